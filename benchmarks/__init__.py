@@ -1,0 +1,1 @@
+"""Speed-versus-error studies behind ``rollcam bench``."""

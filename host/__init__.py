@@ -1,0 +1,1 @@
+"""Host side: camera sources, CLI."""

@@ -1,0 +1,6 @@
+"""The ``rollcam`` command line."""
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Entry point of the ``rollcam`` console script."""
+    return 0

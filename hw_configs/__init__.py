@@ -1,0 +1,1 @@
+"""Sensor descriptions as YAML data, read by ``rollcam.sim.hwconfig``."""

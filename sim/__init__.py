@@ -1,0 +1,1 @@
+"""Simulation: scenes, per-row rendering, sensor timing, ground truth."""
