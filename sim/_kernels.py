@@ -1,0 +1,820 @@
+"""Numba kernels of the per-line renderer: camera poses, background ray casting, actor parts, line painting.
+
+Layout of the tables these kernels read is defined in ``rollcam.sim.compile`` (column constants below).
+Every function is pure: the same inputs give bit-identical outputs whichever path (exact per-line, banded,
+brute-force reference) calls it, which is what lets the fast path equal the reference.
+
+Render space: lines are rows of the render buffer. For column readout the camera is rendered transposed
+(render row b = image column b), so one kernel serves all four readout directions.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit, prange
+
+# ---- camera table columns -------------------------------------------------------------------------------
+C_FX, C_FY, C_CX, C_CY, C_W, C_H, C_TRANSPOSED = 0, 1, 2, 3, 4, 5, 6
+C_POS, C_YAW, C_PITCH, C_ROLL = 7, 10, 11, 12
+C_VEL, C_PAN, C_TILT, C_ROLLRATE = 13, 16, 17, 18
+C_VIB_ANG, C_VIB_POS, C_VIB_HZ, C_MOVING = 19, 20, 21, 22
+CAM_COLS = 24
+
+# ---- lighting table ---------------------------------------------------------------------------------------
+L_SUN, L_SUN_RGB, L_AMB, L_HORIZON, L_ZENITH, L_HAZE, L_FOG, L_GLOW = 0, 3, 6, 9, 12, 15, 18, 19
+LIGHT_COLS = 20
+
+# ---- world table ------------------------------------------------------------------------------------------
+W_KIND, W_ROAD, W_CURB, W_WALK, W_FACADE, W_YHALF = 0, 1, 2, 3, 4, 5
+W_ASPHALT, W_SIDEWALK, W_CROSS, W_SEED, W_LEVEL, W_BIN = 6, 9, 12, 13, 14, 15
+WORLD_COLS = 16
+KIND_STREET, KIND_CHART, KIND_FLAT = 0, 1, 2
+
+# ---- building table ---------------------------------------------------------------------------------------
+B_SIDE, B_Y0, B_Y1, B_HEIGHT, B_RGB, B_WIN_RGB, B_FLOOR, B_WIN_W, B_WIN_SP, B_LIT = 0, 1, 2, 3, 4, 7, 10, 11, 12, 13
+BLD_COLS = 14
+
+# ---- actor table ------------------------------------------------------------------------------------------
+A_TYPE, A_STATIC, A_SPEED, A_ID = 0, 1, 2, 3
+# pedestrian
+P_LANE_X, P_YC, P_HALF, P_OFF, P_SPEED, P_H, P_BUILD, P_PHASE, P_DIR = 4, 5, 6, 7, 8, 9, 10, 11, 12
+P_LONG_HAIR, P_SLEEVES, P_STRIDE, P_SKIN, P_HAIR, P_SHIRT, P_PANTS, P_SHOES = 13, 14, 15, 16, 19, 22, 25, 28
+# chart bar
+R_X0, R_WIDTH, R_VX, R_PERIOD, R_RGB = 4, 5, 6, 7, 8
+ACTOR_COLS = 32
+TYPE_PEDESTRIAN, TYPE_BAR = 0, 1
+
+# ---- part table (one actor at one time) ---------------------------------------------------------------------
+Q_KIND, Q_DEPTH, Q_AMB, Q_DIR, Q_LX, Q_LZ, Q_GEO, Q_YMIN, Q_YMAX = 0, 1, 2, 5, 8, 9, 10, 18, 19
+PART_COLS = 20
+MAX_PARTS = 16
+PART_CAPSULE, PART_QUAD, PART_NONE = 0, 1, -1
+
+NEAR_M = 0.05
+LUT_SIZE = 16384
+
+# ======================================================================================================
+# camera
+# ======================================================================================================
+
+
+@njit(cache=True)
+def camera_pose(cam, t, rot, pos):
+    """World-to-camera rotation (rows: right, down, forward) and camera position at time ``t`` seconds."""
+    w = 2.0 * math.pi * cam[C_VIB_HZ] * t
+    va, vp = cam[C_VIB_ANG], cam[C_VIB_POS]
+    pos[0] = cam[C_POS] + cam[C_VEL] * t + vp * math.sin(w)
+    pos[1] = cam[C_POS + 1] + cam[C_VEL + 1] * t + vp * math.sin(1.31 * w + 1.0)
+    pos[2] = cam[C_POS + 2] + cam[C_VEL + 2] * t + vp * math.sin(0.77 * w + 2.0)
+    yaw = cam[C_YAW] + cam[C_PAN] * t + va * math.sin(1.13 * w + 0.5)
+    pitch = cam[C_PITCH] + cam[C_TILT] * t + va * math.sin(0.91 * w + 1.7)
+    roll = cam[C_ROLL] + cam[C_ROLLRATE] * t + 0.5 * va * math.sin(1.07 * w + 2.9)
+    sy, cy = math.sin(yaw), math.cos(yaw)
+    sp, cp = math.sin(pitch), math.cos(pitch)
+    sr, cr = math.sin(roll), math.cos(roll)
+    fx, fy, fz = sy * cp, cy * cp, sp
+    rx, ry, rz = cy, -sy, 0.0
+    # up = right x forward
+    ux, uy, uz = ry * fz - rz * fy, rz * fx - rx * fz, rx * fy - ry * fx
+    r2x, r2y, r2z = cr * rx - sr * ux, cr * ry - sr * uy, cr * rz - sr * uz
+    u2x, u2y, u2z = sr * rx + cr * ux, sr * ry + cr * uy, sr * rz + cr * uz
+    rot[0, 0], rot[0, 1], rot[0, 2] = r2x, r2y, r2z
+    rot[1, 0], rot[1, 1], rot[1, 2] = -u2x, -u2y, -u2z
+    rot[2, 0], rot[2, 1], rot[2, 2] = fx, fy, fz
+
+
+@njit(cache=True)
+def to_camera(rot, pos, x, y, z, out):
+    """World point to camera frame."""
+    dx, dy, dz = x - pos[0], y - pos[1], z - pos[2]
+    out[0] = rot[0, 0] * dx + rot[0, 1] * dy + rot[0, 2] * dz
+    out[1] = rot[1, 0] * dx + rot[1, 1] * dy + rot[1, 2] * dz
+    out[2] = rot[2, 0] * dx + rot[2, 1] * dy + rot[2, 2] * dz
+
+
+# ======================================================================================================
+# background
+# ======================================================================================================
+
+
+@njit(cache=True)
+def _hash01(ix, iy, seed):
+    h = (ix * 374761393 + iy * 668265263 + seed * 2147483647) & 0xFFFFFFFF
+    h = ((h ^ (h >> 13)) * 1274126177) & 0xFFFFFFFF
+    h = h ^ (h >> 16)
+    return (h & 0xFFFFFF) / 16777216.0
+
+
+@njit(cache=True)
+def _value_noise(x, y, seed):
+    ix, iy = math.floor(x), math.floor(y)
+    fx, fy = x - ix, y - iy
+    ix, iy = int(ix), int(iy)
+    a = _hash01(ix, iy, seed)
+    b = _hash01(ix + 1, iy, seed)
+    c = _hash01(ix, iy + 1, seed)
+    d = _hash01(ix + 1, iy + 1, seed)
+    sx, sy = fx * fx * (3 - 2 * fx), fy * fy * (3 - 2 * fy)
+    return (a + (b - a) * sx) * (1 - sy) + (c + (d - c) * sx) * sy
+
+
+@njit(cache=True)
+def building_at(world, lut, side, y):
+    """Index of the building on ``side`` (0 west, 1 east) at street coordinate ``y`` (periodic), or -1."""
+    yh = world[W_YHALF]
+    yy = (y + yh) % (2.0 * yh)
+    i = int(yy / world[W_BIN])
+    if i < 0 or i >= lut.shape[1]:
+        return -1
+    return lut[side, i]
+
+
+@njit(cache=True)
+def _sun_blocked(world, lut, bld, px, py, pz, light, skip_side):
+    """True when a facade stands between point ``p`` and the sun (street canyon shadows)."""
+    sx, sy, sz = light[L_SUN], light[L_SUN + 1], light[L_SUN + 2]
+    if sz <= 0.0:
+        return True
+    if sx == 0.0:
+        return False
+    side = 1 if sx > 0 else 0
+    if side == skip_side:
+        return False
+    xf = world[W_FACADE] if side == 1 else -world[W_FACADE]
+    t = (xf - px) / sx
+    if t <= 0.0:
+        return False
+    b = building_at(world, lut, side, py + t * sy)
+    if b < 0:
+        return False
+    return pz + t * sz < bld[b, B_HEIGHT]
+
+
+@njit(cache=True)
+def _ground_albedo(world, gx, gy, out):
+    seed = int(world[W_SEED])
+    ax = abs(gx)
+    road, curb = world[W_ROAD], world[W_ROAD] + world[W_CURB]
+    yl = gy
+    if ax < road:
+        n = _value_noise(gx * 9.0, gy * 9.0, seed) * 0.6 + _value_noise(gx * 1.3, gy * 1.3, seed + 7) * 0.4
+        g = 0.75 + 0.5 * n
+        r, gg, b = world[W_ASPHALT] * g, world[W_ASPHALT + 1] * g, world[W_ASPHALT + 2] * g
+        paint = False
+        dc = yl - world[W_CROSS]
+        if abs(dc) < 2.0 and ax < road - 0.3:
+            paint = (gx + 100.0) % 1.0 < 0.5  # zebra crossing
+        elif ax < 0.07:
+            paint = (yl % 9.0) < 3.0  # dashed centre line
+        elif road - 0.35 < ax < road - 0.2:
+            paint = True  # edge line
+        if paint:
+            r, gg, b = 0.62, 0.62, 0.60
+        out[0], out[1], out[2] = r, gg, b
+    elif ax < curb:
+        out[0], out[1], out[2] = 0.45, 0.44, 0.42
+    else:
+        u, v = (ax - curb) / 0.6, yl / 0.6
+        iu, iv = math.floor(u), math.floor(v)
+        g = 0.85 + 0.3 * _hash01(int(iu), int(iv), seed + 3)
+        if u - iu < 0.04 or v - iv < 0.04:
+            g *= 0.7  # grout
+        g *= 0.9 + 0.2 * _value_noise(gx * 4.0, gy * 4.0, seed + 11)
+        out[0], out[1], out[2] = world[W_SIDEWALK] * g, world[W_SIDEWALK + 1] * g, world[W_SIDEWALK + 2] * g
+
+
+@njit(cache=True)
+def _facade(world, bld, b, fy, fz, light, out):
+    """Albedo of facade ``b`` at street coordinate ``fy`` and height ``fz``; returns emission (lit windows)."""
+    y0 = bld[b, B_Y0]
+    yh = world[W_YHALF]
+    u = ((fy + yh) % (2.0 * yh)) - yh - y0
+    fl = bld[b, B_FLOOR]
+    floor_i = math.floor(fz / fl)
+    zz = fz - floor_i * fl
+    sp = bld[b, B_WIN_SP]
+    col_i = math.floor(u / sp)
+    uu = u - col_i * sp
+    ww = bld[b, B_WIN_W]
+    margin = 0.5 * (sp - ww)
+    top = bld[b, B_HEIGHT]
+    seed = int(world[W_SEED]) + b * 131
+    grain = 0.9 + 0.2 * _value_noise(u * 3.0, fz * 3.0, seed)
+    r, g, bl = bld[b, B_RGB] * grain, bld[b, B_RGB + 1] * grain, bld[b, B_RGB + 2] * grain
+    emit = 0.0
+    if fz > top - 0.6:
+        r, g, bl = r * 0.75, g * 0.75, bl * 0.75  # cornice
+    elif floor_i == 0:
+        if 0.1 < zz < 2.7 and 0.25 < uu < sp - 0.25:
+            shop = _hash01(int(col_i), 17, seed)
+            r, g, bl = bld[b, B_WIN_RGB] * 0.8, bld[b, B_WIN_RGB + 1] * 0.8, bld[b, B_WIN_RGB + 2] * 0.8
+            if shop < 0.35:
+                r, g, bl = 0.12 + 0.2 * shop, 0.08, 0.06  # door
+    elif 0.9 < zz < 2.5 and margin < uu < sp - margin:
+        h = _hash01(int(col_i), int(floor_i), seed)
+        r = bld[b, B_WIN_RGB] * (0.7 + 0.6 * h)
+        g = bld[b, B_WIN_RGB + 1] * (0.7 + 0.6 * h)
+        bl = bld[b, B_WIN_RGB + 2] * (0.7 + 0.6 * h)
+        if h < bld[b, B_LIT]:
+            emit = light[L_GLOW]
+        if zz < 1.0 or zz > 2.4 or uu < margin + 0.06 or uu > sp - margin - 0.06:
+            r, g, bl = r * 0.5 + 0.1, g * 0.5 + 0.1, bl * 0.5 + 0.1  # frame
+    out[0], out[1], out[2] = r, g, bl
+    return emit
+
+
+@njit(cache=True)
+def _sky(light, dx, dy, dz, out):
+    n = math.sqrt(dx * dx + dy * dy + dz * dz)
+    e = max(dz / n, 0.0)
+    s = math.sqrt(e)
+    for c in range(3):
+        out[c] = light[L_HORIZON + c] * (1.0 - s) + light[L_ZENITH + c] * s
+    cosg = (dx * light[L_SUN] + dy * light[L_SUN + 1] + dz * light[L_SUN + 2]) / n
+    if cosg > 0.0:
+        glow = cosg**32 * 0.6
+        for c in range(3):
+            out[c] += light[L_SUN_RGB + c] * glow
+
+
+@njit(cache=True)
+def background_pixel(world, lut, bld, light, cam, rot, pos, xi, yi, out, alb):
+    """Linear RGB radiance of the static world seen through image pixel (xi, yi) from pose (rot, pos)."""
+    kind = int(world[W_KIND])
+    if kind == KIND_FLAT:
+        out[0] = out[1] = out[2] = world[W_LEVEL]
+        return
+    if kind == KIND_CHART:
+        # A matte board filling the view, with a faint print texture so it is not perfectly uniform.
+        v = 0.97 + 0.03 * _value_noise(xi * 0.05, yi * 0.05, int(world[W_SEED]))
+        out[0], out[1], out[2] = world[W_ASPHALT] * v, world[W_ASPHALT + 1] * v, world[W_ASPHALT + 2] * v
+        return
+    cx = (xi + 0.5 - cam[C_CX]) / cam[C_FX]
+    cy = (yi + 0.5 - cam[C_CY]) / cam[C_FY]
+    dx = cx * rot[0, 0] + cy * rot[1, 0] + rot[2, 0]
+    dy = cx * rot[0, 1] + cy * rot[1, 1] + rot[2, 1]
+    dz = cx * rot[0, 2] + cy * rot[1, 2] + rot[2, 2]
+    xf = world[W_FACADE]
+    t_hit = 1e30
+    surf = 0  # 0 sky, 1 ground, 2 facade
+    side = 0
+    if dz < 0.0 and pos[2] > 0.0:
+        t = -pos[2] / dz
+        gx = pos[0] + t * dx
+        if abs(gx) < xf:
+            t_hit, surf = t, 1
+    if dx != 0.0:
+        side = 1 if dx > 0 else 0
+        t = ((xf if side == 1 else -xf) - pos[0]) / dx
+        if 0.0 < t < t_hit:
+            fy, fz = pos[1] + t * dy, pos[2] + t * dz
+            if fz >= 0.0:
+                b = building_at(world, lut, side, fy)
+                if b >= 0 and fz < bld[b, B_HEIGHT]:
+                    t_hit, surf = t, 2
+    emit = 0.0
+    if surf == 0:
+        _sky(light, dx, dy, dz, out)
+        return
+    hx, hy, hz = pos[0] + t_hit * dx, pos[1] + t_hit * dy, pos[2] + t_hit * dz
+    if surf == 1:
+        _ground_albedo(world, hx, hy, alb)
+        ndotl = light[L_SUN + 2]
+        lit = 0.0 if _sun_blocked(world, lut, bld, hx, hy, 0.0, light, -1) else 1.0
+    else:
+        b = building_at(world, lut, side, hy)
+        emit = _facade(world, bld, b, hy, hz, light, alb)
+        ndotl = -light[L_SUN] if side == 1 else light[L_SUN]
+        lit = 0.0
+        if ndotl > 0.0 and not _sun_blocked(world, lut, bld, hx, hy, hz, light, side):
+            lit = 1.0
+    ndotl = max(ndotl, 0.0) * lit
+    dist = t_hit * math.sqrt(dx * dx + dy * dy + dz * dz)
+    f = math.exp(-dist / light[L_FOG])
+    for c in range(3):
+        v = alb[c] * (light[L_AMB + c] + light[L_SUN_RGB + c] * ndotl) + emit * alb[c]
+        out[c] = v * f + light[L_HAZE + c] * (1.0 - f)
+
+
+@njit(cache=True)
+def background_line(world, lut, bld, light, cam, t, line, out_line):
+    """Render one render-space line of the background at time ``t`` into ``out_line`` (n x 3 float32)."""
+    rot = np.empty((3, 3))
+    pos = np.empty(3)
+    camera_pose(cam, t, rot, pos)
+    px = np.empty(3)
+    alb = np.empty(3)
+    transposed = cam[C_TRANSPOSED] != 0.0
+    for a in range(out_line.shape[0]):
+        if transposed:
+            background_pixel(world, lut, bld, light, cam, rot, pos, line, a, px, alb)
+        else:
+            background_pixel(world, lut, bld, light, cam, rot, pos, a, line, px, alb)
+        out_line[a, 0], out_line[a, 1], out_line[a, 2] = px[0], px[1], px[2]
+
+
+# ======================================================================================================
+# actors
+# ======================================================================================================
+
+
+@njit(cache=True)
+def pedestrian_root(act, t, out):
+    """Root position (x, y), heading sign along Y and distance walked, at time ``t``; fills ``out[0:4]``."""
+    half = act[P_HALF]
+    d = act[P_OFF] + act[P_SPEED] * t
+    m = d % (4.0 * half)
+    if m < 2.0 * half:
+        y, sgn = -half + m, 1.0
+    else:
+        y, sgn = half - (m - 2.0 * half), -1.0
+    sgn *= act[P_DIR]
+    out[0] = act[P_LANE_X]
+    out[1] = act[P_YC] + y * act[P_DIR]
+    out[2] = sgn
+    out[3] = d
+
+
+@njit(cache=True)
+def _limb(px, py, pz, fwd_x, fwd_y, ang, length, out, i):
+    s, c = math.sin(ang), math.cos(ang)
+    out[i, 0] = px + length * s * fwd_x
+    out[i, 1] = py + length * s * fwd_y
+    out[i, 2] = pz - length * c
+
+
+@njit(cache=True)
+def pedestrian_skeleton(act, t, seg, rad, col_idx):
+    """World-space capsules of a walker at time ``t``: seg[p] = (ax, ay, az, bx, by, bz), rad[p] metres.
+
+    ``col_idx[p]`` selects the colour (0 skin, 1 hair, 2 shirt, 3 pants, 4 shoes). Returns the part count.
+    """
+    root = np.empty(4)
+    pedestrian_root(act, t, root)
+    x0, y0, sgn, dist = root[0], root[1], root[2], root[3]
+    h, bd = act[P_H], act[P_BUILD]
+    phi = 2.0 * math.pi * dist / act[P_STRIDE] + act[P_PHASE]
+    fx, fy = 0.0, sgn  # heading along +/-Y
+    lx, ly = sgn, 0.0  # lateral (to the walker's right when heading +Y)
+    sw = min(1.0, act[P_SPEED] / 1.0)  # amplitude of swing grows with speed up to normal walking
+    bob = 0.012 * h * math.cos(2.0 * phi) * sw
+    hip_z = 0.530 * h + bob
+    sh_z = 0.815 * h + bob
+    joints = np.empty((16, 3))
+    n = 0
+    # head (slightly elongated), hair, neck
+    hz = 0.925 * h + bob
+    seg[n, 0], seg[n, 1], seg[n, 2] = x0, y0, hz - 0.018 * h
+    seg[n, 3], seg[n, 4], seg[n, 5] = x0, y0, hz + 0.012 * h
+    rad[n], col_idx[n] = 0.058 * h, 0
+    n += 1
+    back = -0.012 * h
+    seg[n, 0], seg[n, 1], seg[n, 2] = x0 + back * fx, y0 + back * fy, hz + 0.004 * h
+    bz = hz - (0.075 * h if act[P_LONG_HAIR] > 0 else 0.006 * h)
+    seg[n, 3], seg[n, 4], seg[n, 5] = x0 + 1.6 * back * fx, y0 + 1.6 * back * fy, bz
+    rad[n], col_idx[n] = 0.060 * h, 1
+    n += 1
+    seg[n, 0], seg[n, 1], seg[n, 2] = x0, y0, 0.835 * h + bob
+    seg[n, 3], seg[n, 4], seg[n, 5] = x0, y0, 0.875 * h + bob
+    rad[n], col_idx[n] = 0.028 * h, 0
+    n += 1
+    # torso, shoulders, hips
+    seg[n, 0], seg[n, 1], seg[n, 2] = x0, y0, hip_z + 0.07 * h
+    seg[n, 3], seg[n, 4], seg[n, 5] = x0, y0, sh_z - 0.055 * h
+    rad[n], col_idx[n] = 0.085 * h * bd, 2
+    n += 1
+    shw = 0.105 * h * bd
+    seg[n, 0], seg[n, 1], seg[n, 2] = x0 - shw * lx, y0 - shw * ly, sh_z - 0.02 * h
+    seg[n, 3], seg[n, 4], seg[n, 5] = x0 + shw * lx, y0 + shw * ly, sh_z - 0.02 * h
+    rad[n], col_idx[n] = 0.048 * h * bd, 2
+    n += 1
+    hpw = 0.06 * h * bd
+    seg[n, 0], seg[n, 1], seg[n, 2] = x0 - hpw * lx, y0 - hpw * ly, hip_z + 0.02 * h
+    seg[n, 3], seg[n, 4], seg[n, 5] = x0 + hpw * lx, y0 + hpw * ly, hip_z + 0.02 * h
+    rad[n], col_idx[n] = 0.07 * h * bd, 3
+    n += 1
+    # legs and arms, left (s=-1) and right (s=+1); the right leg leads at phi = 0
+    for k in range(2):
+        s = -1.0 if k == 0 else 1.0
+        ph = phi + (math.pi if k == 0 else 0.0)
+        hip_a = 0.42 * sw * math.sin(ph)
+        knee = (0.08 + 0.75 * max(0.0, math.sin(ph + 1.3)) ** 2) * max(sw, 0.15)
+        hx, hy = x0 + s * hpw * 0.9 * lx, y0 + s * hpw * 0.9 * ly
+        joints[0, 0], joints[0, 1], joints[0, 2] = hx, hy, hip_z
+        _limb(hx, hy, hip_z, fx, fy, hip_a, 0.245 * h, joints, 1)
+        _limb(joints[1, 0], joints[1, 1], joints[1, 2], fx, fy, hip_a - knee, 0.25 * h, joints, 2)
+        seg[n, 0], seg[n, 1], seg[n, 2] = joints[0, 0], joints[0, 1], joints[0, 2]
+        seg[n, 3], seg[n, 4], seg[n, 5] = joints[1, 0], joints[1, 1], joints[1, 2]
+        rad[n], col_idx[n] = 0.055 * h * bd, 3
+        n += 1
+        seg[n, 0], seg[n, 1], seg[n, 2] = joints[1, 0], joints[1, 1], joints[1, 2]
+        seg[n, 3], seg[n, 4], seg[n, 5] = joints[2, 0], joints[2, 1], joints[2, 2]
+        rad[n], col_idx[n] = 0.04 * h * bd, 3
+        n += 1
+        foot = 0.11 * h
+        az = max(joints[2, 2], 0.025 * h)
+        seg[n, 0], seg[n, 1], seg[n, 2] = joints[2, 0] - 0.02 * h * fx, joints[2, 1] - 0.02 * h * fy, az
+        seg[n, 3], seg[n, 4], seg[n, 5] = joints[2, 0] + foot * fx, joints[2, 1] + foot * fy, az - 0.01 * h
+        rad[n], col_idx[n] = 0.024 * h, 4
+        n += 1
+        arm_a = -0.32 * sw * math.sin(ph)
+        elbow = 0.25 + 0.25 * sw * max(0.0, -math.sin(ph))
+        sx_, sy_ = x0 + s * (shw + 0.035 * h) * lx, y0 + s * (shw + 0.035 * h) * ly
+        szz = sh_z - 0.03 * h
+        _limb(sx_, sy_, szz, fx, fy, arm_a, 0.175 * h, joints, 3)
+        _limb(joints[3, 0], joints[3, 1], joints[3, 2], fx, fy, arm_a + elbow, 0.19 * h, joints, 4)
+        seg[n, 0], seg[n, 1], seg[n, 2] = sx_, sy_, szz
+        seg[n, 3], seg[n, 4], seg[n, 5] = joints[3, 0], joints[3, 1], joints[3, 2]
+        rad[n], col_idx[n] = 0.036 * h * bd, 2
+        n += 1
+        seg[n, 0], seg[n, 1], seg[n, 2] = joints[3, 0], joints[3, 1], joints[3, 2]
+        seg[n, 3], seg[n, 4], seg[n, 5] = joints[4, 0], joints[4, 1], joints[4, 2]
+        rad[n], col_idx[n] = 0.029 * h, 2 if act[P_SLEEVES] > 0 else 0
+        n += 1
+    return n
+
+
+@njit(cache=True)
+def _project(cam, x, y, z, out):
+    """Camera-frame point to render-space pixel coordinates (x, y swapped when transposed)."""
+    u = cam[C_FX] * x / z + cam[C_CX]
+    v = cam[C_FY] * y / z + cam[C_CY]
+    if cam[C_TRANSPOSED] != 0.0:
+        out[0], out[1] = v, u
+    else:
+        out[0], out[1] = u, v
+
+
+@njit(cache=True)
+def actor_bounds(act, world, lut, bld, light, cam, t, out):
+    """Conservative render-space box (ymin, ymax, xmin, xmax) of an actor at ``t``; empty when ymin > ymax."""
+    out[0], out[1], out[2], out[3] = 1e30, -1e30, 1e30, -1e30
+    typ = int(act[A_TYPE])
+    if typ == TYPE_BAR:
+        x0 = _bar_x0(act, t)
+        xs0, xs1 = x0, x0 + act[R_WIDTH]
+        big = 1e6
+        if cam[C_TRANSPOSED] != 0.0:
+            out[0], out[1], out[2], out[3] = xs0, xs1, -big, big
+        else:
+            out[0], out[1], out[2], out[3] = -big, big, xs0, xs1
+        return
+    rot = np.empty((3, 3))
+    pos = np.empty(3)
+    camera_pose(cam, t, rot, pos)
+    root = np.empty(4)
+    pedestrian_root(act, t, root)
+    h = act[P_H]
+    e = 0.55 * h * max(act[P_BUILD], 1.0)
+    pc = np.empty(3)
+    uv = np.empty(2)
+    n_behind = 0
+    for i in range(8):
+        x = root[0] + (e if i & 1 else -e)
+        y = root[1] + (e if i & 2 else -e)
+        z = 1.02 * h if i & 4 else 0.0
+        to_camera(rot, pos, x, y, z, pc)
+        if pc[2] < NEAR_M:
+            n_behind += 1
+            continue
+        _project(cam, pc[0], pc[1], pc[2], uv)
+        out[2], out[3] = min(out[2], uv[0]), max(out[3], uv[0])
+        out[0], out[1] = min(out[0], uv[1]), max(out[1], uv[1])
+    if n_behind == 8:
+        out[0], out[1] = 1e30, -1e30
+    elif n_behind > 0:
+        out[0], out[1], out[2], out[3] = -1e30, 1e30, -1e30, 1e30  # straddles the camera plane
+
+
+@njit(cache=True)
+def _bar_x0(act, t):
+    period = act[R_PERIOD]
+    x = act[R_X0] + act[R_VX] * t
+    if period > 0.0:
+        # Wrap inside [-pitch, period - pitch): off-image on both sides, so wrapping is never seen.
+        x = (x + act[R_WIDTH] + 1.0) % period - act[R_WIDTH] - 1.0
+    return x
+
+
+@njit(cache=True)
+def _set_quad(parts, p, x0, y0, x1, y1, x2, y2, x3, y3):
+    g = Q_GEO
+    parts[p, g], parts[p, g + 1], parts[p, g + 2], parts[p, g + 3] = x0, y0, x1, y1
+    parts[p, g + 4], parts[p, g + 5], parts[p, g + 6], parts[p, g + 7] = x2, y2, x3, y3
+    parts[p, Q_YMIN] = min(min(y0, y1), min(y2, y3))
+    parts[p, Q_YMAX] = max(max(y0, y1), max(y2, y3))
+
+
+@njit(cache=True)
+def actor_parts(act, world, lut, bld, light, cam, t, parts):
+    """Fill ``parts`` (MAX_PARTS x PART_COLS) with the render-space primitives of an actor at time ``t``."""
+    for p in range(MAX_PARTS):
+        parts[p, Q_KIND] = PART_NONE
+    typ = int(act[A_TYPE])
+    if typ == TYPE_BAR:
+        x0 = _bar_x0(act, t)
+        x1 = x0 + act[R_WIDTH]
+        big = 1e6
+        parts[0, Q_KIND] = PART_QUAD
+        parts[0, Q_DEPTH] = 1.0
+        for c in range(3):
+            parts[0, Q_AMB + c] = act[R_RGB + c]
+            parts[0, Q_DIR + c] = 0.0
+        parts[0, Q_LX], parts[0, Q_LZ] = 0.0, 0.0
+        if cam[C_TRANSPOSED] != 0.0:
+            _set_quad(parts, 0, -big, x0, big, x0, big, x1, -big, x1)
+        else:
+            _set_quad(parts, 0, x0, -big, x1, -big, x1, big, x0, big)
+        return
+    rot = np.empty((3, 3))
+    pos = np.empty(3)
+    camera_pose(cam, t, rot, pos)
+    seg = np.empty((MAX_PARTS, 6))
+    rad = np.empty(MAX_PARTS)
+    col_idx = np.empty(MAX_PARTS, np.int64)
+    n = pedestrian_skeleton(act, t, seg, rad, col_idx)
+    root = np.empty(4)
+    pedestrian_root(act, t, root)
+    # Sun on the walker: blocked by the street canyon at chest height.
+    lit = 0.0 if _sun_blocked(world, lut, bld, root[0], root[1], 0.7 * act[P_H], light, -1) else 1.0
+    # Sun direction in camera frame, reduced to the image-plane x / viewing-axis z for cylinder shading.
+    sx = rot[0, 0] * light[L_SUN] + rot[0, 1] * light[L_SUN + 1] + rot[0, 2] * light[L_SUN + 2]
+    sz = -(rot[2, 0] * light[L_SUN] + rot[2, 1] * light[L_SUN + 1] + rot[2, 2] * light[L_SUN + 2])
+    sy_up = light[L_SUN + 2]
+    nrm = math.sqrt(sx * sx + sz * sz) + 1e-12
+    horiz = math.sqrt(max(0.0, 1.0 - sy_up * sy_up))
+    lxv, lzv = sx / nrm * horiz, sz / nrm * horiz
+    a = np.empty(3)
+    b = np.empty(3)
+    ua = np.empty(2)
+    ub = np.empty(2)
+    for p in range(n):
+        to_camera(rot, pos, seg[p, 0], seg[p, 1], seg[p, 2], a)
+        to_camera(rot, pos, seg[p, 3], seg[p, 4], seg[p, 5], b)
+        if a[2] < NEAR_M and b[2] < NEAR_M:
+            continue
+        # Clip the segment at the near plane so parts crossing the camera plane stay finite.
+        if a[2] < NEAR_M:
+            f = (NEAR_M - a[2]) / (b[2] - a[2])
+            for c in range(3):
+                a[c] = a[c] + f * (b[c] - a[c])
+        elif b[2] < NEAR_M:
+            f = (NEAR_M - b[2]) / (a[2] - b[2])
+            for c in range(3):
+                b[c] = b[c] + f * (a[c] - b[c])
+        zm = 0.5 * (a[2] + b[2])
+        _project(cam, a[0], a[1], a[2], ua)
+        _project(cam, b[0], b[1], b[2], ub)
+        r_px = cam[C_FX] * rad[p] / zm
+        ci = col_idx[p]
+        base = P_SKIN + 3 * ci
+        parts[p, Q_KIND] = PART_CAPSULE
+        parts[p, Q_DEPTH] = zm
+        for c in range(3):
+            alb = act[base + c]
+            parts[p, Q_AMB + c] = alb * light[L_AMB + c]
+            parts[p, Q_DIR + c] = alb * light[L_SUN_RGB + c] * lit
+        parts[p, Q_LX], parts[p, Q_LZ] = lxv, lzv
+        if cam[C_TRANSPOSED] != 0.0:
+            parts[p, Q_LX] = 0.0  # a transposed line runs along the image's y axis
+        g = Q_GEO
+        parts[p, g], parts[p, g + 1], parts[p, g + 2], parts[p, g + 3] = ua[0], ua[1], ub[0], ub[1]
+        parts[p, g + 4] = r_px
+        parts[p, Q_YMIN] = min(ua[1], ub[1]) - r_px
+        parts[p, Q_YMAX] = max(ua[1], ub[1]) + r_px
+
+
+# ======================================================================================================
+# spans and line painting
+# ======================================================================================================
+
+
+@njit(cache=True)
+def _edge(px, py, qx, qy, yc, lohi):
+    if (py - yc) * (qy - yc) <= 0.0:
+        if py != qy:
+            x = px + (yc - py) * (qx - px) / (qy - py)
+            lohi[0], lohi[1] = min(lohi[0], x), max(lohi[1], x)
+        else:
+            lohi[0], lohi[1] = min(lohi[0], min(px, qx)), max(lohi[1], max(px, qx))
+
+
+@njit(cache=True)
+def part_span(parts, p, yc, lohi):
+    """Continuous x-interval of part ``p`` on the line through ``yc``; lohi = (inf, -inf) when empty."""
+    lohi[0], lohi[1] = 1e30, -1e30
+    g = Q_GEO
+    if parts[p, Q_KIND] == PART_QUAD:
+        for e in range(4):
+            f = (e + 1) % 4
+            _edge(parts[p, g + 2 * e], parts[p, g + 2 * e + 1], parts[p, g + 2 * f], parts[p, g + 2 * f + 1],
+                  yc, lohi)
+        return
+    ax, ay, bx, by, r = parts[p, g], parts[p, g + 1], parts[p, g + 2], parts[p, g + 3], parts[p, g + 4]
+    for px, py in ((ax, ay), (bx, by)):
+        dy = yc - py
+        if abs(dy) <= r:
+            d = math.sqrt(r * r - dy * dy)
+            lohi[0], lohi[1] = min(lohi[0], px - d), max(lohi[1], px + d)
+    ln = math.hypot(bx - ax, by - ay)
+    if ln > 0.0:
+        nx, ny = -(by - ay) / ln * r, (bx - ax) / ln * r
+        _edge(ax + nx, ay + ny, bx + nx, by + ny, yc, lohi)
+        _edge(bx + nx, by + ny, bx - nx, by - ny, yc, lohi)
+        _edge(bx - nx, by - ny, ax - nx, ay - ny, yc, lohi)
+        _edge(ax - nx, ay - ny, ax + nx, ay + ny, yc, lohi)
+
+
+@njit(cache=True)
+def _collect_line(line, w, actors, obj_k, slots, parts_tab, include, gt_l, gt_r, gt_tot,
+                  depth, idx_o, idx_p, span_l, span_r, stamp, ext):
+    """Spans of every included actor on ``line`` (``obj_k[o]``: its time slot, -1 when not touching).
+
+    Fills the per-actor extent and area ground truth; ``ext`` receives the pixel range the spans cover.
+    Returns the number of spans.
+    """
+    yc = line + 0.5
+    lohi = np.empty(2)
+    m = 0
+    ext[0], ext[1] = w, 0
+    for o in range(actors.shape[0]):
+        if not include[o] or obj_k[o] < 0:
+            continue
+        s = slots[o, obj_k[o]]
+        if s < 0:
+            continue
+        olo, ohi = 1e30, -1e30
+        for p in range(MAX_PARTS):
+            if parts_tab[s, p, Q_KIND] == PART_NONE:
+                continue
+            if yc < parts_tab[s, p, Q_YMIN] or yc > parts_tab[s, p, Q_YMAX]:
+                continue
+            part_span(parts_tab[s], p, yc, lohi)
+            if lohi[1] <= lohi[0] or lohi[1] <= 0.0 or lohi[0] >= w:
+                continue
+            depth[m], idx_o[m], idx_p[m] = parts_tab[s, p, Q_DEPTH], o, p
+            span_l[m], span_r[m] = lohi[0], lohi[1]
+            m += 1
+            olo, ohi = min(olo, lohi[0]), max(ohi, lohi[1])
+            # Pixels whose centre the part covers count towards the actor's area (once per actor).
+            for i in range(max(int(math.ceil(lohi[0] - 0.5)), 0), min(int(math.ceil(lohi[1] - 0.5)), w)):
+                if stamp[i] != o:
+                    stamp[i] = o
+                    gt_tot[o, line] += 1
+        if ohi > olo:
+            gt_l[o, line] = max(olo, 0.0)
+            gt_r[o, line] = min(ohi, float(w))
+            ext[0] = min(ext[0], max(int(math.floor(olo)), 0))
+            ext[1] = max(ext[1], min(int(math.ceil(ohi)), w))
+    return m
+
+
+@njit(cache=True)
+def _paint_spans(lin, line, m, obj_k, slots, parts_tab, gt_vis, depth, idx_o, idx_p, span_l, span_r, owner,
+                 ext):
+    """Paint the collected spans over ``lin`` far to near (anti-aliased along the line); count visibility."""
+    w = lin.shape[0]
+    # Insertion sort, far first; ties keep actor/part order so every path paints identically.
+    order = np.arange(m)
+    for i in range(1, m):
+        j = i
+        while j > 0 and depth[order[j - 1]] < depth[order[j]]:
+            order[j - 1], order[j] = order[j], order[j - 1]
+            j -= 1
+    for ii in range(m):
+        e = order[ii]
+        o, p = idx_o[e], idx_p[e]
+        pt = parts_tab[slots[o, obj_k[o]]]
+        xl, xr = span_l[e], span_r[e]
+        i0 = max(int(math.floor(xl)), 0)
+        i1 = min(int(math.ceil(xr)), w)
+        mid, half = 0.5 * (xl + xr), 0.5 * (xr - xl)
+        lx, lz = pt[p, Q_LX], pt[p, Q_LZ]
+        for i in range(i0, i1):
+            cov = min(xr, i + 1.0) - max(xl, float(i))
+            if cov <= 0.0:
+                continue
+            u = (i + 0.5 - mid) / half
+            if u > 1.0:
+                u = 1.0
+            elif u < -1.0:
+                u = -1.0
+            sh = lx * u + lz * math.sqrt(1.0 - u * u)
+            if sh < 0.0:
+                sh = 0.0
+            for c in range(3):
+                v = pt[p, Q_AMB + c] + pt[p, Q_DIR + c] * sh
+                lin[i, c] = lin[i, c] * (1.0 - cov) + v * cov
+        for i in range(max(int(math.ceil(xl - 0.5)), 0), min(int(math.ceil(xr - 0.5)), w)):
+            owner[i] = o
+    for i in range(ext[0], ext[1]):
+        if owner[i] >= 0:
+            gt_vis[owner[i], line] += 1
+
+
+@njit(cache=True)
+def encode_line(lin, gain, lut, out_u8):
+    """Linear RGB line to 8-bit BGR through the output curve ``lut`` (LUT_SIZE + 1 entries)."""
+    for i in range(lin.shape[0]):
+        for c in range(3):
+            v = lin[i, c] * gain
+            if v < 0.0:
+                v = 0.0
+            elif v > 1.0:
+                v = 1.0
+            out_u8[i, 2 - c] = lut[int(v * LUT_SIZE + 0.5)]
+
+
+@njit(cache=True, parallel=True)
+def actor_bounds_all(actors, world, lut, bld, light, cam, times, need, out):
+    """out[o, k] = bounds of actor o at times[k] wherever need[o, k]."""
+    n_obj, n_t = need.shape
+    for o in prange(n_obj):
+        for k in range(n_t):
+            if need[o, k]:
+                actor_bounds(actors[o], world, lut, bld, light, cam, times[k], out[o, k])
+
+
+@njit(cache=True, parallel=True)
+def actor_parts_all(actors, world, lut, bld, light, cam, times, slot_o, slot_k, parts_tab):
+    """parts_tab[s] = parts of actor slot_o[s] at times[slot_k[s]]."""
+    for s in prange(slot_o.shape[0]):
+        actor_parts(actors[slot_o[s]], world, lut, bld, light, cam, times[slot_k[s]], parts_tab[s])
+
+
+@njit(cache=True, parallel=True)
+def render_lines_kernel(world, lut_b, bld, light, cam, actors, times, line_k, obj_line_k, slots, parts_tab,
+                        include, bg_lin, comp_lin, comp_u8, comp_gt, out_u8, out_lin, gain, lut,
+                        gt_l, gt_r, gt_tot, gt_vis, gt_only, force_paint):
+    """Render every line: copy the cached composite where no moving actor touches it, else paint it.
+
+    ``obj_line_k[o, line]`` is actor o's time slot on that line (-1 when not touching). ``bg_lin`` is the
+    cached bare background (used when the camera is static), ``comp_*`` the cached background with the
+    static actors; ``comp_gt`` carries the static actors' ground truth for copied lines. ``force_paint``
+    paints every line (used to build the composite itself).
+    """
+    n_lines, w = out_u8.shape[0], out_u8.shape[1]
+    n_obj = actors.shape[0]
+    moving_cam = cam[C_MOVING] != 0.0
+    want_lin = out_lin.shape[0] > 0
+    for line in prange(n_lines):
+        touched = moving_cam or force_paint
+        for o in range(n_obj):
+            if include[o] and obj_line_k[o, line] >= 0 and actors[o, A_STATIC] == 0.0:
+                touched = True
+                break
+        if not touched:
+            if not gt_only:
+                if want_lin:
+                    out_lin[line, :, :] = comp_lin[line]
+                out_u8[line, :, :] = comp_u8[line]
+            if comp_gt.shape[0] > 0:
+                for o in range(n_obj):
+                    gt_l[o, line] = comp_gt[0, o, line]
+                    gt_r[o, line] = comp_gt[1, o, line]
+                    gt_tot[o, line] = int(comp_gt[2, o, line])
+                    gt_vis[o, line] = int(comp_gt[3, o, line])
+            continue
+        cap = n_obj * MAX_PARTS
+        depth = np.empty(cap)
+        idx_o = np.empty(cap, np.int64)
+        idx_p = np.empty(cap, np.int64)
+        span_l = np.empty(cap)
+        span_r = np.empty(cap)
+        owner = np.full(w, -1, np.int64)
+        stamp = np.full(w, -1, np.int64)
+        ext = np.empty(2, np.int64)
+        ok = obj_line_k[:, line]
+        m = _collect_line(line, w, actors, ok, slots, parts_tab, include, gt_l, gt_r, gt_tot,
+                          depth, idx_o, idx_p, span_l, span_r, stamp, ext)
+        lin = np.empty((w, 3), np.float32)
+        if moving_cam and not gt_only:
+            # The whole line changes with the camera: render, paint and encode all of it.
+            background_line(world, lut_b, bld, light, cam, times[line_k[line]], line, lin)
+            ext[0], ext[1] = 0, w
+        elif force_paint and not gt_only:
+            lin[:, :] = bg_lin[line]
+            ext[0], ext[1] = 0, w
+        elif not gt_only:
+            # Only the pixels under actor spans differ from the cached composite: redo just that range.
+            if want_lin:
+                out_lin[line, :, :] = comp_lin[line]
+            out_u8[line, :, :] = comp_u8[line]
+            if ext[1] > ext[0]:
+                lin[ext[0]:ext[1]] = bg_lin[line, ext[0]:ext[1]]
+        if m > 0:
+            _paint_spans(lin, line, m, ok, slots, parts_tab, gt_vis, depth, idx_o, idx_p, span_l, span_r, owner,
+                         ext)
+        if not gt_only and ext[1] > ext[0]:
+            if want_lin:
+                out_lin[line, ext[0]:ext[1], :] = lin[ext[0]:ext[1]]
+            encode_line(lin[ext[0]:ext[1]], gain, lut, out_u8[line, ext[0]:ext[1]])
+
+
+@njit(cache=True, parallel=True)
+def background_image(world, lut_b, bld, light, cam, t, out):
+    """Whole background at one time (the static layer cache)."""
+    for line in prange(out.shape[0]):
+        background_line(world, lut_b, bld, light, cam, t, line, out[line])

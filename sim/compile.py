@@ -1,0 +1,144 @@
+"""Scene data to the flat float64 tables the render kernels read (layouts in ``rollcam.sim._kernels``)."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from . import _kernels as K
+from .scene import Camera, Scene
+
+BUILDING_BIN_M = 0.5
+
+
+@dataclass(frozen=True)
+class CompiledScene:
+    """The kernel tables of one scene: world, building lookup, lighting and actors."""
+
+    world: np.ndarray
+    building_lut: np.ndarray
+    buildings: np.ndarray
+    light: np.ndarray
+    actors: np.ndarray
+    actor_ids: tuple[int, ...]
+    actor_classes: tuple[str, ...]
+    actor_speeds_mps: tuple[float, ...]
+
+
+def compile_camera(cam: Camera, transposed: bool = False) -> np.ndarray:
+    """Camera table of one camera; ``transposed`` renders image columns as lines (column readout)."""
+    t = np.zeros(K.CAM_COLS)
+    fx = cam.fx_px
+    t[K.C_FX], t[K.C_FY] = fx, fx
+    t[K.C_CX], t[K.C_CY] = cam.width / 2.0, cam.height / 2.0
+    t[K.C_W], t[K.C_H] = cam.width, cam.height
+    t[K.C_TRANSPOSED] = 1.0 if transposed else 0.0
+    t[K.C_POS : K.C_POS + 3] = cam.position_m
+    t[K.C_YAW], t[K.C_PITCH], t[K.C_ROLL] = (math.radians(v) for v in (cam.yaw_deg, cam.pitch_deg, cam.roll_deg))
+    ego = cam.ego
+    t[K.C_VEL : K.C_VEL + 3] = ego.velocity_mps
+    t[K.C_PAN], t[K.C_TILT], t[K.C_ROLLRATE] = (math.radians(v) for v in (ego.pan_dps, ego.tilt_dps, ego.roll_dps))
+    t[K.C_VIB_ANG], t[K.C_VIB_POS], t[K.C_VIB_HZ] = math.radians(ego.vibration_deg), ego.vibration_m, ego.vibration_hz
+    t[K.C_MOVING] = 1.0 if ego.moving else 0.0
+    return t
+
+
+def compile_scene(scene: Scene) -> CompiledScene:
+    """Flatten a Scene into kernel tables."""
+    world = np.zeros(K.WORLD_COLS)
+    world[K.W_BIN] = BUILDING_BIN_M
+    world[K.W_YHALF] = 1.0
+    world[K.W_SEED] = scene.seed & 0x7FFFFFFF
+    light = _compile_light(scene)
+    buildings = np.zeros((1, K.BLD_COLS))
+    lut = -np.ones((2, 1), np.int64)
+    if scene.kind == "street" and scene.street is not None:
+        st = scene.street
+        world[K.W_KIND] = K.KIND_STREET
+        world[K.W_ROAD], world[K.W_CURB], world[K.W_WALK] = st.road_half_width_m, st.curb_width_m, st.sidewalk_width_m
+        world[K.W_FACADE] = st.facade_x_m
+        world[K.W_YHALF] = st.length_m / 2.0
+        world[K.W_ASPHALT : K.W_ASPHALT + 3] = st.asphalt_color
+        world[K.W_SIDEWALK : K.W_SIDEWALK + 3] = st.sidewalk_color
+        world[K.W_CROSS] = st.crosswalk_y_m
+        world[K.W_SEED] = st.texture_seed & 0x7FFFFFFF
+        buildings, lut = _compile_buildings(st.buildings, st.length_m)
+    elif scene.kind == "chart" and scene.chart is not None:
+        world[K.W_KIND] = K.KIND_CHART
+        world[K.W_ASPHALT : K.W_ASPHALT + 3] = scene.chart.board_rgb
+    else:
+        world[K.W_KIND] = K.KIND_FLAT
+        world[K.W_LEVEL] = scene.flat_level
+    actors, ids, classes, speeds = _compile_actors(scene)
+    return CompiledScene(world, lut, buildings, light, actors, ids, classes, speeds)
+
+
+def _compile_light(scene: Scene) -> np.ndarray:
+    li = scene.lighting
+    t = np.zeros(K.LIGHT_COLS)
+    t[K.L_SUN : K.L_SUN + 3] = li.sun_direction
+    t[K.L_SUN_RGB : K.L_SUN_RGB + 3] = li.sun_rgb
+    t[K.L_AMB : K.L_AMB + 3] = li.ambient_rgb
+    t[K.L_HORIZON : K.L_HORIZON + 3] = li.sky_horizon_rgb
+    t[K.L_ZENITH : K.L_ZENITH + 3] = li.sky_zenith_rgb
+    t[K.L_HAZE : K.L_HAZE + 3] = li.haze_rgb
+    t[K.L_FOG] = li.fog_distance_m
+    t[K.L_GLOW] = li.window_glow
+    return t
+
+
+def _compile_buildings(buildings, length_m: float) -> tuple[np.ndarray, np.ndarray]:
+    n_bins = int(math.ceil(length_m / BUILDING_BIN_M))
+    lut = -np.ones((2, n_bins), np.int64)
+    tab = np.zeros((max(len(buildings), 1), K.BLD_COLS))
+    half = length_m / 2.0
+    for i, b in enumerate(buildings):
+        row = tab[i]
+        row[K.B_SIDE], row[K.B_Y0], row[K.B_Y1], row[K.B_HEIGHT] = b.side, b.y0_m, b.y1_m, b.height_m
+        row[K.B_RGB : K.B_RGB + 3] = b.color
+        row[K.B_WIN_RGB : K.B_WIN_RGB + 3] = b.window_color
+        row[K.B_FLOOR], row[K.B_WIN_W], row[K.B_WIN_SP] = b.floor_height_m, b.window_width_m, b.window_spacing_m
+        row[K.B_LIT] = b.lit_fraction
+        lo = max(int(math.floor((b.y0_m + half) / BUILDING_BIN_M)), 0)
+        hi = min(int(math.ceil((b.y1_m + half) / BUILDING_BIN_M)), n_bins)
+        lut[0 if b.side < 0 else 1, lo:hi] = i
+    return tab, lut
+
+
+def _compile_actors(scene: Scene) -> tuple[np.ndarray, tuple[int, ...], tuple[str, ...], tuple[float, ...]]:
+    rows, ids, classes, speeds = [], [], [], []
+    for p in scene.pedestrians:
+        a = np.zeros(K.ACTOR_COLS)
+        a[K.A_TYPE] = K.TYPE_PEDESTRIAN
+        a[K.A_STATIC] = 1.0 if p.speed_mps == 0.0 else 0.0
+        a[K.A_SPEED], a[K.A_ID] = p.speed_mps, p.id
+        a[K.P_LANE_X], a[K.P_YC], a[K.P_HALF] = p.lane_x_m, p.lane_y_center_m, p.lane_half_length_m
+        a[K.P_OFF], a[K.P_SPEED], a[K.P_H], a[K.P_BUILD] = p.start_offset_m, p.speed_mps, p.height_m, p.build
+        a[K.P_PHASE], a[K.P_DIR] = p.gait_phase, float(p.direction)
+        a[K.P_LONG_HAIR], a[K.P_SLEEVES] = float(p.long_hair), float(p.long_sleeves)
+        a[K.P_STRIDE] = p.stride_length_m
+        for off, rgb in ((K.P_SKIN, p.skin), (K.P_HAIR, p.hair), (K.P_SHIRT, p.shirt), (K.P_PANTS, p.pants),
+                         (K.P_SHOES, p.shoes)):
+            a[off : off + 3] = rgb
+        rows.append(a)
+        ids.append(p.id)
+        classes.append(p.cls)
+        speeds.append(p.speed_mps)
+    if scene.chart is not None:
+        ch = scene.chart
+        period = ch.pitch_px * len(ch.bars)
+        for bar in ch.bars:
+            a = np.zeros(K.ACTOR_COLS)
+            a[K.A_TYPE] = K.TYPE_BAR
+            a[K.A_STATIC] = 1.0 if ch.vx_px_s == 0.0 else 0.0
+            a[K.A_ID] = bar.id
+            a[K.R_X0], a[K.R_WIDTH], a[K.R_VX], a[K.R_PERIOD] = bar.x0_px, bar.width_px, ch.vx_px_s, period
+            a[K.R_RGB : K.R_RGB + 3] = bar.color
+            rows.append(a)
+            ids.append(bar.id)
+            classes.append("bar")
+            speeds.append(0.0)  # image-plane target: no world speed
+    actors = np.array(rows) if rows else np.zeros((0, K.ACTOR_COLS))
+    return actors, tuple(ids), tuple(classes), tuple(speeds)

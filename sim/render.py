@@ -1,0 +1,268 @@
+"""Per-line renderer: one scene function evaluated at a vector of line times.
+
+``Renderer.render_lines(times_ns)`` is the core call of DESIGN.md: one sample time per image line (row, or
+column for column readout). A global-shutter frame passes one time for every line; a rolling-shutter frame
+``t_start + offset(r)``; a banded approximation repeats each of K times over a band of lines. The same call
+backs all three, and ``reference_lines`` is the study's brute-force oracle (one full render per line time,
+keeping line r of render r).
+
+Work the scene does not need is skipped: the static world (and any actor that does not move) is rendered
+once and cached; lines no moving actor touches at their own time are copied from that cache; each actor's
+pose is evaluated once per distinct time it is needed at, so a static scene costs one render and a GS frame
+one pose per actor.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from . import _kernels as K
+from .compile import compile_camera, compile_scene
+from .errors import ConfigError
+from .frame import Box, ObjectTruth
+from .scene import Camera, Scene
+
+
+def srgb_lut() -> np.ndarray:
+    """8-bit sRGB encoding of linear values 0..1 sampled at LUT_SIZE + 1 points."""
+    v = np.linspace(0.0, 1.0, K.LUT_SIZE + 1)
+    s = np.where(v <= 0.0031308, 12.92 * v, 1.055 * np.power(v, 1 / 2.4) - 0.055)
+    return np.clip(np.round(s * 255.0), 0, 255).astype(np.uint8)
+
+
+_SRGB = srgb_lut()
+
+
+@dataclass
+class LineTruth:
+    """Per-actor, per-line ground truth of one render, in render space (lines x along-line position)."""
+
+    left: np.ndarray  # (actors, lines) float64, NaN where the actor has no pixel on the line
+    right: np.ndarray
+    area: np.ndarray  # (actors, lines) int64: pixels whose centre the actor covers
+    visible: np.ndarray  # (actors, lines) int64: of those, pixels no nearer actor hides
+    transposed: bool
+
+    @classmethod
+    def empty(cls, n_actors: int, n_lines: int, transposed: bool) -> LineTruth:
+        """Arrays for a render of ``n_lines`` lines."""
+        return cls(
+            np.full((n_actors, n_lines), np.nan),
+            np.full((n_actors, n_lines), np.nan),
+            np.zeros((n_actors, n_lines), np.int64),
+            np.zeros((n_actors, n_lines), np.int64),
+            transposed,
+        )
+
+    def boxes(self) -> list[Box | None]:
+        """Image-space box of each actor: union of its per-line extents (None when it has no pixel)."""
+        out: list[Box | None] = []
+        has = ~np.isnan(self.left)
+        for o in range(self.left.shape[0]):
+            lines = np.flatnonzero(has[o])
+            if lines.size == 0:
+                out.append(None)
+                continue
+            a0 = float(np.min(self.left[o, lines]))
+            a1 = float(np.max(self.right[o, lines]))
+            b0, b1 = float(lines[0]), float(lines[-1] + 1)
+            out.append((b0, a0, b1, a1) if self.transposed else (a0, b0, a1, b1))
+        return out
+
+    def visible_fraction(self) -> np.ndarray:
+        """Fraction of each actor's in-image pixels not hidden by nearer actors (0 when none)."""
+        tot = self.area.sum(axis=1)
+        vis = self.visible.sum(axis=1)
+        return np.where(tot > 0, vis / np.maximum(tot, 1), 0.0)
+
+
+@dataclass
+class RenderResult:
+    """A rendered image (8-bit BGR, optionally linear RGB float32) and its per-line ground truth."""
+
+    image: np.ndarray
+    linear: np.ndarray | None
+    truth: LineTruth
+
+
+class _Layer:
+    """Static layers of one camera orientation: bare background, and background with the static actors."""
+
+    def __init__(self, bg_lin: np.ndarray | None) -> None:
+        self.bg_lin = bg_lin
+        self.comp_lin: np.ndarray | None = None
+        self.comp_u8: np.ndarray | None = None
+        self.comp_gt: np.ndarray | None = None
+
+
+class Renderer:
+    """Renders one camera of a scene at arbitrary per-line times, with exact per-actor ground truth."""
+
+    def __init__(self, scene: Scene, camera: Camera | int | str = 0, *, gain: float = 1.0) -> None:
+        self.scene = scene
+        self.camera = camera if isinstance(camera, Camera) else scene.camera(camera)
+        if self.camera.width <= 0 or self.camera.height <= 0:
+            raise ConfigError(f"camera size must be positive, got {self.camera.width}x{self.camera.height}")
+        self.gain = float(gain)
+        self._c = compile_scene(scene)
+        self._cams = {False: compile_camera(self.camera, False), True: compile_camera(self.camera, True)}
+        self._layers: dict[bool, _Layer] = {}
+        self.camera_moving = self.camera.ego.moving
+        self.actor_ids = self._c.actor_ids
+        self.actor_classes = self._c.actor_classes
+        self.actor_speeds_mps = self._c.actor_speeds_mps
+
+    # ------------------------------------------------------------------ public API
+    @property
+    def n_actors(self) -> int:
+        """Number of actors (pedestrians, chart bars) in the scene."""
+        return int(self._c.actors.shape[0])
+
+    def render_lines(
+        self,
+        times_ns: np.ndarray,
+        *,
+        by_column: bool = False,
+        linear: bool = False,
+        truth_only: bool = False,
+    ) -> RenderResult:
+        """Render every image line at its own time (``times_ns``: int64, one per row or per column).
+
+        Returns the 8-bit BGR image in image orientation, the linear RGB float32 image when ``linear``,
+        and the per-line ground truth. ``truth_only`` skips pixels (for boxes at another instant).
+        """
+        cam = self._cams[by_column]
+        n_lines = self.camera.width if by_column else self.camera.height
+        n_along = self.camera.height if by_column else self.camera.width
+        times_ns = np.asarray(times_ns, dtype=np.int64)
+        if times_ns.shape != (n_lines,):
+            raise ConfigError(f"need one time per line: {n_lines} lines, got times of shape {times_ns.shape}")
+        ut_ns, line_k = np.unique(times_ns, return_inverse=True)
+        times_s = ut_ns.astype(np.float64) * 1e-9
+        layer = self._layer(by_column, times_s[0])
+        res = self._render(cam, times_s, line_k.astype(np.int64), n_lines, n_along, layer, linear, truth_only,
+                           include=np.ones(self.n_actors, np.bool_), force_paint=False)
+        return res
+
+    def reference_lines(self, times_ns: np.ndarray, *, by_column: bool = False) -> RenderResult:
+        """The study's brute-force method: one full render per line, keeping line r of render r."""
+        n_lines = self.camera.width if by_column else self.camera.height
+        times_ns = np.asarray(times_ns, dtype=np.int64)
+        if times_ns.shape != (n_lines,):
+            raise ConfigError(f"need one time per line: {n_lines} lines, got times of shape {times_ns.shape}")
+        out: RenderResult | None = None
+        for r in range(n_lines):
+            full = self.render_lines(np.full(n_lines, times_ns[r]), by_column=by_column)
+            if out is None:
+                out = RenderResult(np.empty_like(full.image), None,
+                                   LineTruth.empty(self.n_actors, n_lines, by_column))
+            if by_column:
+                out.image[:, r] = full.image[:, r]
+            else:
+                out.image[r] = full.image[r]
+            for name in ("left", "right", "area", "visible"):
+                getattr(out.truth, name)[:, r] = getattr(full.truth, name)[:, r]
+        assert out is not None
+        return out
+
+    def object_truth(self, frame_truth: LineTruth, reference_time_ns: int, by_column: bool = False,
+                     gs_truth: LineTruth | None = None) -> tuple[ObjectTruth, ...]:
+        """Per-object ground truth of a frame: RS boxes from ``frame_truth``, GS boxes at the reference time.
+
+        Objects with no pixel under either shutter are left out.
+        """
+        if gs_truth is None:
+            n_lines = self.camera.width if by_column else self.camera.height
+            gs_truth = self.render_lines(np.full(n_lines, reference_time_ns, np.int64), by_column=by_column,
+                                         truth_only=True).truth
+        rs_boxes = frame_truth.boxes()
+        gs_boxes = gs_truth.boxes()
+        vis = frame_truth.visible_fraction()
+        out = []
+        for o in range(self.n_actors):
+            if rs_boxes[o] is None and gs_boxes[o] is None:
+                continue
+            out.append(ObjectTruth(self.actor_ids[o], self.actor_classes[o], gs_boxes[o], rs_boxes[o],
+                                   float(vis[o]), float(self.actor_speeds_mps[o])))
+        return tuple(out)
+
+    # ------------------------------------------------------------------ internals
+    def _layer(self, by_column: bool, t0_s: float) -> _Layer:
+        """Static layers for this orientation, built on first use (nothing to cache for a moving camera)."""
+        layer = self._layers.get(by_column)
+        if layer is not None:
+            return layer
+        cam = self._cams[by_column]
+        n_lines = self.camera.width if by_column else self.camera.height
+        n_along = self.camera.height if by_column else self.camera.width
+        c = self._c
+        if self.camera_moving:
+            layer = _Layer(None)
+        else:
+            bg = np.empty((n_lines, n_along, 3), np.float32)
+            K.background_image(c.world, c.building_lut, c.buildings, c.light, cam, t0_s, bg)
+            layer = _Layer(bg)
+            static = c.actors[:, K.A_STATIC] != 0.0 if self.n_actors else np.zeros(0, np.bool_)
+            res = self._render(cam, np.array([t0_s]), np.zeros(n_lines, np.int64), n_lines, n_along, layer,
+                               True, False, include=static, force_paint=True)
+            assert res.linear is not None
+            layer.comp_lin = res.linear if not by_column else np.ascontiguousarray(res.linear.transpose(1, 0, 2))
+            img = res.image if not by_column else res.image.transpose(1, 0, 2)
+            layer.comp_u8 = np.ascontiguousarray(img)
+            t = res.truth
+            layer.comp_gt = np.stack([t.left, t.right, t.area.astype(np.float64), t.visible.astype(np.float64)])
+        self._layers[by_column] = layer
+        return layer
+
+    def _render(self, cam, times_s, line_k, n_lines, n_along, layer: _Layer, linear, truth_only, include,
+                force_paint) -> RenderResult:
+        c = self._c
+        n_obj, n_t = self.n_actors, times_s.shape[0]
+        static = c.actors[:, K.A_STATIC] != 0.0 if n_obj else np.zeros(0, np.bool_)
+        if self.camera_moving:
+            static = np.zeros_like(static)
+        # Actor time slot per line: a moving actor uses the line's own time, a static one the first time.
+        k_line = np.where(static[:, None], 0, line_k[None, :]) if n_obj else np.zeros((0, n_lines), np.int64)
+        need = np.zeros((n_obj, n_t), np.bool_)
+        need[:, 0] = include
+        need[include & ~static, :] = True
+        bounds = np.empty((n_obj, n_t, 4))
+        K.actor_bounds_all(c.actors, c.world, c.building_lut, c.buildings, c.light, cam, times_s, need, bounds)
+        centre = np.arange(n_lines) + 0.5
+        obj_line_k = np.full((n_obj, n_lines), -1, np.int64)
+        for o in np.flatnonzero(include):
+            b = bounds[o, k_line[o]]
+            touch = (b[:, 0] <= centre) & (centre <= b[:, 1]) & (b[:, 2] < n_along) & (b[:, 3] > 0)
+            obj_line_k[o, touch] = k_line[o, touch]
+        slots = np.full((n_obj, n_t), -1, np.int64)
+        o_idx, l_idx = np.nonzero(obj_line_k >= 0)
+        used = np.zeros((n_obj, n_t), np.bool_)
+        used[o_idx, obj_line_k[o_idx, l_idx]] = True
+        s_o, s_k = np.nonzero(used)
+        slots[s_o, s_k] = np.arange(s_o.size)
+        parts = np.empty((max(s_o.size, 1), K.MAX_PARTS, K.PART_COLS))
+        if s_o.size:
+            K.actor_parts_all(c.actors, c.world, c.building_lut, c.buildings, c.light, cam, times_s, s_o, s_k,
+                              parts)
+        out_u8 = np.empty((n_lines, n_along, 3), np.uint8)
+        out_lin = np.empty((n_lines, n_along, 3) if linear else (0, 0, 3), np.float32)
+        gt = LineTruth.empty(n_obj, n_lines, cam[K.C_TRANSPOSED] != 0.0)
+        bg = layer.bg_lin if layer.bg_lin is not None else np.empty((0, 0, 3), np.float32)
+        comp_lin = layer.comp_lin if (layer.comp_lin is not None and linear) else np.empty((0, 0, 3), np.float32)
+        comp_u8 = layer.comp_u8 if layer.comp_u8 is not None else np.empty((0, 0, 3), np.uint8)
+        comp_gt = layer.comp_gt if layer.comp_gt is not None else np.empty((0, 0, 0))
+        if not force_paint and not self.camera_moving and layer.comp_u8 is None:
+            raise RuntimeError("static layer missing")  # pragma: no cover - internal invariant
+        if linear and layer.comp_lin is None and not force_paint and not self.camera_moving:
+            raise RuntimeError("static linear layer missing")  # pragma: no cover
+        K.render_lines_kernel(c.world, c.building_lut, c.buildings, c.light, cam, c.actors, times_s, line_k,
+                              obj_line_k, slots, parts, include, bg, comp_lin, comp_u8, comp_gt, out_u8,
+                              out_lin, self.gain, _SRGB, gt.left, gt.right, gt.area, gt.visible, truth_only,
+                              force_paint)
+        image = out_u8.transpose(1, 0, 2) if cam[K.C_TRANSPOSED] != 0.0 else out_u8
+        lin = None
+        if linear:
+            lin = out_lin.transpose(1, 0, 2) if cam[K.C_TRANSPOSED] != 0.0 else out_lin
+        return RenderResult(np.ascontiguousarray(image), lin, gt)

@@ -1,0 +1,213 @@
+"""The scene as plain, frozen data: street layout, lighting, pedestrians, calibration charts, cameras.
+
+Everything moves analytically in time, so any instant can be evaluated directly (no stepping). Renderers,
+sensor models and ground truth read a Scene and never mutate it. World frame: X across the street (east),
+Y along it (north), Z up, metres; camera frame: x right, y down, z forward.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field, replace
+
+RGB = tuple[float, float, float]
+
+
+@dataclass(frozen=True)
+class Lighting:
+    """Light of one time of day, in linear relative radiance (noon sun on white ~ 1.0)."""
+
+    name: str
+    sun_azimuth_deg: float  # compass direction towards the sun, 0 = +Y (north), 90 = +X (east)
+    sun_elevation_deg: float
+    sun_rgb: RGB
+    ambient_rgb: RGB  # diffuse sky light reaching a surface that faces the open sky
+    sky_horizon_rgb: RGB
+    sky_zenith_rgb: RGB
+    haze_rgb: RGB
+    fog_distance_m: float = 300.0
+    window_glow: float = 0.0  # lit-window emission (dusk, dawn)
+
+    @property
+    def sun_direction(self) -> tuple[float, float, float]:
+        """Unit vector from the ground towards the sun, world frame."""
+        az, el = math.radians(self.sun_azimuth_deg), math.radians(self.sun_elevation_deg)
+        return (math.sin(az) * math.cos(el), math.cos(az) * math.cos(el), math.sin(el))
+
+
+@dataclass(frozen=True)
+class Building:
+    """One facade segment along a side of the street."""
+
+    side: int  # -1: west facade (x = -facade_x), +1: east facade
+    y0_m: float
+    y1_m: float
+    height_m: float
+    color: RGB
+    window_color: RGB
+    floor_height_m: float = 3.2
+    window_width_m: float = 1.2
+    window_spacing_m: float = 2.6
+    lit_fraction: float = 0.3
+
+
+@dataclass(frozen=True)
+class Street:
+    """A straight street along Y: road, curbs, sidewalks and two rows of facades."""
+
+    road_half_width_m: float
+    sidewalk_width_m: float
+    length_m: float  # the street spans y in [-length/2, length/2]
+    buildings: tuple[Building, ...]
+    asphalt_color: RGB = (0.10, 0.10, 0.11)
+    sidewalk_color: RGB = (0.38, 0.36, 0.34)
+    curb_width_m: float = 0.25
+    crosswalk_y_m: float = 12.0
+    texture_seed: int = 0
+
+    @property
+    def facade_x_m(self) -> float:
+        """Distance from the street axis to the facades."""
+        return self.road_half_width_m + self.curb_width_m + self.sidewalk_width_m
+
+
+@dataclass(frozen=True)
+class Pedestrian:
+    """A walker going back and forth along a lane parallel to the street (turning at the lane's ends).
+
+    Gait phase follows distance walked, so stride frequency follows speed (``speed / stride_length``).
+    """
+
+    id: int
+    lane_x_m: float
+    lane_y_center_m: float
+    lane_half_length_m: float
+    start_offset_m: float  # distance already walked at t = 0
+    speed_mps: float
+    height_m: float
+    build: float  # girth scale, ~0.85 (slim) .. 1.25 (heavy)
+    skin: RGB
+    hair: RGB
+    shirt: RGB
+    pants: RGB
+    shoes: RGB
+    long_hair: bool = False
+    long_sleeves: bool = True
+    gait_phase: float = 0.0
+    direction: int = 1  # +1 starts walking towards +Y, -1 towards -Y
+    cls: str = "person"
+
+    @property
+    def stride_length_m(self) -> float:
+        """Length of one full gait cycle (two steps)."""
+        return 0.82 * self.height_m
+
+
+@dataclass(frozen=True)
+class ChartBar:
+    """A vertical bar of a moving calibration chart, defined in image coordinates (pixels)."""
+
+    id: int
+    x0_px: float  # left edge at t = 0
+    width_px: float
+    color: RGB = (0.02, 0.02, 0.02)
+
+
+@dataclass(frozen=True)
+class Chart:
+    """Moving-target chart: bars sliding horizontally at ``vx_px_s`` over a light board.
+
+    Bars wrap around a period of ``pitch_px * len(bars)`` outside the image, so the chart runs forever.
+    """
+
+    vx_px_s: float
+    pitch_px: float
+    bars: tuple[ChartBar, ...]
+    board_rgb: RGB = (0.75, 0.75, 0.75)
+
+
+@dataclass(frozen=True)
+class EgoMotion:
+    """Camera motion: constant rates and velocity plus a three-axis sinusoidal vibration."""
+
+    pan_dps: float = 0.0
+    tilt_dps: float = 0.0
+    roll_dps: float = 0.0
+    velocity_mps: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    vibration_deg: float = 0.0
+    vibration_m: float = 0.0
+    vibration_hz: float = 0.0
+
+    @property
+    def moving(self) -> bool:
+        """True when the camera pose changes with time."""
+        return any(
+            v != 0.0
+            for v in (self.pan_dps, self.tilt_dps, self.roll_dps, *self.velocity_mps)
+        ) or (self.vibration_hz > 0 and (self.vibration_deg > 0 or self.vibration_m > 0))
+
+
+@dataclass(frozen=True)
+class Camera:
+    """A pinhole camera: intrinsics from focal length and sensor width, a pose, optional ego-motion."""
+
+    name: str
+    width: int
+    height: int
+    focal_mm: float
+    sensor_width_mm: float
+    position_m: tuple[float, float, float]
+    yaw_deg: float = 0.0  # 0 looks along +Y, 90 along +X
+    pitch_deg: float = 0.0  # positive looks up
+    roll_deg: float = 0.0
+    ego: EgoMotion = field(default_factory=EgoMotion)
+
+    @property
+    def fx_px(self) -> float:
+        """Focal length in pixels (square pixels)."""
+        return self.focal_mm / self.sensor_width_mm * self.width
+
+    def with_resolution(
+        self, width: int, height: int, focal_mm: float | None = None, sensor_width_mm: float | None = None
+    ) -> Camera:
+        """The same pose at another resolution (and optionally other optics)."""
+        return replace(
+            self,
+            width=int(width),
+            height=int(height),
+            focal_mm=self.focal_mm if focal_mm is None else float(focal_mm),
+            sensor_width_mm=self.sensor_width_mm if sensor_width_mm is None else float(sensor_width_mm),
+        )
+
+
+@dataclass(frozen=True)
+class Scene:
+    """A complete scene: what is there (street or chart or flat field), its light, its actors, its cameras."""
+
+    kind: str  # "street", "chart" or "flat"
+    seed: int
+    lighting: Lighting
+    cameras: tuple[Camera, ...]
+    street: Street | None = None
+    pedestrians: tuple[Pedestrian, ...] = ()
+    chart: Chart | None = None
+    flat_level: float = 0.5
+
+    @property
+    def time_of_day(self) -> str:
+        """Name of the lighting preset."""
+        return self.lighting.name
+
+    def camera(self, index_or_name: int | str = 0) -> Camera:
+        """A camera by index or name."""
+        from .errors import ConfigError
+
+        if isinstance(index_or_name, str) and not index_or_name.isdigit():
+            for cam in self.cameras:
+                if cam.name == index_or_name:
+                    return cam
+            raise ConfigError(f"camera {index_or_name!r} not in scene: {[c.name for c in self.cameras]}")
+        idx = int(index_or_name)
+        if not 0 <= idx < len(self.cameras):
+            raise ConfigError(f"camera index {idx!r} out of range 0..{len(self.cameras) - 1}")
+        return self.cameras[idx]

@@ -1,0 +1,258 @@
+"""Seeded procedural scenes: city streets with crowds (the study's setting), moving charts, flat fields.
+
+``make_scene(kind, seed=..., **options)`` is the one entry point; the same seed always gives the same scene.
+Every sampler draws from a ``numpy.random.Generator`` built from the seed here, never a global one.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numpy as np
+
+from .errors import ConfigError
+from .scene import (
+    Building,
+    Camera,
+    Chart,
+    ChartBar,
+    EgoMotion,
+    Lighting,
+    Pedestrian,
+    Scene,
+    Street,
+)
+
+# The study's virtual camera: 35 mm lens on a 16:9 digital filmback (36 x 20.25 mm), 1920x1080.
+STUDY_FOCAL_MM = 35.0
+STUDY_SENSOR_WIDTH_MM = 36.0
+
+TIMES_OF_DAY: dict[str, Lighting] = {
+    "dawn": Lighting("dawn", 80.0, 6.0, (0.55, 0.32, 0.20), (0.10, 0.09, 0.12), (0.55, 0.38, 0.32),
+                     (0.16, 0.18, 0.30), (0.40, 0.32, 0.30), 260.0, 0.35),
+    "morning": Lighting("morning", 110.0, 28.0, (0.95, 0.85, 0.70), (0.22, 0.24, 0.30), (0.62, 0.70, 0.80),
+                        (0.25, 0.40, 0.70), (0.60, 0.65, 0.72), 380.0, 0.0),
+    "noon": Lighting("noon", 170.0, 62.0, (1.10, 1.05, 0.98), (0.28, 0.30, 0.35), (0.70, 0.78, 0.88),
+                     (0.28, 0.45, 0.80), (0.70, 0.74, 0.80), 450.0, 0.0),
+    "afternoon": Lighting("afternoon", 235.0, 35.0, (1.00, 0.88, 0.72), (0.24, 0.25, 0.30),
+                          (0.68, 0.70, 0.76), (0.26, 0.42, 0.74), (0.66, 0.66, 0.70), 400.0, 0.0),
+    "dusk": Lighting("dusk", 285.0, 4.0, (0.45, 0.22, 0.10), (0.06, 0.06, 0.10), (0.45, 0.25, 0.22),
+                     (0.08, 0.09, 0.20), (0.30, 0.20, 0.20), 240.0, 0.55),
+}
+DAYLIGHT = ("morning", "noon", "afternoon")
+
+SPEED_PRESETS = {"static": 0.0, "normal": 1.0, "fast": 10.0}
+"""Speed multipliers: 'normal' walkers go up to 2 m/s as in the study, 'fast' ten times that."""
+
+_SKIN = np.array([(0.80, 0.62, 0.50), (0.72, 0.52, 0.38), (0.58, 0.40, 0.28), (0.42, 0.28, 0.18),
+                  (0.28, 0.18, 0.12), (0.86, 0.70, 0.60)])
+_HAIR = np.array([(0.03, 0.025, 0.02), (0.12, 0.07, 0.04), (0.30, 0.18, 0.08), (0.55, 0.45, 0.25),
+                  (0.45, 0.44, 0.42), (0.25, 0.08, 0.04)])
+_SHOES = np.array([(0.03, 0.03, 0.03), (0.20, 0.12, 0.07), (0.65, 0.65, 0.65), (0.08, 0.08, 0.12)])
+
+
+def parse_speed(speed: str | float) -> float:
+    """Speed multiplier from 'static', 'normal', 'fast' or a number (1.0 = normal)."""
+    if isinstance(speed, (int, float)):
+        value = float(speed)
+    elif str(speed).lower() in SPEED_PRESETS:
+        return SPEED_PRESETS[str(speed).lower()]
+    else:
+        try:
+            value = float(speed)
+        except ValueError:
+            raise ConfigError(
+                f"speed {speed!r} is not one of {sorted(SPEED_PRESETS)} or a number (multiplier of normal)"
+            ) from None
+    if not math.isfinite(value) or value < 0:
+        raise ConfigError(f"speed multiplier must be a finite number >= 0, got {speed!r}")
+    return value
+
+
+def _clothing(rng: np.random.Generator) -> tuple[float, float, float]:
+    """A clothing colour: mostly muted, sometimes saturated, never quite black or white."""
+    hue = rng.uniform(0, 6)
+    sat = rng.choice([0.1, 0.3, 0.6, 0.8], p=[0.35, 0.3, 0.2, 0.15])
+    val = rng.uniform(0.06, 0.65)
+    c = val * (1 - sat)
+    x = (1 - abs(hue % 2 - 1)) * val * sat
+    i = int(hue)
+    base = [(val, c + x, c), (c + x, val, c), (c, val, c + x), (c, c + x, val), (c + x, c, val), (val, c, c + x)][i]
+    return (float(base[0]), float(base[1]), float(base[2]))
+
+
+def make_pedestrian(rng: np.random.Generator, pid: int, lane_x_m: float, lane_y_center_m: float,
+                    lane_half_length_m: float, speed_mps: float) -> Pedestrian:
+    """One walker with random body, skin, hair and clothing on the given lane."""
+    female = rng.random() < 0.5
+    height = float(np.clip(rng.normal(1.64 if female else 1.77, 0.07), 1.45, 2.0))
+    if rng.random() < 0.08:
+        height = float(rng.uniform(1.05, 1.4))  # children
+    return Pedestrian(
+        id=pid,
+        lane_x_m=lane_x_m,
+        lane_y_center_m=lane_y_center_m,
+        lane_half_length_m=lane_half_length_m,
+        start_offset_m=float(rng.uniform(0, 4 * lane_half_length_m)),
+        speed_mps=speed_mps,
+        height_m=height,
+        build=float(np.clip(rng.normal(0.95 if female else 1.05, 0.1), 0.8, 1.3)),
+        skin=tuple(float(v) for v in _SKIN[rng.integers(len(_SKIN))]),
+        hair=tuple(float(v) for v in _HAIR[rng.integers(len(_HAIR))]),
+        shirt=_clothing(rng),
+        pants=_clothing(rng),
+        shoes=tuple(float(v) for v in _SHOES[rng.integers(len(_SHOES))]),
+        long_hair=bool(rng.random() < (0.6 if female else 0.1)),
+        long_sleeves=bool(rng.random() < 0.6),
+        gait_phase=float(rng.uniform(0, 2 * math.pi)),
+        direction=1 if rng.random() < 0.5 else -1,
+    )
+
+
+def _buildings(rng: np.random.Generator, length_m: float) -> tuple[Building, ...]:
+    out = []
+    for side in (-1, 1):
+        y = -length_m / 2
+        while y < length_m / 2:
+            w = float(rng.uniform(8, 26))
+            base = rng.uniform(0.15, 0.55)
+            tint = rng.normal(0, 0.06, 3)
+            color = tuple(float(np.clip(base + t, 0.05, 0.8)) for t in tint)
+            glass = tuple(float(v) for v in np.clip(rng.uniform(0.04, 0.12) + rng.normal(0, 0.02, 3), 0.02, 0.3))
+            out.append(Building(
+                side=side, y0_m=y, y1_m=min(y + w, length_m / 2), height_m=float(rng.uniform(9, 45)),
+                color=color, window_color=glass, floor_height_m=float(rng.uniform(3.0, 3.8)),
+                window_width_m=float(rng.uniform(0.9, 1.6)), window_spacing_m=float(rng.uniform(2.2, 3.4)),
+                lit_fraction=float(rng.uniform(0.1, 0.5)),
+            ))
+            y += w
+    return tuple(out)
+
+
+def _street_cameras(rng: np.random.Generator, street: Street, n: int, width: int, height: int,
+                    focal_mm: float, sensor_width_mm: float, ego: EgoMotion) -> tuple[Camera, ...]:
+    """``n`` cameras around the crowd: along the street, across it, high and low (the study used five)."""
+    cams = []
+    walk_x = street.road_half_width_m + street.curb_width_m + street.sidewalk_width_m / 2
+    presets = [  # (x, y, z, yaw, pitch): looking across, along, diagonally, from above
+        (-walk_x + 0.5, -2.0, 1.6, 75.0, -4.0),
+        (0.0, -26.0, 3.5, 0.0, -6.0),
+        (walk_x - 0.3, -14.0, 2.2, -25.0, -5.0),
+        (-street.facade_x_m + 0.8, 6.0, 6.5, 120.0, -16.0),
+        (walk_x, 22.0, 1.4, 195.0, -3.0),
+    ]
+    for i in range(n):
+        x, y, z, yaw, pitch = presets[i % len(presets)]
+        jitter = rng.normal(0, 1, 5) * (0.4, 1.0, 0.2, 4.0, 1.0)
+        cams.append(Camera(
+            name=f"cam{i}", width=width, height=height, focal_mm=focal_mm, sensor_width_mm=sensor_width_mm,
+            position_m=(float(x + jitter[0]), float(y + jitter[1]), float(max(z + jitter[2], 0.5))),
+            yaw_deg=float(yaw + jitter[3]), pitch_deg=float(pitch + jitter[4]), roll_deg=0.0, ego=ego,
+        ))
+    return tuple(cams)
+
+
+def make_street_scene(
+    seed: int = 0,
+    *,
+    time_of_day: str = "noon",
+    speed: str | float = "normal",
+    n_pedestrians: int = 20,
+    n_cameras: int = 5,
+    width: int = 1920,
+    height: int = 1080,
+    focal_mm: float = STUDY_FOCAL_MM,
+    sensor_width_mm: float = STUDY_SENSOR_WIDTH_MM,
+    ego: EgoMotion | None = None,
+) -> Scene:
+    """A seeded city street with a crowd walking on the sidewalks and crossing lanes, and several cameras.
+
+    Walkers' base speeds are drawn up to 2 m/s and scaled by ``speed`` ('normal' 1x, 'fast' 10x).
+    """
+    if time_of_day not in TIMES_OF_DAY:
+        raise ConfigError(f"time_of_day {time_of_day!r} is not one of {list(TIMES_OF_DAY)}")
+    if n_pedestrians < 0 or n_cameras < 1:
+        raise ConfigError(f"need n_pedestrians >= 0 and n_cameras >= 1, got {n_pedestrians!r}, {n_cameras!r}")
+    mult = parse_speed(speed)
+    rng = np.random.default_rng(seed)
+    road_half = float(rng.uniform(3.2, 5.5))
+    sidewalk = float(rng.uniform(3.0, 5.0))
+    length = 240.0
+    street = Street(road_half, sidewalk, length, (), texture_seed=int(rng.integers(1 << 30)),
+                    crosswalk_y_m=float(rng.uniform(-8, 18)))
+    street = Street(road_half, sidewalk, length, _buildings(rng, length), texture_seed=street.texture_seed,
+                    crosswalk_y_m=street.crosswalk_y_m,
+                    asphalt_color=tuple(float(v) for v in rng.uniform(0.07, 0.14) * np.array([1, 1, 1.08])),
+                    sidewalk_color=tuple(float(v) for v in rng.uniform(0.3, 0.45) * np.array([1.0, 0.96, 0.9])))
+    walk_lo = road_half + street.curb_width_m + 0.4
+    walk_hi = street.facade_x_m - 0.5
+    peds = []
+    for i in range(n_pedestrians):
+        side = -1.0 if rng.random() < 0.5 else 1.0
+        lane_x = side * float(rng.uniform(walk_lo, walk_hi))
+        if rng.random() < 0.15:
+            lane_x = float(rng.uniform(-road_half + 0.5, road_half - 0.5))  # walking in the road
+        base_speed = float(rng.uniform(0.8, 2.0))
+        peds.append(make_pedestrian(rng, i + 1, lane_x, float(rng.uniform(-6, 6)), float(rng.uniform(25, 45)),
+                                    base_speed * mult))
+    cams = _street_cameras(rng, street, n_cameras, width, height, focal_mm, sensor_width_mm,
+                           ego if ego is not None else EgoMotion())
+    return Scene("street", seed, TIMES_OF_DAY[time_of_day], cams, street=street, pedestrians=tuple(peds))
+
+
+def make_chart_scene(seed: int = 0, *, vx_px_s: float = 2000.0, pitch_px: float = 64.0, bar_width_px: float = 24.0,
+                     width: int = 1920, height: int = 1080, focal_mm: float = STUDY_FOCAL_MM,
+                     sensor_width_mm: float = STUDY_SENSOR_WIDTH_MM) -> Scene:
+    """Moving-target chart: dark vertical bars sliding at ``vx_px_s`` px/s across a light board.
+
+    On a rolling-shutter sensor each bar edge shears by ``vx * line_time`` px per row, the classic way to
+    measure a sensor's line time from its images.
+    """
+    for name, v in (("vx", vx_px_s), ("pitch", pitch_px), ("bar_width", bar_width_px)):
+        if not math.isfinite(v):
+            raise ConfigError(f"chart {name} must be finite, got {v!r}")
+    if pitch_px <= 0 or not 0 < bar_width_px < pitch_px:
+        raise ConfigError(f"chart needs 0 < bar_width < pitch, got bar_width={bar_width_px!r}, pitch={pitch_px!r}")
+    n = int(math.ceil((width + 2 * pitch_px) / pitch_px)) + 1
+    bars = tuple(ChartBar(i + 1, (i - 1) * pitch_px, bar_width_px) for i in range(n))
+    cam = Camera("chart", width, height, focal_mm, sensor_width_mm, (0.0, 0.0, 1.0))
+    return Scene("chart", seed, TIMES_OF_DAY["noon"], (cam,), chart=Chart(vx_px_s, pitch_px, bars))
+
+
+def make_flat_scene(seed: int = 0, *, level: float = 0.5, width: int = 1920, height: int = 1080) -> Scene:
+    """A uniform flat field of linear radiance ``level`` (for sensor characterisation)."""
+    if not math.isfinite(level) or level < 0:
+        raise ConfigError(f"flat level must be a finite number >= 0, got {level!r}")
+    cam = Camera("flat", width, height, STUDY_FOCAL_MM, STUDY_SENSOR_WIDTH_MM, (0.0, 0.0, 1.0))
+    return Scene("flat", seed, TIMES_OF_DAY["noon"], (cam,), flat_level=float(level))
+
+
+def ego_preset(name: str) -> EgoMotion:
+    """Named camera ego-motions: 'none', 'pan' (30 deg/s), 'walk' (handheld), 'vehicle' (10 m/s + vibration)."""
+    presets = {
+        "none": EgoMotion(),
+        "pan": EgoMotion(pan_dps=30.0),
+        "walk": EgoMotion(velocity_mps=(0.0, 1.4, 0.0), vibration_deg=0.4, vibration_m=0.01, vibration_hz=2.0),
+        "vehicle": EgoMotion(velocity_mps=(0.0, 10.0, 0.0), pan_dps=2.0, vibration_deg=0.15, vibration_m=0.005,
+                             vibration_hz=12.0),
+        "drone": EgoMotion(pan_dps=20.0, tilt_dps=-5.0, roll_dps=10.0, velocity_mps=(2.0, 3.0, 0.0),
+                           vibration_deg=0.3, vibration_m=0.002, vibration_hz=60.0),
+    }
+    if name not in presets:
+        raise ConfigError(f"ego-motion {name!r} is not one of {list(presets)}")
+    return presets[name]
+
+
+SCENE_KINDS = ("street", "chart", "flat")
+
+
+def make_scene(kind: str = "street", seed: int = 0, **options: Any) -> Scene:
+    """Build a scene by kind ('street', 'chart', 'flat') with that kind's keyword options."""
+    makers = {"street": make_street_scene, "chart": make_chart_scene, "flat": make_flat_scene}
+    if kind not in makers:
+        raise ConfigError(f"scene {kind!r} is not one of {list(makers)}")
+    try:
+        return makers[kind](seed, **options)
+    except TypeError as exc:
+        raise ConfigError(f"bad option for scene {kind!r}: {exc}") from None
