@@ -7,6 +7,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from . import _body as B
 from . import _kernels as K
 from .scene import Camera, Scene
 
@@ -110,17 +111,17 @@ def _compile_buildings(buildings, length_m: float) -> tuple[np.ndarray, np.ndarr
 def _compile_actors(scene: Scene) -> tuple[np.ndarray, tuple[int, ...], tuple[str, ...], tuple[float, ...]]:
     rows, ids, classes, speeds = [], [], [], []
     for p in scene.pedestrians:
-        a = np.zeros(K.ACTOR_COLS)
-        a[K.A_TYPE] = K.TYPE_PEDESTRIAN
-        a[K.A_STATIC] = 1.0 if p.speed_mps == 0.0 else 0.0
-        a[K.A_SPEED], a[K.A_ID] = p.speed_mps, p.id
-        a[K.P_LANE_X], a[K.P_YC], a[K.P_HALF] = p.lane_x_m, p.lane_y_center_m, p.lane_half_length_m
-        a[K.P_OFF], a[K.P_SPEED], a[K.P_H], a[K.P_BUILD] = p.start_offset_m, p.speed_mps, p.height_m, p.build
-        a[K.P_PHASE], a[K.P_DIR] = p.gait_phase, float(p.direction)
-        a[K.P_LONG_HAIR], a[K.P_SLEEVES] = float(p.long_hair), float(p.long_sleeves)
-        a[K.P_STRIDE] = p.stride_length_m
-        for off, rgb in ((K.P_SKIN, p.skin), (K.P_HAIR, p.hair), (K.P_SHIRT, p.shirt), (K.P_PANTS, p.pants),
-                         (K.P_SHOES, p.shoes)):
+        a = np.zeros(B.ACTOR_COLS)
+        a[B.A_TYPE] = B.TYPE_PEDESTRIAN
+        a[B.A_STATIC] = 1.0 if p.speed_mps == 0.0 else 0.0
+        a[B.A_SPEED], a[B.A_ID] = p.speed_mps, p.id
+        a[B.P_LANE_X], a[B.P_YC], a[B.P_HALF] = p.lane_x_m, p.lane_y_center_m, p.lane_half_length_m
+        a[B.P_OFF], a[B.P_SPEED], a[B.P_H], a[B.P_BUILD] = p.start_offset_m, p.speed_mps, p.height_m, p.build
+        a[B.P_PHASE], a[B.P_DIR] = p.gait_phase, float(p.direction)
+        a[B.P_LONG_HAIR], a[B.P_SLEEVES] = float(p.long_hair), float(p.long_sleeves)
+        a[B.P_STRIDE] = p.stride_length_m
+        for off, rgb in ((B.P_SKIN, p.skin), (B.P_HAIR, p.hair), (B.P_SHIRT, p.shirt), (B.P_PANTS, p.pants),
+                         (B.P_SHOES, p.shoes)):
             a[off : off + 3] = rgb
         rows.append(a)
         ids.append(p.id)
@@ -130,15 +131,15 @@ def _compile_actors(scene: Scene) -> tuple[np.ndarray, tuple[int, ...], tuple[st
         ch = scene.chart
         period = ch.pitch_px * len(ch.bars)
         for bar in ch.bars:
-            a = np.zeros(K.ACTOR_COLS)
-            a[K.A_TYPE] = K.TYPE_BAR
-            a[K.A_STATIC] = 1.0 if ch.vx_px_s == 0.0 else 0.0
-            a[K.A_ID] = bar.id
-            a[K.R_X0], a[K.R_WIDTH], a[K.R_VX], a[K.R_PERIOD] = bar.x0_px, bar.width_px, ch.vx_px_s, period
-            a[K.R_RGB : K.R_RGB + 3] = bar.color
+            a = np.zeros(B.ACTOR_COLS)
+            a[B.A_TYPE] = B.TYPE_BAR
+            a[B.A_STATIC] = 1.0 if ch.vx_px_s == 0.0 else 0.0
+            a[B.A_ID] = bar.id
+            a[B.R_X0], a[B.R_WIDTH], a[B.R_VX], a[B.R_PERIOD] = bar.x0_px, bar.width_px, ch.vx_px_s, period
+            a[B.R_RGB : B.R_RGB + 3] = bar.color
             rows.append(a)
             ids.append(bar.id)
             classes.append("bar")
             speeds.append(0.0)  # image-plane target: no world speed
-    actors = np.array(rows) if rows else np.zeros((0, K.ACTOR_COLS))
+    actors = np.array(rows) if rows else np.zeros((0, B.ACTOR_COLS))
     return actors, tuple(ids), tuple(classes), tuple(speeds)

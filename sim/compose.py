@@ -31,10 +31,10 @@ _DIS_PRESETS = {
 }
 # A pair's flow is reused by every line between its frames; consecutive RS frames share at most the
 # boundary pair, so two entries suffice (each holds the two flows, 16 bytes a pixel).
+_PAIR_CACHE_SIZE = 2
 # OpenCV 4.x's DIS crashes the process (segfault) on images under ~32 px in a dimension; flow is computed
 # on at least this many lines (a wider band, or edge-replicated padding of a small frame).
 _MIN_FLOW_PX = 64
-_PAIR_CACHE_SIZE = 2
 
 
 class ComposedFrame(NamedTuple):

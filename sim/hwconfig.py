@@ -2,10 +2,10 @@
 
 Validation is table-driven. Each field of a config class carries its schema row (type, expected form, value
 check, default; ``_schema(cls)`` gathers them into a dict) and each class a ``_rules`` table of checks that
-relate several values. The loader turns YAML into objects and rejects
-unknown and missing keys; each class's ``__post_init__`` runs its schema and rules, so objects made with
-``dataclasses.replace`` are checked too. Errors are ``ConfigError``s naming the file, the dotted key
-(``modes[1].line_length_pck``), the expected form and the bad value.
+relate several values. The loader turns YAML into objects and rejects unknown and missing keys; each class's
+``__post_init__`` runs its schema and rules, so objects made with ``dataclasses.replace`` are checked too.
+Errors are ``ConfigError``s naming the file, the dotted key (``modes[1].line_length_pck``), the expected
+form and the bad value.
 """
 
 from __future__ import annotations
@@ -43,11 +43,12 @@ _BAYER_FOURCCS = {  # order -> fourccs of 8, 10, 10 packed, 12, 12 packed bits (
 FOURCCS: dict[str, tuple[str | None, int]] = {
     **{f: (order, bits)
        for order, fs in _BAYER_FOURCCS.items() for f, bits in zip(fs, (8, 10, 10, 12, 12), strict=True)},
-    "GREY": ("mono", 8), "Y10 ": ("mono", 10), "Y10P": ("mono", 10), "Y12 ": ("mono", 12),
-    "Y16 ": ("mono", 16), **dict.fromkeys(("YUYV", "UYVY", "NV12", "YU12", "BGR3", "RGB3", "XR24", "MJPG",
-                                           "H264"), (None, 8)),
+    "Y10 ": ("mono", 10), "Y10P": ("mono", 10), "Y12 ": ("mono", 12), "Y16 ": ("mono", 16),
+    **dict.fromkeys(("GREY", "YUYV", "UYVY", "NV12", "YU12", "BGR3", "RGB3", "XR24", "MJPG", "H264"), (None, 8)),
 }
-"""Known V4L2 fourccs -> (Bayer order, "mono", or None for processed formats; bits per sample)."""
+"""Known V4L2 fourccs -> (Bayer order, "mono", or None for processed formats; bits per sample).
+
+GREY counts as processed: a mono sensor's 8-bit output and a colour ISP's luma alike."""
 
 
 class _Invalid(ConfigError):
@@ -264,12 +265,13 @@ class Register(_Checked):
         return self.address + self.width_bits // 8 - 1
 
 
-def _size_ok(s: SensorConfig, axis: str) -> bool:
-    return math.isclose(getattr(s.optics, f"sensor_{axis}_mm"), _size_mm(s, axis), rel_tol=0.02)
-
-
 def _size_mm(s: SensorConfig, axis: str) -> float:
     return getattr(s, f"active_{axis}") * s.optics.pixel_size_um / 1000
+
+
+def _fits(s: SensorConfig, m: SensorMode) -> bool:
+    c = m.crop or Crop(0, 0, *m.read_size)
+    return c.left + c.width <= s.active_width and c.top + c.height <= s.active_height
 
 
 def _clash(s: SensorConfig, i: int) -> str | None:
@@ -281,15 +283,11 @@ def _clash(s: SensorConfig, i: int) -> str | None:
     return None
 
 
-def _exposure_lines(s: SensorConfig) -> int:
-    return s.exposure.min_lines + s.exposure.max_margin_lines
-
-
 ModeKey = str | SensorMode | None
 _READOUTS = [r.value for r in Readout]
 
 
-@dataclass(frozen=True, kw_only=True)
+@dataclass(frozen=True, kw_only=True, repr=False)
 class SensorConfig(_Checked):
     """Everything rollcam knows about one sensor: geometry, timing, formats, noise, limits, registers."""
 
@@ -312,20 +310,22 @@ class SensorConfig(_Checked):
     registers: tuple[Register, ...] = _f(_ListOf(Register), "a list of registers (may be empty)")
     sources: tuple[str, ...] = _f(_ListOf(str), "a list of strings", None, ())
     _rules: ClassVar[tuple[_Rule, ...]] = (
-        *(_Rule(f"optics.sensor_{ax}_mm", lambda s, _, i, ax=ax: _size_ok(s, ax),
+        *(_Rule(f"optics.sensor_{ax}_mm",
+                lambda s, _, i, ax=ax: math.isclose(_dotted(s, f"optics.sensor_{ax}_mm"), _size_mm(s, ax),
+                                                    rel_tol=0.02),
                 lambda s, _, i, ax=ax: f"active_{ax} x pixel_size_um = {_size_mm(s, ax):.4g} mm (within 2%)")
           for ax in ("width", "height")),
         _Rule("noise.black_level_dn", lambda s, _, i: s.noise.black_level_dn < (1 << s.bit_depth) - 1,
               lambda s, _, i: f"< {(1 << s.bit_depth) - 1}, the {s.bit_depth}-bit maximum"),
         _Rule("modes[].name", lambda s, m, i: m.name not in [x.name for x in s.modes[:i]],
               lambda s, m, i: "a name no earlier mode has"),
-        _Rule("modes[].crop", lambda s, m, i: (c := s.crop(m)).left + c.width <= s.active_width
-              and c.top + c.height <= s.active_height,
-              lambda s, m, i: f"an area inside the {s.active_width}x{s.active_height} active array",
-              lambda s, m, i: s.crop(m)),
+        _Rule("modes[].crop", lambda s, m, i: _fits(s, m),
+              lambda s, m, i: f"an area inside the {s.active_width}x{s.active_height} active array "
+                              "(without crop: width x height times binning, centred)",
+              lambda s, m, i: m.crop or m.read_size),
         _Rule("modes[].frame_length_lines",
-              lambda s, m, i: m.frame_length_lines >= _exposure_lines(s),
-              lambda s, m, i: f">= exposure.min_lines + max_margin_lines = {_exposure_lines(s)}"),
+              lambda s, m, i: m.frame_length_lines >= s.exposure.min_lines + s.exposure.max_margin_lines,
+              lambda s, m, i: ">= exposure.min_lines + max_margin_lines, room for the shortest exposure"),
         _Rule("default_mode", lambda s, _, i: s.default_mode in [m.name for m in s.modes],
               lambda s, _, i: f"one of {[m.name for m in s.modes]}"),
         _Rule("formats[]", lambda s, f, i: f in FOURCCS,
@@ -349,6 +349,12 @@ class SensorConfig(_Checked):
     def __post_init__(self) -> None:
         super().__post_init__()
         object.__setattr__(self, "readout", Readout(self.readout))
+
+    def __repr__(self) -> str:
+        t, m = self.timing(), self.mode()
+        return (f"SensorConfig({self.name!r}, {self.shutter}, {self.active_width}x{self.active_height}, mode "
+                f"{m.name!r} {t.fps:.2f} fps, line {t.line_time_ns} ns, {len(self.modes)} modes, "
+                f"{len(self.registers)} registers)")
 
     @property
     def rolling(self) -> bool:
@@ -400,10 +406,6 @@ class SensorConfig(_Checked):
         fy = self.optics.focal_mm / self.optics.sensor_height_mm * self.active_height / m.binning[1]
         cx = (self.active_width / 2 - c.left) / m.binning[0]
         return self.focal_px(m), fy, cx, (self.active_height / 2 - c.top) / m.binning[1]
-
-    def exposure_range_lines(self, mode: ModeKey = None) -> tuple[int, int]:
-        """Shortest and longest exposure in lines at the mode's default frame length."""
-        return self.exposure.min_lines, self.mode(mode).frame_length_lines - self.exposure.max_margin_lines
 
     def register(self, key: str | int) -> Register:
         """The register with this name, role or address."""
