@@ -325,7 +325,8 @@ class SensorConfig(_Checked):
               lambda s, m, i: m.crop or m.read_size),
         _Rule("modes[].frame_length_lines",
               lambda s, m, i: m.frame_length_lines >= s.exposure.min_lines + s.exposure.max_margin_lines,
-              lambda s, m, i: ">= exposure.min_lines + max_margin_lines, room for the shortest exposure"),
+              lambda s, m, i: f">= exposure.min_lines + max_margin_lines "
+                              f"({s.exposure.min_lines} + {s.exposure.max_margin_lines}): room to expose"),
         _Rule("default_mode", lambda s, _, i: s.default_mode in [m.name for m in s.modes],
               lambda s, _, i: f"one of {[m.name for m in s.modes]}"),
         _Rule("formats[]", lambda s, f, i: f in FOURCCS,
@@ -450,8 +451,8 @@ def _parse_section(cls: type[_Checked], raw: Any, key: str) -> Any:
         raise _Invalid(join(e.key), e.detail) from None
 
 
-class _StrictLoader(yaml.SafeLoader):
-    """SafeLoader that rejects a repeated mapping key instead of silently keeping the last one."""
+class _StrictLoader(getattr(yaml, "CSafeLoader", yaml.SafeLoader)):  # type: ignore[misc]
+    """(C)SafeLoader that rejects a repeated mapping key instead of silently keeping the last one."""
 
 
 def _mapping_no_duplicates(loader: _StrictLoader, node: yaml.MappingNode) -> dict:
@@ -472,7 +473,7 @@ def _parse_text(text: str, label: str) -> SensorConfig:
     try:
         raw = yaml.load(text, Loader=_StrictLoader)  # a SafeLoader subclass: builds no arbitrary objects
     except yaml.YAMLError as e:
-        raise ConfigError(f"{label}: not valid YAML: {e}") from None
+        raise ConfigError(f"{label}: not valid YAML: {e}".replace("<unicode string>", label)) from None
     try:
         return _parse_section(SensorConfig, raw, "")
     except _Invalid as e:

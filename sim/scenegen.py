@@ -136,9 +136,9 @@ def _street_cameras(rng: np.random.Generator, street: Street, n: int, width: int
     cams = []
     walk_x = street.road_half_width_m + street.curb_width_m + street.sidewalk_width_m / 2
     presets = [  # (x, y, z, yaw, pitch): looking across, along, diagonally, from above
-        (-walk_x + 0.5, -2.0, 1.6, 75.0, -4.0),
         (0.0, -26.0, 3.5, 0.0, -6.0),
         (walk_x - 0.3, -14.0, 2.2, -25.0, -5.0),
+        (-walk_x + 0.5, -2.0, 1.6, 75.0, -4.0),
         (-street.facade_x_m + 0.8, 6.0, 6.5, 120.0, -16.0),
         (walk_x, 22.0, 1.4, 195.0, -3.0),
     ]
@@ -194,7 +194,7 @@ def make_street_scene(
         if rng.random() < 0.15:
             lane_x = float(rng.uniform(-road_half + 0.5, road_half - 0.5))  # walking in the road
         base_speed = float(rng.uniform(0.8, 2.0))
-        peds.append(make_pedestrian(rng, i + 1, lane_x, float(rng.uniform(-6, 6)), float(rng.uniform(25, 45)),
+        peds.append(make_pedestrian(rng, i + 1, lane_x, float(rng.uniform(-6, 6)), float(rng.uniform(14, 32)),
                                     base_speed * mult))
     cams = _street_cameras(rng, street, n_cameras, width, height, focal_mm, sensor_width_mm,
                            ego if ego is not None else EgoMotion())

@@ -103,6 +103,32 @@ def test_nearest_is_a_staircase_and_linear_a_time_blend() -> None:
     assert np.all(row_err[::8] == 0) and row_err[3] > 0  # exact on frame rows, stale in between
 
 
+@pytest.mark.parametrize(
+    "convert",
+    [
+        lambda f: f[..., 0].astype(np.uint16) * 257,  # 16-bit mono
+        lambda f: f[..., :1],  # H x W x 1
+        lambda f: f.astype(np.float32) / 255,
+        lambda f: np.ascontiguousarray(f[:20, 20:48]),  # smaller than DIS takes unpadded; bar edge
+    ],
+    ids=["u16", "hw1", "f32", "tiny"],
+)
+def test_other_dtypes_and_sizes_keep_dtype_and_order(convert) -> None:
+    source = footage_at(8, H_PX // 8 + 4)
+    footage = Footage.from_frames([convert(source[k]) for k in range(len(source))], source.fps)
+    offsets = row_offsets_ns(footage.height)
+    t0 = footage.time_ns(1)
+    exact = convert(render(t0 + row_offsets_ns()))
+    scale = float(np.max(exact)) or 1.0
+    errs = {}
+    for method, kw in [("nearest", {}), ("linear", {}), ("flow", {}), ("flow", {"flow_margin_px": 4})]:
+        out = compose_rs(footage, t0, offsets, method, **kw)
+        assert out.dtype == exact.dtype and out.shape == exact.shape
+        errs[method, bool(kw)] = composition_error(out, exact)["mean_abs_err_dn"] / scale
+    assert errs["flow", False] < errs["linear", False] < errs["nearest", False]
+    assert errs["flow", True] < errs["linear", False]
+
+
 # ---- geometry and errors --------------------------------------------------------------------------------
 @pytest.mark.parametrize("method", ["nearest", "linear", "flow"])
 def test_column_readout_is_the_transpose(method: str) -> None:

@@ -1,1 +1,49 @@
-"""Camera sources, one module per URI scheme."""
+"""Camera sources, one module per URI scheme, resolved by name (as pyserial resolves ``protocol_<scheme>``).
+
+``open_camera(uri)`` imports ``rollcam.host.sources.<scheme>`` and calls its ``open_source(uri, parts)``;
+a new backend is one new module plus its name in ``SCHEMES``. Nothing else in ``host`` imports a backend.
+"""
+
+from __future__ import annotations
+
+import importlib
+from urllib.parse import parse_qsl
+
+from rollcam.sim.errors import SourceError
+
+from .base import CameraSource, SourceURI
+
+SCHEMES = {"emu": "emu", "file": "file"}
+"""URI scheme -> module name under ``rollcam.host.sources``."""
+
+
+def parse_uri(uri: str) -> SourceURI:
+    """Split ``scheme:target?key=value&...`` into its parts; duplicate or empty keys are errors."""
+    if not isinstance(uri, str) or ":" not in uri:
+        raise SourceError(f"source {uri!r} is not a URI; expected one of {[s + ':...' for s in SCHEMES]}")
+    scheme, rest = uri.split(":", 1)
+    scheme = scheme.lower()
+    if scheme in ("http", "https"):
+        return SourceURI(uri, scheme, uri, {})
+    target, _, query = rest.partition("?")
+    options: dict[str, str] = {}
+    for key, value in parse_qsl(query, keep_blank_values=True):
+        if not key:
+            raise SourceError(f"source {uri!r}: empty option name in query {query!r}")
+        if key in options:
+            raise SourceError(f"source {uri!r}: option {key!r} given twice")
+        options[key] = value
+    return SourceURI(uri, scheme, target, options)
+
+
+def open_camera(uri: str) -> CameraSource:
+    """Open any supported camera source by URI (see DESIGN.md: ``emu:imx219?scene=street``, ``file:DIR``)."""
+    parts = parse_uri(uri)
+    module_name = SCHEMES.get(parts.scheme)
+    if module_name is None:
+        raise SourceError(f"source {uri!r}: scheme {parts.scheme!r} is not supported; known: {sorted(SCHEMES)}")
+    module = importlib.import_module(f"{__name__}.{module_name}")
+    return module.open_source(parts)
+
+
+__all__ = ["SCHEMES", "CameraSource", "SourceURI", "open_camera", "parse_uri"]

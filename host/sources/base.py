@@ -1,0 +1,81 @@
+"""What every camera source offers: Frames in order, context management, controls where the device has them."""
+
+from __future__ import annotations
+
+from abc import ABC, abstractmethod
+from collections.abc import Iterator
+from dataclasses import dataclass, field
+from typing import Any
+
+from rollcam.sim.errors import ConfigError, SourceError
+from rollcam.sim.frame import Frame
+
+
+@dataclass(frozen=True)
+class SourceURI:
+    """A parsed source URI: scheme, target (sensor name, path, device) and query options."""
+
+    uri: str
+    scheme: str
+    target: str
+    options: dict[str, str] = field(default_factory=dict)
+
+    def take(self, used: set[str], allowed: set[str]) -> None:
+        """Reject options this scheme does not know, naming them and the ones it does."""
+        unknown = set(self.options) - allowed
+        if unknown:
+            raise SourceError(f"source {self.uri!r}: unknown option(s) {sorted(unknown)}; known: {sorted(allowed)}")
+        used.update(self.options)
+
+    def get(self, key: str, kind: type, default: Any = None) -> Any:
+        """Option ``key`` converted to ``kind``, or ``default`` when absent; bad values name the option."""
+        if key not in self.options:
+            return default
+        raw = self.options[key]
+        try:
+            return kind(raw)
+        except (TypeError, ValueError, ConfigError) as exc:
+            raise SourceError(f"source {self.uri!r}: option {key}={raw!r} is invalid ({exc})") from None
+
+
+class CameraSource(ABC):
+    """A stream of Frames. Iterate it, or call ``read()``; ``close()`` is idempotent; use ``with``."""
+
+    uri: str = ""
+    closed: bool = False
+
+    @abstractmethod
+    def read(self) -> Frame | None:
+        """The next frame, or None at the end of a finite source."""
+
+    def close(self) -> None:
+        """Release the device; safe to call twice."""
+        self.closed = True
+
+    def info(self) -> dict[str, Any]:
+        """What the source is (sensor, size, timing) as plain data."""
+        return {"uri": self.uri}
+
+    # Paired global/rolling frames of the same instant (synthetic and composed sources only).
+    supports_pairs: bool = False
+
+    def read_pair(self) -> tuple[Frame, Frame] | None:
+        """The next (global, rolling) pair of the same instant, or None at the end."""
+        raise SourceError(f"source {self.uri!r} cannot deliver paired global/rolling frames")
+
+    def __iter__(self) -> Iterator[Frame]:
+        while True:
+            frame = self.read()
+            if frame is None:
+                return
+            yield frame
+
+    def __enter__(self) -> CameraSource:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    def _check_open(self) -> None:
+        if self.closed:
+            raise SourceError(f"source {self.uri!r} is closed")
