@@ -253,9 +253,8 @@ def background_pixel(world, lut, bld, light, cam, rot, pos, xi, yi, out, alb):
         out[0] = out[1] = out[2] = world[W_LEVEL]
         return
     if kind == KIND_CHART:
-        # A matte board filling the view, with a faint print texture so it is not perfectly uniform.
-        v = 0.97 + 0.03 * _value_noise(xi * 0.05, yi * 0.05, int(world[W_SEED]))
-        out[0], out[1], out[2] = world[W_ASPHALT] * v, world[W_ASPHALT + 1] * v, world[W_ASPHALT + 2] * v
+        # A uniform matte board filling the view: edges measured against it need no flat-field correction.
+        out[0], out[1], out[2] = world[W_ASPHALT], world[W_ASPHALT + 1], world[W_ASPHALT + 2]
         return
     cx = (xi + 0.5 - cam[C_CX]) / cam[C_FX]
     cy = (yi + 0.5 - cam[C_CY]) / cam[C_FY]
