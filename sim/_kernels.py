@@ -42,6 +42,7 @@ from ._body import (  # noqa: E402  (actor table layout lives with the body mode
     P_BUILD,
     P_H,
     P_SKIN,
+    P_SPEED,
     R_PERIOD,
     R_RGB,
     R_VX,
@@ -89,6 +90,18 @@ def camera_pose(cam, t, rot, pos):
     rot[0, 0], rot[0, 1], rot[0, 2] = r2x, r2y, r2z
     rot[1, 0], rot[1, 1], rot[1, 2] = -u2x, -u2y, -u2z
     rot[2, 0], rot[2, 1], rot[2, 2] = fx, fy, fz
+
+
+@njit(cache=True)
+def pose_table(cam, times, rot_tab, pos_tab):
+    """Camera pose at every time (a static camera's pose is computed once and repeated)."""
+    moving = cam[C_MOVING] != 0.0
+    for k in range(times.shape[0]):
+        if k == 0 or moving:
+            camera_pose(cam, times[k], rot_tab[k], pos_tab[k])
+        else:
+            rot_tab[k, :, :] = rot_tab[0]
+            pos_tab[k, :] = pos_tab[0]
 
 
 @njit(cache=True)
@@ -304,11 +317,8 @@ def background_pixel(world, lut, bld, light, cam, rot, pos, xi, yi, out, alb):
 
 
 @njit(cache=True)
-def background_line(world, lut, bld, light, cam, t, line, out_line):
-    """Render one render-space line of the background at time ``t`` into ``out_line`` (n x 3 float32)."""
-    rot = np.empty((3, 3))
-    pos = np.empty(3)
-    camera_pose(cam, t, rot, pos)
+def background_line(world, lut, bld, light, cam, rot, pos, line, out_line):
+    """Render one render-space line of the background from pose (rot, pos) into ``out_line`` (n x 3)."""
     px = np.empty(3)
     alb = np.empty(3)
     transposed = cam[C_TRANSPOSED] != 0.0
@@ -337,32 +347,33 @@ def _project(cam, x, y, z, out):
 
 
 @njit(cache=True)
-def actor_bounds(act, world, lut, bld, light, cam, t, out):
-    """Conservative render-space box (ymin, ymax, xmin, xmax) of an actor at ``t``; empty when ymin > ymax."""
+def actor_bounds(act, cam, rot, pos, t, dt, out, root, pc, uv):
+    """Conservative render-space box (ymin, ymax, xmin, xmax) of an actor over times [t, t + dt].
+
+    ``rot, pos`` is the camera pose, which must hold over the whole interval (dt = 0 for a moving camera).
+    Empty when ymin > ymax.
+    """
     out[0], out[1], out[2], out[3] = 1e30, -1e30, 1e30, -1e30
     typ = int(act[A_TYPE])
     if typ == TYPE_BAR:
         x0 = _bar_x0(act, t)
         xs0, xs1 = x0, x0 + act[R_WIDTH]
         big = 1e6
+        if dt > 0.0:
+            xs0, xs1 = -big, big  # may wrap within the interval
         if cam[C_TRANSPOSED] != 0.0:
             out[0], out[1], out[2], out[3] = xs0, xs1, -big, big
         else:
             out[0], out[1], out[2], out[3] = -big, big, xs0, xs1
         return
-    rot = np.empty((3, 3))
-    pos = np.empty(3)
-    camera_pose(cam, t, rot, pos)
-    root = np.empty(4)
     pedestrian_root(act, t, root)
     h = act[P_H]
     e = 0.55 * h * max(act[P_BUILD], 1.0)
-    pc = np.empty(3)
-    uv = np.empty(2)
     n_behind = 0
+    ey = e + abs(act[P_SPEED]) * dt  # walkers move along Y only, at most speed * dt either way
     for i in range(8):
         x = root[0] + (e if i & 1 else -e)
-        y = root[1] + (e if i & 2 else -e)
+        y = root[1] + (ey if i & 2 else -ey)
         z = 1.02 * h if i & 4 else 0.0
         to_camera(rot, pos, x, y, z, pc)
         if pc[2] < NEAR_M:
@@ -397,7 +408,7 @@ def _set_quad(parts, p, x0, y0, x1, y1, x2, y2, x3, y3):
 
 
 @njit(cache=True)
-def actor_parts(act, world, lut, bld, light, cam, t, parts):
+def actor_parts(act, world, lut, bld, light, cam, rot, pos, t, parts, seg, rad, col_idx, root, a, b, ua, ub):
     """Fill ``parts`` (MAX_PARTS x PART_COLS) with the render-space primitives of an actor at time ``t``."""
     for p in range(MAX_PARTS):
         parts[p, Q_KIND] = PART_NONE
@@ -417,14 +428,7 @@ def actor_parts(act, world, lut, bld, light, cam, t, parts):
         else:
             _set_quad(parts, 0, x0, -big, x1, -big, x1, big, x0, big)
         return
-    rot = np.empty((3, 3))
-    pos = np.empty(3)
-    camera_pose(cam, t, rot, pos)
-    seg = np.empty((MAX_PARTS, 6))
-    rad = np.empty(MAX_PARTS)
-    col_idx = np.empty(MAX_PARTS, np.int64)
     n = pedestrian_skeleton(act, t, seg, rad, col_idx)
-    root = np.empty(4)
     pedestrian_root(act, t, root)
     # Sun on the walker: blocked by the street canyon at chest height.
     lit = 0.0 if _sun_blocked(world, lut, bld, root[0], root[1], 0.7 * act[P_H], light, -1) else 1.0
@@ -435,10 +439,6 @@ def actor_parts(act, world, lut, bld, light, cam, t, parts):
     nrm = math.sqrt(sx * sx + sz * sz) + 1e-12
     horiz = math.sqrt(max(0.0, 1.0 - sy_up * sy_up))
     lxv, lzv = sx / nrm * horiz, sz / nrm * horiz
-    a = np.empty(3)
-    b = np.empty(3)
-    ua = np.empty(2)
-    ub = np.empty(2)
     for p in range(n):
         to_camera(rot, pos, seg[p, 0], seg[p, 1], seg[p, 2], a)
         to_camera(rot, pos, seg[p, 3], seg[p, 4], seg[p, 5], b)
@@ -517,17 +517,41 @@ def part_span(parts, p, yc, lohi):
 
 
 @njit(cache=True)
+def _covered_pixels(span_l, span_r, m0, m, w, pa, pb):
+    """Pixels whose centre lies in the union of spans m0..m-1 (one actor's parts on one line)."""
+    n = 0
+    for e in range(m0, m):
+        a = max(int(math.ceil(span_l[e] - 0.5)), 0)
+        b = min(int(math.ceil(span_r[e] - 0.5)), w)
+        if b <= a:
+            continue
+        j = n
+        while j > 0 and pa[j - 1] > a:  # insertion sort by start
+            pa[j], pb[j] = pa[j - 1], pb[j - 1]
+            j -= 1
+        pa[j], pb[j] = a, b
+        n += 1
+    total = 0
+    cur_a, cur_b = 0, 0
+    for j in range(n):
+        if j == 0 or pa[j] > cur_b:
+            total += cur_b - cur_a
+            cur_a, cur_b = pa[j], pb[j]
+        elif pb[j] > cur_b:
+            cur_b = pb[j]
+    return total + cur_b - cur_a
+
+
+@njit(cache=True)
 def _collect_line(line, w, actors, obj_k, slots, parts_tab, include, gt_l, gt_r, gt_tot,
-                  depth, idx_o, idx_p, span_l, span_r, stamp, ext):
+                  depth, idx_o, idx_p, span_l, span_r, pa, pb):
     """Spans of every included actor on ``line`` (``obj_k[o]``: its time slot, -1 when not touching).
 
-    Fills the per-actor extent and area ground truth; ``ext`` receives the pixel range the spans cover.
-    Returns the number of spans.
+    Fills the per-actor extent and area ground truth. Returns the number of spans.
     """
     yc = line + 0.5
     lohi = np.empty(2)
     m = 0
-    ext[0], ext[1] = w, 0
     for o in range(actors.shape[0]):
         if not include[o] or obj_k[o] < 0:
             continue
@@ -535,6 +559,7 @@ def _collect_line(line, w, actors, obj_k, slots, parts_tab, include, gt_l, gt_r,
         if s < 0:
             continue
         olo, ohi = 1e30, -1e30
+        m0 = m
         for p in range(MAX_PARTS):
             if parts_tab[s, p, Q_KIND] == PART_NONE:
                 continue
@@ -547,22 +572,42 @@ def _collect_line(line, w, actors, obj_k, slots, parts_tab, include, gt_l, gt_r,
             span_l[m], span_r[m] = lohi[0], lohi[1]
             m += 1
             olo, ohi = min(olo, lohi[0]), max(ohi, lohi[1])
-            # Pixels whose centre the part covers count towards the actor's area (once per actor).
-            for i in range(max(int(math.ceil(lohi[0] - 0.5)), 0), min(int(math.ceil(lohi[1] - 0.5)), w)):
-                if stamp[i] != o:
-                    stamp[i] = o
-                    gt_tot[o, line] += 1
+        if m > m0:
+            gt_tot[o, line] += _covered_pixels(span_l, span_r, m0, m, w, pa, pb)
         if ohi > olo:
             gt_l[o, line] = max(olo, 0.0)
             gt_r[o, line] = min(ohi, float(w))
-            ext[0] = min(ext[0], max(int(math.floor(olo)), 0))
-            ext[1] = max(ext[1], min(int(math.ceil(ohi)), w))
     return m
 
 
 @njit(cache=True)
+def _span_runs(span_l, span_r, m, w, ia, ib):
+    """Merge the pixel ranges the spans touch into sorted disjoint runs [ia[j], ib[j]); returns the count."""
+    n = 0
+    for e in range(m):
+        a = max(int(math.floor(span_l[e])), 0)
+        b = min(int(math.ceil(span_r[e])), w)
+        if b <= a:
+            continue
+        j = n
+        while j > 0 and ia[j - 1] > a:
+            ia[j], ib[j] = ia[j - 1], ib[j - 1]
+            j -= 1
+        ia[j], ib[j] = a, b
+        n += 1
+    k = 0
+    for j in range(n):
+        if k > 0 and ia[j] <= ib[k - 1]:
+            ib[k - 1] = max(ib[k - 1], ib[j])
+        else:
+            ia[k], ib[k] = ia[j], ib[j]
+            k += 1
+    return k
+
+
+@njit(cache=True)
 def _paint_spans(lin, line, m, obj_k, slots, parts_tab, gt_vis, depth, idx_o, idx_p, span_l, span_r, owner,
-                 ext):
+                 ia, ib, n_runs):
     """Paint the collected spans over ``lin`` far to near (anti-aliased along the line); count visibility."""
     w = lin.shape[0]
     # Insertion sort, far first; ties keep actor/part order so every path paints identically.
@@ -598,9 +643,11 @@ def _paint_spans(lin, line, m, obj_k, slots, parts_tab, gt_vis, depth, idx_o, id
                 lin[i, c] = lin[i, c] * (1.0 - cov) + v * cov
         for i in range(max(int(math.ceil(xl - 0.5)), 0), min(int(math.ceil(xr - 0.5)), w)):
             owner[i] = o
-    for i in range(ext[0], ext[1]):
-        if owner[i] >= 0:
-            gt_vis[owner[i], line] += 1
+    for j in range(n_runs):
+        for i in range(ia[j], ib[j]):
+            if owner[i] >= 0:
+                gt_vis[owner[i], line] += 1
+                owner[i] = -1  # leave the scratch clean for the next line
 
 
 @njit(cache=True)
@@ -616,25 +663,47 @@ def encode_line(lin, gain, lut, out_u8):
             out_u8[i, 2 - c] = lut[int(v * LUT_SIZE + 0.5)]
 
 
-@njit(cache=True, parallel=True)
-def actor_bounds_all(actors, world, lut, bld, light, cam, times, need, out):
-    """out[o, k] = bounds of actor o at times[k] wherever need[o, k]."""
-    n_obj, n_t = need.shape
-    for o in prange(n_obj):
-        for k in range(n_t):
-            if need[o, k]:
-                actor_bounds(actors[o], world, lut, bld, light, cam, times[k], out[o, k])
+N_CHUNKS = 16  # parallel work units; scratch buffers are allocated once per unit, not per item
 
 
 @njit(cache=True, parallel=True)
-def actor_parts_all(actors, world, lut, bld, light, cam, times, slot_o, slot_k, parts_tab):
+def actor_bounds_all(actors, cam, rot_tab, pos_tab, t_first, k_first, t_span, need, out):
+    """out[o, g] = bounds of actor o over time group g (from t_first[g], lasting t_span[g]) where need[o, g]."""
+    n_obj, n_g = need.shape
+    for ch in prange(N_CHUNKS):
+        root = np.empty(4)
+        pc = np.empty(3)
+        uv = np.empty(2)
+        for o in range(n_obj):
+            for g in range(ch, n_g, N_CHUNKS):
+                if need[o, g]:
+                    k = k_first[g]
+                    actor_bounds(actors[o], cam, rot_tab[k], pos_tab[k], t_first[g], t_span[g], out[o, g], root,
+                                 pc, uv)
+
+
+@njit(cache=True, parallel=True)
+def actor_parts_all(actors, world, lut, bld, light, cam, rot_tab, pos_tab, times, slot_o, slot_k, parts_tab):
     """parts_tab[s] = parts of actor slot_o[s] at times[slot_k[s]]."""
-    for s in prange(slot_o.shape[0]):
-        actor_parts(actors[slot_o[s]], world, lut, bld, light, cam, times[slot_k[s]], parts_tab[s])
+    n = slot_o.shape[0]
+    for ch in prange(N_CHUNKS):
+        seg = np.empty((MAX_PARTS, 6))
+        rad = np.empty(MAX_PARTS)
+        col_idx = np.empty(MAX_PARTS, np.int64)
+        root = np.empty(4)
+        a = np.empty(3)
+        b = np.empty(3)
+        ua = np.empty(2)
+        ub = np.empty(2)
+        for s in range(ch, n, N_CHUNKS):
+            k = slot_k[s]
+            actor_parts(actors[slot_o[s]], world, lut, bld, light, cam, rot_tab[k], pos_tab[k], times[k],
+                        parts_tab[s], seg, rad, col_idx, root, a, b, ua, ub)
 
 
 @njit(cache=True, parallel=True)
-def render_lines_kernel(world, lut_b, bld, light, cam, actors, times, line_k, obj_line_k, slots, parts_tab,
+def render_lines_kernel(world, lut_b, bld, light, cam, rot_tab, pos_tab, actors, times, line_k, obj_line_k, slots,
+                        parts_tab,
                         include, bg_lin, comp_lin, comp_u8, comp_gt, out_u8, out_lin, gain, lut,
                         gt_l, gt_r, gt_tot, gt_vis, gt_only, force_paint):
     """Render every line: copy the cached composite where no moving actor touches it, else paint it.
@@ -648,62 +717,90 @@ def render_lines_kernel(world, lut_b, bld, light, cam, actors, times, line_k, ob
     n_obj = actors.shape[0]
     moving_cam = cam[C_MOVING] != 0.0
     want_lin = out_lin.shape[0] > 0
-    for line in prange(n_lines):
-        touched = moving_cam or force_paint
-        for o in range(n_obj):
-            if include[o] and obj_line_k[o, line] >= 0 and actors[o, A_STATIC] == 0.0:
-                touched = True
-                break
-        if not touched:
-            if not gt_only:
-                if want_lin:
-                    out_lin[line, :, :] = comp_lin[line]
-                out_u8[line, :, :] = comp_u8[line]
-            if comp_gt.shape[0] > 0:
-                for o in range(n_obj):
-                    gt_l[o, line] = comp_gt[0, o, line]
-                    gt_r[o, line] = comp_gt[1, o, line]
-                    gt_tot[o, line] = int(comp_gt[2, o, line])
-                    gt_vis[o, line] = int(comp_gt[3, o, line])
-            continue
-        cap = n_obj * MAX_PARTS
+    cap = max(n_obj * MAX_PARTS, 1)
+    for ch in prange(N_CHUNKS):
         depth = np.empty(cap)
         idx_o = np.empty(cap, np.int64)
         idx_p = np.empty(cap, np.int64)
         span_l = np.empty(cap)
         span_r = np.empty(cap)
+        pa = np.empty(cap, np.int64)
+        pb = np.empty(cap, np.int64)
         owner = np.full(w, -1, np.int64)
-        stamp = np.full(w, -1, np.int64)
-        ext = np.empty(2, np.int64)
-        ok = obj_line_k[:, line]
-        m = _collect_line(line, w, actors, ok, slots, parts_tab, include, gt_l, gt_r, gt_tot,
-                          depth, idx_o, idx_p, span_l, span_r, stamp, ext)
+        ia = np.empty(cap + 1, np.int64)
+        ib = np.empty(cap + 1, np.int64)
         lin = np.empty((w, 3), np.float32)
-        if moving_cam and not gt_only:
-            # The whole line changes with the camera: render, paint and encode all of it.
-            background_line(world, lut_b, bld, light, cam, times[line_k[line]], line, lin)
-            ext[0], ext[1] = 0, w
-        elif force_paint and not gt_only:
-            lin[:, :] = bg_lin[line]
-            ext[0], ext[1] = 0, w
-        elif not gt_only:
-            # Only the pixels under actor spans differ from the cached composite: redo just that range.
+        for line in range(ch, n_lines, N_CHUNKS):
+            _render_one_line(world, lut_b, bld, light, cam, rot_tab, pos_tab, actors, times, line_k, obj_line_k, slots,
+                             parts_tab,
+                             include, bg_lin, comp_lin, comp_u8, comp_gt, out_u8, out_lin, gain, lut, gt_l, gt_r,
+                             gt_tot, gt_vis, gt_only, force_paint, moving_cam, want_lin, line, depth, idx_o, idx_p,
+                             span_l, span_r, pa, pb, owner, ia, ib, lin)
+
+
+@njit(cache=True)
+def _render_one_line(world, lut_b, bld, light, cam, rot_tab, pos_tab, actors, times, line_k, obj_line_k, slots,
+                     parts_tab,
+                     include, bg_lin, comp_lin, comp_u8, comp_gt, out_u8, out_lin, gain, lut, gt_l, gt_r,
+                     gt_tot, gt_vis, gt_only, force_paint, moving_cam, want_lin, line, depth, idx_o, idx_p,
+                     span_l, span_r, pa, pb, owner, ia, ib, lin):
+    """One line of ``render_lines_kernel`` (scratch buffers come from the caller)."""
+    n_obj = actors.shape[0]
+    w = out_u8.shape[1]
+    touched = moving_cam or force_paint
+    for o in range(n_obj):
+        if include[o] and obj_line_k[o, line] >= 0 and actors[o, A_STATIC] == 0.0:
+            touched = True
+            break
+    if not touched:
+        if not gt_only:
             if want_lin:
                 out_lin[line, :, :] = comp_lin[line]
             out_u8[line, :, :] = comp_u8[line]
-            if ext[1] > ext[0]:
-                lin[ext[0]:ext[1]] = bg_lin[line, ext[0]:ext[1]]
-        if m > 0:
-            _paint_spans(lin, line, m, ok, slots, parts_tab, gt_vis, depth, idx_o, idx_p, span_l, span_r, owner,
-                         ext)
-        if not gt_only and ext[1] > ext[0]:
+        if comp_gt.shape[0] > 0:
+            for o in range(n_obj):
+                gt_l[o, line] = comp_gt[0, o, line]
+                gt_r[o, line] = comp_gt[1, o, line]
+                gt_tot[o, line] = int(comp_gt[2, o, line])
+                gt_vis[o, line] = int(comp_gt[3, o, line])
+        return
+    ok = obj_line_k[:, line]
+    m = _collect_line(line, w, actors, ok, slots, parts_tab, include, gt_l, gt_r, gt_tot,
+                      depth, idx_o, idx_p, span_l, span_r, pa, pb)
+    if gt_only:
+        n_runs = _span_runs(span_l, span_r, m, w, ia, ib)
+    elif moving_cam or force_paint:
+        # The whole line is new (camera moved, or the composite is being built): paint and encode all of it.
+        if moving_cam:
+            k = line_k[line]
+            background_line(world, lut_b, bld, light, cam, rot_tab[k], pos_tab[k], line, lin)
+        else:
+            lin[:, :] = bg_lin[line]
+        ia[0], ib[0], n_runs = 0, w, 1
+    else:
+        # Only pixels under actor spans differ from the cached composite: redo just those runs.
+        if want_lin:
+            out_lin[line, :, :] = comp_lin[line]
+        out_u8[line, :, :] = comp_u8[line]
+        n_runs = _span_runs(span_l, span_r, m, w, ia, ib)
+        for j in range(n_runs):
+            lin[ia[j]:ib[j]] = bg_lin[line, ia[j]:ib[j]]
+    if m > 0:
+        _paint_spans(lin, line, m, ok, slots, parts_tab, gt_vis, depth, idx_o, idx_p, span_l, span_r, owner,
+                     ia, ib, n_runs)
+    if not gt_only:
+        for j in range(n_runs):
+            a, b = ia[j], ib[j]
             if want_lin:
-                out_lin[line, ext[0]:ext[1], :] = lin[ext[0]:ext[1]]
-            encode_line(lin[ext[0]:ext[1]], gain, lut, out_u8[line, ext[0]:ext[1]])
+                out_lin[line, a:b, :] = lin[a:b]
+            encode_line(lin[a:b], gain, lut, out_u8[line, a:b])
 
 
 @njit(cache=True, parallel=True)
 def background_image(world, lut_b, bld, light, cam, t, out):
     """Whole background at one time (the static layer cache)."""
+    rot = np.empty((3, 3))
+    pos = np.empty(3)
+    camera_pose(cam, t, rot, pos)
     for line in prange(out.shape[0]):
-        background_line(world, lut_b, bld, light, cam, t, line, out[line])
+        background_line(world, lut_b, bld, light, cam, rot, pos, line, out[line])

@@ -33,6 +33,8 @@ def srgb_lut() -> np.ndarray:
 
 
 _SRGB = srgb_lut()
+BOUND_GROUPS = 32
+"""Time groups per render for the conservative actor bounds that decide which lines an actor touches."""
 
 
 @dataclass
@@ -225,15 +227,25 @@ class Renderer:
             static = np.zeros_like(static)
         # Actor time slot per line: a moving actor uses the line's own time, a static one the first time.
         k_line = np.where(static[:, None], 0, line_k[None, :]) if n_obj else np.zeros((0, n_lines), np.int64)
-        need = np.zeros((n_obj, n_t), np.bool_)
+        rot_tab = np.empty((n_t, 3, 3))
+        pos_tab = np.empty((n_t, 3))
+        K.pose_table(cam, times_s, rot_tab, pos_tab)
+        # Touch tests use conservative actor bounds over groups of consecutive times; a moving camera has one
+        # pose per time, so its groups are single times.
+        n_g = n_t if self.camera_moving else min(n_t, BOUND_GROUPS)
+        group_of_k = (np.arange(n_t) * n_g) // n_t
+        k_first = np.searchsorted(group_of_k, np.arange(n_g))
+        k_last = np.searchsorted(group_of_k, np.arange(n_g), side="right") - 1
+        need = np.zeros((n_obj, n_g), np.bool_)
         need[:, 0] = include
         need[include & ~static, :] = True
-        bounds = np.empty((n_obj, n_t, 4))
-        K.actor_bounds_all(c.actors, c.world, c.building_lut, c.buildings, c.light, cam, times_s, need, bounds)
+        bounds = np.empty((n_obj, n_g, 4))
+        K.actor_bounds_all(c.actors, cam, rot_tab, pos_tab, times_s[k_first], k_first,
+                           times_s[k_last] - times_s[k_first], need, bounds)
         centre = np.arange(n_lines) + 0.5
         obj_line_k = np.full((n_obj, n_lines), -1, np.int64)
         for o in np.flatnonzero(include):
-            b = bounds[o, k_line[o]]
+            b = bounds[o, group_of_k[k_line[o]]]
             touch = (b[:, 0] <= centre) & (centre <= b[:, 1]) & (b[:, 2] < n_along) & (b[:, 3] > 0)
             obj_line_k[o, touch] = k_line[o, touch]
         slots = np.full((n_obj, n_t), -1, np.int64)
@@ -244,8 +256,8 @@ class Renderer:
         slots[s_o, s_k] = np.arange(s_o.size)
         parts = np.empty((max(s_o.size, 1), K.MAX_PARTS, K.PART_COLS))
         if s_o.size:
-            K.actor_parts_all(c.actors, c.world, c.building_lut, c.buildings, c.light, cam, times_s, s_o, s_k,
-                              parts)
+            K.actor_parts_all(c.actors, c.world, c.building_lut, c.buildings, c.light, cam, rot_tab, pos_tab,
+                              times_s, s_o, s_k, parts)
         out_u8 = np.empty((n_lines, n_along, 3), np.uint8)
         out_lin = np.empty((n_lines, n_along, 3) if linear else (0, 0, 3), np.float32)
         gt = LineTruth.empty(n_obj, n_lines, cam[K.C_TRANSPOSED] != 0.0)
@@ -257,7 +269,8 @@ class Renderer:
             raise RuntimeError("static layer missing")  # pragma: no cover - internal invariant
         if linear and layer.comp_lin is None and not force_paint and not self.camera_moving:
             raise RuntimeError("static linear layer missing")  # pragma: no cover
-        K.render_lines_kernel(c.world, c.building_lut, c.buildings, c.light, cam, c.actors, times_s, line_k,
+        K.render_lines_kernel(c.world, c.building_lut, c.buildings, c.light, cam, rot_tab, pos_tab, c.actors, times_s,
+                              line_k,
                               obj_line_k, slots, parts, include, bg, comp_lin, comp_u8, comp_gt, out_u8,
                               out_lin, self.gain, _SRGB, gt.left, gt.right, gt.area, gt.visible, truth_only,
                               force_paint)

@@ -79,9 +79,10 @@ def resolve_settings(
             raise ConfigError(f"fps must be a positive number, got {fps!r}")
         lines = round(timing.pixel_rate_hz / (timing.line_length_pck * fps))
         if lines < n_out:
+            max_fps = timing.pixel_rate_hz / (timing.line_length_pck * n_out)
             raise ConfigError(
-                f"fps={fps!r} is above the sensor's maximum {timing.pixel_rate_hz / (timing.line_length_pck * n_out):.3f}"
-                f" for {width}x{height} (frame length {lines} lines < {n_out} output lines)"
+                f"fps={fps!r} is above the sensor's maximum {max_fps:.3f} for {width}x{height}"
+                f" (frame length {lines} lines < {n_out} output lines)"
             )
         timing = LineTiming(timing.pixel_rate_hz, timing.line_length_pck, lines)
     shutter = shutter or sensor.shutter

@@ -135,7 +135,7 @@ def test_rs_boxes_differ_from_gs_for_fast_walkers():
         r = Renderer(scene, cam)
         rs = r.render_lines(_times(180, 0, "top_to_bottom")).truth.boxes()
         gs = r.render_lines(np.zeros(180, np.int64)).truth.boxes()
-        shifts += [max(abs(a - b) for a, b in zip(x, y)) for x, y in zip(rs, gs) if x and y]
+        shifts += [max(abs(a - b) for a, b in zip(x, y, strict=True)) for x, y in zip(rs, gs, strict=True) if x and y]
     assert shifts and max(shifts) > 1.0
 
 

@@ -1,0 +1,311 @@
+"""``rollcam capture``: frames of any source to image files and ``frames.jsonl``, without losing any.
+
+Each image is written under a temporary name and moved into place with ``os.replace``; its ``frames.jsonl``
+record is appended (and flushed) only once the image is there, and the two frames of a GS/RS pair go in as
+one write. However a capture stops (Ctrl-C, an error, a finite source running out), ``frames.jsonl`` holds
+complete records of images that exist, and no temporary file is left behind. ``capture.json`` beside it
+records the source's ``info()``, the command line and whether the capture completed.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import re
+import sys
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from datetime import datetime, timezone
+from pathlib import Path
+from typing import Any, TextIO
+
+import numpy as np
+from rollcam.sim.errors import ConfigError, SourceError
+from rollcam.sim.frame import Frame
+
+from .sources import CameraSource
+
+FRAMES_LOG = "frames.jsonl"
+CAPTURE_INFO = "capture.json"
+IMAGE_FORMATS = ("png", "jpg")
+SHUTTER_CHOICES = ("rolling", "global", "both")
+SUFFIX = {"rolling": "rs", "global": "gs"}
+_TMP_SUFFIX = ".part"
+# Files a capture writes; --overwrite removes only these, never anything else the folder holds.
+_CAPTURE_FILE = re.compile(r"\d{6,}_(rs|gs)\.(png|jpg)(\.part)?|\.?(frames\.jsonl|capture\.json)(\.part)?")
+
+
+@dataclass
+class CaptureResult:
+    """What a capture wrote: instants captured, image files, where, how long it took, whether it finished."""
+
+    out_dir: Path
+    frames: int
+    images: int
+    seconds: float
+    complete: bool
+
+    def to_json(self) -> dict[str, Any]:
+        """The summary ``rollcam capture --json`` prints."""
+        return {"frames": self.frames, "images": self.images, "out": str(self.out_dir),
+                "frames_jsonl": str(self.out_dir / FRAMES_LOG), "seconds": round(self.seconds, 3),
+                "complete": self.complete}
+
+
+class CaptureInterrupted(KeyboardInterrupt):
+    """Ctrl-C during a capture, raised after cleanup; ``result`` says what was kept."""
+
+    def __init__(self, result: CaptureResult) -> None:
+        super().__init__(f"capture interrupted after {result.frames} frame(s)")
+        self.result = result
+
+
+class Progress:
+    """A one-line ``\\r``-refreshed counter with rate and ETA on a text stream (no-op when disabled)."""
+
+    def __init__(self, total: int, *, label: str, stream: TextIO | None = None, enabled: bool | None = None,
+                 clock: Callable[[], float] = time.monotonic, min_interval_s: float = 0.1) -> None:
+        self.total, self.label = total, label
+        self.stream = sys.stderr if stream is None else stream
+        self.enabled = _isatty(self.stream) if enabled is None else enabled
+        self.clock, self.min_interval_s = clock, min_interval_s
+        self.start = clock()
+        self._last = -float("inf")
+        self._shown = False
+
+    def update(self, done: int) -> None:
+        """Show ``done`` of ``total`` (refreshed at most every ``min_interval_s``, and always at the end)."""
+        if not self.enabled:
+            return
+        now = self.clock()
+        if done < self.total and now - self._last < self.min_interval_s:
+            return
+        self._last = now
+        elapsed = max(now - self.start, 1e-9)
+        rate = done / elapsed
+        eta = f"ETA {(self.total - done) / rate:5.0f} s" if rate > 0 and done < self.total else f"{elapsed:5.1f} s"
+        self.stream.write(f"\r{self.label} {done}/{self.total}  {rate:6.1f} fps  {eta}  ")
+        self.stream.flush()
+        self._shown = True
+
+    def close(self) -> None:
+        """End the progress line so later output starts on a fresh line."""
+        if self._shown:
+            self.stream.write("\n")
+            self.stream.flush()
+            self._shown = False
+
+
+def _isatty(stream: TextIO) -> bool:
+    try:
+        return stream.isatty()
+    except (AttributeError, ValueError):
+        return False
+
+
+def write_atomic(path: Path, data: bytes) -> None:
+    """Write ``data`` to ``path`` via a temporary name and ``os.replace``; never leaves a partial file."""
+    tmp = path.with_name(path.name + _TMP_SUFFIX)
+    try:
+        with open(tmp, "wb") as f:
+            f.write(data)
+        os.replace(tmp, path)
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        raise
+
+
+def image_array(frame: Frame, fmt: str) -> np.ndarray:
+    """Pixel data in the layout ``cv2.imencode`` stores (BGR or single channel) for image format ``fmt``."""
+    data = frame.data
+    if data.ndim == 3 and data.shape[2] == 3:
+        img = data[..., ::-1] if frame.format == "RGB3" else data
+    elif data.ndim == 2 or (data.ndim == 3 and data.shape[2] == 1):
+        img = data
+    else:
+        raise SourceError(f"frame {frame.sequence} ({frame.format}, shape {data.shape}) cannot be stored as an "
+                          "image file; capture needs BGR3, RGB3 or single-channel frames")
+    if img.dtype == np.uint16 and fmt == "png":
+        return img
+    if img.dtype != np.uint8:
+        raise ConfigError(f"--format {fmt} cannot hold {frame.format} frames of dtype {img.dtype}"
+                          + ("; use --format png" if img.dtype == np.uint16 else ""))
+    return img
+
+
+def encode_image(frame: Frame, fmt: str) -> bytes:
+    """The frame as PNG or JPEG bytes."""
+    import cv2
+
+    ok, buf = cv2.imencode(f".{fmt}", image_array(frame, fmt))
+    if not ok:
+        raise SourceError(f"could not encode frame {frame.sequence} as {fmt}")
+    return buf.tobytes()
+
+
+def prepare_out_dir(out_dir: Path, overwrite: bool) -> None:
+    """Create ``out_dir``; refuse one that already holds a capture unless ``overwrite`` (then clear it)."""
+    if out_dir.exists() and not out_dir.is_dir():
+        raise ConfigError(f"--out {str(out_dir)!r} exists and is not a directory")
+    out_dir.mkdir(parents=True, exist_ok=True)
+    if (out_dir / FRAMES_LOG).exists():
+        if not overwrite:
+            raise ConfigError(f"{str(out_dir)!r} already holds a capture ({FRAMES_LOG}); pass --overwrite to "
+                              "replace it, or choose another --out")
+        for p in out_dir.iterdir():
+            if p.is_file() and _CAPTURE_FILE.fullmatch(p.name):
+                p.unlink()
+
+
+def frame_reader(source: CameraSource, shutter: str | None) -> Callable[[], Sequence[Frame] | None]:
+    """A callable giving the frames of one instant (one frame, or a GS/RS pair) under ``shutter``.
+
+    ``None`` keeps the source's own shutter; ``'both'`` needs a source with paired frames; ``'rolling'`` or
+    ``'global'`` reads plainly when the source delivers that shutter and picks from a pair when it can.
+    """
+    if shutter is not None and shutter not in SHUTTER_CHOICES:
+        raise ConfigError(f"shutter {shutter!r} is not one of {list(SHUTTER_CHOICES)}")
+
+    def plain() -> Sequence[Frame] | None:
+        frame = source.read()
+        if frame is None:
+            return None
+        if shutter is not None and frame.shutter != shutter:
+            raise SourceError(f"source {source.uri!r} delivers {frame.shutter}-shutter frames and cannot give "
+                              f"{shutter}-shutter ones")
+        return (frame,)
+
+    if shutter is None:
+        return plain
+    if shutter == "both":
+        if not source.supports_pairs:
+            raise SourceError(f"source {source.uri!r} cannot deliver paired global/rolling frames; --shutter "
+                              "both needs a source that renders or composes both (emu:, file: with a line time)")
+        return source.read_pair
+    if source.info().get("shutter") == shutter or not source.supports_pairs:
+        return plain
+    pick = 0 if shutter == "global" else 1
+
+    def from_pair() -> Sequence[Frame] | None:
+        pair = source.read_pair()
+        return None if pair is None else (pair[pick],)
+
+    return from_pair
+
+
+class CaptureWriter:
+    """Image files plus ``frames.jsonl`` records, written so that an interruption loses nothing recorded."""
+
+    def __init__(self, out_dir: Path, fmt: str = "png") -> None:
+        if fmt not in IMAGE_FORMATS:
+            raise ConfigError(f"image format {fmt!r} is not one of {list(IMAGE_FORMATS)}")
+        self.out_dir, self.fmt = out_dir, fmt
+        self.frames = self.images = 0
+        self._log: TextIO | None = open(out_dir / FRAMES_LOG, "w", encoding="utf-8")  # noqa: SIM115
+
+    def write(self, frames: Sequence[Frame]) -> None:
+        """Store the frames of one instant: images first, then their records as one flushed write."""
+        assert self._log is not None, "writer is closed"
+        records: list[str] = []
+        written: list[Path] = []
+        try:
+            for frame in frames:
+                path = self.out_dir / f"{self.frames:06d}_{SUFFIX.get(frame.shutter, frame.shutter)}.{self.fmt}"
+                write_atomic(path, encode_image(frame, self.fmt))
+                written.append(path)
+                records.append(json.dumps(frame.to_json(path.name), default=_json_default))
+        except BaseException:
+            for path in written:  # half a pair is no record: leave the folder exactly as the log says
+                path.unlink(missing_ok=True)
+            raise
+        self._log.write("".join(r + "\n" for r in records))
+        self._log.flush()
+        self.frames += 1
+        self.images += len(records)
+
+    def close(self) -> None:
+        """Flush the log to disk and close it; safe to call twice."""
+        if self._log is not None:
+            log, self._log = self._log, None
+            try:
+                log.flush()
+                os.fsync(log.fileno())
+            finally:
+                log.close()
+
+
+def _json_default(value: Any) -> Any:
+    if isinstance(value, np.generic):
+        return value.item()
+    if isinstance(value, np.ndarray):
+        return value.tolist()
+    return str(value)
+
+
+def write_capture_info(out_dir: Path, info: dict[str, Any]) -> None:
+    """Store ``capture.json`` atomically."""
+    text = json.dumps(info, indent=2, default=_json_default) + "\n"
+    write_atomic(out_dir / CAPTURE_INFO, text.encode("utf-8"))
+
+
+def capture(
+    source: CameraSource,
+    out_dir: str | os.PathLike[str],
+    frames: int,
+    *,
+    shutter: str | None = None,
+    fmt: str = "png",
+    overwrite: bool = False,
+    progress: bool | None = None,
+    command: Sequence[str] | None = None,
+    stream: TextIO | None = None,
+    clock: Callable[[], float] = time.monotonic,
+) -> CaptureResult:
+    """Capture ``frames`` instants of ``source`` into ``out_dir`` (see the module docstring).
+
+    ``progress`` None shows progress on ``stream`` (stderr) only when it is a terminal. Ends early, and
+    reports it, when a finite source runs out. Ctrl-C raises ``CaptureInterrupted`` after cleanup.
+    """
+    if isinstance(frames, bool) or not isinstance(frames, int) or frames <= 0:
+        raise ConfigError(f"frames must be a positive integer, got {frames!r}")
+    if fmt not in IMAGE_FORMATS:
+        raise ConfigError(f"image format {fmt!r} is not one of {list(IMAGE_FORMATS)}")
+    out = Path(out_dir)
+    read = frame_reader(source, shutter)
+    prepare_out_dir(out, overwrite)
+    info: dict[str, Any] = {
+        "command": list(command) if command is not None else None,
+        "source": source.info(),
+        "shutter": shutter or "source",
+        "image_format": fmt,
+        "frames_requested": frames,
+        "started_utc": datetime.now(timezone.utc).isoformat(timespec="seconds"),
+        "frames": 0,
+        "images": 0,
+        "complete": False,
+    }
+    write_capture_info(out, info)
+    writer = CaptureWriter(out, fmt)
+    bar = Progress(frames, label="capture", stream=stream, enabled=progress, clock=clock)
+    start = clock()
+    interrupted = False
+    try:
+        while writer.frames < frames:
+            got = read()
+            if got is None:
+                break
+            writer.write(got)
+            bar.update(writer.frames)
+    except KeyboardInterrupt:
+        interrupted = True
+    finally:
+        bar.close()
+        writer.close()
+        result = CaptureResult(out, writer.frames, writer.images, clock() - start, writer.frames == frames)
+        info.update(frames=result.frames, images=result.images, seconds=round(result.seconds, 3),
+                    complete=result.complete, interrupted=interrupted)
+        write_capture_info(out, info)
+    if interrupted:
+        raise CaptureInterrupted(result)
+    return result
