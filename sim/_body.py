@@ -69,35 +69,35 @@ def pedestrian_skeleton(act, t, seg, rad, col_idx):
     joints = np.empty((16, 3))
     n = 0
     # head (slightly elongated), hair, neck
-    hz = 0.935 * h + bob
-    seg[n, 0], seg[n, 1], seg[n, 2] = x0, y0, hz - 0.015 * h
-    seg[n, 3], seg[n, 4], seg[n, 5] = x0, y0, hz + 0.015 * h
-    rad[n], col_idx[n] = 0.050 * h, 0
+    hz = 0.925 * h + bob
+    seg[n, 0], seg[n, 1], seg[n, 2] = x0, y0, hz - 0.018 * h
+    seg[n, 3], seg[n, 4], seg[n, 5] = x0, y0, hz + 0.012 * h
+    rad[n], col_idx[n] = 0.058 * h, 0
     n += 1
     back = -0.012 * h
     seg[n, 0], seg[n, 1], seg[n, 2] = x0 + back * fx, y0 + back * fy, hz + 0.004 * h
     bz = hz - (0.075 * h if act[P_LONG_HAIR] > 0 else 0.006 * h)
     seg[n, 3], seg[n, 4], seg[n, 5] = x0 + 1.6 * back * fx, y0 + 1.6 * back * fy, bz
-    rad[n], col_idx[n] = 0.053 * h, 1
+    rad[n], col_idx[n] = 0.060 * h, 1
     n += 1
     seg[n, 0], seg[n, 1], seg[n, 2] = x0, y0, 0.835 * h + bob
     seg[n, 3], seg[n, 4], seg[n, 5] = x0, y0, 0.875 * h + bob
-    rad[n], col_idx[n] = 0.032 * h, 0
+    rad[n], col_idx[n] = 0.028 * h, 0
     n += 1
     # torso, shoulders, hips
     seg[n, 0], seg[n, 1], seg[n, 2] = x0, y0, hip_z + 0.07 * h
     seg[n, 3], seg[n, 4], seg[n, 5] = x0, y0, sh_z - 0.055 * h
-    rad[n], col_idx[n] = 0.072 * h * bd, 2
+    rad[n], col_idx[n] = 0.085 * h * bd, 2
     n += 1
-    shw = 0.085 * h * bd
+    shw = 0.105 * h * bd
     seg[n, 0], seg[n, 1], seg[n, 2] = x0 - shw * lx, y0 - shw * ly, sh_z - 0.02 * h
     seg[n, 3], seg[n, 4], seg[n, 5] = x0 + shw * lx, y0 + shw * ly, sh_z - 0.02 * h
-    rad[n], col_idx[n] = 0.05 * h * bd, 2
+    rad[n], col_idx[n] = 0.048 * h * bd, 2
     n += 1
-    hpw = 0.045 * h * bd
+    hpw = 0.06 * h * bd
     seg[n, 0], seg[n, 1], seg[n, 2] = x0 - hpw * lx, y0 - hpw * ly, hip_z + 0.02 * h
     seg[n, 3], seg[n, 4], seg[n, 5] = x0 + hpw * lx, y0 + hpw * ly, hip_z + 0.02 * h
-    rad[n], col_idx[n] = 0.058 * h * bd, 3
+    rad[n], col_idx[n] = 0.07 * h * bd, 3
     n += 1
     # legs and arms, left (s=-1) and right (s=+1); the right leg leads at phi = 0
     for k in range(2):
@@ -105,17 +105,17 @@ def pedestrian_skeleton(act, t, seg, rad, col_idx):
         ph = phi + (math.pi if k == 0 else 0.0)
         hip_a = 0.42 * sw * math.sin(ph)
         knee = (0.08 + 0.75 * max(0.0, math.sin(ph + 1.3)) ** 2) * max(sw, 0.15)
-        hx, hy = x0 + s * 0.05 * h * bd * lx, y0 + s * 0.05 * h * bd * ly
+        hx, hy = x0 + s * hpw * 0.9 * lx, y0 + s * hpw * 0.9 * ly
         joints[0, 0], joints[0, 1], joints[0, 2] = hx, hy, hip_z
         _limb(hx, hy, hip_z, fx, fy, hip_a, 0.245 * h, joints, 1)
         _limb(joints[1, 0], joints[1, 1], joints[1, 2], fx, fy, hip_a - knee, 0.25 * h, joints, 2)
         seg[n, 0], seg[n, 1], seg[n, 2] = joints[0, 0], joints[0, 1], joints[0, 2]
         seg[n, 3], seg[n, 4], seg[n, 5] = joints[1, 0], joints[1, 1], joints[1, 2]
-        rad[n], col_idx[n] = 0.05 * h * bd, 3
+        rad[n], col_idx[n] = 0.055 * h * bd, 3
         n += 1
         seg[n, 0], seg[n, 1], seg[n, 2] = joints[1, 0], joints[1, 1], joints[1, 2]
         seg[n, 3], seg[n, 4], seg[n, 5] = joints[2, 0], joints[2, 1], joints[2, 2]
-        rad[n], col_idx[n] = 0.037 * h * bd, 3
+        rad[n], col_idx[n] = 0.04 * h * bd, 3
         n += 1
         foot = 0.11 * h
         az = max(joints[2, 2], 0.025 * h)
@@ -123,15 +123,15 @@ def pedestrian_skeleton(act, t, seg, rad, col_idx):
         seg[n, 3], seg[n, 4], seg[n, 5] = joints[2, 0] + foot * fx, joints[2, 1] + foot * fy, az - 0.01 * h
         rad[n], col_idx[n] = 0.024 * h, 4
         n += 1
-        arm_a = -0.25 * sw * math.sin(ph)
-        elbow = 0.2 + 0.25 * sw * max(0.0, -math.sin(ph))
-        sx_, sy_ = x0 + s * (shw + 0.025 * h) * lx, y0 + s * (shw + 0.025 * h) * ly
+        arm_a = -0.32 * sw * math.sin(ph)
+        elbow = 0.25 + 0.25 * sw * max(0.0, -math.sin(ph))
+        sx_, sy_ = x0 + s * (shw + 0.035 * h) * lx, y0 + s * (shw + 0.035 * h) * ly
         szz = sh_z - 0.03 * h
         _limb(sx_, sy_, szz, fx, fy, arm_a, 0.175 * h, joints, 3)
         _limb(joints[3, 0], joints[3, 1], joints[3, 2], fx, fy, arm_a + elbow, 0.19 * h, joints, 4)
         seg[n, 0], seg[n, 1], seg[n, 2] = sx_, sy_, szz
         seg[n, 3], seg[n, 4], seg[n, 5] = joints[3, 0], joints[3, 1], joints[3, 2]
-        rad[n], col_idx[n] = 0.034 * h * bd, 2
+        rad[n], col_idx[n] = 0.036 * h * bd, 2
         n += 1
         seg[n, 0], seg[n, 1], seg[n, 2] = joints[3, 0], joints[3, 1], joints[3, 2]
         seg[n, 3], seg[n, 4], seg[n, 5] = joints[4, 0], joints[4, 1], joints[4, 2]

@@ -703,21 +703,20 @@ def actor_parts_all(actors, world, lut, bld, light, cam, rot_tab, pos_tab, times
 
 @njit(cache=True, parallel=True)
 def render_lines_kernel(world, lut_b, bld, light, cam, rot_tab, pos_tab, actors, times, line_k, obj_line_k, slots,
-                        parts_tab,
-                        include, bg_lin, comp_lin, comp_u8, comp_gt, out_u8, out_lin, gain, lut,
-                        gt_l, gt_r, gt_tot, gt_vis, gt_only, force_paint):
-    """Render every line: copy the cached composite where no moving actor touches it, else paint it.
+                        parts_tab, include, lines, w, bg_lin, out_u8, out_lin, gain, lut, gt_l, gt_r, gt_tot,
+                        gt_vis, gt_only, full_lines):
+    """Paint the given ``lines``; every other line already holds the cached composite (copied by the caller).
 
-    ``obj_line_k[o, line]`` is actor o's time slot on that line (-1 when not touching). ``bg_lin`` is the
-    cached bare background (used when the camera is static), ``comp_*`` the cached background with the
-    static actors; ``comp_gt`` carries the static actors' ground truth for copied lines. ``force_paint``
-    paints every line (used to build the composite itself).
+    ``obj_line_k[o, line]`` is actor o's time slot on that line (-1 when not touching). With ``full_lines``
+    (moving camera, or building the composite) each line is rendered whole, from the background rendered
+    at the line's own pose when the camera moves, else from the cached ``bg_lin``; otherwise only the pixel
+    runs under actor spans are redone over ``bg_lin``. Ground truth of painted lines is recomputed.
     """
-    n_lines, w = out_u8.shape[0], out_u8.shape[1]
     n_obj = actors.shape[0]
     moving_cam = cam[C_MOVING] != 0.0
     want_lin = out_lin.shape[0] > 0
     cap = max(n_obj * MAX_PARTS, 1)
+    n = lines.shape[0]
     for ch in prange(N_CHUNKS):
         depth = np.empty(cap)
         idx_o = np.empty(cap, np.int64)
@@ -730,70 +729,34 @@ def render_lines_kernel(world, lut_b, bld, light, cam, rot_tab, pos_tab, actors,
         ia = np.empty(cap + 1, np.int64)
         ib = np.empty(cap + 1, np.int64)
         lin = np.empty((w, 3), np.float32)
-        for line in range(ch, n_lines, N_CHUNKS):
-            _render_one_line(world, lut_b, bld, light, cam, rot_tab, pos_tab, actors, times, line_k, obj_line_k, slots,
-                             parts_tab,
-                             include, bg_lin, comp_lin, comp_u8, comp_gt, out_u8, out_lin, gain, lut, gt_l, gt_r,
-                             gt_tot, gt_vis, gt_only, force_paint, moving_cam, want_lin, line, depth, idx_o, idx_p,
-                             span_l, span_r, pa, pb, owner, ia, ib, lin)
-
-
-@njit(cache=True)
-def _render_one_line(world, lut_b, bld, light, cam, rot_tab, pos_tab, actors, times, line_k, obj_line_k, slots,
-                     parts_tab,
-                     include, bg_lin, comp_lin, comp_u8, comp_gt, out_u8, out_lin, gain, lut, gt_l, gt_r,
-                     gt_tot, gt_vis, gt_only, force_paint, moving_cam, want_lin, line, depth, idx_o, idx_p,
-                     span_l, span_r, pa, pb, owner, ia, ib, lin):
-    """One line of ``render_lines_kernel`` (scratch buffers come from the caller)."""
-    n_obj = actors.shape[0]
-    w = out_u8.shape[1]
-    touched = moving_cam or force_paint
-    for o in range(n_obj):
-        if include[o] and obj_line_k[o, line] >= 0 and actors[o, A_STATIC] == 0.0:
-            touched = True
-            break
-    if not touched:
-        if not gt_only:
-            if want_lin:
-                out_lin[line, :, :] = comp_lin[line]
-            out_u8[line, :, :] = comp_u8[line]
-        if comp_gt.shape[0] > 0:
+        for j in range(ch, n, N_CHUNKS):
+            line = lines[j]
             for o in range(n_obj):
-                gt_l[o, line] = comp_gt[0, o, line]
-                gt_r[o, line] = comp_gt[1, o, line]
-                gt_tot[o, line] = int(comp_gt[2, o, line])
-                gt_vis[o, line] = int(comp_gt[3, o, line])
-        return
-    ok = obj_line_k[:, line]
-    m = _collect_line(line, w, actors, ok, slots, parts_tab, include, gt_l, gt_r, gt_tot,
-                      depth, idx_o, idx_p, span_l, span_r, pa, pb)
-    if gt_only:
-        n_runs = _span_runs(span_l, span_r, m, w, ia, ib)
-    elif moving_cam or force_paint:
-        # The whole line is new (camera moved, or the composite is being built): paint and encode all of it.
-        if moving_cam:
-            k = line_k[line]
-            background_line(world, lut_b, bld, light, cam, rot_tab[k], pos_tab[k], line, lin)
-        else:
-            lin[:, :] = bg_lin[line]
-        ia[0], ib[0], n_runs = 0, w, 1
-    else:
-        # Only pixels under actor spans differ from the cached composite: redo just those runs.
-        if want_lin:
-            out_lin[line, :, :] = comp_lin[line]
-        out_u8[line, :, :] = comp_u8[line]
-        n_runs = _span_runs(span_l, span_r, m, w, ia, ib)
-        for j in range(n_runs):
-            lin[ia[j]:ib[j]] = bg_lin[line, ia[j]:ib[j]]
-    if m > 0:
-        _paint_spans(lin, line, m, ok, slots, parts_tab, gt_vis, depth, idx_o, idx_p, span_l, span_r, owner,
-                     ia, ib, n_runs)
-    if not gt_only:
-        for j in range(n_runs):
-            a, b = ia[j], ib[j]
-            if want_lin:
-                out_lin[line, a:b, :] = lin[a:b]
-            encode_line(lin[a:b], gain, lut, out_u8[line, a:b])
+                gt_l[o, line], gt_r[o, line], gt_tot[o, line], gt_vis[o, line] = np.nan, np.nan, 0, 0
+            ok = obj_line_k[:, line]
+            m = _collect_line(line, w, actors, ok, slots, parts_tab, include, gt_l, gt_r, gt_tot,
+                              depth, idx_o, idx_p, span_l, span_r, pa, pb)
+            if full_lines and not gt_only:
+                if moving_cam:
+                    k = line_k[line]
+                    background_line(world, lut_b, bld, light, cam, rot_tab[k], pos_tab[k], line, lin)
+                else:
+                    lin[:, :] = bg_lin[line]
+                ia[0], ib[0], n_runs = 0, w, 1
+            else:
+                n_runs = _span_runs(span_l, span_r, m, w, ia, ib)
+                if not gt_only:
+                    for r in range(n_runs):
+                        lin[ia[r]:ib[r]] = bg_lin[line, ia[r]:ib[r]]
+            if m > 0:
+                _paint_spans(lin, line, m, ok, slots, parts_tab, gt_vis, depth, idx_o, idx_p, span_l, span_r,
+                             owner, ia, ib, n_runs)
+            if not gt_only:
+                for r in range(n_runs):
+                    x0, x1 = ia[r], ib[r]
+                    if want_lin:
+                        out_lin[line, x0:x1, :] = lin[x0:x1]
+                    encode_line(lin[x0:x1], gain, lut, out_u8[line, x0:x1])
 
 
 @njit(cache=True, parallel=True)

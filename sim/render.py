@@ -258,22 +258,27 @@ class Renderer:
         if s_o.size:
             K.actor_parts_all(c.actors, c.world, c.building_lut, c.buildings, c.light, cam, rot_tab, pos_tab,
                               times_s, s_o, s_k, parts)
-        out_u8 = np.empty((n_lines, n_along, 3), np.uint8)
-        out_lin = np.empty((n_lines, n_along, 3) if linear else (0, 0, 3), np.float32)
         gt = LineTruth.empty(n_obj, n_lines, cam[K.C_TRANSPOSED] != 0.0)
+        full_lines = force_paint or self.camera_moving
+        if full_lines:
+            lines = np.arange(n_lines)
+            out_u8 = np.empty((n_lines, n_along, 3), np.uint8)
+            out_lin = np.empty((n_lines, n_along, 3) if linear else (0, 0, 3), np.float32)
+        else:
+            # Start from the cached composite (one memcpy) and repaint only lines a moving actor touches.
+            assert layer.comp_u8 is not None and layer.comp_gt is not None and layer.comp_lin is not None
+            moving = include & ~static
+            lines = np.flatnonzero((obj_line_k[moving] >= 0).any(axis=0))
+            out_u8 = np.empty((0, n_along, 3), np.uint8) if truth_only else layer.comp_u8.copy()
+            out_lin = layer.comp_lin.copy() if linear and not truth_only else np.empty((0, 0, 3), np.float32)
+            gt.left[:], gt.right[:] = layer.comp_gt[0], layer.comp_gt[1]
+            gt.area[:], gt.visible[:] = layer.comp_gt[2], layer.comp_gt[3]
         bg = layer.bg_lin if layer.bg_lin is not None else np.empty((0, 0, 3), np.float32)
-        comp_lin = layer.comp_lin if (layer.comp_lin is not None and linear) else np.empty((0, 0, 3), np.float32)
-        comp_u8 = layer.comp_u8 if layer.comp_u8 is not None else np.empty((0, 0, 3), np.uint8)
-        comp_gt = layer.comp_gt if layer.comp_gt is not None else np.empty((0, 0, 0))
-        if not force_paint and not self.camera_moving and layer.comp_u8 is None:
-            raise RuntimeError("static layer missing")  # pragma: no cover - internal invariant
-        if linear and layer.comp_lin is None and not force_paint and not self.camera_moving:
-            raise RuntimeError("static linear layer missing")  # pragma: no cover
         K.render_lines_kernel(c.world, c.building_lut, c.buildings, c.light, cam, rot_tab, pos_tab, c.actors, times_s,
-                              line_k,
-                              obj_line_k, slots, parts, include, bg, comp_lin, comp_u8, comp_gt, out_u8,
-                              out_lin, self.gain, _SRGB, gt.left, gt.right, gt.area, gt.visible, truth_only,
-                              force_paint)
+                              line_k, obj_line_k, slots, parts, include, lines, n_along, bg, out_u8, out_lin,
+                              self.gain, _SRGB, gt.left, gt.right, gt.area, gt.visible, truth_only, full_lines)
+        if truth_only:
+            return RenderResult(np.empty((0, 0, 3), np.uint8), None, gt)
         image = out_u8.transpose(1, 0, 2) if cam[K.C_TRANSPOSED] != 0.0 else out_u8
         lin = None
         if linear:
