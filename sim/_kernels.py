@@ -60,6 +60,9 @@ MAX_PARTS = 16
 PART_CAPSULE, PART_QUAD, PART_NONE = 0, 1, -1
 
 NEAR_M = 0.05
+# Background shading tolerates reassociation and fast math functions (NaN/inf semantics kept); every path
+# renders the background through the same compiled functions, so results stay identical between paths.
+BG_FAST = {"contract", "afn", "reassoc", "arcp", "nsz"}
 LUT_SIZE = 16384
 
 # ======================================================================================================
@@ -118,7 +121,7 @@ def to_camera(rot, pos, x, y, z, out):
 # ======================================================================================================
 
 
-@njit(cache=True)
+@njit(cache=True, fastmath=BG_FAST)
 def _hash01(ix, iy, seed):
     h = (ix * 374761393 + iy * 668265263 + seed * 2147483647) & 0xFFFFFFFF
     h = ((h ^ (h >> 13)) * 1274126177) & 0xFFFFFFFF
@@ -126,7 +129,7 @@ def _hash01(ix, iy, seed):
     return (h & 0xFFFFFF) / 16777216.0
 
 
-@njit(cache=True)
+@njit(cache=True, fastmath=BG_FAST)
 def _value_noise(x, y, seed):
     ix, iy = math.floor(x), math.floor(y)
     fx, fy = x - ix, y - iy
@@ -139,18 +142,19 @@ def _value_noise(x, y, seed):
     return (a + (b - a) * sx) * (1 - sy) + (c + (d - c) * sx) * sy
 
 
-@njit(cache=True)
+@njit(cache=True, fastmath=BG_FAST)
 def building_at(world, lut, side, y):
     """Index of the building on ``side`` (0 west, 1 east) at street coordinate ``y`` (periodic), or -1."""
     yh = world[W_YHALF]
-    yy = (y + yh) % (2.0 * yh)
+    yy = y + yh
+    yy -= math.floor(yy / (2.0 * yh)) * (2.0 * yh)  # periodic street; cheaper than Python's float %
     i = int(yy / world[W_BIN])
     if i < 0 or i >= lut.shape[1]:
         return -1
     return lut[side, i]
 
 
-@njit(cache=True)
+@njit(cache=True, fastmath=BG_FAST)
 def _sun_blocked(world, lut, bld, px, py, pz, light, skip_side):
     """True when a facade stands between point ``p`` and the sun (street canyon shadows)."""
     sx, sy, sz = light[L_SUN], light[L_SUN + 1], light[L_SUN + 2]
@@ -171,7 +175,7 @@ def _sun_blocked(world, lut, bld, px, py, pz, light, skip_side):
     return pz + t * sz < bld[b, B_HEIGHT]
 
 
-@njit(cache=True)
+@njit(cache=True, fastmath=BG_FAST)
 def _ground_albedo(world, gx, gy, out):
     seed = int(world[W_SEED])
     ax = abs(gx)
@@ -204,12 +208,14 @@ def _ground_albedo(world, gx, gy, out):
         out[0], out[1], out[2] = world[W_SIDEWALK] * g, world[W_SIDEWALK + 1] * g, world[W_SIDEWALK + 2] * g
 
 
-@njit(cache=True)
+@njit(cache=True, fastmath=BG_FAST)
 def _facade(world, bld, b, fy, fz, light, out):
     """Albedo of facade ``b`` at street coordinate ``fy`` and height ``fz``; returns emission (lit windows)."""
     y0 = bld[b, B_Y0]
     yh = world[W_YHALF]
-    u = ((fy + yh) % (2.0 * yh)) - yh - y0
+    u = fy + yh
+    u -= math.floor(u / (2.0 * yh)) * (2.0 * yh)
+    u -= yh + y0
     fl = bld[b, B_FLOOR]
     floor_i = math.floor(fz / fl)
     zz = fz - floor_i * fl
@@ -244,7 +250,7 @@ def _facade(world, bld, b, fy, fz, light, out):
     return emit
 
 
-@njit(cache=True)
+@njit(cache=True, fastmath=BG_FAST)
 def _sky(light, dx, dy, dz, out):
     n = math.sqrt(dx * dx + dy * dy + dz * dz)
     e = max(dz / n, 0.0)
@@ -258,7 +264,7 @@ def _sky(light, dx, dy, dz, out):
             out[c] += light[L_SUN_RGB + c] * glow
 
 
-@njit(cache=True)
+@njit(cache=True, fastmath=BG_FAST)
 def background_pixel(world, lut, bld, light, cam, rot, pos, xi, yi, out, alb):
     """Linear RGB radiance of the static world seen through image pixel (xi, yi) from pose (rot, pos)."""
     kind = int(world[W_KIND])
@@ -316,7 +322,7 @@ def background_pixel(world, lut, bld, light, cam, rot, pos, xi, yi, out, alb):
         out[c] = v * f + light[L_HAZE + c] * (1.0 - f)
 
 
-@njit(cache=True)
+@njit(cache=True, fastmath=BG_FAST)
 def background_line(world, lut, bld, light, cam, rot, pos, line, out_line):
     """Render one render-space line of the background from pose (rot, pos) into ``out_line`` (n x 3)."""
     px = np.empty(3)
