@@ -107,7 +107,7 @@ def pose_table(cam, times, rot_tab, pos_tab):
             pos_tab[k, :] = pos_tab[0]
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def to_camera(rot, pos, x, y, z, out):
     """World point to camera frame."""
     dx, dy, dz = x - pos[0], y - pos[1], z - pos[2]
@@ -121,7 +121,7 @@ def to_camera(rot, pos, x, y, z, out):
 # ======================================================================================================
 
 
-@njit(cache=True, fastmath=BG_FAST)
+@njit(cache=True, fastmath=BG_FAST, inline="always")
 def _hash01(ix, iy, seed):
     h = (ix * 374761393 + iy * 668265263 + seed * 2147483647) & 0xFFFFFFFF
     h = ((h ^ (h >> 13)) * 1274126177) & 0xFFFFFFFF
@@ -129,7 +129,7 @@ def _hash01(ix, iy, seed):
     return (h & 0xFFFFFF) / 16777216.0
 
 
-@njit(cache=True, fastmath=BG_FAST)
+@njit(cache=True, fastmath=BG_FAST, inline="always")
 def _value_noise(x, y, seed):
     ix, iy = math.floor(x), math.floor(y)
     fx, fy = x - ix, y - iy
@@ -142,7 +142,7 @@ def _value_noise(x, y, seed):
     return (a + (b - a) * sx) * (1 - sy) + (c + (d - c) * sx) * sy
 
 
-@njit(cache=True, fastmath=BG_FAST)
+@njit(cache=True, fastmath=BG_FAST, inline="always")
 def building_at(world, lut, side, y):
     """Index of the building on ``side`` (0 west, 1 east) at street coordinate ``y`` (periodic), or -1."""
     yh = world[W_YHALF]
@@ -154,7 +154,7 @@ def building_at(world, lut, side, y):
     return lut[side, i]
 
 
-@njit(cache=True, fastmath=BG_FAST)
+@njit(cache=True, fastmath=BG_FAST, inline="always")
 def _sun_blocked(world, lut, bld, px, py, pz, light, skip_side):
     """True when a facade stands between point ``p`` and the sun (street canyon shadows)."""
     sx, sy, sz = light[L_SUN], light[L_SUN + 1], light[L_SUN + 2]
@@ -175,7 +175,7 @@ def _sun_blocked(world, lut, bld, px, py, pz, light, skip_side):
     return pz + t * sz < bld[b, B_HEIGHT]
 
 
-@njit(cache=True, fastmath=BG_FAST)
+@njit(cache=True, fastmath=BG_FAST, inline="always")
 def _ground_albedo(world, gx, gy, out):
     seed = int(world[W_SEED])
     ax = abs(gx)
@@ -208,7 +208,7 @@ def _ground_albedo(world, gx, gy, out):
         out[0], out[1], out[2] = world[W_SIDEWALK] * g, world[W_SIDEWALK + 1] * g, world[W_SIDEWALK + 2] * g
 
 
-@njit(cache=True, fastmath=BG_FAST)
+@njit(cache=True, fastmath=BG_FAST, inline="always")
 def _facade(world, bld, b, fy, fz, light, out):
     """Albedo of facade ``b`` at street coordinate ``fy`` and height ``fz``; returns emission (lit windows)."""
     y0 = bld[b, B_Y0]
@@ -250,7 +250,7 @@ def _facade(world, bld, b, fy, fz, light, out):
     return emit
 
 
-@njit(cache=True, fastmath=BG_FAST)
+@njit(cache=True, fastmath=BG_FAST, inline="always")
 def _sky(light, dx, dy, dz, out):
     n = math.sqrt(dx * dx + dy * dy + dz * dz)
     e = max(dz / n, 0.0)
@@ -264,7 +264,7 @@ def _sky(light, dx, dy, dz, out):
             out[c] += light[L_SUN_RGB + c] * glow
 
 
-@njit(cache=True, fastmath=BG_FAST)
+@njit(cache=True, fastmath=BG_FAST, inline="always")
 def background_pixel(world, lut, bld, light, cam, rot, pos, xi, yi, out, alb):
     """Linear RGB radiance of the static world seen through image pixel (xi, yi) from pose (rot, pos)."""
     kind = int(world[W_KIND])
@@ -341,7 +341,7 @@ def background_line(world, lut, bld, light, cam, rot, pos, line, out_line):
 # ======================================================================================================
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _project(cam, x, y, z, out):
     """Camera-frame point to render-space pixel coordinates (x, y swapped when transposed)."""
     u = cam[C_FX] * x / z + cam[C_CX]
@@ -394,7 +394,7 @@ def actor_bounds(act, cam, rot, pos, t, dt, out, root, pc, uv):
         out[0], out[1], out[2], out[3] = -1e30, 1e30, -1e30, 1e30  # straddles the camera plane
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _bar_x0(act, t):
     period = act[R_PERIOD]
     x = act[R_X0] + act[R_VX] * t
@@ -486,7 +486,7 @@ def actor_parts(act, world, lut, bld, light, cam, rot, pos, t, parts, seg, rad, 
 # ======================================================================================================
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _edge(px, py, qx, qy, yc, lohi):
     if (py - yc) * (qy - yc) <= 0.0:
         if py != qy:
@@ -496,7 +496,7 @@ def _edge(px, py, qx, qy, yc, lohi):
             lohi[0], lohi[1] = min(lohi[0], min(px, qx)), max(lohi[1], max(px, qx))
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def part_span(parts, p, yc, lohi):
     """Continuous x-interval of part ``p`` on the line through ``yc``; lohi = (inf, -inf) when empty."""
     lohi[0], lohi[1] = 1e30, -1e30
