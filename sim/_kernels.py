@@ -175,7 +175,7 @@ def _sun_blocked(world, lut, bld, px, py, pz, light, skip_side):
     return pz + t * sz < bld[b, B_HEIGHT]
 
 
-@njit(cache=True, fastmath=BG_FAST, inline="always")
+@njit(cache=True, fastmath=BG_FAST)
 def _ground_albedo(world, gx, gy, out):
     seed = int(world[W_SEED])
     ax = abs(gx)
@@ -208,7 +208,7 @@ def _ground_albedo(world, gx, gy, out):
         out[0], out[1], out[2] = world[W_SIDEWALK] * g, world[W_SIDEWALK + 1] * g, world[W_SIDEWALK + 2] * g
 
 
-@njit(cache=True, fastmath=BG_FAST, inline="always")
+@njit(cache=True, fastmath=BG_FAST)
 def _facade(world, bld, b, fy, fz, light, out):
     """Albedo of facade ``b`` at street coordinate ``fy`` and height ``fz``; returns emission (lit windows)."""
     y0 = bld[b, B_Y0]
@@ -264,7 +264,7 @@ def _sky(light, dx, dy, dz, out):
             out[c] += light[L_SUN_RGB + c] * glow
 
 
-@njit(cache=True, fastmath=BG_FAST, inline="always")
+@njit(cache=True, fastmath=BG_FAST)
 def background_pixel(world, lut, bld, light, cam, rot, pos, xi, yi, out, alb):
     """Linear RGB radiance of the static world seen through image pixel (xi, yi) from pose (rot, pos)."""
     kind = int(world[W_KIND])
