@@ -1,0 +1,89 @@
+"""The bench machinery (``rollcam bench``) on a tiny frame: schema, error ordering, plot. No timing checks."""
+
+from __future__ import annotations
+
+import argparse
+import itertools
+import json
+
+import numpy as np
+import pytest
+from rollcam.benchmarks import bench
+from rollcam.sim.errors import ConfigError
+
+ROW_KEYS = {"method", "scene", "ms_per_frame", "mean_abs_err_dn", "max_abs_err_dn", "max_box_err_px", "x_memcpy",
+            "speedup_vs_reference", "kind", "n_timed", "note"}
+
+
+@pytest.fixture(scope="module")
+def tiny(tmp_path_factory: pytest.TempPathFactory) -> tuple[dict, object]:
+    out = tmp_path_factory.mktemp("bench")
+    doc = bench.run_bench(width=192, height=108, quick=True, out_dir=out, scenes=("fast_ego",),
+                          bands=(1, 2, 4, 8, 16, 64), footage_fps=(240, bench.LINE_RATE), footage_scenes=None,
+                          full_reference=True, n_frames=2, compose_repeats=1, memcpy_repeats=10)
+    return doc, out
+
+
+def test_json_document_has_rows_floor_targets_machine(tiny) -> None:
+    doc, out = tiny
+    assert {"rows", "floor", "targets", "machine"} <= set(doc)
+    methods = {r["method"] for r in doc["rows"]}
+    assert {"reference", "exact", "gs", "banded_1", "banded_64", "footage_240_nearest", "footage_240_linear",
+            "footage_240_flow", "footage_3240_nearest", "footage_3240_flow"} <= methods
+    for row in doc["rows"]:
+        assert set(row) >= ROW_KEYS, row["method"]
+        assert row["ms_per_frame"] > 0 and row["x_memcpy"] > 0 and row["speedup_vs_reference"] > 0
+    assert doc["floor"]["ms"] > 0 and doc["floor"]["bytes"] == 192 * 108 * 3
+    for target in doc["targets"].values():
+        assert {"value", "limit", "pass", "per_scene"} <= set(target)
+    on_disk = json.loads((out / "bench.json").read_text())
+    assert on_disk["rows"] == doc["rows"]
+
+
+def test_exact_and_line_rate_footage_equal_the_reference(tiny) -> None:
+    doc, _ = tiny
+    rows = {r["method"]: r for r in doc["rows"]}
+    assert "reference image" in doc["baseline"]
+    assert rows["exact"]["mean_abs_err_dn"] == 0 and rows["exact"]["max_abs_err_dn"] == 0
+    assert rows["exact"]["max_box_err_px"] == 0
+    assert rows["reference"]["max_box_err_px"] == 0
+    # At the line rate every line is a footage frame: the study's method under every compose method.
+    for method in ("nearest", "linear", "flow"):
+        assert rows[f"footage_3240_{method}"]["max_abs_err_dn"] <= 1
+    assert doc["targets"]["exact_vs_reference_max_abs_diff"]["pass"] is True
+
+
+def test_banded_error_falls_as_bands_grow(tiny) -> None:
+    doc, _ = tiny
+    rows = {r["method"]: r for r in doc["rows"]}
+    errs = [rows[f"banded_{k}"]["mean_abs_err_dn"] for k in (1, 2, 4, 8, 16, 64)]
+    assert errs[0] > 0
+    assert all(b <= a for a, b in itertools.pairwise(errs)), errs
+    assert errs[-1] < errs[0] / 4
+
+
+def test_plot_is_written(tiny) -> None:
+    _, out = tiny
+    png = (out / "bench.png").read_bytes()
+    assert png[:8] == b"\x89PNG\r\n\x1a\n" and len(png) > 1000
+
+
+def test_banded_times_hold_each_band_at_its_middle() -> None:
+    t = np.arange(8, dtype=np.int64) * 10
+    assert bench.banded_times_ns(t, 1).tolist() == [35] * 8
+    assert bench.banded_times_ns(t, 2).tolist() == [15] * 4 + [55] * 4
+    assert bench.banded_times_ns(t, 8).tolist() == t.tolist()
+    assert bench.banded_times_ns(t, 100).tolist() == t.tolist()
+
+
+def test_quick_config_and_bad_options() -> None:
+    cfg = bench.make_config(quick=True)
+    assert cfg.quick and not cfg.full_reference and cfg.flow_preset == "fast" and cfg.flow_margin_px == 48
+    with pytest.raises(ConfigError, match="scenes"):
+        bench.make_config(scenes=("rainy",))
+    with pytest.raises(ConfigError, match="unknown bench option"):
+        bench.make_config(colour="red")
+    parser = argparse.ArgumentParser()
+    bench.add_arguments(parser)
+    args = parser.parse_args(["--quick", "--size", "big", "--out", "unused"])
+    assert bench.run(args) == 2
