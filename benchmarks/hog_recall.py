@@ -61,7 +61,7 @@ def detect_people(hog: cv2.HOGDescriptor, image_bgr: np.ndarray, *, hit_threshol
                                           winStride=(win_stride_px, win_stride_px),
                                           padding=(padding_px, padding_px), scale=scale)
     out = []
-    for (x, y, w, h), score in zip(np.asarray(rects).reshape(-1, 4), np.asarray(weights).reshape(-1)):
+    for (x, y, w, h), score in zip(np.asarray(rects).reshape(-1, 4), np.asarray(weights).reshape(-1), strict=True):
         dx, dy = SHRINK_W * w, SHRINK_H * h
         out.append(((float(x + dx), float(y + dy), float(x + w - dx), float(y + h - dy)), float(score)))
     out.sort(key=lambda d: -d[1])

@@ -37,7 +37,6 @@ B_SIDE, B_Y0, B_Y1, B_HEIGHT, B_RGB, B_WIN_RGB, B_FLOOR, B_WIN_W, B_WIN_SP, B_LI
 BLD_COLS = 14
 
 from ._body import (  # noqa: E402  (actor table layout lives with the body model)
-    A_STATIC,
     A_TYPE,
     P_BUILD,
     P_H,

@@ -18,6 +18,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from . import _body as B
 from . import _kernels as K
 from .compile import compile_camera, compile_scene
 from .errors import ConfigError
@@ -206,7 +207,7 @@ class Renderer:
             bg = np.empty((n_lines, n_along, 3), np.float32)
             K.background_image(c.world, c.building_lut, c.buildings, c.light, cam, t0_s, bg)
             layer = _Layer(bg)
-            static = c.actors[:, K.A_STATIC] != 0.0 if self.n_actors else np.zeros(0, np.bool_)
+            static = c.actors[:, B.A_STATIC] != 0.0 if self.n_actors else np.zeros(0, np.bool_)
             res = self._render(cam, np.array([t0_s]), np.zeros(n_lines, np.int64), n_lines, n_along, layer,
                                True, False, include=static, force_paint=True)
             assert res.linear is not None
@@ -222,7 +223,7 @@ class Renderer:
                 force_paint) -> RenderResult:
         c = self._c
         n_obj, n_t = self.n_actors, times_s.shape[0]
-        static = c.actors[:, K.A_STATIC] != 0.0 if n_obj else np.zeros(0, np.bool_)
+        static = c.actors[:, B.A_STATIC] != 0.0 if n_obj else np.zeros(0, np.bool_)
         if self.camera_moving:
             static = np.zeros_like(static)
         # Actor time slot per line: a moving actor uses the line's own time, a static one the first time.
