@@ -25,6 +25,7 @@ from collections.abc import Callable, Sequence
 
 import cv2
 import numpy as np
+from rollcam.sim.errors import ConfigError
 from rollcam.sim.render import Renderer
 from rollcam.sim.scenegen import DAYLIGHT, make_street_scene
 
@@ -98,7 +99,7 @@ def _bin_label(lo: int, hi: int | None) -> str:
 
 
 def hog_recall(
-    n_scenes: int = 12,
+    n_scenes: int = 10,
     seed: int = 0,
     width: int = 1920,
     height: int = 1080,
@@ -121,6 +122,9 @@ def hog_recall(
     rendered global-shutter at ``frames_per_camera`` instants ``frame_spacing_s`` apart. Detection runs on
     the full-resolution frame. ``progress(done, total)`` is called after each frame. Returns a JSON-able dict.
     """
+    if n_scenes < 1 or frames_per_camera < 1 or not times:
+        raise ConfigError(f"need n_scenes >= 1, frames_per_camera >= 1 and some times of day, got "
+                          f"{n_scenes!r}, {frames_per_camera!r}, {times!r}")
     hog = people_detector()
     t_start = time.perf_counter()
     bins = [*HEIGHT_BINS_PX]
@@ -204,7 +208,7 @@ def hog_recall(
 def main(argv: Sequence[str] | None = None) -> None:
     """Run the study and print its result as JSON."""
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--scenes", type=int, default=12)
+    ap.add_argument("--scenes", type=int, default=10)
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--frames-per-camera", type=int, default=2)
     ap.add_argument("--hit-threshold", type=float, default=0.0)

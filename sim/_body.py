@@ -84,38 +84,42 @@ def pedestrian_skeleton(act, t, seg, rad, col_idx):
     seg[n, 3], seg[n, 4], seg[n, 5] = x0, y0, 0.875 * h + bob
     rad[n], col_idx[n] = 0.028 * h, 0
     n += 1
-    # torso, shoulders, hips
+    # Trunk: a round abdomen, a chest running across it (wider than deep: ~0.26 h across the shoulders,
+    # ~0.13 h deep, so the waist narrows under it seen from the front) and a pelvis, also across.
     seg[n, 0], seg[n, 1], seg[n, 2] = x0, y0, hip_z + 0.07 * h
     seg[n, 3], seg[n, 4], seg[n, 5] = x0, y0, sh_z - 0.055 * h
-    rad[n], col_idx[n] = 0.085 * h * bd, 2
+    rad[n], col_idx[n] = 0.08 * h * bd, 2
     n += 1
-    shw = 0.105 * h * bd
-    seg[n, 0], seg[n, 1], seg[n, 2] = x0 - shw * lx, y0 - shw * ly, sh_z - 0.02 * h
-    seg[n, 3], seg[n, 4], seg[n, 5] = x0 + shw * lx, y0 + shw * ly, sh_z - 0.02 * h
-    rad[n], col_idx[n] = 0.048 * h * bd, 2
+    chw = 0.065 * h * bd
+    seg[n, 0], seg[n, 1], seg[n, 2] = x0 - chw * lx, y0 - chw * ly, sh_z - 0.045 * h
+    seg[n, 3], seg[n, 4], seg[n, 5] = x0 + chw * lx, y0 + chw * ly, sh_z - 0.045 * h
+    rad[n], col_idx[n] = 0.065 * h * bd, 2
     n += 1
-    hpw = 0.06 * h * bd
+    hpw = 0.045 * h * bd
     seg[n, 0], seg[n, 1], seg[n, 2] = x0 - hpw * lx, y0 - hpw * ly, hip_z + 0.02 * h
     seg[n, 3], seg[n, 4], seg[n, 5] = x0 + hpw * lx, y0 + hpw * ly, hip_z + 0.02 * h
-    rad[n], col_idx[n] = 0.07 * h * bd, 3
+    rad[n], col_idx[n] = 0.058 * h * bd, 3
     n += 1
+    # Hip joints sit ~0.1 h apart; shoulder joints ~0.28 h apart, so arms hang just clear of the waist.
+    leg_x = 0.05 * h * bd
+    arm_x = 0.105 * h * bd + 0.035 * h
     # legs and arms, left (s=-1) and right (s=+1); the right leg leads at phi = 0
     for k in range(2):
         s = -1.0 if k == 0 else 1.0
         ph = phi + (math.pi if k == 0 else 0.0)
         hip_a = 0.42 * sw * math.sin(ph)
         knee = (0.08 + 0.75 * max(0.0, math.sin(ph + 1.3)) ** 2) * max(sw, 0.15)
-        hx, hy = x0 + s * hpw * 0.9 * lx, y0 + s * hpw * 0.9 * ly
+        hx, hy = x0 + s * leg_x * lx, y0 + s * leg_x * ly
         joints[0, 0], joints[0, 1], joints[0, 2] = hx, hy, hip_z
         _limb(hx, hy, hip_z, fx, fy, hip_a, 0.245 * h, joints, 1)
         _limb(joints[1, 0], joints[1, 1], joints[1, 2], fx, fy, hip_a - knee, 0.25 * h, joints, 2)
         seg[n, 0], seg[n, 1], seg[n, 2] = joints[0, 0], joints[0, 1], joints[0, 2]
         seg[n, 3], seg[n, 4], seg[n, 5] = joints[1, 0], joints[1, 1], joints[1, 2]
-        rad[n], col_idx[n] = 0.055 * h * bd, 3
+        rad[n], col_idx[n] = 0.05 * h * bd, 3
         n += 1
         seg[n, 0], seg[n, 1], seg[n, 2] = joints[1, 0], joints[1, 1], joints[1, 2]
         seg[n, 3], seg[n, 4], seg[n, 5] = joints[2, 0], joints[2, 1], joints[2, 2]
-        rad[n], col_idx[n] = 0.04 * h * bd, 3
+        rad[n], col_idx[n] = 0.037 * h * bd, 3
         n += 1
         foot = 0.11 * h
         az = max(joints[2, 2], 0.025 * h)
@@ -125,7 +129,7 @@ def pedestrian_skeleton(act, t, seg, rad, col_idx):
         n += 1
         arm_a = -0.32 * sw * math.sin(ph)
         elbow = 0.25 + 0.25 * sw * max(0.0, -math.sin(ph))
-        sx_, sy_ = x0 + s * (shw + 0.035 * h) * lx, y0 + s * (shw + 0.035 * h) * ly
+        sx_, sy_ = x0 + s * arm_x * lx, y0 + s * arm_x * ly
         szz = sh_z - 0.03 * h
         _limb(sx_, sy_, szz, fx, fy, arm_a, 0.175 * h, joints, 3)
         _limb(joints[3, 0], joints[3, 1], joints[3, 2], fx, fy, arm_a + elbow, 0.19 * h, joints, 4)

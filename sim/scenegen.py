@@ -45,8 +45,10 @@ DAYLIGHT = ("morning", "noon", "afternoon")
 SPEED_PRESETS = {"static": 0.0, "normal": 1.0, "fast": 10.0}
 """Speed multipliers: 'normal' walkers go up to 2 m/s as in the study, 'fast' ten times that."""
 
-_SKIN = np.array([(0.80, 0.62, 0.50), (0.72, 0.52, 0.38), (0.58, 0.40, 0.28), (0.42, 0.28, 0.18),
-                  (0.28, 0.18, 0.12), (0.86, 0.70, 0.60)])
+# Linear albedos. Skin: measured reflectances run from ~(0.66, 0.49, 0.40) for very light to ~(0.2, 0.11, 0.07)
+# for very dark skin; brighter values read as white plaster under the sun.
+_SKIN = np.array([(0.62, 0.44, 0.35), (0.55, 0.38, 0.28), (0.45, 0.30, 0.20), (0.33, 0.20, 0.12),
+                  (0.20, 0.11, 0.07), (0.66, 0.49, 0.40)])
 _HAIR = np.array([(0.03, 0.025, 0.02), (0.12, 0.07, 0.04), (0.30, 0.18, 0.08), (0.55, 0.45, 0.25),
                   (0.45, 0.44, 0.42), (0.25, 0.08, 0.04)])
 _SHOES = np.array([(0.03, 0.03, 0.03), (0.20, 0.12, 0.07), (0.65, 0.65, 0.65), (0.08, 0.08, 0.12)])
@@ -70,11 +72,18 @@ def parse_speed(speed: str | float) -> float:
     return value
 
 
-def _clothing(rng: np.random.Generator) -> tuple[float, float, float]:
-    """A clothing colour: mostly muted, sometimes saturated, never quite black or white."""
+def _clothing(rng: np.random.Generator, denim_p: float = 0.0) -> tuple[float, float, float]:
+    """A clothing colour (linear albedo): mostly muted, sometimes saturated, blue denim ``denim_p`` of the time.
+
+    Brightness is log-uniform between dyed black (0.03) and white cotton (0.75), as fabrics are: many dark
+    garments, some light ones, few exactly mid-grey.
+    """
+    if rng.random() < denim_p:
+        v = math.exp(rng.uniform(math.log(0.12), math.log(0.4)))
+        return (0.45 * v, 0.62 * v, v)
     hue = rng.uniform(0, 6)
     sat = rng.choice([0.1, 0.3, 0.6, 0.8], p=[0.35, 0.3, 0.2, 0.15])
-    val = rng.uniform(0.06, 0.65)
+    val = math.exp(rng.uniform(math.log(0.03), math.log(0.75)))
     c = val * (1 - sat)
     x = (1 - abs(hue % 2 - 1)) * val * sat
     i = int(hue)
@@ -101,7 +110,7 @@ def make_pedestrian(rng: np.random.Generator, pid: int, lane_x_m: float, lane_y_
         skin=tuple(float(v) for v in _SKIN[rng.integers(len(_SKIN))]),
         hair=tuple(float(v) for v in _HAIR[rng.integers(len(_HAIR))]),
         shirt=_clothing(rng),
-        pants=_clothing(rng),
+        pants=_clothing(rng, denim_p=0.3),
         shoes=tuple(float(v) for v in _SHOES[rng.integers(len(_SHOES))]),
         long_hair=bool(rng.random() < (0.6 if female else 0.1)),
         long_sleeves=bool(rng.random() < 0.6),
