@@ -9,7 +9,6 @@ from __future__ import annotations
 
 import math
 
-import numpy as np
 from numba import njit
 
 # ---- actor table ------------------------------------------------------------------------------------------
@@ -50,12 +49,12 @@ def _limb(px, py, pz, fwd_x, fwd_y, ang, length, out, i):
 
 
 @njit(cache=True)
-def pedestrian_skeleton(act, t, seg, rad, col_idx):
+def pedestrian_skeleton(act, t, seg, rad, col_idx, root, joints):
     """World-space capsules of a walker at time ``t``: seg[p] = (ax, ay, az, bx, by, bz), rad[p] metres.
 
-    ``col_idx[p]`` selects the colour (0 skin, 1 hair, 2 shirt, 3 pants, 4 shoes). Returns the part count.
+    ``col_idx[p]`` selects the colour (0 skin, 1 hair, 2 shirt, 3 pants, 4 shoes); ``root`` (4) receives
+    the root state (see ``pedestrian_root``) and ``joints`` (5 x 3) is scratch. Returns the part count.
     """
-    root = np.empty(4)
     pedestrian_root(act, t, root)
     x0, y0, sgn, dist = root[0], root[1], root[2], root[3]
     h, bd = act[P_H], act[P_BUILD]
@@ -66,7 +65,6 @@ def pedestrian_skeleton(act, t, seg, rad, col_idx):
     bob = 0.012 * h * math.cos(2.0 * phi) * sw
     hip_z = 0.530 * h + bob
     sh_z = 0.815 * h + bob
-    joints = np.empty((16, 3))
     n = 0
     # head (slightly elongated), hair, neck
     hz = 0.925 * h + bob

@@ -36,6 +36,26 @@ KIND_STREET, KIND_CHART, KIND_FLAT = 0, 1, 2
 B_SIDE, B_Y0, B_Y1, B_HEIGHT, B_RGB, B_WIN_RGB, B_FLOOR, B_WIN_W, B_WIN_SP, B_LIT = 0, 1, 2, 3, 4, 7, 10, 11, 12, 13
 BLD_COLS = 14
 
+def _drop_stale_cache() -> None:
+    """Remove this module's numba cache when ``_body.py`` is newer than it.
+
+    Numba keys a cached function on its own source file only, but these kernels compile the walker model of
+    ``_body.py`` into themselves; without this, an edited body model would keep running from stale cache.
+    """
+    from pathlib import Path
+
+    here = Path(__file__).resolve().parent
+    try:
+        body_mtime = (here / "_body.py").stat().st_mtime
+        for f in (here / "__pycache__").glob("_kernels.*.nb[ci]"):
+            if f.stat().st_mtime < body_mtime:
+                f.unlink(missing_ok=True)
+    except OSError:
+        pass  # read-only install: nothing is edited there, so nothing can be stale
+
+
+_drop_stale_cache()
+
 from ._body import (  # noqa: E402  (actor table layout lives with the body model)
     A_TYPE,
     P_BUILD,
@@ -413,7 +433,8 @@ def _set_quad(parts, p, x0, y0, x1, y1, x2, y2, x3, y3):
 
 
 @njit(cache=True)
-def actor_parts(act, world, lut, bld, light, cam, rot, pos, t, parts, seg, rad, col_idx, root, a, b, ua, ub):
+def actor_parts(act, world, lut, bld, light, cam, rot, pos, t, parts, seg, rad, col_idx, root, joints, a, b, ua,
+                ub):
     """Fill ``parts`` (MAX_PARTS x PART_COLS) with the render-space primitives of an actor at time ``t``."""
     for p in range(MAX_PARTS):
         parts[p, Q_KIND] = PART_NONE
@@ -433,8 +454,7 @@ def actor_parts(act, world, lut, bld, light, cam, rot, pos, t, parts, seg, rad, 
         else:
             _set_quad(parts, 0, x0, -big, x1, -big, x1, big, x0, big)
         return
-    n = pedestrian_skeleton(act, t, seg, rad, col_idx)
-    pedestrian_root(act, t, root)
+    n = pedestrian_skeleton(act, t, seg, rad, col_idx, root, joints)
     # Sun on the walker: blocked by the street canyon at chest height.
     lit = 0.0 if _sun_blocked(world, lut, bld, root[0], root[1], 0.7 * act[P_H], light, -1) else 1.0
     # Sun direction in camera frame, reduced to the image-plane x / viewing-axis z for cylinder shading.
@@ -696,6 +716,7 @@ def actor_parts_all(actors, world, lut, bld, light, cam, rot_tab, pos_tab, times
         rad = np.empty(MAX_PARTS)
         col_idx = np.empty(MAX_PARTS, np.int64)
         root = np.empty(4)
+        joints = np.empty((5, 3))
         a = np.empty(3)
         b = np.empty(3)
         ua = np.empty(2)
@@ -703,7 +724,7 @@ def actor_parts_all(actors, world, lut, bld, light, cam, rot_tab, pos_tab, times
         for s in range(ch, n, N_CHUNKS):
             k = slot_k[s]
             actor_parts(actors[slot_o[s]], world, lut, bld, light, cam, rot_tab[k], pos_tab[k], times[k],
-                        parts_tab[s], seg, rad, col_idx, root, a, b, ua, ub)
+                        parts_tab[s], seg, rad, col_idx, root, joints, a, b, ua, ub)
 
 
 @njit(cache=True, parallel=True)
