@@ -77,8 +77,12 @@ Q_KIND, Q_DEPTH, Q_AMB, Q_DIR, Q_LX, Q_LZ, Q_GEO, Q_YMIN, Q_YMAX = 0, 1, 2, 5, 8
 PART_COLS = 20
 MAX_PARTS = 16
 PART_CAPSULE, PART_QUAD, PART_NONE = 0, 1, -1
+# slots[o, k]: >= 0 row of the shared parts table; SLOT_NONE not needed; SLOT_LOCAL needed by a single line,
+# so its parts are computed on that line (no table round trip through memory).
+SLOT_NONE, SLOT_LOCAL = -1, -2
 
 NEAR_M = 0.05
+BODY_LATERAL, BODY_FORWARD, BODY_TOP = 0.25, 0.40, 1.02  # walker bounds, fractions of height (see actor_bounds)
 # Background shading tolerates reassociation and fast math functions (NaN/inf semantics kept); every path
 # renders the background through the same compiled functions, so results stay identical between paths.
 BG_FAST = {"contract", "afn", "reassoc", "arcp", "nsz"}
@@ -393,13 +397,16 @@ def actor_bounds(act, cam, rot, pos, t, dt, out, root, pc, uv):
         return
     pedestrian_root(act, t, root)
     h = act[P_H]
-    e = 0.55 * h * max(act[P_BUILD], 1.0)
+    # Body reach from the root, with margin: arms and hips at most 0.18 h x build sideways, feet and hands
+    # at most 0.32 h forward or back, head top at 1.007 h (tests/test_render.py checks the containment).
+    lat = BODY_LATERAL * h * max(act[P_BUILD], 1.0)
+    e = BODY_FORWARD * h
     n_behind = 0
     ey = e + abs(act[P_SPEED]) * dt  # walkers move along Y only, at most speed * dt either way
     for i in range(8):
-        x = root[0] + (e if i & 1 else -e)
+        x = root[0] + (lat if i & 1 else -lat)
         y = root[1] + (ey if i & 2 else -ey)
-        z = 1.02 * h if i & 4 else 0.0
+        z = BODY_TOP * h if i & 4 else 0.0
         to_camera(rot, pos, x, y, z, pc)
         if pc[2] < NEAR_M:
             n_behind += 1
@@ -568,7 +575,7 @@ def _covered_pixels(span_l, span_r, m0, m, w, pa, pb):
 
 
 @njit(cache=True)
-def _collect_line(line, w, actors, obj_k, slots, parts_tab, include, gt_l, gt_r, gt_tot,
+def _collect_line(line, w, actors, obj_k, slots, parts_tab, local, include, gt_l, gt_r, gt_tot,
                   depth, idx_o, idx_p, span_l, span_r, pa, pb):
     """Spans of every included actor on ``line`` (``obj_k[o]``: its time slot, -1 when not touching).
 
@@ -581,19 +588,20 @@ def _collect_line(line, w, actors, obj_k, slots, parts_tab, include, gt_l, gt_r,
         if not include[o] or obj_k[o] < 0:
             continue
         s = slots[o, obj_k[o]]
-        if s < 0:
+        if s == SLOT_NONE:
             continue
+        pt = parts_tab[s] if s >= 0 else local[o]
         olo, ohi = 1e30, -1e30
         m0 = m
         for p in range(MAX_PARTS):
-            if parts_tab[s, p, Q_KIND] == PART_NONE:
+            if pt[p, Q_KIND] == PART_NONE:
                 continue
-            if yc < parts_tab[s, p, Q_YMIN] or yc > parts_tab[s, p, Q_YMAX]:
+            if yc < pt[p, Q_YMIN] or yc > pt[p, Q_YMAX]:
                 continue
-            part_span(parts_tab[s], p, yc, lohi)
+            part_span(pt, p, yc, lohi)
             if lohi[1] <= lohi[0] or lohi[1] <= 0.0 or lohi[0] >= w:
                 continue
-            depth[m], idx_o[m], idx_p[m] = parts_tab[s, p, Q_DEPTH], o, p
+            depth[m], idx_o[m], idx_p[m] = pt[p, Q_DEPTH], o, p
             span_l[m], span_r[m] = lohi[0], lohi[1]
             m += 1
             olo, ohi = min(olo, lohi[0]), max(ohi, lohi[1])
@@ -631,7 +639,7 @@ def _span_runs(span_l, span_r, m, w, ia, ib):
 
 
 @njit(cache=True)
-def _paint_spans(lin, line, m, obj_k, slots, parts_tab, gt_vis, depth, idx_o, idx_p, span_l, span_r, owner,
+def _paint_spans(lin, line, m, obj_k, slots, parts_tab, local, gt_vis, depth, idx_o, idx_p, span_l, span_r, owner,
                  ia, ib, n_runs):
     """Paint the collected spans over ``lin`` far to near (anti-aliased along the line); count visibility."""
     w = lin.shape[0]
@@ -645,7 +653,8 @@ def _paint_spans(lin, line, m, obj_k, slots, parts_tab, gt_vis, depth, idx_o, id
     for ii in range(m):
         e = order[ii]
         o, p = idx_o[e], idx_p[e]
-        pt = parts_tab[slots[o, obj_k[o]]]
+        s = slots[o, obj_k[o]]
+        pt = parts_tab[s] if s >= 0 else local[o]
         xl, xr = span_l[e], span_r[e]
         i0 = max(int(math.floor(xl)), 0)
         i1 = min(int(math.ceil(xr)), w)
@@ -755,12 +764,26 @@ def render_lines_kernel(world, lut_b, bld, light, cam, rot_tab, pos_tab, actors,
         ia = np.empty(cap + 1, np.int64)
         ib = np.empty(cap + 1, np.int64)
         lin = np.empty((w, 3), np.float32)
+        local = np.empty((max(n_obj, 1), MAX_PARTS, PART_COLS))
+        seg = np.empty((MAX_PARTS, 6))
+        rad = np.empty(MAX_PARTS)
+        col_idx = np.empty(MAX_PARTS, np.int64)
+        root = np.empty(4)
+        joints = np.empty((5, 3))
+        va = np.empty(3)
+        vb = np.empty(3)
+        ua = np.empty(2)
+        ub = np.empty(2)
         for j in range(ch, n, N_CHUNKS):
             line = lines[j]
+            ok = obj_line_k[:, line]
             for o in range(n_obj):
                 gt_l[o, line], gt_r[o, line], gt_tot[o, line], gt_vis[o, line] = np.nan, np.nan, 0, 0
-            ok = obj_line_k[:, line]
-            m = _collect_line(line, w, actors, ok, slots, parts_tab, include, gt_l, gt_r, gt_tot,
+                if include[o] and ok[o] >= 0 and slots[o, ok[o]] == SLOT_LOCAL:
+                    k = ok[o]
+                    actor_parts(actors[o], world, lut_b, bld, light, cam, rot_tab[k], pos_tab[k], times[k],
+                                local[o], seg, rad, col_idx, root, joints, va, vb, ua, ub)
+            m = _collect_line(line, w, actors, ok, slots, parts_tab, local, include, gt_l, gt_r, gt_tot,
                               depth, idx_o, idx_p, span_l, span_r, pa, pb)
             if full_lines and not gt_only:
                 if moving_cam:
@@ -775,7 +798,7 @@ def render_lines_kernel(world, lut_b, bld, light, cam, rot_tab, pos_tab, actors,
                     for r in range(n_runs):
                         lin[ia[r]:ib[r]] = bg_lin[line, ia[r]:ib[r]]
             if m > 0:
-                _paint_spans(lin, line, m, ok, slots, parts_tab, gt_vis, depth, idx_o, idx_p, span_l, span_r,
+                _paint_spans(lin, line, m, ok, slots, parts_tab, local, gt_vis, depth, idx_o, idx_p, span_l, span_r,
                              owner, ia, ib, n_runs)
             if not gt_only:
                 for r in range(n_runs):

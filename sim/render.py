@@ -112,6 +112,7 @@ class Renderer:
         self._c = compile_scene(scene)
         self._cams = {False: compile_camera(self.camera, False), True: compile_camera(self.camera, True)}
         self._layers: dict[bool, _Layer] = {}
+        self._parts: np.ndarray | None = None
         self.camera_moving = self.camera.ego.moving
         self.actor_ids = self._c.actor_ids
         self.actor_classes = self._c.actor_classes
@@ -192,6 +193,16 @@ class Renderer:
         return tuple(out)
 
     # ------------------------------------------------------------------ internals
+    def _parts_buffer(self, n_slots: int) -> np.ndarray:
+        """A parts table of at least ``n_slots`` slots, reused across renders.
+
+        An RS frame needs thousands of slots (megabytes); a fresh array each frame would pay for its page
+        faults every time. This is why a Renderer renders one frame at a time.
+        """
+        if self._parts is None or self._parts.shape[0] < n_slots:
+            self._parts = np.empty((max(n_slots, 1024), K.MAX_PARTS, K.PART_COLS))
+        return self._parts[:n_slots]
+
     def _layer(self, by_column: bool, t0_s: float) -> _Layer:
         """Static layers for this orientation, built on first use (nothing to cache for a moving camera)."""
         layer = self._layers.get(by_column)
@@ -249,13 +260,15 @@ class Renderer:
             b = bounds[o, group_of_k[k_line[o]]]
             touch = (b[:, 0] <= centre) & (centre <= b[:, 1]) & (b[:, 2] < n_along) & (b[:, 3] > 0)
             obj_line_k[o, touch] = k_line[o, touch]
-        slots = np.full((n_obj, n_t), -1, np.int64)
+        # Parts of an actor at an instant that several lines share (GS, bands, static actors) are computed
+        # once into a table; those only one line needs (RS) are computed on that line, in cache.
         o_idx, l_idx = np.nonzero(obj_line_k >= 0)
-        used = np.zeros((n_obj, n_t), np.bool_)
-        used[o_idx, obj_line_k[o_idx, l_idx]] = True
-        s_o, s_k = np.nonzero(used)
+        uses = np.zeros((n_obj, n_t), np.int64)
+        np.add.at(uses, (o_idx, obj_line_k[o_idx, l_idx]), 1)
+        slots = np.where(uses == 1, K.SLOT_LOCAL, K.SLOT_NONE)
+        s_o, s_k = np.nonzero(uses > 1)
         slots[s_o, s_k] = np.arange(s_o.size)
-        parts = np.empty((max(s_o.size, 1), K.MAX_PARTS, K.PART_COLS))
+        parts = self._parts_buffer(max(s_o.size, 1))
         if s_o.size:
             K.actor_parts_all(c.actors, c.world, c.building_lut, c.buildings, c.light, cam, rot_tab, pos_tab,
                               times_s, s_o, s_k, parts)
