@@ -283,7 +283,7 @@ class _SceneBench:
         elapsed = 0.0
         for n, r in enumerate(lines.tolist()):
             t0 = time.perf_counter()
-            full = self._render(np.full(h, self.rs_times[r]))
+            full = self.renderer.reference_frame(int(self.rs_times[r]), by_column=self.by_column)
             if self.by_column:
                 image[:, r] = full.image[:, r]
             else:
@@ -606,7 +606,7 @@ def run(args: argparse.Namespace) -> int:
         doc = run_bench(width, height, quick=args.quick, out_dir=args.out, progress=_stderr_progress(),
                         **overrides)
     except RollcamError as exc:
-        print(f"rollcam bench: {exc}", file=sys.stderr)
+        print(f"rollcam: error: {exc}", file=sys.stderr)
         return 2
     print(json.dumps(doc, indent=1) if args.json else format_table(doc))
     return 0

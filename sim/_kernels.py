@@ -375,8 +375,21 @@ def _project(cam, x, y, z, out):
         out[0], out[1] = u, v
 
 
+@njit(cache=True, inline="always")
+def _lane_shift(world, pos, y):
+    """Street-period shift that brings a walker at ``y`` to its copy nearest the camera.
+
+    The street repeats every ``length`` along Y (facades wrap), and so does the crowd: a camera travelling
+    down the street keeps meeting walkers instead of leaving them behind. Copies swap half a period away.
+    """
+    if world[W_KIND] != KIND_STREET:
+        return 0.0
+    period = 2.0 * world[W_YHALF]
+    return period * math.floor((pos[1] - y) / period + 0.5)
+
+
 @njit(cache=True)
-def actor_bounds(act, cam, rot, pos, t, dt, out, root, pc, uv):
+def actor_bounds(act, world, cam, rot, pos, t, dt, out, root, pc, uv):
     """Conservative render-space box (ymin, ymax, xmin, xmax) of an actor over times [t, t + dt].
 
     ``rot, pos`` is the camera pose, which must hold over the whole interval (dt = 0 for a moving camera).
@@ -396,6 +409,7 @@ def actor_bounds(act, cam, rot, pos, t, dt, out, root, pc, uv):
             out[0], out[1], out[2], out[3] = -big, big, xs0, xs1
         return
     pedestrian_root(act, t, root)
+    root[1] += _lane_shift(world, pos, root[1])
     h = act[P_H]
     # Body reach from the root, with margin: arms and hips at most 0.18 h x build sideways, feet and hands
     # at most 0.32 h forward or back, head top at 1.007 h (tests/test_render.py checks the containment).
@@ -406,7 +420,7 @@ def actor_bounds(act, cam, rot, pos, t, dt, out, root, pc, uv):
     for i in range(8):
         x = root[0] + (lat if i & 1 else -lat)
         y = root[1] + (ey if i & 2 else -ey)
-        z = BODY_TOP * h if i & 4 else 0.0
+        z = BODY_TOP * h if i & 4 else -0.02 * h  # feet dip a little below the ground plane
         to_camera(rot, pos, x, y, z, pc)
         if pc[2] < NEAR_M:
             n_behind += 1
@@ -462,6 +476,12 @@ def actor_parts(act, world, lut, bld, light, cam, rot, pos, t, parts, seg, rad, 
             _set_quad(parts, 0, x0, -big, x1, -big, x1, big, x0, big)
         return
     n = pedestrian_skeleton(act, t, seg, rad, col_idx, root, joints)
+    shift = _lane_shift(world, pos, root[1])
+    if shift != 0.0:
+        root[1] += shift
+        for p in range(n):
+            seg[p, 1] += shift
+            seg[p, 4] += shift
     # Sun on the walker: blocked by the street canyon at chest height.
     lit = 0.0 if _sun_blocked(world, lut, bld, root[0], root[1], 0.7 * act[P_H], light, -1) else 1.0
     # Sun direction in camera frame, reduced to the image-plane x / viewing-axis z for cylinder shading.
@@ -701,7 +721,7 @@ N_CHUNKS = 16  # parallel work units; scratch buffers are allocated once per uni
 
 
 @njit(cache=True, parallel=True)
-def actor_bounds_all(actors, cam, rot_tab, pos_tab, t_first, k_first, t_span, need, out):
+def actor_bounds_all(actors, world, cam, rot_tab, pos_tab, t_first, k_first, t_span, need, out):
     """out[o, g] = bounds of actor o over time group g (from t_first[g], lasting t_span[g]) where need[o, g]."""
     n_obj, n_g = need.shape
     for ch in prange(N_CHUNKS):
@@ -712,8 +732,8 @@ def actor_bounds_all(actors, cam, rot_tab, pos_tab, t_first, k_first, t_span, ne
             for g in range(ch, n_g, N_CHUNKS):
                 if need[o, g]:
                     k = k_first[g]
-                    actor_bounds(actors[o], cam, rot_tab[k], pos_tab[k], t_first[g], t_span[g], out[o, g], root,
-                                 pc, uv)
+                    actor_bounds(actors[o], world, cam, rot_tab[k], pos_tab[k], t_first[g], t_span[g], out[o, g],
+                                 root, pc, uv)
 
 
 @njit(cache=True, parallel=True)

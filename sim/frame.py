@@ -20,6 +20,8 @@ class ObjectTruth:
     ``box_gs`` is the object's box with every line at the frame's reference time (its first line's sample
     time); ``box_rs`` the union of its per-line extents with each line at that line's own sample time. Boxes
     are clipped to the image; either is ``None`` when the object has no pixel in it under that shutter.
+    Extents are exact along a line and sampled at line centres across lines (rows for row readout,
+    columns for column readout), so y0/y1 of a row-read frame are whole rows.
     ``visible`` is the fraction of the object's in-image pixels (in this frame's own shutter) that no nearer
     object hides.
     """

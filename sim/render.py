@@ -88,6 +88,7 @@ class RenderResult:
     image: np.ndarray
     linear: np.ndarray | None
     truth: LineTruth
+    lines_painted: int = 0  # lines rendered rather than copied from the static cache
 
 
 class _Layer:
@@ -138,11 +139,8 @@ class Renderer:
         and the per-line ground truth. ``truth_only`` skips pixels (for boxes at another instant).
         """
         cam = self._cams[by_column]
-        n_lines = self.camera.width if by_column else self.camera.height
-        n_along = self.camera.height if by_column else self.camera.width
-        times_ns = np.asarray(times_ns, dtype=np.int64)
-        if times_ns.shape != (n_lines,):
-            raise ConfigError(f"need one time per line: {n_lines} lines, got times of shape {times_ns.shape}")
+        n_lines, n_along = self._shape(by_column)
+        times_ns = self._check_times(times_ns, by_column)
         ut_ns, line_k = np.unique(times_ns, return_inverse=True)
         times_s = ut_ns.astype(np.float64) * 1e-9
         layer = self._layer(by_column, times_s[0])
@@ -150,15 +148,28 @@ class Renderer:
                            include=np.ones(self.n_actors, np.bool_), force_paint=False)
         return res
 
+    def reference_frame(self, t_ns: int, *, by_column: bool = False) -> RenderResult:
+        """One full render with every line at ``t_ns`` and no shortcuts: every line painted over the bare
+        background with every actor tested against it (no static-actor composite, no touched-line culling).
+        """
+        n_lines, n_along = self._shape(by_column)
+        t_s = np.array([np.int64(t_ns).astype(np.float64) * 1e-9])
+        layer = self._layer(by_column, t_s[0])
+        return self._render(self._cams[by_column], t_s, np.zeros(n_lines, np.int64), n_lines, n_along, layer,
+                            False, False, include=np.ones(self.n_actors, np.bool_), force_paint=True,
+                            exhaustive=True)
+
     def reference_lines(self, times_ns: np.ndarray, *, by_column: bool = False) -> RenderResult:
-        """The study's brute-force method: one full render per line, keeping line r of render r."""
-        n_lines = self.camera.width if by_column else self.camera.height
-        times_ns = np.asarray(times_ns, dtype=np.int64)
-        if times_ns.shape != (n_lines,):
-            raise ConfigError(f"need one time per line: {n_lines} lines, got times of shape {times_ns.shape}")
+        """The study's brute-force method: one full render per line, keeping line r of render r.
+
+        Each full render is ``reference_frame``, which shares only the bare background with the fast path,
+        so the fast path's caches and culling are checked against it, not assumed.
+        """
+        times_ns = self._check_times(times_ns, by_column)
+        n_lines = times_ns.shape[0]
         out: RenderResult | None = None
         for r in range(n_lines):
-            full = self.render_lines(np.full(n_lines, times_ns[r]), by_column=by_column)
+            full = self.reference_frame(int(times_ns[r]), by_column=by_column)
             if out is None:
                 out = RenderResult(np.empty_like(full.image), None,
                                    LineTruth.empty(self.n_actors, n_lines, by_column))
@@ -178,7 +189,7 @@ class Renderer:
         Objects with no pixel under either shutter are left out.
         """
         if gs_truth is None:
-            n_lines = self.camera.width if by_column else self.camera.height
+            n_lines = self._shape(by_column)[0]
             gs_truth = self.render_lines(np.full(n_lines, reference_time_ns, np.int64), by_column=by_column,
                                          truth_only=True).truth
         rs_boxes = frame_truth.boxes()
@@ -193,6 +204,18 @@ class Renderer:
         return tuple(out)
 
     # ------------------------------------------------------------------ internals
+    def _shape(self, by_column: bool) -> tuple[int, int]:
+        """(lines, pixels per line) of a render."""
+        w, h = self.camera.width, self.camera.height
+        return (w, h) if by_column else (h, w)
+
+    def _check_times(self, times_ns: np.ndarray, by_column: bool) -> np.ndarray:
+        n_lines = self._shape(by_column)[0]
+        times_ns = np.asarray(times_ns, dtype=np.int64)
+        if times_ns.shape != (n_lines,):
+            raise ConfigError(f"need one time per line: {n_lines} lines, got times of shape {times_ns.shape}")
+        return times_ns
+
     def _parts_buffer(self, n_slots: int) -> np.ndarray:
         """A parts table of at least ``n_slots`` slots, reused across renders.
 
@@ -209,8 +232,7 @@ class Renderer:
         if layer is not None:
             return layer
         cam = self._cams[by_column]
-        n_lines = self.camera.width if by_column else self.camera.height
-        n_along = self.camera.height if by_column else self.camera.width
+        n_lines, n_along = self._shape(by_column)
         c = self._c
         if self.camera_moving:
             layer = _Layer(None)
@@ -231,7 +253,7 @@ class Renderer:
         return layer
 
     def _render(self, cam, times_s, line_k, n_lines, n_along, layer: _Layer, linear, truth_only, include,
-                force_paint) -> RenderResult:
+                force_paint, exhaustive=False) -> RenderResult:
         c = self._c
         n_obj, n_t = self.n_actors, times_s.shape[0]
         static = c.actors[:, B.A_STATIC] != 0.0 if n_obj else np.zeros(0, np.bool_)
@@ -252,11 +274,13 @@ class Renderer:
         need[:, 0] = include
         need[include & ~static, :] = True
         bounds = np.empty((n_obj, n_g, 4))
-        K.actor_bounds_all(c.actors, cam, rot_tab, pos_tab, times_s[k_first], k_first,
+        K.actor_bounds_all(c.actors, c.world, cam, rot_tab, pos_tab, times_s[k_first], k_first,
                            times_s[k_last] - times_s[k_first], need, bounds)
         centre = np.arange(n_lines) + 0.5
         obj_line_k = np.full((n_obj, n_lines), -1, np.int64)
-        for o in np.flatnonzero(include):
+        if exhaustive:  # the oracle: every included actor is tried on every line, bounds unused
+            obj_line_k[include] = k_line[include]
+        for o in np.flatnonzero(include) if not exhaustive else ():
             b = bounds[o, group_of_k[k_line[o]]]
             touch = (b[:, 0] <= centre) & (centre <= b[:, 1]) & (b[:, 2] < n_along) & (b[:, 3] > 0)
             obj_line_k[o, touch] = k_line[o, touch]
@@ -292,9 +316,9 @@ class Renderer:
                               line_k, obj_line_k, slots, parts, include, lines, n_along, bg, out_u8, out_lin,
                               self.gain, _SRGB, gt.left, gt.right, gt.area, gt.visible, truth_only, full_lines)
         if truth_only:
-            return RenderResult(np.empty((0, 0, 3), np.uint8), None, gt)
+            return RenderResult(np.empty((0, 0, 3), np.uint8), None, gt, int(lines.size))
         image = out_u8.transpose(1, 0, 2) if cam[K.C_TRANSPOSED] != 0.0 else out_u8
         lin = None
         if linear:
             lin = out_lin.transpose(1, 0, 2) if cam[K.C_TRANSPOSED] != 0.0 else out_lin
-        return RenderResult(np.ascontiguousarray(image), lin, gt)
+        return RenderResult(np.ascontiguousarray(image), lin, gt, int(lines.size))

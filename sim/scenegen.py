@@ -184,6 +184,8 @@ def make_street_scene(
     if n_pedestrians < 0 or n_cameras < 1:
         raise ConfigError(f"need n_pedestrians >= 0 and n_cameras >= 1, got {n_pedestrians!r}, {n_cameras!r}")
     mult = parse_speed(speed)
+    if not isinstance(seed, (int, np.integer)) or seed < 0:
+        raise ConfigError(f"seed must be an integer >= 0, got {seed!r}")
     rng = np.random.default_rng(seed)
     road_half = float(rng.uniform(3.2, 5.5))
     sidewalk = float(rng.uniform(3.0, 5.0))

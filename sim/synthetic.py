@@ -10,6 +10,7 @@ exposure and gain relative to the sensor's default exposure.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Iterator
 from dataclasses import dataclass
 
@@ -17,7 +18,7 @@ import numpy as np
 
 from .errors import ConfigError
 from .frame import Frame
-from .hwconfig import SensorConfig
+from .hwconfig import SensorConfig, SensorMode
 from .render import LineTruth, Renderer
 from .scene import Scene
 from .timing import LineTiming, Readout, line_sample_times_ns
@@ -26,12 +27,16 @@ DEFAULT_EXPOSURE_NS = 10_000_000
 SHUTTERS = ("rolling", "global")
 
 
+MIN_FPS = 1e-3  # a 1000 s frame period: slower streams are a misconfiguration, not a sensor
+
+
 @dataclass(frozen=True)
 class StreamSettings:
     """The resolved settings of a synthetic stream (what the sensor would be programmed with)."""
 
     width: int
     height: int
+    mode: SensorMode
     timing: LineTiming
     readout: Readout
     shutter: str
@@ -45,6 +50,17 @@ class StreamSettings:
         return self.width if self.readout.by_column else self.height
 
 
+def _finite(name: str, value: float, low: float = 0.0) -> float:
+    if not isinstance(value, (int, float, np.number)) or not math.isfinite(value) or value <= low:
+        raise ConfigError(f"{name} must be a finite number > {low:g}, got {value!r}")
+    return float(value)
+
+
+def _reduced(pixel_rate_hz: int, line_length_pck: int, frame_lines: int, frame_pck: int) -> LineTiming:
+    g = math.gcd(pixel_rate_hz, line_length_pck, frame_pck)
+    return LineTiming(pixel_rate_hz // g, line_length_pck // g, frame_lines, frame_pck // g)
+
+
 def resolve_settings(
     sensor: SensorConfig,
     *,
@@ -55,7 +71,12 @@ def resolve_settings(
     exposure_ns: int | None = None,
     gain: float = 1.0,
 ) -> StreamSettings:
-    """Sensor programming for a stream: mode by size, frame length by fps, exposure clamped to the frame."""
+    """Sensor programming for a stream: mode by size, frame length by fps, exposure clamped to the frame.
+
+    The mode's timing reads ``mode.height`` rows per readout. An output of another size, or read by
+    columns, is a rescaled readout: the same readout time spread over the output's lines, and the same
+    frame period (kept exact by counting it in pixel clocks, scaled with the clock).
+    """
     mode = None
     if size is not None:
         w, h = size
@@ -63,21 +84,21 @@ def resolve_settings(
             raise ConfigError(f"size must be positive, got {w}x{h}")
         mode = next((m for m in sensor.modes if (m.width, m.height) == (w, h)), None)
     mode = mode or sensor.mode()
-    base = sensor.timing(mode)
     width, height = (mode.width, mode.height) if size is None else size
-    # An output size no mode has is a rescaled readout of the mode: the same readout time spread over the
-    # output lines, expressed exactly by scaling pixel rate and line length.
-    n_mode = mode.width if Readout.parse(readout or sensor.readout).by_column else mode.height
-    n_out = width if Readout.parse(readout or sensor.readout).by_column else height
-    if n_out != n_mode:
-        frame_lines = -(-base.frame_length_lines * n_out // n_mode)
-        timing = LineTiming(base.pixel_rate_hz * n_out, base.line_length_pck * n_mode, frame_lines)
-    else:
-        timing = base
+    ro = Readout.parse(readout or sensor.readout)
+    base = sensor.timing(mode)
+    n_out = width if ro.by_column else height
+    timing = base
+    if n_out != mode.height:
+        frame_pck = base.frame_period_pck * n_out
+        line_pck = base.line_length_pck * mode.height
+        timing = _reduced(base.pixel_rate_hz * n_out, line_pck, -(-frame_pck // line_pck), frame_pck)
     if fps is not None:
-        if not np.isfinite(fps) or fps <= 0:
-            raise ConfigError(f"fps must be a positive number, got {fps!r}")
-        lines = round(timing.pixel_rate_hz / (timing.line_length_pck * fps))
+        fps = _finite("fps", fps)
+        frame_s = 1.0 / max(fps, MIN_FPS)
+        if fps < MIN_FPS:
+            raise ConfigError(f"fps={fps!r} is below the minimum {MIN_FPS:g}")
+        lines = max(round(timing.pixel_rate_hz * frame_s / timing.line_length_pck), 1)
         if lines < n_out:
             max_fps = timing.pixel_rate_hz / (timing.line_length_pck * n_out)
             raise ConfigError(
@@ -85,22 +106,24 @@ def resolve_settings(
                 f" (frame length {lines} lines < {n_out} output lines)"
             )
         timing = LineTiming(timing.pixel_rate_hz, timing.line_length_pck, lines)
+    if timing.frame_period_pck < n_out * timing.line_length_pck:
+        raise ConfigError(f"{width}x{height} read by {ro.value} needs {n_out} lines, more than one frame period "
+                          f"of sensor {sensor.name!r} holds")
     shutter = shutter or sensor.shutter
     if shutter not in SHUTTERS:
         raise ConfigError(f"shutter {shutter!r} is not one of {SHUTTERS}")
-    ro = Readout.parse(readout or sensor.readout)
-    # Exposure in whole lines between the sensor's limits, as a real sensor's integration register holds it.
-    max_lines = max(timing.frame_length_lines - sensor.exposure.max_margin_lines, sensor.exposure.min_lines)
-    want_ns = DEFAULT_EXPOSURE_NS if exposure_ns is None else int(exposure_ns)
-    if want_ns < 0:
-        raise ConfigError(f"exposure must be >= 0 ns, got {want_ns!r}")
-    lines = round(want_ns / max(timing.line_offset_ns(1), 1))
+    # Exposure in whole lines between the sensor's limits, as a real sensor's integration register holds
+    # it, and never longer than the frame.
+    frame_lines = timing.frame_period_pck // timing.line_length_pck
+    max_lines = min(max(frame_lines - sensor.exposure.max_margin_lines, sensor.exposure.min_lines), frame_lines)
+    want_ns = DEFAULT_EXPOSURE_NS if exposure_ns is None else exposure_ns
+    if not isinstance(want_ns, (int, np.integer)) or want_ns < 0:
+        raise ConfigError(f"exposure must be a whole number of ns >= 0, got {want_ns!r}")
+    lines = round(int(want_ns) / max(timing.line_offset_ns(1), 1))
     clamped = not sensor.exposure.min_lines <= lines <= max_lines
-    lines = min(max(lines, sensor.exposure.min_lines), max_lines)
+    lines = max(min(max(lines, sensor.exposure.min_lines), max_lines), 1)
     exp_ns = int(timing.line_offset_ns(lines))
-    if not np.isfinite(gain) or gain <= 0:
-        raise ConfigError(f"gain must be a positive number, got {gain!r}")
-    return StreamSettings(width, height, timing, ro, shutter, exp_ns, float(gain), clamped)
+    return StreamSettings(width, height, mode, timing, ro, shutter, exp_ns, _finite("gain", gain), clamped)
 
 
 class SyntheticCamera:
@@ -112,9 +135,7 @@ class SyntheticCamera:
         self.scene = scene
         self.settings = resolve_settings(sensor, **settings)
         s = self.settings
-        mode = sensor.mode(f"{s.width}x{s.height}") if any(
-            (m.width, m.height) == (s.width, s.height) for m in sensor.modes) else sensor.mode()
-        crop = sensor.crop(mode)
+        crop = sensor.crop(s.mode)
         # The output covers the mode's crop of the array; its width in mm fixes the focal length in pixels.
         covered_mm = crop.width * sensor.optics.pixel_size_um / 1000.0
         cam = scene.camera(camera).with_resolution(s.width, s.height, sensor.optics.focal_mm, covered_mm)

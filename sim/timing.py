@@ -53,19 +53,32 @@ class Readout(str, Enum):
 
 @dataclass(frozen=True)
 class LineTiming:
-    """Line timing of a sensor mode from its pixel clock: exact integer-ns offsets of any line or frame."""
+    """Line timing of a sensor mode from its pixel clock: exact integer-ns offsets of any line or frame.
+
+    ``frame_pck`` is the frame period in pixel clocks when it is not a whole number of lines (a rescaled
+    readout keeps the sensor's frame period while spreading its lines); by default
+    ``frame_length_lines * line_length_pck``.
+    """
 
     pixel_rate_hz: int
     line_length_pck: int
     frame_length_lines: int
+    frame_pck: int | None = None
 
     def __post_init__(self) -> None:
-        for name in ("pixel_rate_hz", "line_length_pck", "frame_length_lines"):
+        for name in ("pixel_rate_hz", "line_length_pck", "frame_length_lines", "frame_pck"):
             value = getattr(self, name)
+            if name == "frame_pck" and value is None:
+                continue
             if not isinstance(value, (int, np.integer)) or value <= 0:
                 from .errors import ConfigError
 
                 raise ConfigError(f"LineTiming.{name} must be a positive integer, got {value!r}")
+
+    @property
+    def frame_period_pck(self) -> int:
+        """Frame period in pixel clocks."""
+        return self.frame_pck or self.frame_length_lines * self.line_length_pck
 
     @property
     def line_time_ns(self) -> int:
@@ -80,20 +93,21 @@ class LineTiming:
     @property
     def fps(self) -> float:
         """Frame rate in frames per second."""
-        return self.pixel_rate_hz / (self.line_length_pck * self.frame_length_lines)
+        return self.pixel_rate_hz / self.frame_period_pck
 
     def line_offset_ns(self, lines: np.ndarray | int) -> np.ndarray | int:
         """Offset from a frame's first line to line ``lines`` (scalar or array), floored to ns."""
         if isinstance(lines, (int, np.integer)):
             return int(lines) * self.line_length_pck * NS_PER_S // self.pixel_rate_hz
         arr = np.asarray(lines, dtype=np.int64)
-        # r * line_length * 1e9 stays far below 2**63 for any real sensor (8K rows * 1e5 pck * 1e9 = 8e17).
-        return (arr * (self.line_length_pck * NS_PER_S)) // self.pixel_rate_hz
+        # floor(r * L * 1e9 / P) = r * q + floor(r * rem / P) with q, rem = divmod(L * 1e9, P): no int64
+        # overflow for any line count and clock (r * rem < r * P), unlike the direct product.
+        q, rem = divmod(self.line_length_pck * NS_PER_S, self.pixel_rate_hz)
+        return arr * q + (arr * rem) // self.pixel_rate_hz
 
     def frame_start_ns(self, frame_index: int, epoch_ns: int = 0) -> int:
         """Start of frame ``frame_index`` counted from ``epoch_ns``; exact for any index (Python ints)."""
-        pck = int(frame_index) * self.frame_length_lines * self.line_length_pck
-        return int(epoch_ns) + pck * NS_PER_S // self.pixel_rate_hz
+        return int(epoch_ns) + int(frame_index) * self.frame_period_pck * NS_PER_S // self.pixel_rate_hz
 
 
 def line_sample_times_ns(

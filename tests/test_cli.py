@@ -122,6 +122,14 @@ def test_capture_default_shutter_jpg_and_overwrite(tmp_path: Path):
     ("emu:letsroll?colour=red", "unknown option"),
     ("emu:letsroll?size=12by7", "size"),
     ("not-a-uri", "is not a URI"),
+    ("emu:letsroll?size=160x90&exposure_us=nan", "exposure_us"),
+    ("emu:letsroll?size=160x90&exposure_us=inf", "exposure_us"),
+    ("emu:letsroll?size=160x90&fps=1e-12", "below the minimum"),
+    ("emu:letsroll?size=160x90&seed=-1", "seed"),
+    ("emu:letsroll?size=160x90&frames=0", "frames"),
+    ("emu:letsroll?size=160x90&start_ns=-5", "start_ns"),
+    ("emu:letsroll?size=160x90&ego=rocket", "ego-motion 'rocket'"),
+    ("emu:letsroll?size=160x90&gain=0", "gain"),
 ])
 def test_bad_source_is_exit_2_without_traceback(tmp_path: Path, uri: str, words: str):
     res = run("capture", uri, "--frames", "1", "--out", str(tmp_path / "x"))

@@ -63,3 +63,33 @@ def test_synthetic_camera_pairs_and_clamped_exposure():
     assert rs.row_times_ns[0] == gs.row_times_ns[0]
     s = resolve_settings(sensor, exposure_ns=10**10)  # 10 s: longer than the frame
     assert s.clamped_exposure and s.exposure_ns <= s.timing.frame_period_ns
+
+
+@pytest.mark.parametrize("kwargs", [
+    {"size": (3000, 3000)},  # rescaled clock: products that overflowed int64 before
+    {"readout": "left_to_right"},  # column readout of a sensor timed by rows
+    {"size": (160, 1)},
+    {"size": (3, 2)},
+    {"size": (960, 540)},
+    {"fps": 10.0},
+])
+def test_rescaled_readouts_keep_frame_period_and_fit_the_frame(kwargs):
+    sensor = load_sensor("imx219")
+    s = resolve_settings(sensor, **kwargs)
+    times = line_sample_times_ns(0, s.n_lines, s.timing, s.readout)
+    assert np.all(np.diff(times) >= 0) and times[0] == 0
+    assert times[-1] < s.timing.frame_period_ns  # every line is read within one frame period
+    assert s.exposure_ns <= s.timing.frame_period_ns
+    if "fps" not in kwargs:
+        assert s.timing.frame_period_ns == IMX219.frame_period_ns  # exactly the sensor's frame rate
+    # The whole readout takes the mode's readout time, whatever the output's line count.
+    if "fps" not in kwargs and s.n_lines > 1:
+        full = IMX219.line_offset_ns(1080)
+        assert abs(int(s.timing.line_offset_ns(s.n_lines)) - full) <= 2
+
+
+def test_line_offsets_never_overflow():
+    timing = LineTiming(547_200_000_000, 3_723_840, 4898)
+    offs = timing.line_offset_ns(np.arange(0, 100_000, 997))
+    assert np.all(np.diff(offs) > 0)
+    assert int(offs[-1]) == int(np.arange(0, 100_000, 997)[-1]) * 3_723_840 * 10**9 // 547_200_000_000

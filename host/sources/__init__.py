@@ -1,6 +1,6 @@
 """Camera sources, one module per URI scheme, resolved by name (as pyserial resolves ``protocol_<scheme>``).
 
-``open_camera(uri)`` imports ``rollcam.host.sources.<scheme>`` and calls its ``open_source(uri, parts)``;
+``open_camera(uri)`` imports ``rollcam.host.sources.<scheme>`` and calls its ``open_source(parts)``;
 a new backend is one new module plus its name in ``SCHEMES``. Nothing else in ``host`` imports a backend.
 """
 

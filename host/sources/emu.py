@@ -9,6 +9,7 @@ Options: ``scene`` (street | chart | flat), ``seed``, ``speed`` (static | normal
 
 from __future__ import annotations
 
+import math
 from typing import Any
 
 from rollcam.sim.errors import ConfigError, SourceError
@@ -34,6 +35,30 @@ def parse_size(text: str) -> tuple[int, int]:
     return w, h
 
 
+def finite_float(text: str) -> float:
+    """A finite float (``nan`` and ``inf`` are refused)."""
+    value = float(text)
+    if not math.isfinite(value):
+        raise ValueError("must be a finite number")
+    return value
+
+
+def count(text: str) -> int:
+    """An integer >= 1."""
+    value = int(text)
+    if value < 1:
+        raise ValueError("must be an integer >= 1")
+    return value
+
+
+def non_negative(text: str) -> int:
+    """An integer >= 0."""
+    value = int(text)
+    if value < 0:
+        raise ValueError("must be an integer >= 0")
+    return value
+
+
 def build_camera(sensor_name: str, opts: SourceURI) -> SyntheticCamera:
     """A SyntheticCamera from a sensor name and parsed ``emu:`` options."""
     opts.take(set(), OPTIONS)
@@ -45,34 +70,34 @@ def build_camera(sensor_name: str, opts: SourceURI) -> SyntheticCamera:
     size = opts.get("size", parse_size)
     mode = sensor.mode() if size is None else None
     width, height = size if size is not None else (mode.width, mode.height)
-    scene_opts: dict[str, Any] = {"width": width, "height": height}
-    if kind == "street":
-        scene_opts.update(
-            time_of_day=opts.get("time", str, "noon"),
-            speed=opts.get("speed", str, "normal"),
-            n_pedestrians=opts.get("pedestrians", int, 20),
-            ego=ego_preset(opts.get("ego", str, "none")),
-        )
-    elif kind == "chart":
-        scene_opts["vx_px_s"] = opts.get("vx", float, 2000.0)
-    elif kind == "flat":
-        scene_opts["level"] = opts.get("level", float, 0.5)
     misplaced = {"street": {"vx", "level"}, "chart": {"time", "speed", "pedestrians", "ego", "level"},
                  "flat": {"time", "speed", "pedestrians", "ego", "vx"}}.get(kind, set()) & set(opts.options)
     if misplaced:
         raise SourceError(f"source {opts.uri!r}: option(s) {sorted(misplaced)} do not apply to scene={kind!r}")
+    scene_opts: dict[str, Any] = {"width": width, "height": height}
     try:
-        scene = make_scene(kind, opts.get("seed", int, 0), **scene_opts)
-        exposure_us = opts.get("exposure_us", float)
+        if kind == "street":
+            scene_opts.update(
+                time_of_day=opts.get("time", str, "noon"),
+                speed=opts.get("speed", str, "normal"),
+                n_pedestrians=opts.get("pedestrians", non_negative, 20),
+                ego=ego_preset(opts.get("ego", str, "none")),
+            )
+        elif kind == "chart":
+            scene_opts["vx_px_s"] = opts.get("vx", finite_float, 2000.0)
+        elif kind == "flat":
+            scene_opts["level"] = opts.get("level", finite_float, 0.5)
+        scene = make_scene(kind, opts.get("seed", non_negative, 0), **scene_opts)
+        exposure_us = opts.get("exposure_us", finite_float)
         return SyntheticCamera(
             sensor, scene, opts.get("camera", str, "0"),
-            start_ns=opts.get("start_ns", int, 0),
+            start_ns=opts.get("start_ns", non_negative, 0),
             size=size,
-            fps=opts.get("fps", float),
+            fps=opts.get("fps", finite_float),
             shutter=opts.get("shutter", str),
             readout=opts.get("readout", str),
             exposure_ns=None if exposure_us is None else round(exposure_us * 1000),
-            gain=opts.get("gain", float, 1.0),
+            gain=opts.get("gain", finite_float, 1.0),
         )
     except ConfigError as exc:
         raise SourceError(f"source {opts.uri!r}: {exc}") from None
@@ -86,7 +111,7 @@ class EmuSource(CameraSource):
     def __init__(self, uri: SourceURI) -> None:
         self.uri = uri.uri
         self.camera = build_camera(uri.target, uri)
-        self.limit = uri.get("frames", int)
+        self.limit = uri.get("frames", count)
         self.index = 0
 
     def read(self) -> Frame | None:
