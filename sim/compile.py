@@ -8,7 +8,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from . import _body as B
-from . import _kernels as K
+from . import _world as Wd
 from .scene import Camera, Scene
 
 BUILDING_BIN_M = 0.5
@@ -30,78 +30,80 @@ class CompiledScene:
 
 def compile_camera(cam: Camera, transposed: bool = False) -> np.ndarray:
     """Camera table of one camera; ``transposed`` renders image columns as lines (column readout)."""
-    t = np.zeros(K.CAM_COLS)
+    t = np.zeros(Wd.CAM_COLS)
     fx = cam.fx_px
-    t[K.C_FX], t[K.C_FY] = fx, fx
-    t[K.C_CX], t[K.C_CY] = cam.width / 2.0, cam.height / 2.0
-    t[K.C_W], t[K.C_H] = cam.width, cam.height
-    t[K.C_TRANSPOSED] = 1.0 if transposed else 0.0
-    t[K.C_POS : K.C_POS + 3] = cam.position_m
-    t[K.C_YAW], t[K.C_PITCH], t[K.C_ROLL] = (math.radians(v) for v in (cam.yaw_deg, cam.pitch_deg, cam.roll_deg))
+    t[Wd.C_FX], t[Wd.C_FY] = fx, fx
+    t[Wd.C_CX], t[Wd.C_CY] = cam.width / 2.0, cam.height / 2.0
+    t[Wd.C_W], t[Wd.C_H] = cam.width, cam.height
+    t[Wd.C_TRANSPOSED] = 1.0 if transposed else 0.0
+    t[Wd.C_POS : Wd.C_POS + 3] = cam.position_m
+    t[Wd.C_YAW], t[Wd.C_PITCH], t[Wd.C_ROLL] = (math.radians(v) for v in (cam.yaw_deg, cam.pitch_deg, cam.roll_deg))
     ego = cam.ego
-    t[K.C_VEL : K.C_VEL + 3] = ego.velocity_mps
-    t[K.C_PAN], t[K.C_TILT], t[K.C_ROLLRATE] = (math.radians(v) for v in (ego.pan_dps, ego.tilt_dps, ego.roll_dps))
-    t[K.C_VIB_ANG], t[K.C_VIB_POS], t[K.C_VIB_HZ] = math.radians(ego.vibration_deg), ego.vibration_m, ego.vibration_hz
-    t[K.C_MOVING] = 1.0 if ego.moving else 0.0
+    t[Wd.C_VEL : Wd.C_VEL + 3] = ego.velocity_mps
+    t[Wd.C_PAN], t[Wd.C_TILT], t[Wd.C_ROLLRATE] = (math.radians(v) for v in (ego.pan_dps, ego.tilt_dps, ego.roll_dps))
+    t[Wd.C_VIB_ANG] = math.radians(ego.vibration_deg)
+    t[Wd.C_VIB_POS], t[Wd.C_VIB_HZ] = ego.vibration_m, ego.vibration_hz
+    t[Wd.C_MOVING] = 1.0 if ego.moving else 0.0
     return t
 
 
 def compile_scene(scene: Scene) -> CompiledScene:
     """Flatten a Scene into kernel tables."""
-    world = np.zeros(K.WORLD_COLS)
-    world[K.W_BIN] = BUILDING_BIN_M
-    world[K.W_YHALF] = 1.0
-    world[K.W_SEED] = scene.seed & 0x7FFFFFFF
+    world = np.zeros(Wd.WORLD_COLS)
+    world[Wd.W_BIN] = BUILDING_BIN_M
+    world[Wd.W_YHALF] = 1.0
+    world[Wd.W_SEED] = scene.seed & 0x7FFFFFFF
     light = _compile_light(scene)
-    buildings = np.zeros((1, K.BLD_COLS))
+    buildings = np.zeros((1, Wd.BLD_COLS))
     lut = -np.ones((2, 1), np.int64)
     if scene.kind == "street" and scene.street is not None:
         st = scene.street
-        world[K.W_KIND] = K.KIND_STREET
-        world[K.W_ROAD], world[K.W_CURB], world[K.W_WALK] = st.road_half_width_m, st.curb_width_m, st.sidewalk_width_m
-        world[K.W_FACADE] = st.facade_x_m
-        world[K.W_YHALF] = st.length_m / 2.0
-        world[K.W_ASPHALT : K.W_ASPHALT + 3] = st.asphalt_color
-        world[K.W_SIDEWALK : K.W_SIDEWALK + 3] = st.sidewalk_color
-        world[K.W_CROSS] = st.crosswalk_y_m
-        world[K.W_SEED] = st.texture_seed & 0x7FFFFFFF
+        world[Wd.W_KIND] = Wd.KIND_STREET
+        world[Wd.W_ROAD], world[Wd.W_CURB] = st.road_half_width_m, st.curb_width_m
+        world[Wd.W_WALK] = st.sidewalk_width_m
+        world[Wd.W_FACADE] = st.facade_x_m
+        world[Wd.W_YHALF] = st.length_m / 2.0
+        world[Wd.W_ASPHALT : Wd.W_ASPHALT + 3] = st.asphalt_color
+        world[Wd.W_SIDEWALK : Wd.W_SIDEWALK + 3] = st.sidewalk_color
+        world[Wd.W_CROSS] = st.crosswalk_y_m
+        world[Wd.W_SEED] = st.texture_seed & 0x7FFFFFFF
         buildings, lut = _compile_buildings(st.buildings, st.length_m)
     elif scene.kind == "chart" and scene.chart is not None:
-        world[K.W_KIND] = K.KIND_CHART
-        world[K.W_ASPHALT : K.W_ASPHALT + 3] = scene.chart.board_rgb
+        world[Wd.W_KIND] = Wd.KIND_CHART
+        world[Wd.W_ASPHALT : Wd.W_ASPHALT + 3] = scene.chart.board_rgb
     else:
-        world[K.W_KIND] = K.KIND_FLAT
-        world[K.W_LEVEL] = scene.flat_level
+        world[Wd.W_KIND] = Wd.KIND_FLAT
+        world[Wd.W_LEVEL] = scene.flat_level
     actors, ids, classes, speeds = _compile_actors(scene)
     return CompiledScene(world, lut, buildings, light, actors, ids, classes, speeds)
 
 
 def _compile_light(scene: Scene) -> np.ndarray:
     li = scene.lighting
-    t = np.zeros(K.LIGHT_COLS)
-    t[K.L_SUN : K.L_SUN + 3] = li.sun_direction
-    t[K.L_SUN_RGB : K.L_SUN_RGB + 3] = li.sun_rgb
-    t[K.L_AMB : K.L_AMB + 3] = li.ambient_rgb
-    t[K.L_HORIZON : K.L_HORIZON + 3] = li.sky_horizon_rgb
-    t[K.L_ZENITH : K.L_ZENITH + 3] = li.sky_zenith_rgb
-    t[K.L_HAZE : K.L_HAZE + 3] = li.haze_rgb
-    t[K.L_FOG] = li.fog_distance_m
-    t[K.L_GLOW] = li.window_glow
+    t = np.zeros(Wd.LIGHT_COLS)
+    t[Wd.L_SUN : Wd.L_SUN + 3] = li.sun_direction
+    t[Wd.L_SUN_RGB : Wd.L_SUN_RGB + 3] = li.sun_rgb
+    t[Wd.L_AMB : Wd.L_AMB + 3] = li.ambient_rgb
+    t[Wd.L_HORIZON : Wd.L_HORIZON + 3] = li.sky_horizon_rgb
+    t[Wd.L_ZENITH : Wd.L_ZENITH + 3] = li.sky_zenith_rgb
+    t[Wd.L_HAZE : Wd.L_HAZE + 3] = li.haze_rgb
+    t[Wd.L_FOG] = li.fog_distance_m
+    t[Wd.L_GLOW] = li.window_glow
     return t
 
 
 def _compile_buildings(buildings, length_m: float) -> tuple[np.ndarray, np.ndarray]:
     n_bins = int(math.ceil(length_m / BUILDING_BIN_M))
     lut = -np.ones((2, n_bins), np.int64)
-    tab = np.zeros((max(len(buildings), 1), K.BLD_COLS))
+    tab = np.zeros((max(len(buildings), 1), Wd.BLD_COLS))
     half = length_m / 2.0
     for i, b in enumerate(buildings):
         row = tab[i]
-        row[K.B_SIDE], row[K.B_Y0], row[K.B_Y1], row[K.B_HEIGHT] = b.side, b.y0_m, b.y1_m, b.height_m
-        row[K.B_RGB : K.B_RGB + 3] = b.color
-        row[K.B_WIN_RGB : K.B_WIN_RGB + 3] = b.window_color
-        row[K.B_FLOOR], row[K.B_WIN_W], row[K.B_WIN_SP] = b.floor_height_m, b.window_width_m, b.window_spacing_m
-        row[K.B_LIT] = b.lit_fraction
+        row[Wd.B_SIDE], row[Wd.B_Y0], row[Wd.B_Y1], row[Wd.B_HEIGHT] = b.side, b.y0_m, b.y1_m, b.height_m
+        row[Wd.B_RGB : Wd.B_RGB + 3] = b.color
+        row[Wd.B_WIN_RGB : Wd.B_WIN_RGB + 3] = b.window_color
+        row[Wd.B_FLOOR], row[Wd.B_WIN_W], row[Wd.B_WIN_SP] = b.floor_height_m, b.window_width_m, b.window_spacing_m
+        row[Wd.B_LIT] = b.lit_fraction
         lo = max(int(math.floor((b.y0_m + half) / BUILDING_BIN_M)), 0)
         hi = min(int(math.ceil((b.y1_m + half) / BUILDING_BIN_M)), n_bins)
         lut[0 if b.side < 0 else 1, lo:hi] = i

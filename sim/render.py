@@ -20,6 +20,7 @@ import numpy as np
 
 from . import _body as B
 from . import _kernels as K
+from . import _world as Wd
 from .compile import compile_camera, compile_scene
 from .errors import ConfigError
 from .frame import Box, ObjectTruth
@@ -238,7 +239,7 @@ class Renderer:
             layer = _Layer(None)
         else:
             bg = np.empty((n_lines, n_along, 3), np.float32)
-            K.background_image(c.world, c.building_lut, c.buildings, c.light, cam, t0_s, bg)
+            Wd.background_image(c.world, c.building_lut, c.buildings, c.light, cam, t0_s, bg)
             layer = _Layer(bg)
             static = c.actors[:, B.A_STATIC] != 0.0 if self.n_actors else np.zeros(0, np.bool_)
             res = self._render(cam, np.array([t0_s]), np.zeros(n_lines, np.int64), n_lines, n_along, layer,
@@ -263,7 +264,7 @@ class Renderer:
         k_line = np.where(static[:, None], 0, line_k[None, :]) if n_obj else np.zeros((0, n_lines), np.int64)
         rot_tab = np.empty((n_t, 3, 3))
         pos_tab = np.empty((n_t, 3))
-        K.pose_table(cam, times_s, rot_tab, pos_tab)
+        Wd.pose_table(cam, times_s, rot_tab, pos_tab)
         # Touch tests use conservative actor bounds over groups of consecutive times; a moving camera has one
         # pose per time, so its groups are single times.
         n_g = n_t if self.camera_moving else min(n_t, BOUND_GROUPS)
@@ -296,7 +297,7 @@ class Renderer:
         if s_o.size:
             K.actor_parts_all(c.actors, c.world, c.building_lut, c.buildings, c.light, cam, rot_tab, pos_tab,
                               times_s, s_o, s_k, parts)
-        gt = LineTruth.empty(n_obj, n_lines, cam[K.C_TRANSPOSED] != 0.0)
+        gt = LineTruth.empty(n_obj, n_lines, cam[Wd.C_TRANSPOSED] != 0.0)
         full_lines = force_paint or self.camera_moving
         if full_lines:
             lines = np.arange(n_lines)
@@ -317,8 +318,8 @@ class Renderer:
                               self.gain, _SRGB, gt.left, gt.right, gt.area, gt.visible, truth_only, full_lines)
         if truth_only:
             return RenderResult(np.empty((0, 0, 3), np.uint8), None, gt, int(lines.size))
-        image = out_u8.transpose(1, 0, 2) if cam[K.C_TRANSPOSED] != 0.0 else out_u8
+        image = out_u8.transpose(1, 0, 2) if cam[Wd.C_TRANSPOSED] != 0.0 else out_u8
         lin = None
         if linear:
-            lin = out_lin.transpose(1, 0, 2) if cam[K.C_TRANSPOSED] != 0.0 else out_lin
+            lin = out_lin.transpose(1, 0, 2) if cam[Wd.C_TRANSPOSED] != 0.0 else out_lin
         return RenderResult(np.ascontiguousarray(image), lin, gt, int(lines.size))

@@ -163,6 +163,7 @@ def test_actor_bounds_contain_every_part():
     tight; this checks the bounds against the parts directly, over gait phases, speeds, cameras and times.)
     """
     from rollcam.sim import _kernels as K
+    from rollcam.sim import _world as Wd
 
     for seed, speed, ego in ((0, "normal", "none"), (1, "fast", "none"), (2, 0.3, "drone"), (3, "fast", "vehicle")):
         scene = make_street_scene(seed, speed=speed, width=320, height=180, n_pedestrians=25, ego=ego_preset(ego))
@@ -175,7 +176,7 @@ def test_actor_bounds_contain_every_part():
                        np.empty(4), np.empty((5, 3)), np.empty(3), np.empty(3), np.empty(2), np.empty(2))
             box = np.empty(4)
             for t in np.linspace(0.0, 40.0, 57):
-                K.camera_pose(cam, t, rot, pos)
+                Wd.camera_pose(cam, t, rot, pos)
                 for act in c.actors:
                     K.actor_bounds(act, c.world, cam, rot, pos, t, 0.0, box, np.empty(4), np.empty(3), np.empty(2))
                     K.actor_parts(act, c.world, c.building_lut, c.buildings, c.light, cam, rot, pos, t, parts,
