@@ -147,7 +147,8 @@ def _sun_blocked(world, lut, bld, px, py, pz, light, skip_side):
 
 
 @njit(cache=True, fastmath=BG_FAST)
-def _ground_albedo(world, gx, gy, out):
+def _ground_albedo(world, gx, gy):
+    """Albedo (r, g, b) of the ground at (gx, gy): asphalt with markings, curb, tiled sidewalk."""
     seed = int(world[W_SEED])
     ax = abs(gx)
     road, curb = world[W_ROAD], world[W_ROAD] + world[W_CURB]
@@ -165,23 +166,22 @@ def _ground_albedo(world, gx, gy, out):
         elif road - 0.35 < ax < road - 0.2:
             paint = True  # edge line
         if paint:
-            r, gg, b = 0.62, 0.62, 0.60
-        out[0], out[1], out[2] = r, gg, b
-    elif ax < curb:
-        out[0], out[1], out[2] = 0.45, 0.44, 0.42
-    else:
-        u, v = (ax - curb) / 0.6, yl / 0.6
-        iu, iv = math.floor(u), math.floor(v)
-        g = 0.85 + 0.3 * _hash01(int(iu), int(iv), seed + 3)
-        if u - iu < 0.04 or v - iv < 0.04:
-            g *= 0.7  # grout
-        g *= 0.9 + 0.2 * _value_noise(gx * 4.0, gy * 4.0, seed + 11)
-        out[0], out[1], out[2] = world[W_SIDEWALK] * g, world[W_SIDEWALK + 1] * g, world[W_SIDEWALK + 2] * g
+            return 0.62, 0.62, 0.60
+        return r, gg, b
+    if ax < curb:
+        return 0.45, 0.44, 0.42
+    u, v = (ax - curb) / 0.6, yl / 0.6
+    iu, iv = math.floor(u), math.floor(v)
+    g = 0.85 + 0.3 * _hash01(int(iu), int(iv), seed + 3)
+    if u - iu < 0.04 or v - iv < 0.04:
+        g *= 0.7  # grout
+    g *= 0.9 + 0.2 * _value_noise(gx * 4.0, gy * 4.0, seed + 11)
+    return world[W_SIDEWALK] * g, world[W_SIDEWALK + 1] * g, world[W_SIDEWALK + 2] * g
 
 
 @njit(cache=True, fastmath=BG_FAST)
-def _facade(world, bld, b, fy, fz, light, out):
-    """Albedo of facade ``b`` at street coordinate ``fy`` and height ``fz``; returns emission (lit windows)."""
+def _facade(world, bld, b, fy, fz, light):
+    """Albedo (r, g, b) and emission (lit windows) of facade ``b`` at street coordinate ``fy``, height ``fz``."""
     y0 = bld[b, B_Y0]
     yh = world[W_YHALF]
     u = fy + yh
@@ -217,35 +217,29 @@ def _facade(world, bld, b, fy, fz, light, out):
             emit = light[L_GLOW]
         if zz < 1.0 or zz > 2.4 or uu < margin + 0.06 or uu > sp - margin - 0.06:
             r, g, bl = r * 0.5 + 0.1, g * 0.5 + 0.1, bl * 0.5 + 0.1  # frame
-    out[0], out[1], out[2] = r, g, bl
-    return emit
+    return r, g, bl, emit
 
 
 @njit(cache=True, fastmath=BG_FAST, inline="always")
-def _sky(light, dx, dy, dz, out):
+def _sky(light, dx, dy, dz):
     n = math.sqrt(dx * dx + dy * dy + dz * dz)
-    e = max(dz / n, 0.0)
-    s = math.sqrt(e)
-    for c in range(3):
-        out[c] = light[L_HORIZON + c] * (1.0 - s) + light[L_ZENITH + c] * s
+    s = math.sqrt(max(dz / n, 0.0))
     cosg = (dx * light[L_SUN] + dy * light[L_SUN + 1] + dz * light[L_SUN + 2]) / n
-    if cosg > 0.0:
-        glow = cosg**32 * 0.6
-        for c in range(3):
-            out[c] += light[L_SUN_RGB + c] * glow
+    glow = cosg**32 * 0.6 if cosg > 0.0 else 0.0
+    return (light[L_HORIZON] * (1.0 - s) + light[L_ZENITH] * s + light[L_SUN_RGB] * glow,
+            light[L_HORIZON + 1] * (1.0 - s) + light[L_ZENITH + 1] * s + light[L_SUN_RGB + 1] * glow,
+            light[L_HORIZON + 2] * (1.0 - s) + light[L_ZENITH + 2] * s + light[L_SUN_RGB + 2] * glow)
 
 
-@njit(cache=True, fastmath=BG_FAST)
-def background_pixel(world, lut, bld, light, cam, rot, pos, xi, yi, out, alb):
-    """Linear RGB radiance of the static world seen through image pixel (xi, yi) from pose (rot, pos)."""
+@njit(cache=True, fastmath=BG_FAST, inline="always")
+def background_pixel(world, lut, bld, light, cam, rot, pos, xi, yi):
+    """Linear RGB radiance (r, g, b) of the static world seen through image pixel (xi, yi) from (rot, pos)."""
     kind = int(world[W_KIND])
     if kind == KIND_FLAT:
-        out[0] = out[1] = out[2] = world[W_LEVEL]
-        return
+        return world[W_LEVEL], world[W_LEVEL], world[W_LEVEL]
     if kind == KIND_CHART:
         # A uniform matte board filling the view: edges measured against it need no flat-field correction.
-        out[0], out[1], out[2] = world[W_ASPHALT], world[W_ASPHALT + 1], world[W_ASPHALT + 2]
-        return
+        return world[W_ASPHALT], world[W_ASPHALT + 1], world[W_ASPHALT + 2]
     cx = (xi + 0.5 - cam[C_CX]) / cam[C_FX]
     cy = (yi + 0.5 - cam[C_CY]) / cam[C_FY]
     dx = cx * rot[0, 0] + cy * rot[1, 0] + rot[2, 0]
@@ -271,16 +265,15 @@ def background_pixel(world, lut, bld, light, cam, rot, pos, xi, yi, out, alb):
                     t_hit, surf = t, 2
     emit = 0.0
     if surf == 0:
-        _sky(light, dx, dy, dz, out)
-        return
+        return _sky(light, dx, dy, dz)
     hx, hy, hz = pos[0] + t_hit * dx, pos[1] + t_hit * dy, pos[2] + t_hit * dz
     if surf == 1:
-        _ground_albedo(world, hx, hy, alb)
+        ar, ag, ab = _ground_albedo(world, hx, hy)
         ndotl = light[L_SUN + 2]
         lit = 0.0 if _sun_blocked(world, lut, bld, hx, hy, 0.0, light, -1) else 1.0
     else:
         b = building_at(world, lut, side, hy)
-        emit = _facade(world, bld, b, hy, hz, light, alb)
+        ar, ag, ab, emit = _facade(world, bld, b, hy, hz, light)
         ndotl = -light[L_SUN] if side == 1 else light[L_SUN]
         lit = 0.0
         if ndotl > 0.0 and not _sun_blocked(world, lut, bld, hx, hy, hz, light, side):
@@ -288,23 +281,22 @@ def background_pixel(world, lut, bld, light, cam, rot, pos, xi, yi, out, alb):
     ndotl = max(ndotl, 0.0) * lit
     dist = t_hit * math.sqrt(dx * dx + dy * dy + dz * dz)
     f = math.exp(-dist / light[L_FOG])
-    for c in range(3):
-        v = alb[c] * (light[L_AMB + c] + light[L_SUN_RGB + c] * ndotl) + emit * alb[c]
-        out[c] = v * f + light[L_HAZE + c] * (1.0 - f)
+    g = 1.0 - f
+    return ((ar * (light[L_AMB] + light[L_SUN_RGB] * ndotl + emit)) * f + light[L_HAZE] * g,
+            (ag * (light[L_AMB + 1] + light[L_SUN_RGB + 1] * ndotl + emit)) * f + light[L_HAZE + 1] * g,
+            (ab * (light[L_AMB + 2] + light[L_SUN_RGB + 2] * ndotl + emit)) * f + light[L_HAZE + 2] * g)
 
 
 @njit(cache=True, fastmath=BG_FAST)
 def background_line(world, lut, bld, light, cam, rot, pos, line, out_line):
     """Render one render-space line of the background from pose (rot, pos) into ``out_line`` (n x 3)."""
-    px = np.empty(3)
-    alb = np.empty(3)
     transposed = cam[C_TRANSPOSED] != 0.0
     for a in range(out_line.shape[0]):
         if transposed:
-            background_pixel(world, lut, bld, light, cam, rot, pos, line, a, px, alb)
+            r, g, b = background_pixel(world, lut, bld, light, cam, rot, pos, line, a)
         else:
-            background_pixel(world, lut, bld, light, cam, rot, pos, a, line, px, alb)
-        out_line[a, 0], out_line[a, 1], out_line[a, 2] = px[0], px[1], px[2]
+            r, g, b = background_pixel(world, lut, bld, light, cam, rot, pos, a, line)
+        out_line[a, 0], out_line[a, 1], out_line[a, 2] = r, g, b
 
 
 @njit(cache=True, parallel=True)
