@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from abc import ABC, abstractmethod
 from collections.abc import Iterator
 from dataclasses import dataclass, field
@@ -36,6 +37,30 @@ class SourceURI:
             return kind(raw)
         except (TypeError, ValueError, ConfigError) as exc:
             raise SourceError(f"source {self.uri!r}: option {key}={raw!r} is invalid ({exc})") from None
+
+
+def finite_float(text: str) -> float:
+    """Option parser: a finite float (``nan`` and ``inf`` are refused)."""
+    value = float(text)
+    if not math.isfinite(value):
+        raise ValueError("must be a finite number")
+    return value
+
+
+def positive_int(text: str) -> int:
+    """Option parser: an integer >= 1."""
+    value = int(text)
+    if value < 1:
+        raise ValueError("must be an integer >= 1")
+    return value
+
+
+def non_negative_int(text: str) -> int:
+    """Option parser: an integer >= 0."""
+    value = int(text)
+    if value < 0:
+        raise ValueError("must be an integer >= 0")
+    return value
 
 
 class CameraSource(ABC):

@@ -9,7 +9,6 @@ Options: ``scene`` (street | chart | flat), ``seed``, ``speed`` (static | normal
 
 from __future__ import annotations
 
-import math
 from typing import Any
 
 from rollcam.sim.errors import ConfigError, SourceError
@@ -18,7 +17,7 @@ from rollcam.sim.hwconfig import load_sensor
 from rollcam.sim.scenegen import ego_preset, make_scene
 from rollcam.sim.synthetic import SyntheticCamera
 
-from .base import CameraSource, SourceURI
+from .base import CameraSource, SourceURI, finite_float, non_negative_int, positive_int
 
 OPTIONS = {"scene", "seed", "speed", "camera", "time", "pedestrians", "ego", "vx", "level", "shutter", "readout",
            "exposure_us", "gain", "fps", "size", "start_ns", "frames"}
@@ -33,30 +32,6 @@ def parse_size(text: str) -> tuple[int, int]:
     if w <= 0 or h <= 0:
         raise ConfigError(f"size {text!r} must be positive")
     return w, h
-
-
-def finite_float(text: str) -> float:
-    """A finite float (``nan`` and ``inf`` are refused)."""
-    value = float(text)
-    if not math.isfinite(value):
-        raise ValueError("must be a finite number")
-    return value
-
-
-def count(text: str) -> int:
-    """An integer >= 1."""
-    value = int(text)
-    if value < 1:
-        raise ValueError("must be an integer >= 1")
-    return value
-
-
-def non_negative(text: str) -> int:
-    """An integer >= 0."""
-    value = int(text)
-    if value < 0:
-        raise ValueError("must be an integer >= 0")
-    return value
 
 
 def build_camera(sensor_name: str, opts: SourceURI) -> SyntheticCamera:
@@ -80,18 +55,18 @@ def build_camera(sensor_name: str, opts: SourceURI) -> SyntheticCamera:
             scene_opts.update(
                 time_of_day=opts.get("time", str, "noon"),
                 speed=opts.get("speed", str, "normal"),
-                n_pedestrians=opts.get("pedestrians", non_negative, 20),
+                n_pedestrians=opts.get("pedestrians", non_negative_int, 20),
                 ego=ego_preset(opts.get("ego", str, "none")),
             )
         elif kind == "chart":
             scene_opts["vx_px_s"] = opts.get("vx", finite_float, 2000.0)
         elif kind == "flat":
             scene_opts["level"] = opts.get("level", finite_float, 0.5)
-        scene = make_scene(kind, opts.get("seed", non_negative, 0), **scene_opts)
+        scene = make_scene(kind, opts.get("seed", non_negative_int, 0), **scene_opts)
         exposure_us = opts.get("exposure_us", finite_float)
         return SyntheticCamera(
             sensor, scene, opts.get("camera", str, "0"),
-            start_ns=opts.get("start_ns", non_negative, 0),
+            start_ns=opts.get("start_ns", non_negative_int, 0),
             size=size,
             fps=opts.get("fps", finite_float),
             shutter=opts.get("shutter", str),
@@ -111,7 +86,7 @@ class EmuSource(CameraSource):
     def __init__(self, uri: SourceURI) -> None:
         self.uri = uri.uri
         self.camera = build_camera(uri.target, uri)
-        self.limit = uri.get("frames", count)
+        self.limit = uri.get("frames", positive_int)
         self.index = 0
 
     def read(self) -> Frame | None:

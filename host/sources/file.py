@@ -31,7 +31,7 @@ from rollcam.sim.hwconfig import load_sensor
 from rollcam.sim.synthetic import resolve_settings
 from rollcam.sim.timing import NS_PER_S, LineTiming, Readout, line_sample_times_ns
 
-from .base import CameraSource, SourceURI
+from .base import CameraSource, SourceURI, non_negative_int, positive_int
 
 OPTIONS = {"fps", "line_time_ns", "sensor", "method", "out_fps", "readout", "frames", "flow_preset",
            "flow_margin_px"}
@@ -59,20 +59,6 @@ def to_bgr(frame: np.ndarray) -> np.ndarray:
     return frame.copy()
 
 
-def _parse_line_time(raw: str) -> int:
-    value = int(raw)
-    if value <= 0:
-        raise ValueError("must be a positive integer number of ns")
-    return value
-
-
-def _parse_count(raw: str) -> int:
-    value = int(raw)
-    if value < 0:
-        raise ValueError("must be an integer >= 0")
-    return value
-
-
 class FileSource(CameraSource):
     """Footage replayed as GS Frames, or composed into RS Frames when given a line time."""
 
@@ -82,8 +68,8 @@ class FileSource(CameraSource):
         if not uri.target:
             raise SourceError(f"source {uri.uri!r}: name a video or a folder of frames, e.g. file:clip.mp4")
         self.path = Path(uri.target)
-        self.limit: int | None = uri.get("frames", _parse_count)
-        line_time_ns = uri.get("line_time_ns", _parse_line_time)
+        self.limit: int | None = uri.get("frames", positive_int)
+        line_time_ns = uri.get("line_time_ns", positive_int)
         sensor_name = uri.get("sensor", str)
         if line_time_ns is not None and sensor_name is not None:
             raise SourceError(f"source {uri.uri!r}: give line_time_ns= or sensor=, not both")
@@ -159,7 +145,8 @@ class FileSource(CameraSource):
         self.timing, self.out_fps, self.readout = timing, out_fps, readout
         self._stream = iter(compose_stream(
             fp, timing, readout, fps=out_fps, method=self.method, snap_ns=_SNAP_NS,
-            flow_preset=uri.get("flow_preset", str, "medium"), flow_margin_px=uri.get("flow_margin_px", _parse_count),
+            flow_preset=uri.get("flow_preset", str, "medium"),
+            flow_margin_px=uri.get("flow_margin_px", non_negative_int),
         ))
 
     # ---------------------------------------------------------------------------------------- frames
