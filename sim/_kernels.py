@@ -177,9 +177,9 @@ def _set_quad(parts, p, x0, y0, x1, y1, x2, y2, x3, y3):
 
 
 @njit(cache=True)
-def actor_parts(act, world, lut, bld, light, cam, rot, pos, t, parts, seg, rad, col_idx, root, joints, a, b, ua,
-                ub):
+def actor_parts(act, world, lut, bld, light, cam, rot, pos, t, parts, scratch):
     """Fill ``parts`` (MAX_PARTS x PART_COLS) with the render-space primitives of an actor at time ``t``."""
+    seg, rad, col_idx, root, joints, a, b, ua, ub = scratch
     for p in range(MAX_PARTS):
         parts[p, Q_KIND] = PART_NONE
     typ = int(act[A_TYPE])
@@ -440,6 +440,13 @@ def encode_line(lin, gain, lut, out_u8):
             out_u8[i, 2 - c] = lut[int(v * LUT_SIZE + 0.5)]
 
 
+@njit(cache=True)
+def parts_scratch():
+    """Scratch buffers ``actor_parts`` needs, allocated once per parallel work unit."""
+    return (np.empty((MAX_PARTS, 6)), np.empty(MAX_PARTS), np.empty(MAX_PARTS, np.int64), np.empty(4),
+            np.empty((5, 3)), np.empty(3), np.empty(3), np.empty(2), np.empty(2))
+
+
 N_CHUNKS = 16  # parallel work units; scratch buffers are allocated once per unit, not per item
 
 
@@ -464,19 +471,11 @@ def actor_parts_all(actors, world, lut, bld, light, cam, rot_tab, pos_tab, times
     """parts_tab[s] = parts of actor slot_o[s] at times[slot_k[s]]."""
     n = slot_o.shape[0]
     for ch in prange(N_CHUNKS):
-        seg = np.empty((MAX_PARTS, 6))
-        rad = np.empty(MAX_PARTS)
-        col_idx = np.empty(MAX_PARTS, np.int64)
-        root = np.empty(4)
-        joints = np.empty((5, 3))
-        a = np.empty(3)
-        b = np.empty(3)
-        ua = np.empty(2)
-        ub = np.empty(2)
+        scratch = parts_scratch()
         for s in range(ch, n, N_CHUNKS):
             k = slot_k[s]
             actor_parts(actors[slot_o[s]], world, lut, bld, light, cam, rot_tab[k], pos_tab[k], times[k],
-                        parts_tab[s], seg, rad, col_idx, root, joints, a, b, ua, ub)
+                        parts_tab[s], scratch)
 
 
 @njit(cache=True, parallel=True)
@@ -508,15 +507,7 @@ def render_lines_kernel(world, lut_b, bld, light, cam, rot_tab, pos_tab, actors,
         ib = np.empty(cap + 1, np.int64)
         lin = np.empty((w, 3), np.float32)
         local = np.empty((max(n_obj, 1), MAX_PARTS, PART_COLS))
-        seg = np.empty((MAX_PARTS, 6))
-        rad = np.empty(MAX_PARTS)
-        col_idx = np.empty(MAX_PARTS, np.int64)
-        root = np.empty(4)
-        joints = np.empty((5, 3))
-        va = np.empty(3)
-        vb = np.empty(3)
-        ua = np.empty(2)
-        ub = np.empty(2)
+        scratch = parts_scratch()
         for j in range(ch, n, N_CHUNKS):
             line = lines[j]
             ok = obj_line_k[:, line]
@@ -525,7 +516,7 @@ def render_lines_kernel(world, lut_b, bld, light, cam, rot_tab, pos_tab, actors,
                 if include[o] and ok[o] >= 0 and slots[o, ok[o]] == SLOT_LOCAL:
                     k = ok[o]
                     actor_parts(actors[o], world, lut_b, bld, light, cam, rot_tab[k], pos_tab[k], times[k],
-                                local[o], seg, rad, col_idx, root, joints, va, vb, ua, ub)
+                                local[o], scratch)
             m = _collect_line(line, w, actors, ok, slots, parts_tab, local, include, gt_l, gt_r, gt_tot,
                               depth, idx_o, idx_p, span_l, span_r, pa, pb)
             if full_lines and not gt_only:

@@ -172,15 +172,14 @@ def test_actor_bounds_contain_every_part():
             c, cam = r._c, r._cams[False]
             rot, pos = np.empty((3, 3)), np.empty(3)
             parts = np.empty((K.MAX_PARTS, K.PART_COLS))
-            scratch = (np.empty((K.MAX_PARTS, 6)), np.empty(K.MAX_PARTS), np.empty(K.MAX_PARTS, np.int64),
-                       np.empty(4), np.empty((5, 3)), np.empty(3), np.empty(3), np.empty(2), np.empty(2))
+            scratch = K.parts_scratch()
             box = np.empty(4)
             for t in np.linspace(0.0, 40.0, 57):
                 Wd.camera_pose(cam, t, rot, pos)
                 for act in c.actors:
                     K.actor_bounds(act, c.world, cam, rot, pos, t, 0.0, box, np.empty(4), np.empty(3), np.empty(2))
                     K.actor_parts(act, c.world, c.building_lut, c.buildings, c.light, cam, rot, pos, t, parts,
-                                  *scratch)
+                                  scratch)
                     live = parts[:, K.Q_KIND] != K.PART_NONE
                     if box[0] > box[1]:  # wholly behind the camera: no part may be drawn
                         assert not live.any()
