@@ -227,6 +227,31 @@ class Renderer:
             self._parts = np.empty((max(n_slots, 1024), K.MAX_PARTS, K.PART_COLS))
         return self._parts[:n_slots]
 
+    def _touch(self, cam, times_s, rot_tab, pos_tab, k_line, moving, include, n_lines, n_along,
+               obj_line_k) -> None:
+        """Fill ``obj_line_k[o, line]`` with actor o's time slot on each line its bounds reach.
+
+        The bounds are conservative boxes over groups of consecutive times (one group per time when the
+        camera moves, since each time then has its own pose); a static actor needs only its one time.
+        """
+        c = self._c
+        n_obj, n_t = self.n_actors, times_s.shape[0]
+        n_g = n_t if self.camera_moving else min(n_t, BOUND_GROUPS)
+        group_of_k = (np.arange(n_t) * n_g) // n_t
+        k_first = np.searchsorted(group_of_k, np.arange(n_g))
+        k_last = np.searchsorted(group_of_k, np.arange(n_g), side="right") - 1
+        need = np.zeros((n_obj, n_g), np.bool_)
+        need[:, 0] = include
+        need[moving, :] = True
+        bounds = np.empty((n_obj, n_g, 4))
+        K.actor_bounds_all(c.actors, c.world, cam, rot_tab, pos_tab, times_s[k_first], k_first,
+                           times_s[k_last] - times_s[k_first], need, bounds)
+        centre = np.arange(n_lines) + 0.5
+        for o in np.flatnonzero(include):
+            b = bounds[o, group_of_k[k_line[o]]]
+            touch = (b[:, 0] <= centre) & (centre <= b[:, 1]) & (b[:, 2] < n_along) & (b[:, 3] > 0)
+            obj_line_k[o, touch] = k_line[o, touch]
+
     def _layer(self, by_column: bool, t0_s: float) -> _Layer:
         """Static layers for this orientation, built on first use (nothing to cache for a moving camera)."""
         layer = self._layers.get(by_column)
@@ -265,26 +290,12 @@ class Renderer:
         rot_tab = np.empty((n_t, 3, 3))
         pos_tab = np.empty((n_t, 3))
         Wd.pose_table(cam, times_s, rot_tab, pos_tab)
-        # Touch tests use conservative actor bounds over groups of consecutive times; a moving camera has one
-        # pose per time, so its groups are single times.
-        n_g = n_t if self.camera_moving else min(n_t, BOUND_GROUPS)
-        group_of_k = (np.arange(n_t) * n_g) // n_t
-        k_first = np.searchsorted(group_of_k, np.arange(n_g))
-        k_last = np.searchsorted(group_of_k, np.arange(n_g), side="right") - 1
-        need = np.zeros((n_obj, n_g), np.bool_)
-        need[:, 0] = include
-        need[include & ~static, :] = True
-        bounds = np.empty((n_obj, n_g, 4))
-        K.actor_bounds_all(c.actors, c.world, cam, rot_tab, pos_tab, times_s[k_first], k_first,
-                           times_s[k_last] - times_s[k_first], need, bounds)
-        centre = np.arange(n_lines) + 0.5
         obj_line_k = np.full((n_obj, n_lines), -1, np.int64)
-        if exhaustive:  # the oracle: every included actor is tried on every line, bounds unused
+        if exhaustive:  # the oracle: every included actor is tried on every line
             obj_line_k[include] = k_line[include]
-        for o in np.flatnonzero(include) if not exhaustive else ():
-            b = bounds[o, group_of_k[k_line[o]]]
-            touch = (b[:, 0] <= centre) & (centre <= b[:, 1]) & (b[:, 2] < n_along) & (b[:, 3] > 0)
-            obj_line_k[o, touch] = k_line[o, touch]
+        else:
+            self._touch(cam, times_s, rot_tab, pos_tab, k_line, include & ~static, include, n_lines, n_along,
+                        obj_line_k)
         # Parts of an actor at an instant that several lines share (GS, bands, static actors) are computed
         # once into a table; those only one line needs (RS) are computed on that line, in cache.
         o_idx, l_idx = np.nonzero(obj_line_k >= 0)
