@@ -185,13 +185,12 @@ def frame_reader(source: CameraSource, shutter: str | None) -> Callable[[], Sequ
         return source.read_pair
     if source.info().get("shutter") == shutter or not source.supports_pairs:
         return plain
-    pick = 0 if shutter == "global" else 1
 
-    def from_pair() -> Sequence[Frame] | None:
-        pair = source.read_pair()
-        return None if pair is None else (pair[pick],)
+    def other_shutter() -> Sequence[Frame] | None:
+        frame = source.read_as(shutter)
+        return None if frame is None else (frame,)
 
-    return from_pair
+    return other_shutter
 
 
 class CaptureWriter:

@@ -88,6 +88,15 @@ class CameraSource(ABC):
         """The next (global, rolling) pair of the same instant, or None at the end."""
         raise SourceError(f"source {self.uri!r} cannot deliver paired global/rolling frames")
 
+    def read_as(self, shutter: str) -> Frame | None:
+        """The next frame under ``shutter`` ('global' or 'rolling'), or None at the end.
+
+        This default takes one frame of ``read_pair()``; sources that render each shutter on its own
+        override it so the other one is not made for nothing.
+        """
+        pair = self.read_pair()
+        return None if pair is None else pair[0 if shutter == "global" else 1]
+
     def __iter__(self) -> Iterator[Frame]:
         while True:
             frame = self.read()

@@ -98,6 +98,15 @@ class EmuSource(CameraSource):
         self.index += 1
         return frame
 
+    def read_as(self, shutter: str) -> Frame | None:
+        """The next frame rendered under ``shutter`` only."""
+        self._check_open()
+        if self.limit is not None and self.index >= self.limit:
+            return None
+        frame = self.camera.frame(self.index, shutter)
+        self.index += 1
+        return frame
+
     def read_pair(self) -> tuple[Frame, Frame] | None:
         """Global and rolling frames of the same instant (same timestamp and exposure)."""
         self._check_open()
