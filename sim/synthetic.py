@@ -140,7 +140,9 @@ class SyntheticCamera:
         covered_mm = crop.width * sensor.optics.pixel_size_um / 1000.0
         cam = scene.camera(camera).with_resolution(s.width, s.height, sensor.optics.focal_mm, covered_mm)
         self.camera = cam
-        ref_exposure = resolve_settings(sensor, size=(s.width, s.height)).exposure_ns
+        # Brightness is relative to the default exposure of the same readout (same line time), so it
+        # scales with the requested exposure and gain only.
+        ref_exposure = resolve_settings(sensor, size=(s.width, s.height), readout=s.readout).exposure_ns
         brightness = s.gain * s.exposure_ns / max(ref_exposure, 1)
         self.renderer = Renderer(scene, cam, gain=brightness)
         self.start_ns = int(start_ns)
