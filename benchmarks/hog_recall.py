@@ -23,8 +23,8 @@ import json
 import time
 from collections.abc import Callable, Sequence
 
-import cv2
 import numpy as np
+from rollcam.host.detectors.hog import SHRINK_H, SHRINK_W, HogDetector
 from rollcam.sim.errors import ConfigError
 from rollcam.sim.render import Renderer
 from rollcam.sim.scenegen import DAYLIGHT, make_street_scene
@@ -32,7 +32,6 @@ from rollcam.sim.scenegen import DAYLIGHT, make_street_scene
 HEIGHT_BINS_PX = (128, 160, 200, 256, 384)
 """Lower edges of the per-height-bin recall (the last bin is open-ended)."""
 
-SHRINK_W, SHRINK_H = 0.15, 0.05  # per side, fractions of the HOG window (OpenCV peopledetect.py sample)
 IOU_MIN = 0.5
 
 Box = tuple[float, float, float, float]
@@ -46,27 +45,6 @@ def iou(a: Box, b: Box) -> float:
         return 0.0
     inter = iw * ih
     return inter / ((a[2] - a[0]) * (a[3] - a[1]) + (b[2] - b[0]) * (b[3] - b[1]) - inter)
-
-
-def people_detector() -> cv2.HOGDescriptor:
-    """OpenCV's default 64x128 HOG descriptor with its stock linear-SVM people detector."""
-    hog = cv2.HOGDescriptor()
-    hog.setSVMDetector(cv2.HOGDescriptor_getDefaultPeopleDetector())
-    return hog
-
-
-def detect_people(hog: cv2.HOGDescriptor, image_bgr: np.ndarray, *, hit_threshold: float = 0.0,
-                  scale: float = 1.05, win_stride_px: int = 8, padding_px: int = 16) -> list[tuple[Box, float]]:
-    """HOG detections on one frame as (shrunk box, SVM score), best first."""
-    rects, weights = hog.detectMultiScale(image_bgr, hitThreshold=hit_threshold,
-                                          winStride=(win_stride_px, win_stride_px),
-                                          padding=(padding_px, padding_px), scale=scale)
-    out = []
-    for (x, y, w, h), score in zip(np.asarray(rects).reshape(-1, 4), np.asarray(weights).reshape(-1), strict=True):
-        dx, dy = SHRINK_W * w, SHRINK_H * h
-        out.append(((float(x + dx), float(y + dy), float(x + w - dx), float(y + h - dy)), float(score)))
-    out.sort(key=lambda d: -d[1])
-    return out
 
 
 def match_frame(dets: Sequence[tuple[Box, float]], kept: Sequence[Box],
@@ -125,7 +103,7 @@ def hog_recall(
     if n_scenes < 1 or frames_per_camera < 1 or not times:
         raise ConfigError(f"need n_scenes >= 1, frames_per_camera >= 1 and some times of day, got "
                           f"{n_scenes!r}, {frames_per_camera!r}, {times!r}")
-    hog = people_detector()
+    hog = HogDetector(scale=scale, stride_px=win_stride_px, padding_px=padding_px, hit_threshold=hit_threshold)
     t_start = time.perf_counter()
     bins = [*HEIGHT_BINS_PX]
     heights: list[float] = []
@@ -156,8 +134,9 @@ def hog_recall(
                         kept.append(box)
                     else:
                         ignored.append(box)
-                dets = detect_people(hog, res.image, hit_threshold=hit_threshold, scale=scale,
-                                     win_stride_px=win_stride_px, padding_px=padding_px)
+                found_dets = hog.detect(res.image)
+                dets = [(tuple(map(float, b)), float(sc)) for b, sc in zip(found_dets.boxes, found_dets.scores,
+                                                                         strict=True)]
                 found, fp, ign = match_frame(dets, kept, ignored)
                 heights.extend(b[3] - b[1] for b in kept)
                 hits.extend(found)

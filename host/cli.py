@@ -8,6 +8,7 @@ their work lazily, so ``rollcam --help`` starts fast and works whatever optional
 from __future__ import annotations
 
 import argparse
+import importlib
 import json
 import os
 import sys
@@ -112,6 +113,10 @@ def sensor_rows() -> list[dict[str, Any]]:
     return rows
 
 
+COMMAND_MODULES: tuple[str, ...] = ()
+"""Modules under ``rollcam.host`` that each add one command: ``register(sub)`` adds a subparser whose
+``func(args) -> int`` runs it (import heavy work inside ``func``, so ``rollcam --help`` stays fast)."""
+
 DEVICES_NOTE = "not implemented yet; discovery of v4l2:, opencv:, oak: and uvc: cameras comes in a later issue"
 
 
@@ -136,8 +141,6 @@ def cmd_list(args: argparse.Namespace) -> int:
 
 def cmd_bench(args: argparse.Namespace, extra: Sequence[str]) -> int:
     """``rollcam bench``: hand the remaining arguments to ``rollcam.benchmarks.bench``."""
-    import importlib
-
     try:
         bench = importlib.import_module("rollcam.benchmarks.bench")
     except ModuleNotFoundError as exc:
@@ -195,6 +198,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--json", action="store_true", help="print a JSON summary on stdout")
     p.add_argument("--progress", action="store_true", help="show progress even when stderr is not a terminal")
     p.set_defaults(func=cmd_capture)
+
+    for name in COMMAND_MODULES:
+        importlib.import_module(f"rollcam.host.{name}").register(sub)
 
     p = sub.add_parser("bench", add_help=False, help="speed-versus-error benchmarks ('rollcam bench --help')",
                        description="Run rollcam's benchmarks; options belong to rollcam.benchmarks.bench.")
