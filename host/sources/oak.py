@@ -13,6 +13,8 @@ from __future__ import annotations
 
 import datetime
 import importlib
+import os
+import sys
 from typing import Any
 
 import numpy as np
@@ -30,10 +32,25 @@ ISO_PER_GAIN = 100
 INSTALL_HINT = "pip install 'rollcam[oak]' (depthai 3)"
 
 
+def _import_quietly(name: str) -> Any:
+    """Import ``name`` with file descriptor 1 pointed at stderr: depthai's logger prints its start-up warnings
+    (no USB in a container, ...) on stdout, which would corrupt JSON output such as ``rollcam list --json``."""
+    if name in sys.modules:
+        return importlib.import_module(name)
+    sys.stdout.flush()
+    saved = os.dup(1)
+    try:
+        os.dup2(2, 1)
+        return importlib.import_module(name)
+    finally:
+        os.dup2(saved, 1)
+        os.close(saved)
+
+
 def import_depthai() -> Any:
     """The depthai module (v3), or a SourceError naming what to install."""
     try:
-        dai = importlib.import_module("depthai")
+        dai = _import_quietly("depthai")
     except ImportError:
         raise SourceError(f"oak: sources need depthai: {INSTALL_HINT}") from None
     version = getattr(dai, "__version__", "0")
