@@ -2,7 +2,8 @@
 
 ``from rollcam.host import VideoCapture`` in place of ``cv2.VideoCapture`` is the only change an OpenCV
 script needs to run on ``emu:``, ``file:``, ``oak:``, ``http://`` (MJPEG) and the other rollcam schemes.
-Integers, paths and URLs of other schemes go to ``cv2.VideoCapture`` itself with OpenCV's own semantics.
+Integers, paths and URLs of other schemes go to ``cv2.VideoCapture`` itself with OpenCV's own semantics, and
+so does an ``http(s)://`` URL that is not an MJPEG stream rollcam can read.
 
 For rollcam sources: ``read``/``grab``/``retrieve`` give 8-bit BGR (``CAP_PROP_CONVERT_RGB=0`` gives the
 frame's own pixels), ``frame`` is the last rollcam ``Frame`` (timing and ground truth). ``get`` answers
@@ -69,6 +70,10 @@ class VideoCapture:
             self._uri = os.fspath(source)
         except RollcamError as exc:  # OpenCV reports failure by isOpened(), not by raising
             self.error = exc
+            if parse_uri(os.fspath(source)).scheme in ("http", "https"):
+                # Not an MJPEG stream rollcam can read (HLS, a plain video file...): OpenCV may still play it.
+                self._cv = cv2.VideoCapture(os.fspath(source), apiPreference, *args)
+                return bool(self._cv.isOpened())
             return False
         return True
 

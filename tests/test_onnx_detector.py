@@ -136,3 +136,16 @@ def test_ssdlite_is_packaged_and_finds_a_rendered_pedestrian():
     assert iou_matrix(d.boxes, truth).max(axis=1).max() > 0.5
     with pytest.raises(ConfigError, match="fixed by the ssdlite model"):
         load_detector("ssdlite?layout=yolo")
+
+
+def test_raw_input_model_gets_the_mosaic(tmp_path):
+    cand = np.array([[16, 16, 8, 8, 0.9]] + [[0, 0, 1, 1, 0.0]] * 9, np.float32)
+    path = _constant_model(tmp_path / "raw.onnx", [1, 1, 32, 32], {"output0": cand.T[None]})
+    det = load_detector(f"onnx:{path}?input=raw&letterbox=0")
+    assert det.input == "raw"
+    tensor, _ = det._prepare(np.full((64, 64), 1023, np.uint16))
+    assert tensor.shape == (1, 1, 32, 32) and tensor.max() == pytest.approx(1023 / 65535)
+    ten_bit = load_detector(f"onnx:{path}?input=raw&letterbox=0&bits=10")
+    assert ten_bit._prepare(np.full((64, 64), 1023, np.uint16))[0].max() == pytest.approx(1.0)
+    d = det.detect(np.zeros((64, 64), np.uint16))
+    np.testing.assert_allclose(d.boxes[0], [24, 24, 40, 40], atol=1e-4)

@@ -82,3 +82,11 @@ def test_demosaic_table_matches_bayer_orders():
     assert to_bgr(np.full((2, 2), 4095, np.uint16), "Y12 ").shape == (2, 2, 3)
     with pytest.raises(SourceError, match="bit-packed"):
         to_bgr(np.zeros(10, np.uint8), "pRAA")
+
+
+def test_http_mjpeg_through_the_drop_in(rollcam_camera, rollcam_mjpeg_server):
+    cam = rollcam_camera("imx219", size="160x90", seed=1, pedestrians=2)
+    sent = [cam.read(), cam.read()]
+    server = rollcam_mjpeg_server(sent)
+    frames, stamps = opencv_script(VideoCapture, server.url)
+    assert len(frames) == 2 and stamps == [f.timestamp_ns / 1e6 for f in sent]

@@ -16,7 +16,8 @@ with dynamic input size; 640x640 YOLO, 300x300 SSD), ``letterbox`` (1/0; default
 ``bgr`` (1 feeds BGR instead of RGB), ``max_det`` (300), ``threads`` (onnxruntime intra-op threads),
 ``tiles`` (CxR: also run the model on C x R overlapping tiles and merge, for small pedestrians in large
 frames), ``overlap`` (tile overlap fraction, 0.2), ``full`` (1/0: with tiles, also run the whole frame; 1),
-``input`` (``bgr`` or ``raw``: a raw model gets the sensor mosaic, scaled to 0..1 by its bit depth).
+``input`` (``bgr`` or ``raw``: a raw model gets the sensor mosaic, scaled to 0..1 by ``bits``, the mosaic's
+bit depth; default the full range of its dtype).
 """
 
 from __future__ import annotations
@@ -33,7 +34,7 @@ from .base import Detections, DetectorSpec
 from .ops import Placement, letterbox, nms, stretch, tile_windows
 
 OPTIONS = {"conf", "iou", "classes", "class_offset", "size", "letterbox", "bgr", "max_det", "threads", "tiles",
-           "overlap", "full", "layout", "box", "norm", "input"}
+           "overlap", "full", "layout", "box", "norm", "input", "bits"}
 LAYOUTS = ("auto", "yolo", "ssd")
 SSD_ROLES = {"boxes": ("box",), "scores": ("score",), "classes": ("class", "label"), "num": ("num", "count")}
 """Role of each SSD output -> substrings its name contains (first match wins, case-insensitive)."""
@@ -119,8 +120,8 @@ class OnnxDetector:
                  letterbox_input: bool | None = None, bgr: bool = False, max_det: int = 300,
                  threads: int | None = None, tiles: tuple[int, int] | None = None,
                  overlap: float = 0.2, full: bool = True, layout: str = "auto", box: str = "yxyx",
-                 norm: bool | None = None, input: Literal["bgr", "raw"] = "bgr", name: str = "onnx",
-                 class_names: dict[int, str] | None = None) -> None:
+                 norm: bool | None = None, input: Literal["bgr", "raw"] = "bgr", bits: int | None = None,
+                 name: str = "onnx", class_names: dict[int, str] | None = None) -> None:
         ort = import_onnxruntime()
         self.path = Path(path)
         if not self.path.is_file():
@@ -132,7 +133,7 @@ class OnnxDetector:
             self._session = ort.InferenceSession(str(self.path), opts, providers=["CPUExecutionProvider"])
         except Exception as exc:  # onnxruntime raises its own untyped errors for unreadable models
             raise ConfigError(f"ONNX model {str(self.path)!r} cannot be loaded: {exc}") from None
-        self.name, self.input = name, input
+        self.name, self.input, self.bits = name, input, bits
         self.conf, self.iou, self.max_det = conf, iou, max_det
         self.keep_classes = None if classes is None else np.asarray(classes, np.int32)
         self.class_offset, self.bgr, self.box, self.norm = class_offset, bgr, box, norm
@@ -190,7 +191,8 @@ class OnnxDetector:
     def _prepare(self, image: np.ndarray) -> tuple[np.ndarray, Placement]:
         img = np.asarray(image)
         if self.input == "raw":
-            scale = 1.0 / (np.iinfo(img.dtype).max if img.dtype.kind in "ui" else 1.0)
+            full = (1 << self.bits) - 1 if self.bits else (np.iinfo(img.dtype).max if img.dtype.kind in "ui" else 1.0)
+            scale = 1.0 / full
             fitted, place = (letterbox if self.letterbox else stretch)(img, self.width, self.height)
             arr = fitted.astype(np.float32) * scale
             arr = arr[..., None] if arr.ndim == 2 else arr
@@ -296,6 +298,7 @@ def detector_options(spec: DetectorSpec) -> dict[str, Any]:
         "layout": spec.get("layout", _choice(*LAYOUTS), "auto"),
         "box": spec.get("box", _choice("yxyx", "xyxy"), "yxyx"),
         "norm": spec.get("norm", _bool), "input": spec.get("input", _choice("bgr", "raw"), "bgr"),
+        "bits": spec.get("bits", _positive_int),
     }
     return kw
 

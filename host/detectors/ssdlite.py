@@ -19,7 +19,7 @@ from .onnx import OnnxDetector, detector_options
 
 MODEL_DIR = "models/ssdlite_person"
 DEFAULT_CONF = 0.3
-FIXED = {"layout", "box", "class_offset", "size", "letterbox", "bgr", "input", "norm"}
+FIXED = {"layout", "box", "class_offset", "size", "letterbox", "bgr", "input", "norm", "bits"}
 """``onnx:`` options that describe the model itself and so are fixed here."""
 
 
