@@ -16,11 +16,15 @@ the Frame when the server sends them (the rollcam emulator does; mjpg-streamer s
 
 Without them: sequence counts parts received, the timestamp is the host's monotonic clock at arrival, and
 the row timing comes from ``sensor=NAME`` (or is unknown). A line time from the headers wins over the
-sensor's. Options: ``sensor``, ``timeout`` (seconds to connect and between parts, default 10), ``frames``.
+sensor's. Options: ``sensor``, ``timeout`` (seconds to connect and between parts, default 10), ``frames``,
+``latest`` (1: a thread reads the stream and ``read()`` returns the newest part, dropping older ones, so a
+consumer slower than the stream, such as a detector, sees live frames instead of a growing backlog; the
+count dropped goes into ``meta["dropped"]``; default 0: every part, in order).
 """
 
 from __future__ import annotations
 
+import threading
 import time
 from collections.abc import Callable
 from decimal import Decimal, InvalidOperation
@@ -38,7 +42,7 @@ from rollcam.sim.timing import Readout, line_sample_times_ns
 from .base import CameraSource, SourceURI, finite_float, positive_int
 from .rowtiming import FrameTimer
 
-OPTIONS = {"sensor", "timeout", "frames"}
+OPTIONS = {"sensor", "timeout", "frames", "latest"}
 MAX_HEADER_LINES = 64
 MAX_PART_BYTES = 64 << 20
 
@@ -149,6 +153,47 @@ def part_fields(headers: dict[str, str], uri: str) -> dict[str, Any]:
     return out
 
 
+class LatestPart:
+    """Reads parts on a thread and keeps only the newest (with its arrival time) for a slower consumer."""
+
+    def __init__(self, next_part: Callable[[], tuple[dict[str, str], bytes] | None], clock: Callable[[], int]) -> None:
+        self._next, self._clock = next_part, clock
+        self._cond = threading.Condition()
+        self._part: tuple[tuple[dict[str, str], bytes], int] | None = None
+        self._done = False
+        self._error: BaseException | None = None
+        self.dropped = 0
+        self._thread = threading.Thread(target=self._run, name="mjpeg-reader", daemon=True)
+        self._thread.start()
+
+    def _run(self) -> None:
+        try:
+            while (part := self._next()) is not None:
+                arrival = self._clock()
+                with self._cond:
+                    self.dropped += self._part is not None
+                    self._part = (part, arrival)
+                    self._cond.notify_all()
+        except BaseException as exc:  # handed to the consumer by get()
+            with self._cond:
+                self._error = exc
+        with self._cond:
+            self._done = True
+            self._cond.notify_all()
+
+    def get(self, timeout_s: float) -> tuple[tuple[dict[str, str], bytes], int] | None:
+        """The newest part not yet taken and its arrival time; None at the end of the stream."""
+        with self._cond:
+            if not self._cond.wait_for(lambda: self._part is not None or self._done, timeout_s):
+                raise TimeoutError
+            if self._part is not None:
+                got, self._part = self._part, None
+                return got
+            if self._error is not None:
+                raise self._error
+            return None
+
+
 class HttpMjpegSource(CameraSource):
     """Frames of an MJPEG-over-HTTP stream, with device timing from part headers where sent."""
 
@@ -172,6 +217,8 @@ class HttpMjpegSource(CameraSource):
         except ProtocolError as exc:
             self._response.close()
             raise SourceError(f"source {uri.uri!r}: {exc}") from None
+        latest = opts.get("latest", int, 0)
+        self._latest = LatestPart(self._parser.next_part, clock) if latest else None
 
     def read(self) -> Frame | None:
         """The next decoded frame, or None when the server ends the stream (or after ``frames=N``)."""
@@ -179,14 +226,18 @@ class HttpMjpegSource(CameraSource):
         if self.limit is not None and self.index >= self.limit:
             return None
         try:
-            part = self._parser.next_part()
+            if self._latest is not None:
+                got = self._latest.get(self.timeout_s)
+                part, arrival_ns = got if got is not None else (None, 0)
+            else:
+                part = self._parser.next_part()
+                arrival_ns = self.clock()
         except TimeoutError:
             raise SourceError(f"source {self.uri!r}: no frame within {self.timeout_s:g} s") from None
         except OSError as exc:
             raise SourceError(f"source {self.uri!r}: connection lost ({exc})") from None
         if part is None:
             return None
-        arrival_ns = self.clock()
         headers, body = part
         image = cv2.imdecode(np.frombuffer(body, np.uint8), cv2.IMREAD_UNCHANGED)
         if image is None:
@@ -196,7 +247,8 @@ class HttpMjpegSource(CameraSource):
         seq = fields.get("sequence", self.index)
         ts = fields.get("timestamp_ns", arrival_ns)
         frame = self.timer.frame(image, fmt, seq, ts, fields.get("exposure_ns", 0),
-                                 meta={"arrival_ns": arrival_ns, "jpeg_bytes": len(body)})
+                                 meta={"arrival_ns": arrival_ns, "jpeg_bytes": len(body),
+                                       **({"dropped": self._latest.dropped} if self._latest is not None else {})})
         if "line_time_ns" in fields or "shutter" in fields or "readout" in fields:
             frame = self._with_header_timing(frame, fields)
         self.index += 1
