@@ -14,7 +14,8 @@ an OAK's camera can take its frames from any rollcam source instead::
             img = queue.get().getCvFrame()          # BGR888i, device sequence and timestamp set
 
 Each ImgFrame carries the source frame's sequence number and device timestamp (depthai keeps whole
-microseconds); ``cam.truth[sequence]`` holds the frame's ground-truth objects for synthetic sources. With
+microseconds); ``cam.truth[sequence]`` holds the frame's ground-truth objects for synthetic sources (the
+newest ``TRUTH_KEPT`` frames, so an endless stream does not grow without bound). With
 ``realtime=True`` frames are paced at the source's frame period; otherwise they come as fast as they render.
 After ``frames`` (or the end of a finite source) the node stops the pipeline, so ``isRunning()`` loops end.
 ``EmulatedCamera`` is built on first access, because depthai is an optional dependency (``rollcam[oak]``).
@@ -29,6 +30,7 @@ from typing import Any
 from .sources.oak import import_depthai
 
 _CLASS: dict[int, type] = {}
+TRUTH_KEPT = 1024
 
 
 def _make_class(dai: Any) -> type:
@@ -77,6 +79,8 @@ def _make_class(dai: Any) -> type:
                         msg.setTimestampDevice(stamp)
                         msg.setTimestamp(stamp)
                         self.truth[frame.sequence] = frame.objects
+                        if len(self.truth) > TRUTH_KEPT:
+                            del self.truth[next(iter(self.truth))]  # dicts keep insertion order: the oldest
                         self.out.send(msg)
                         n += 1
             except BaseException as exc:  # surface it to the caller; the node's thread would swallow it
