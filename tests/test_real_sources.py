@@ -173,3 +173,23 @@ def test_http_latest_mode_skips_to_the_newest_frame(emu_frames, rollcam_mjpeg_se
         newest = src.read()
         assert src.read() is None
     assert newest.sequence == emu_frames[-1].sequence and newest.meta["dropped"] == len(emu_frames) - 1
+
+
+def test_luxonis_style_example_on_the_mock(mock_depthai):
+    """The shape of depthai 3's camera example: default socket, no frame type, isRunning loop, break."""
+    import depthai as dai
+
+    with dai.Pipeline() as pipeline:
+        cam = pipeline.create(dai.node.Camera).build()
+        video_queue = cam.requestOutput((640, 400)).createOutputQueue()
+        full = cam.requestFullResolutionOutput()
+        pipeline.start()
+        n = 0
+        while pipeline.isRunning():
+            video_in = video_queue.get()
+            assert isinstance(video_in, dai.ImgFrame)
+            assert video_in.getCvFrame().shape == (400, 640, 3) and video_in.getTimestamp().total_seconds() >= 0
+            n += 1
+            if n == 2:
+                break
+    assert full.size == (1920, 1080)

@@ -3,9 +3,10 @@
 It covers what a typical OAK capture script touches: ``Device.getAllAvailableDevices``, ``Device(info)``,
 ``DeviceInfo.getDeviceId``, ``Pipeline()`` / ``Pipeline(device)`` (context manager, ``create``, ``start``,
 ``isRunning``, ``stop``), ``node.Camera`` (``build(socket)``, ``requestOutput(size, type, fps=..)``,
-``inputControl.createInputQueue``), ``Output.createOutputQueue`` and ``MessageQueue`` (``get``, ``tryGet``,
-``has``), ``ImgFrame`` (``getCvFrame``, ``getFrame``, ``getSequenceNum``, ``getTimestamp(Device)``,
-``getExposureTime``, ``getSensitivity``, ``getWidth``/``getHeight``/``getType``) and ``CameraControl``
+``requestFullResolutionOutput``, ``inputControl.createInputQueue``), ``Output.createOutputQueue`` and
+``MessageQueue`` (``get``, ``tryGet``, ``has``), ``ImgFrame`` (``getCvFrame``, ``getFrame``,
+``getSequenceNum``, ``getTimestamp(Device)``, ``getExposureTime``, ``getSensitivity``, ``getWidth``,
+``getHeight``, ``getType``) and ``CameraControl``
 (``setManualExposure``, ``setAutoExposureEnable``). Frames are rendered on demand (no threads) by an
 ``emu:`` camera of each device's socket, so their timestamps, exposure and sequence numbers are the
 emulator's. ``MockDevice.frames`` ends the stream: the pipeline stops and ``get`` raises
@@ -244,6 +245,16 @@ class _Camera:
         if not self.sensor:
             self.build()
         return _Output(self, (size[0], size[1]), type, fps)
+
+    def requestFullResolutionOutput(self, type: _ImgType | None = None, fps: float | None = None,
+                                    **kwargs: Any) -> _Output:
+        """The sensor's default mode, full size (the mock's stand-in for the full array)."""
+        if not self.sensor:
+            self.build()
+        from rollcam.sim.hwconfig import load_sensor
+
+        mode = load_sensor(self.sensor).mode()
+        return _Output(self, (mode.width, mode.height), type, fps)
 
     def apply(self, ctrl: CameraControl) -> None:
         self.pipeline.device_state.controls.append(ctrl)
