@@ -1,4 +1,4 @@
-"""The ``rollcam`` command line: ``demo``, ``list``, ``capture``, ``bench``.
+"""The ``rollcam`` command line: ``demo``, ``list``, ``capture``, ``detect``, ``bench``.
 
 Exit codes: 0 success, 2 bad usage or input (argparse errors and every ``RollcamError``, reported as one
 ``rollcam: error: ...`` line without a traceback), 1 any other failure, 130 after Ctrl-C. Subcommands import

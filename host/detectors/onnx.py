@@ -17,7 +17,8 @@ with dynamic input size; 640x640 YOLO, 300x300 SSD), ``letterbox`` (1/0; default
 ``tiles`` (CxR: also run the model on C x R overlapping tiles and merge, for small pedestrians in large
 frames), ``overlap`` (tile overlap fraction, 0.2), ``full`` (1/0: with tiles, also run the whole frame; 1),
 ``input`` (``bgr`` or ``raw``: a raw model gets the sensor mosaic, scaled to 0..1 by ``bits``, the mosaic's
-bit depth; default the full range of its dtype).
+bit depth; default the full range of its dtype. Give raw models frames at their input size, or use tiles of
+it: resizing a mosaic blends its colour sites).
 """
 
 from __future__ import annotations
