@@ -2,7 +2,8 @@
 
 Frames are BGR3 as OpenCV delivers them. Timestamps: a camera's buffer time when the backend reports one
 (``CAP_PROP_POS_MSEC``: the V4L2 buffer timestamp, monotonic clock) or else the host's monotonic clock at
-capture; a file's position in the video. Sequence: the frame position for files, a counter for cameras.
+capture; a file's position in the video. Exposure: V4L2 cameras report theirs (exposure_time_absolute, in
+100 us steps); other backends leave it 0. Sequence: the frame position for files, a counter for cameras.
 Row timing comes from ``sensor=NAME`` (see ``rowtiming``). Options: ``sensor``, ``size`` (WxH request),
 ``fps``, ``exposure`` (the backend's own unit: 100 us steps with V4L2), ``auto_exposure`` (0/1), ``gain``,
 ``fourcc`` (e.g. MJPG), ``frames``. Controls can be changed later with ``set_control(name, value)``.
@@ -36,6 +37,7 @@ CONTROLS: dict[str, int] = {
 }
 """Control name -> OpenCV property; which ones a device honours depends on the device and backend."""
 
+V4L2_EXPOSURE_UNIT_NS = 100_000
 # V4L2's auto-exposure menu through OpenCV: 1 = manual, 3 = aperture priority (auto).
 _AUTO_EXPOSURE = {0: 1, 1: 3}
 
@@ -63,6 +65,8 @@ class OpenCVSource(CameraSource):
         self.timer = FrameTimer(uri.get("sensor", str), uri.uri)
         self.is_camera = isinstance(target, int) or str(target).startswith("/dev/")
         self.cap = cv2.VideoCapture(target, api)
+        # V4L2's exposure_time_absolute is in 100 us units; other backends use their own scales (or none).
+        self._exposure_unit_ns = V4L2_EXPOSURE_UNIT_NS if self.is_camera and api == cv2.CAP_V4L2 else 0
         if not self.cap.isOpened():
             self.cap.release()
             raise SourceError(f"source {uri.uri!r}: OpenCV cannot open {target!r}{hint}")
@@ -118,6 +122,8 @@ class OpenCVSource(CameraSource):
         msec = float(self.cap.get(cv2.CAP_PROP_POS_MSEC))
         ts = round(msec * 1e6) if (msec > 0 or not self.is_camera) else host_ns
         exposure = 0
+        if self._exposure_unit_ns:
+            exposure = max(round(float(self.cap.get(cv2.CAP_PROP_EXPOSURE)) * self._exposure_unit_ns), 0)
         fmt = "GREY" if image.ndim == 2 else "BGR3"
         frame = self.timer.frame(np.asarray(image), fmt, pos, ts, exposure, meta={"host_ns": host_ns})
         self.index += 1
