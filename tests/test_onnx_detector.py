@@ -149,3 +149,14 @@ def test_raw_input_model_gets_the_mosaic(tmp_path):
     assert ten_bit._prepare(np.full((64, 64), 1023, np.uint16))[0].max() == pytest.approx(1.0)
     d = det.detect(np.zeros((64, 64), np.uint16))
     np.testing.assert_allclose(d.boxes[0], [24, 24, 40, 40], atol=1e-4)
+
+
+def test_missing_runtimes_name_the_install(monkeypatch, yolo_model):
+    import onnxruntime
+
+    if "CUDAExecutionProvider" not in onnxruntime.get_available_providers():
+        with pytest.raises(ConfigError, match="onnxruntime-gpu"):
+            load_detector(f"onnx:{yolo_model}?device=cuda")
+    monkeypatch.setitem(__import__("sys").modules, "onnxruntime", None)
+    with pytest.raises(ConfigError, match=r"pip install 'rollcam\[onnx\]'"):
+        load_detector("ssdlite")

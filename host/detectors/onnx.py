@@ -14,8 +14,9 @@ stretched), read from the model's input tensor. Options: ``conf`` (score thresho
 model class ids: 1 maps TF's 1-based labels onto COCO's 0-based ``person = 0``), ``size`` (WxH for models
 with dynamic input size; 640x640 YOLO, 300x300 SSD), ``letterbox`` (1/0; default 1 for YOLO, 0 for SSD),
 ``bgr`` (1 feeds BGR instead of RGB), ``max_det`` (300), ``threads`` (onnxruntime intra-op threads),
-``tiles`` (CxR: also run the model on C x R overlapping tiles and merge, for small pedestrians in large
-frames), ``overlap`` (tile overlap fraction, 0.2), ``full`` (1/0: with tiles, also run the whole frame; 1),
+``device`` (``cpu``, or ``cuda`` with onnxruntime-gpu installed), ``tiles`` (CxR: also run the model on
+C x R overlapping tiles and merge, for small pedestrians in large frames), ``overlap`` (tile overlap
+fraction, 0.2), ``full`` (1/0: with tiles, also run the whole frame; 1),
 ``input`` (``bgr`` or ``raw``: a raw model gets the sensor mosaic, scaled to 0..1 by ``bits``, the mosaic's
 bit depth; default the full range of its dtype. Give raw models frames at their input size, or use tiles of
 it: resizing a mosaic blends its colour sites).
@@ -35,7 +36,7 @@ from .base import Detections, DetectorSpec
 from .ops import Placement, letterbox, nms, stretch, tile_windows
 
 OPTIONS = {"conf", "iou", "classes", "class_offset", "size", "letterbox", "bgr", "max_det", "threads", "tiles",
-           "overlap", "full", "layout", "box", "norm", "input", "bits"}
+           "overlap", "full", "layout", "box", "norm", "input", "bits", "device"}
 LAYOUTS = ("auto", "yolo", "ssd")
 SSD_ROLES = {"boxes": ("box",), "scores": ("score",), "classes": ("class", "label"), "num": ("num", "count")}
 """Role of each SSD output -> substrings its name contains (first match wins, case-insensitive)."""
@@ -122,7 +123,7 @@ class OnnxDetector:
                  threads: int | None = None, tiles: tuple[int, int] | None = None,
                  overlap: float = 0.2, full: bool = True, layout: str = "auto", box: str = "yxyx",
                  norm: bool | None = None, input: Literal["bgr", "raw"] = "bgr", bits: int | None = None,
-                 name: str = "onnx", class_names: dict[int, str] | None = None) -> None:
+                 device: str = "cpu", name: str = "onnx", class_names: dict[int, str] | None = None) -> None:
         ort = import_onnxruntime()
         self.path = Path(path)
         if not self.path.is_file():
@@ -130,8 +131,14 @@ class OnnxDetector:
         opts = ort.SessionOptions()
         if threads:
             opts.intra_op_num_threads = threads
+        providers = ["CPUExecutionProvider"]
+        if device == "cuda":
+            if "CUDAExecutionProvider" not in ort.get_available_providers():
+                raise ConfigError(f"detector {name!r}: device=cuda needs onnxruntime-gpu (pip install "
+                                  f"onnxruntime-gpu); this onnxruntime offers {ort.get_available_providers()}")
+            providers.insert(0, "CUDAExecutionProvider")
         try:
-            self._session = ort.InferenceSession(str(self.path), opts, providers=["CPUExecutionProvider"])
+            self._session = ort.InferenceSession(str(self.path), opts, providers=providers)
         except Exception as exc:  # onnxruntime raises its own untyped errors for unreadable models
             raise ConfigError(f"ONNX model {str(self.path)!r} cannot be loaded: {exc}") from None
         self.name, self.input, self.bits = name, input, bits
@@ -299,7 +306,7 @@ def detector_options(spec: DetectorSpec) -> dict[str, Any]:
         "layout": spec.get("layout", _choice(*LAYOUTS), "auto"),
         "box": spec.get("box", _choice("yxyx", "xyxy"), "yxyx"),
         "norm": spec.get("norm", _bool), "input": spec.get("input", _choice("bgr", "raw"), "bgr"),
-        "bits": spec.get("bits", _positive_int),
+        "bits": spec.get("bits", _positive_int), "device": spec.get("device", _choice("cpu", "cuda"), "cpu"),
     }
     return kw
 
