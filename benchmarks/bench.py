@@ -574,11 +574,18 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--scenes", default=None, help=f"comma-separated subset of {','.join(SCENES)}")
     parser.add_argument("--hog", action="store_true",
                         help="run the HOG people-detector recall study on the synthetic walkers instead (~1 min)")
+    parser.add_argument("--detect", action="store_true",
+                        help="time the detect loop's overhead and each built-in detector instead")
+    parser.add_argument("--onnx", action="append", metavar="MODEL", help="with --detect: also time onnx:MODEL")
 
 
 def run(args: argparse.Namespace) -> int:
     """Entry point of ``rollcam bench``: 0 done, 2 bad options."""
     overrides: dict[str, Any] = {}
+    if getattr(args, "detect", False):
+        from .detect import run_detect_bench
+
+        return run_detect_bench(args)
     if getattr(args, "hog", False):
         from .hog_recall import hog_recall
 

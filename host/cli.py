@@ -1,4 +1,4 @@
-"""The ``rollcam`` command line: ``demo``, ``list``, ``capture``, ``bench``.
+"""The ``rollcam`` command line: ``demo``, ``list``, ``capture``, ``detect``, ``bench``.
 
 Exit codes: 0 success, 2 bad usage or input (argparse errors and every ``RollcamError``, reported as one
 ``rollcam: error: ...`` line without a traceback), 1 any other failure, 130 after Ctrl-C. Subcommands import
@@ -113,18 +113,18 @@ def sensor_rows() -> list[dict[str, Any]]:
     return rows
 
 
-COMMAND_MODULES: tuple[str, ...] = ()
+COMMAND_MODULES: tuple[str, ...] = ("detect",)
 """Modules under ``rollcam.host`` that each add one command: ``register(sub)`` adds a subparser whose
 ``func(args) -> int`` runs it (import heavy work inside ``func``, so ``rollcam --help`` stays fast)."""
 
-DEVICES_NOTE = "not implemented yet; discovery of v4l2:, opencv:, oak: and uvc: cameras comes in a later issue"
-
-
 def cmd_list(args: argparse.Namespace) -> int:
-    """``rollcam list``: the emulated sensors (real devices come later)."""
+    """``rollcam list``: the emulated sensors, then each device backend's cameras (or why there are none)."""
+    from .discover import SECTIONS, discover
+
     rows = sensor_rows()
+    devices = discover()
     if args.json:
-        print(json.dumps({"emulated": rows, "devices": None, "devices_note": DEVICES_NOTE}))
+        print(json.dumps({"emulated": rows, **devices}))
         return EXIT_OK
     print("Emulated sensors (open as emu:NAME):")
     header = ("NAME", "SHUTTER", "DEFAULT MODE", "FPS", "LINE TIME", "READOUT")
@@ -134,8 +134,14 @@ def cmd_list(args: argparse.Namespace) -> int:
     for row in table:
         print("  " + "  ".join(c.ljust(w) if i in (0, 1, 2, 5) else c.rjust(w)
                                for i, (c, w) in enumerate(zip(row, widths, strict=True))).rstrip())
-    print()
-    print(f"Real devices: {DEVICES_NOTE}.")
+    for key, (heading, _) in SECTIONS.items():
+        section = devices[key]
+        print(f"\n{heading}:")
+        for d in section["devices"]:
+            extra = "  ".join(f"{k}={v}" for k, v in d.items() if k != "uri" and v not in ("", None))
+            print(f"  {d['uri']}  {extra}".rstrip())
+        if not section["devices"]:
+            print(f"  none: {section['note']}")
     return EXIT_OK
 
 
@@ -178,8 +184,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--progress", action="store_true", help="show progress even when stderr is not a terminal")
     p.set_defaults(func=cmd_demo)
 
-    p = sub.add_parser("list", help="list the emulated sensors", description="List the emulated sensors "
-                       "(shutter, default mode, frame rate, line time). Real devices come in a later issue.")
+    p = sub.add_parser("list", help="list the emulated sensors and attached cameras",
+                       description="List the emulated sensors (shutter, default mode, frame rate, line time), then "
+                                   "V4L2, OAK and USB video devices; an empty section says why (backend missing, "
+                                   "nothing plugged in).")
     p.add_argument("--json", action="store_true", help="print JSON instead of a table")
     p.set_defaults(func=cmd_list)
 

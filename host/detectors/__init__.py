@@ -14,7 +14,7 @@ from rollcam.sim.errors import ConfigError
 
 from .base import PERSON, Detections, Detector, DetectorSpec, parse_spec
 
-DETECTORS = {"hog": "hog"}
+DETECTORS = {"hog": "hog", "onnx": "onnx", "ssdlite": "ssdlite"}
 """Detector name -> module name under ``rollcam.host.detectors``."""
 
 

@@ -1,0 +1,319 @@
+"""``onnx:PATH``: any ONNX detection model through onnxruntime, YOLO-style or SSD-style outputs.
+
+Output layouts (``layout=auto`` tells them apart by the model's outputs):
+
+- ``yolo``: one tensor ``[1, 4+C, N]`` (YOLOv8/YOLO11 exports) or ``[1, N, 4+C]`` (channels are taken to be
+  the shorter axis); cx, cy, w, h in input pixels, then C class scores.
+- ``ssd``: ``boxes [1, N, 4]``, ``scores [1, N]``, ``classes [1, N]`` and optionally ``num_detections``,
+  found by their names; boxes ``box=yxyx`` (TF, default) or ``xyxy``, normalised 0..1 or in input pixels
+  (``norm`` 1/0; by default normalised when no coordinate exceeds 1.5).
+
+Input: NCHW float (YOLO: RGB / 255, letterboxed with grey bars) or NHWC uint8 (TF SSD: RGB 0..255,
+stretched), read from the model's input tensor. Options: ``conf`` (score threshold, 0.25), ``iou`` (NMS IoU,
+0.45), ``classes`` (comma list of kept class ids, after ``class_offset``), ``class_offset`` (subtracted from
+model class ids: 1 maps TF's 1-based labels onto COCO's 0-based ``person = 0``), ``size`` (WxH for models
+with dynamic input size; 640x640 YOLO, 300x300 SSD), ``letterbox`` (1/0; default 1 for YOLO, 0 for SSD),
+``bgr`` (1 feeds BGR instead of RGB), ``max_det`` (300), ``threads`` (onnxruntime intra-op threads),
+``device`` (``cpu``, or ``cuda`` with onnxruntime-gpu installed), ``tiles`` (CxR: also run the model on
+C x R overlapping tiles and merge, for small pedestrians in large frames), ``overlap`` (tile overlap
+fraction, 0.2), ``full`` (1/0: with tiles, also run the whole frame; 1),
+``input`` (``bgr`` or ``raw``: a raw model gets the sensor mosaic, scaled to 0..1 by ``bits``, the mosaic's
+bit depth; default the full range of its dtype. Give raw models frames at their input size, or use tiles of
+it: resizing a mosaic blends its colour sites).
+"""
+
+from __future__ import annotations
+
+import ast
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any, Literal
+
+import numpy as np
+from rollcam.sim.errors import ConfigError
+
+from .base import Detections, DetectorSpec
+from .ops import Placement, letterbox, nms, stretch, tile_windows
+
+OPTIONS = {"conf", "iou", "classes", "class_offset", "size", "letterbox", "bgr", "max_det", "threads", "tiles",
+           "overlap", "full", "layout", "box", "norm", "input", "bits", "device"}
+LAYOUTS = ("auto", "yolo", "ssd")
+SSD_ROLES = {"boxes": ("box",), "scores": ("score",), "classes": ("class", "label"), "num": ("num", "count")}
+"""Role of each SSD output -> substrings its name contains (first match wins, case-insensitive)."""
+DEFAULT_SIZE = {"yolo": (640, 640), "ssd": (300, 300)}
+
+COCO_NAMES = (
+    "person", "bicycle", "car", "motorcycle", "airplane", "bus", "train", "truck", "boat", "traffic light",
+    "fire hydrant", "stop sign", "parking meter", "bench", "bird", "cat", "dog", "horse", "sheep", "cow",
+    "elephant", "bear", "zebra", "giraffe", "backpack", "umbrella", "handbag", "tie", "suitcase", "frisbee",
+    "skis", "snowboard", "sports ball", "kite", "baseball bat", "baseball glove", "skateboard", "surfboard",
+    "tennis racket", "bottle", "wine glass", "cup", "fork", "knife", "spoon", "bowl", "banana", "apple",
+    "sandwich", "orange", "broccoli", "carrot", "hot dog", "pizza", "donut", "cake", "chair", "couch",
+    "potted plant", "bed", "dining table", "toilet", "tv", "laptop", "mouse", "remote", "keyboard", "cell phone",
+    "microwave", "oven", "toaster", "sink", "refrigerator", "book", "clock", "vase", "scissors", "teddy bear",
+    "hair drier", "toothbrush",
+)
+"""The 80 COCO class names in YOLO order (class id = index)."""
+
+
+def import_onnxruntime() -> Any:
+    """onnxruntime, or a ConfigError naming the extra to install."""
+    try:
+        import onnxruntime
+    except ImportError:
+        raise ConfigError("the onnx detectors need onnxruntime: pip install 'rollcam[onnx]' "
+                          "(or pip install onnxruntime)") from None
+    return onnxruntime
+
+
+def _bool(text: str) -> bool:
+    if text.lower() in ("1", "true", "yes", "on"):
+        return True
+    if text.lower() in ("0", "false", "no", "off"):
+        return False
+    raise ValueError("expected 1/0, true/false, yes/no or on/off")
+
+
+def _fraction(text: str) -> float:
+    value = float(text)
+    if not 0.0 <= value <= 1.0:
+        raise ValueError("must be between 0 and 1")
+    return value
+
+
+def _overlap(text: str) -> float:
+    value = float(text)
+    if not 0.0 <= value < 1.0:
+        raise ValueError("must be >= 0 and < 1")
+    return value
+
+
+def _pair(text: str) -> tuple[int, int]:
+    a, b = (int(v) for v in text.lower().split("x"))
+    if a <= 0 or b <= 0:
+        raise ValueError("both numbers must be positive")
+    return a, b
+
+
+def _positive_int(text: str) -> int:
+    value = int(text)
+    if value < 1:
+        raise ValueError("must be >= 1")
+    return value
+
+
+def _int_list(text: str) -> tuple[int, ...]:
+    return tuple(int(v) for v in text.split(",") if v.strip())
+
+
+def _choice(*values: str) -> Callable[[str], str]:
+    def parse(text: str) -> str:
+        if text not in values:
+            raise ValueError(f"must be one of {list(values)}")
+        return text
+    return parse
+
+
+class OnnxDetector:
+    """A detection model run by onnxruntime, with its pre- and post-processing chosen from its tensors."""
+
+    def __init__(self, path: str | Path, *, conf: float = 0.25, iou: float = 0.45,
+                 classes: tuple[int, ...] | None = None, class_offset: int = 0, size: tuple[int, int] | None = None,
+                 letterbox_input: bool | None = None, bgr: bool = False, max_det: int = 300,
+                 threads: int | None = None, tiles: tuple[int, int] | None = None,
+                 overlap: float = 0.2, full: bool = True, layout: str = "auto", box: str = "yxyx",
+                 norm: bool | None = None, input: Literal["bgr", "raw"] = "bgr", bits: int | None = None,
+                 device: str = "cpu", name: str = "onnx", class_names: dict[int, str] | None = None) -> None:
+        ort = import_onnxruntime()
+        self.path = Path(path)
+        if not self.path.is_file():
+            raise ConfigError(f"ONNX model {str(self.path)!r} does not exist")
+        opts = ort.SessionOptions()
+        if threads:
+            opts.intra_op_num_threads = threads
+        providers = ["CPUExecutionProvider"]
+        if device == "cuda":
+            if "CUDAExecutionProvider" not in ort.get_available_providers():
+                raise ConfigError(f"detector {name!r}: device=cuda needs onnxruntime-gpu (pip install "
+                                  f"onnxruntime-gpu); this onnxruntime offers {ort.get_available_providers()}")
+            providers.insert(0, "CUDAExecutionProvider")
+        try:
+            self._session = ort.InferenceSession(str(self.path), opts, providers=providers)
+        except Exception as exc:  # onnxruntime raises its own untyped errors for unreadable models
+            raise ConfigError(f"ONNX model {str(self.path)!r} cannot be loaded: {exc}") from None
+        self.name, self.input, self.bits = name, input, bits
+        self.conf, self.iou, self.max_det = conf, iou, max_det
+        self.keep_classes = None if classes is None else np.asarray(classes, np.int32)
+        self.class_offset, self.bgr, self.box, self.norm = class_offset, bgr, box, norm
+        self.tiles, self.overlap, self.full = tiles, overlap, full
+        self.layout = self._find_layout(layout)
+        inp = self._session.get_inputs()[0]
+        self._input_name = inp.name
+        self._uint8 = "uint8" in inp.type
+        shape = list(inp.shape)
+        self._nchw = len(shape) == 4 and shape[1] in (1, 3)
+        self._channels = shape[1] if self._nchw else (shape[3] if len(shape) == 4 else 3)
+        hw = shape[2:4] if self._nchw else shape[1:3]
+        fixed = tuple(hw) if all(isinstance(v, int) and v > 0 for v in hw) else None
+        if size is not None and fixed is not None and (size[1], size[0]) != fixed:
+            raise ConfigError(f"detector {name!r}: size={size[0]}x{size[1]} but the model's input is fixed at "
+                              f"{fixed[1]}x{fixed[0]}")
+        self.width, self.height = size or ((fixed[1], fixed[0]) if fixed else DEFAULT_SIZE[self.layout])
+        self.letterbox = (self.layout == "yolo") if letterbox_input is None else letterbox_input
+        self.class_names = class_names or self._names_from_metadata()
+
+    # ------------------------------------------------------------------------------------------ model layout
+    def _find_layout(self, layout: str) -> str:
+        outputs = self._session.get_outputs()
+        if layout == "auto":
+            layout = "yolo" if len(outputs) == 1 else "ssd"
+        if layout == "yolo":
+            if len(outputs) != 1 or len(outputs[0].shape) != 3:
+                raise ConfigError(f"ONNX model {str(self.path)!r}: layout yolo needs one [1, 4+C, N] output, has "
+                                  f"{[(o.name, o.shape) for o in outputs]}")
+            return layout
+        roles: dict[str, str] = {}
+        for role, keys in SSD_ROLES.items():
+            for o in outputs:
+                if o.name not in roles.values() and any(k in o.name.lower() for k in keys):
+                    roles[role] = o.name
+                    break
+        missing = [r for r in ("boxes", "scores", "classes") if r not in roles]
+        if missing:
+            raise ConfigError(f"ONNX model {str(self.path)!r}: SSD layout needs outputs named like boxes, scores "
+                              f"and classes; none matches {missing} among {[o.name for o in outputs]}")
+        self._ssd_outputs = roles
+        return layout
+
+    def _names_from_metadata(self) -> dict[int, str]:
+        meta = self._session.get_modelmeta().custom_metadata_map
+        if "names" in meta:  # Ultralytics exports store their class names as a Python dict literal
+            try:
+                names = ast.literal_eval(meta["names"])
+                return {int(k): str(v) for k, v in names.items()}
+            except (ValueError, SyntaxError, AttributeError):
+                pass
+        return dict(enumerate(COCO_NAMES))
+
+    # ------------------------------------------------------------------------------------------ inference
+    def _prepare(self, image: np.ndarray) -> tuple[np.ndarray, Placement]:
+        img = np.asarray(image)
+        if self.input == "raw":
+            full = (1 << self.bits) - 1 if self.bits else (np.iinfo(img.dtype).max if img.dtype.kind in "ui" else 1.0)
+            scale = 1.0 / full
+            fitted, place = (letterbox if self.letterbox else stretch)(img, self.width, self.height)
+            arr = fitted.astype(np.float32) * scale
+            arr = arr[..., None] if arr.ndim == 2 else arr
+        else:
+            if img.ndim == 2:
+                img = np.repeat(img[..., None], 3, axis=2)
+            elif img.shape[2] == 4:
+                img = img[..., :3]
+            fitted, place = (letterbox if self.letterbox else stretch)(img, self.width, self.height)
+            if not self.bgr:
+                fitted = fitted[..., ::-1]
+            if self._channels == 1:
+                fitted = fitted.mean(axis=2, keepdims=True)
+            arr = fitted.astype(np.uint8) if self._uint8 else fitted.astype(np.float32) * np.float32(1 / 255)
+        if self._uint8 and self.input == "raw":
+            arr = np.clip(arr * 255, 0, 255).astype(np.uint8)
+        arr = arr.transpose(2, 0, 1) if self._nchw else arr
+        return np.ascontiguousarray(arr[None]), place
+
+    def _run(self, image: np.ndarray) -> Detections:
+        tensor, place = self._prepare(image)
+        if self.layout == "yolo":
+            (out,) = self._session.run(None, {self._input_name: tensor})
+            boxes, scores, classes = self._decode_yolo(np.asarray(out))
+        else:
+            names = [self._ssd_outputs[r] for r in ("boxes", "scores", "classes")]
+            num_name = self._ssd_outputs.get("num")
+            outs = self._session.run([*names, *([num_name] if num_name else [])], {self._input_name: tensor})
+            boxes, scores, classes = self._decode_ssd(outs)
+        classes = classes - self.class_offset
+        keep = scores >= self.conf
+        if self.keep_classes is not None:
+            keep &= np.isin(classes, self.keep_classes)
+        boxes = place.to_source(boxes[keep])
+        h, w = image.shape[:2]
+        boxes[:, [0, 2]] = boxes[:, [0, 2]].clip(0, w)
+        boxes[:, [1, 3]] = boxes[:, [1, 3]].clip(0, h)
+        return Detections(boxes, scores[keep], classes[keep])
+
+    def _decode_yolo(self, out: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        pred = out[0]
+        if pred.shape[0] > pred.shape[1]:  # [N, 4+C] exports: channels on the short axis
+            pred = pred.T
+        cx, cy, bw, bh = pred[:4]
+        cls_scores = pred[4:]
+        if not len(cls_scores):
+            raise ConfigError(f"ONNX model {str(self.path)!r}: YOLO output {out.shape} has no class scores")
+        classes = np.argmax(cls_scores, axis=0).astype(np.int32)
+        scores = cls_scores[classes, np.arange(pred.shape[1])].astype(np.float32)
+        boxes = np.stack([cx - bw / 2, cy - bh / 2, cx + bw / 2, cy + bh / 2], axis=1).astype(np.float32)
+        return boxes, scores, classes
+
+    def _decode_ssd(self, outs: list[np.ndarray]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        boxes = np.asarray(outs[0], np.float32).reshape(-1, 4)
+        scores = np.asarray(outs[1], np.float32).reshape(-1)
+        classes = np.rint(np.asarray(outs[2])).astype(np.int32).reshape(-1)
+        if len(outs) > 3:
+            n = int(np.asarray(outs[3]).reshape(-1)[0])
+            boxes, scores, classes = boxes[:n], scores[:n], classes[:n]
+        if self.box == "yxyx":
+            boxes = boxes[:, [1, 0, 3, 2]]
+        normalised = self.norm if self.norm is not None else (not len(boxes) or float(np.abs(boxes).max()) <= 1.5)
+        if normalised:
+            boxes = boxes * np.array([self.width, self.height, self.width, self.height], np.float32)
+        return boxes, scores, classes
+
+    def detect(self, image: np.ndarray) -> Detections:
+        """Detections on one image (BGR, or the raw mosaic for ``input=raw``), best first, after NMS."""
+        img = np.asarray(image)
+        if self.tiles is None:
+            parts = [self._run(img)]
+        else:
+            h, w = img.shape[:2]
+            parts = [self._run(img)] if self.full else []
+            for x0, y0, x1, y1 in tile_windows(w, h, *self.tiles, self.overlap):
+                d = self._run(img[y0:y1, x0:x1])
+                parts.append(Detections(d.boxes + np.array([x0, y0, x0, y0], np.float32), d.scores, d.classes))
+        boxes = np.concatenate([p.boxes for p in parts])
+        scores = np.concatenate([p.scores for p in parts])
+        classes = np.concatenate([p.classes for p in parts])
+        keep = nms(boxes, scores, classes, self.iou, self.max_det)
+        return Detections(boxes[keep], scores[keep], classes[keep])
+
+    def close(self) -> None:
+        """Drop the onnxruntime session; safe to call twice."""
+        self._session = None
+
+    def __repr__(self) -> str:
+        tiles = "" if self.tiles is None else f", tiles={self.tiles[0]}x{self.tiles[1]}"
+        return f"OnnxDetector({self.path.name!r}, {self.layout}, {self.width}x{self.height}, conf={self.conf}{tiles})"
+
+
+def detector_options(spec: DetectorSpec) -> dict[str, Any]:
+    """Keyword arguments of ``OnnxDetector`` from a spec's options (shared with ``ssdlite``)."""
+    spec.check(OPTIONS)
+    kw: dict[str, Any] = {
+        "conf": spec.get("conf", _fraction, 0.25), "iou": spec.get("iou", _fraction, 0.45),
+        "classes": spec.get("classes", _int_list), "class_offset": spec.get("class_offset", int, 0),
+        "size": spec.get("size", _pair), "letterbox_input": spec.get("letterbox", _bool),
+        "bgr": spec.get("bgr", _bool, False), "max_det": spec.get("max_det", _positive_int, 300),
+        "threads": spec.get("threads", _positive_int), "tiles": spec.get("tiles", _pair),
+        "overlap": spec.get("overlap", _overlap, 0.2), "full": spec.get("full", _bool, True),
+        "layout": spec.get("layout", _choice(*LAYOUTS), "auto"),
+        "box": spec.get("box", _choice("yxyx", "xyxy"), "yxyx"),
+        "norm": spec.get("norm", _bool), "input": spec.get("input", _choice("bgr", "raw"), "bgr"),
+        "bits": spec.get("bits", _positive_int), "device": spec.get("device", _choice("cpu", "cuda"), "cpu"),
+    }
+    return kw
+
+
+def open_detector(spec: DetectorSpec) -> OnnxDetector:
+    """Build an ONNX detector from ``onnx:PATH?conf=..&iou=..&classes=..&tiles=..``."""
+    kw = detector_options(spec)
+    if not spec.target:
+        raise ConfigError(f"detector {spec.spec!r}: name a model file, e.g. onnx:yolo11n.onnx")
+    return OnnxDetector(spec.target, **kw)

@@ -1,0 +1,103 @@
+"""Image and box operations the CNN detectors share: letterboxing, resizing, NMS and tiling.
+
+Pure numpy/OpenCV functions, so each can be tested on its own and reused by any model wrapper.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+
+LETTERBOX_FILL = 114
+"""Grey of the letterbox bars (the Ultralytics convention the YOLO exports were trained with)."""
+
+
+@dataclass(frozen=True)
+class Placement:
+    """How a source image was fitted into the network input: ``net = src * scale + pad`` per axis."""
+
+    scale_x: float
+    scale_y: float
+    pad_x: float
+    pad_y: float
+
+    def to_source(self, boxes: np.ndarray) -> np.ndarray:
+        """Network-input pixel boxes (N, 4) x0, y0, x1, y1 back to source-image pixels."""
+        out = np.asarray(boxes, np.float32).copy()
+        out[:, [0, 2]] = (out[:, [0, 2]] - self.pad_x) / self.scale_x
+        out[:, [1, 3]] = (out[:, [1, 3]] - self.pad_y) / self.scale_y
+        return out
+
+
+def letterbox(image: np.ndarray, width: int, height: int, fill: int = LETTERBOX_FILL) -> tuple[np.ndarray, Placement]:
+    """``image`` scaled to fit ``width`` x ``height`` keeping its aspect ratio, centred on ``fill`` bars."""
+    h, w = image.shape[:2]
+    scale = min(width / w, height / h)
+    nw, nh = max(round(w * scale), 1), max(round(h * scale), 1)
+    resized = cv2.resize(image, (nw, nh), interpolation=cv2.INTER_LINEAR) if (nw, nh) != (w, h) else image
+    px, py = (width - nw) // 2, (height - nh) // 2
+    out = np.full((height, width, *image.shape[2:]), fill, dtype=image.dtype)
+    out[py:py + nh, px:px + nw] = resized
+    return out, Placement(nw / w, nh / h, px, py)
+
+
+def stretch(image: np.ndarray, width: int, height: int) -> tuple[np.ndarray, Placement]:
+    """``image`` resized to exactly ``width`` x ``height`` (aspect ratio not kept; SSD-style models)."""
+    h, w = image.shape[:2]
+    out = cv2.resize(image, (width, height), interpolation=cv2.INTER_LINEAR) if (w, h) != (width, height) else image
+    return out, Placement(width / w, height / h, 0.0, 0.0)
+
+
+def iou_matrix(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Pairwise IoU of boxes ``a`` (N, 4) and ``b`` (M, 4), x0, y0, x1, y1."""
+    a = np.asarray(a, np.float64).reshape(-1, 4)
+    b = np.asarray(b, np.float64).reshape(-1, 4)
+    iw = np.clip(np.minimum(a[:, None, 2], b[None, :, 2]) - np.maximum(a[:, None, 0], b[None, :, 0]), 0, None)
+    ih = np.clip(np.minimum(a[:, None, 3], b[None, :, 3]) - np.maximum(a[:, None, 1], b[None, :, 1]), 0, None)
+    inter = iw * ih
+    area_a = (a[:, 2] - a[:, 0]) * (a[:, 3] - a[:, 1])
+    area_b = (b[:, 2] - b[:, 0]) * (b[:, 3] - b[:, 1])
+    union = area_a[:, None] + area_b[None, :] - inter
+    return np.where(union > 0, inter / np.maximum(union, 1e-12), 0.0)
+
+
+def nms(boxes: np.ndarray, scores: np.ndarray, classes: np.ndarray, iou_threshold: float,
+        max_det: int = 300) -> np.ndarray:
+    """Indices kept by class-aware greedy non-maximum suppression, best score first."""
+    boxes = np.asarray(boxes, np.float32).reshape(-1, 4)
+    if not len(boxes):
+        return np.zeros(0, np.int64)
+    # Offsetting each class into its own coordinate range makes one pass class-aware (the batched-NMS trick).
+    span = float(np.max(boxes)) + 1.0
+    shifted = boxes + (np.asarray(classes, np.float32) * span)[:, None]
+    order = np.argsort(-np.asarray(scores), kind="stable")
+    keep: list[int] = []
+    while len(order) and len(keep) < max_det:
+        i = int(order[0])
+        keep.append(i)
+        if len(order) == 1:
+            break
+        rest = order[1:]
+        order = rest[iou_matrix(shifted[i:i + 1], shifted[rest])[0] <= iou_threshold]
+    return np.asarray(keep, np.int64)
+
+
+def tile_windows(width: int, height: int, cols: int, rows: int, overlap: float) -> Iterator[tuple[int, int, int, int]]:
+    """``cols`` x ``rows`` windows (x0, y0, x1, y1) covering the image, neighbours overlapping by ``overlap``.
+
+    Tiles let a detector with a small input (300 px, 640 px) see small pedestrians of a large frame at a
+    usable size; the overlap keeps a person cut by one tile border whole in the next tile.
+    """
+    def spans(n: int, size: int) -> list[tuple[int, int]]:
+        if n == 1:
+            return [(0, size)]
+        length = size / (n - (n - 1) * overlap)
+        step = length * (1 - overlap)
+        return [(round(k * step), min(round(k * step + length), size)) for k in range(n)]
+
+    for y0, y1 in spans(rows, height):
+        for x0, x1 in spans(cols, width):
+            yield x0, y0, x1, y1

@@ -1,0 +1,285 @@
+"""``http://HOST:PORT/PATH[#sensor=..&timeout=..&frames=..]`` -- an MJPEG stream (multipart/x-mixed-replace).
+
+The URL (query included) goes to the server untouched; rollcam's own options ride in the fragment, which
+HTTP clients never send. Each part's JPEG is decoded to BGR3 (or GREY for a grey JPEG). Part headers fill
+the Frame when the server sends them (the rollcam emulator does; mjpg-streamer sends ``X-Timestamp``):
+
+| Part header | Frame field | Form |
+| --- | --- | --- |
+| ``X-Sequence`` | ``sequence`` | integer frame counter of the device |
+| ``X-Timestamp-Ns`` | ``timestamp_ns`` | integer ns, device clock, first line's start of exposure |
+| ``X-Timestamp`` | ``timestamp_ns`` | seconds (decimal), when ``X-Timestamp-Ns`` is absent |
+| ``X-Exposure-Ns`` | ``exposure_ns`` | integer ns |
+| ``X-Line-Time-Ns`` | ``line_time_ns`` | integer ns (0: global shutter) |
+| ``X-Readout`` | ``readout`` | ``top_to_bottom`` etc. (as in hw_configs) |
+| ``X-Shutter`` | ``shutter`` | ``rolling`` or ``global`` |
+
+Without them: sequence counts parts received, the timestamp is the host's monotonic clock at arrival, and
+the row timing comes from ``sensor=NAME`` (or is unknown). A line time from the headers wins over the
+sensor's. Options: ``sensor``, ``timeout`` (seconds to connect and between parts, default 10), ``frames``,
+``latest`` (1: a thread reads the stream and ``read()`` returns the newest part, dropping older ones, so a
+consumer slower than the stream, such as a detector, sees live frames instead of a growing backlog; the
+count dropped goes into ``meta["dropped"]``; default 0: every part, in order).
+"""
+
+from __future__ import annotations
+
+import threading
+import time
+from collections.abc import Callable
+from decimal import Decimal, InvalidOperation
+from typing import Any, BinaryIO
+from urllib.error import URLError
+from urllib.parse import parse_qsl, urldefrag
+from urllib.request import Request, urlopen
+
+import cv2
+import numpy as np
+from rollcam.sim.errors import ProtocolError, SourceError
+from rollcam.sim.frame import Frame
+from rollcam.sim.timing import Readout, line_sample_times_ns
+
+from .base import CameraSource, SourceURI, finite_float, positive_int
+from .rowtiming import FrameTimer
+
+OPTIONS = {"sensor", "timeout", "frames", "latest"}
+MAX_HEADER_LINES = 64
+MAX_PART_BYTES = 64 << 20
+
+
+def _seconds_to_ns(text: str) -> int:
+    return int(Decimal(text) * 1_000_000_000)
+
+
+PART_HEADERS: dict[str, tuple[str, Callable[[str], Any]]] = {
+    "x-sequence": ("sequence", int),
+    "x-timestamp-ns": ("timestamp_ns", int),
+    "x-timestamp": ("timestamp_s", _seconds_to_ns),
+    "x-exposure-ns": ("exposure_ns", int),
+    "x-line-time-ns": ("line_time_ns", int),
+    "x-readout": ("readout", Readout.parse),
+    "x-shutter": ("shutter", str),
+}
+"""Part header (lower case) -> (field, parser). ``timestamp_s`` is used only without ``timestamp_ns``."""
+
+
+def boundary_of(content_type: str) -> bytes:
+    """The multipart boundary named in a Content-Type header."""
+    kind, _, params = content_type.partition(";")
+    if kind.strip().lower() != "multipart/x-mixed-replace":
+        raise ProtocolError(f"expected an MJPEG stream (multipart/x-mixed-replace), got Content-Type {content_type!r}")
+    for key, value in parse_qsl(params.replace(";", "&").replace(" ", ""), keep_blank_values=True):
+        if key.lower() == "boundary" and value:
+            return value.strip('"').encode("latin-1")
+    raise ProtocolError(f"Content-Type {content_type!r} names no boundary")
+
+
+class MjpegParser:
+    """Splits a multipart/x-mixed-replace byte stream into (headers, body) parts."""
+
+    def __init__(self, stream: BinaryIO, boundary: bytes) -> None:
+        self.stream = stream
+        # Some servers put the leading dashes into the boundary parameter itself; accept both spellings.
+        b = boundary[2:] if boundary.startswith(b"--") else boundary
+        self.delimiters = {b"--" + b, b"----" + b, b}
+        self._pending: bytes | None = None
+
+    def _line(self) -> bytes | None:
+        line = self.stream.readline(65536)
+        return line if line else None
+
+    def _is_delimiter(self, line: bytes) -> bool:
+        s = line.strip()
+        return s in self.delimiters or (s.endswith(b"--") and s[:-2] in self.delimiters)
+
+    def next_part(self) -> tuple[dict[str, str], bytes] | None:
+        """The next part, or None at the end of the stream."""
+        line = self._pending
+        self._pending = None
+        while line is None or not self._is_delimiter(line):  # skip the preamble / CRLF before a delimiter
+            line = self._line()
+            if line is None:
+                return None
+        if line.strip().endswith(b"--") and line.strip()[:-2] in self.delimiters:
+            return None  # closing delimiter
+        headers: dict[str, str] = {}
+        for _ in range(MAX_HEADER_LINES):
+            line = self._line()
+            if line is None:
+                return None
+            if not line.strip():
+                break
+            key, sep, value = line.decode("latin-1").partition(":")
+            if not sep:
+                raise ProtocolError(f"malformed MJPEG part header {line[:80]!r}")
+            headers[key.strip().lower()] = value.strip()
+        else:
+            raise ProtocolError(f"MJPEG part has more than {MAX_HEADER_LINES} header lines")
+        if "content-length" in headers:
+            try:
+                n = int(headers["content-length"])
+            except ValueError:
+                bad = headers["content-length"]
+                raise ProtocolError(f"MJPEG part Content-Length {bad!r} is not a number") from None
+            if not 0 <= n <= MAX_PART_BYTES:
+                raise ProtocolError(f"MJPEG part Content-Length {n!r} is out of range")
+            body = self.stream.read(n)
+            if len(body) < n:
+                return None
+            return headers, body
+        chunks: list[bytes] = []  # no length: the body runs to the next delimiter line
+        while True:
+            line = self._line()
+            if line is None or self._is_delimiter(line):
+                self._pending = line
+                body = b"".join(chunks)
+                return (headers, body[:-2] if body.endswith(b"\r\n") else body) if chunks or line else None
+            chunks.append(line)
+
+
+def part_fields(headers: dict[str, str], uri: str) -> dict[str, Any]:
+    """The Frame fields a part's headers carry (see PART_HEADERS); a malformed value is a ProtocolError."""
+    out: dict[str, Any] = {}
+    for name, (fld, parse) in PART_HEADERS.items():
+        if name in headers:
+            try:
+                out[fld] = parse(headers[name])
+            except (ValueError, InvalidOperation, ArithmeticError) as exc:
+                raise ProtocolError(f"source {uri!r}: part header {name}={headers[name]!r} is invalid "
+                                    f"({exc})") from None
+    if "timestamp_s" in out:
+        out.setdefault("timestamp_ns", out["timestamp_s"])
+        del out["timestamp_s"]
+    return out
+
+
+class LatestPart:
+    """Reads parts on a thread and keeps only the newest (with its arrival time) for a slower consumer."""
+
+    def __init__(self, next_part: Callable[[], tuple[dict[str, str], bytes] | None], clock: Callable[[], int]) -> None:
+        self._next, self._clock = next_part, clock
+        self._cond = threading.Condition()
+        self._part: tuple[tuple[dict[str, str], bytes], int] | None = None
+        self._done = False
+        self._error: BaseException | None = None
+        self.dropped = 0
+        self._thread = threading.Thread(target=self._run, name="mjpeg-reader", daemon=True)
+        self._thread.start()
+
+    def _run(self) -> None:
+        try:
+            while (part := self._next()) is not None:
+                arrival = self._clock()
+                with self._cond:
+                    self.dropped += self._part is not None
+                    self._part = (part, arrival)
+                    self._cond.notify_all()
+        except BaseException as exc:  # handed to the consumer by get()
+            with self._cond:
+                self._error = exc
+        with self._cond:
+            self._done = True
+            self._cond.notify_all()
+
+    def get(self, timeout_s: float) -> tuple[tuple[dict[str, str], bytes], int] | None:
+        """The newest part not yet taken and its arrival time; None at the end of the stream."""
+        with self._cond:
+            if not self._cond.wait_for(lambda: self._part is not None or self._done, timeout_s):
+                raise TimeoutError
+            if self._part is not None:
+                got, self._part = self._part, None
+                return got
+            if self._error is not None:
+                raise self._error
+            return None
+
+
+class HttpMjpegSource(CameraSource):
+    """Frames of an MJPEG-over-HTTP stream, with device timing from part headers where sent."""
+
+    def __init__(self, uri: SourceURI, clock: Callable[[], int] = time.monotonic_ns) -> None:
+        self.uri = uri.uri
+        url, fragment = urldefrag(uri.uri)
+        opts = SourceURI(uri.uri, uri.scheme, url, dict(parse_qsl(fragment, keep_blank_values=True)))
+        opts.take(set(), OPTIONS)
+        self.url, self.clock = url, clock
+        self.timeout_s = opts.get("timeout", finite_float, 10.0)
+        self.limit = opts.get("frames", positive_int)
+        self.timer = FrameTimer(opts.get("sensor", str), uri.uri)
+        self.index = 0
+        try:
+            self._response = urlopen(Request(url, headers={"User-Agent": "rollcam"}), timeout=self.timeout_s)
+        except (URLError, OSError) as exc:
+            raise SourceError(f"source {uri.uri!r}: cannot connect ({getattr(exc, 'reason', exc)}); is the "
+                              "stream running (e.g. 'rollcam emulate')?") from None
+        try:
+            self._parser = MjpegParser(self._response, boundary_of(self._response.headers.get("Content-Type", "")))
+        except ProtocolError as exc:
+            self._response.close()
+            raise SourceError(f"source {uri.uri!r}: {exc}") from None
+        latest = opts.get("latest", int, 0)
+        self._latest = LatestPart(self._parser.next_part, clock) if latest else None
+
+    def read(self) -> Frame | None:
+        """The next decoded frame, or None when the server ends the stream (or after ``frames=N``)."""
+        self._check_open()
+        if self.limit is not None and self.index >= self.limit:
+            return None
+        try:
+            if self._latest is not None:
+                got = self._latest.get(self.timeout_s)
+                part, arrival_ns = got if got is not None else (None, 0)
+            else:
+                part = self._parser.next_part()
+                arrival_ns = self.clock()
+        except TimeoutError:
+            raise SourceError(f"source {self.uri!r}: no frame within {self.timeout_s:g} s") from None
+        except OSError as exc:
+            raise SourceError(f"source {self.uri!r}: connection lost ({exc})") from None
+        if part is None:
+            return None
+        headers, body = part
+        image = cv2.imdecode(np.frombuffer(body, np.uint8), cv2.IMREAD_UNCHANGED)
+        if image is None:
+            raise ProtocolError(f"source {self.uri!r}: part {self.index} is not a decodable JPEG ({len(body)} bytes)")
+        fields = part_fields(headers, self.uri)
+        fmt = "GREY" if image.ndim == 2 else "BGR3"
+        seq = fields.get("sequence", self.index)
+        ts = fields.get("timestamp_ns", arrival_ns)
+        frame = self.timer.frame(image, fmt, seq, ts, fields.get("exposure_ns", 0),
+                                 meta={"arrival_ns": arrival_ns, "jpeg_bytes": len(body),
+                                       **({"dropped": self._latest.dropped} if self._latest is not None else {})})
+        if "line_time_ns" in fields or "shutter" in fields or "readout" in fields:
+            frame = self._with_header_timing(frame, fields)
+        self.index += 1
+        return frame
+
+    @staticmethod
+    def _with_header_timing(frame: Frame, fields: dict[str, Any]) -> Frame:
+        from dataclasses import replace
+
+        line_ns = fields.get("line_time_ns", frame.line_time_ns)
+        shutter = fields.get("shutter", "rolling" if line_ns > 0 else "global")
+        readout = fields.get("readout", frame.readout)
+        n = frame.width if readout.by_column else frame.height
+        t0 = frame.timestamp_ns + frame.exposure_ns // 2
+        order = np.arange(n, dtype=np.int64)
+        rows = (np.int64(t0) + (order[::-1] if readout.reversed else order) * np.int64(line_ns)
+                if shutter == "rolling" else line_sample_times_ns(t0, n, None, readout))
+        return replace(frame, line_time_ns=line_ns if shutter == "rolling" else 0, shutter=shutter, readout=readout,
+                       row_times_ns=rows)
+
+    def close(self) -> None:
+        """Close the connection; safe to call twice."""
+        if not self.closed:
+            self.closed = True
+            self._response.close()
+
+    def info(self) -> dict[str, Any]:
+        """URL and row timing."""
+        return {"uri": self.uri, "url": self.url, **self.timer.timing.to_json()}
+
+
+def open_source(uri: SourceURI) -> HttpMjpegSource:
+    """Scheme entry point for ``http://`` and ``https://``."""
+    return HttpMjpegSource(uri)

@@ -1,0 +1,129 @@
+"""``rollcam detect``: the loop, its files, ground-truth matching and a clean stop on Ctrl-C."""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+from rollcam.host.cli import main
+from rollcam.host.detect import LOG, SUMMARY, VIDEO, DetectInterrupted, run_detect
+from rollcam.host.detectors import PERSON, Detections
+from rollcam.host.truthmatch import RunningPR, match
+
+URI = "emu:imx219?size=320x180&seed=2&pedestrians=8&speed=fast"
+
+
+class OracleDetector:
+    """Returns the frame's RS truth boxes (so RS precision/recall are 1) and can stop like Ctrl-C."""
+
+    name, input, class_names = "oracle", "bgr", {PERSON: "person"}
+
+    def __init__(self, interrupt_at: int | None = None) -> None:
+        self.frame = None
+        self.calls = 0
+        self.interrupt_at = interrupt_at
+
+    def detect(self, image: np.ndarray) -> Detections:
+        self.calls += 1
+        if self.calls == self.interrupt_at:
+            raise KeyboardInterrupt
+        boxes = [o.box_rs for o in self.frame.objects if o.box_rs is not None and o.visible >= 0.25]
+        return Detections(np.asarray(boxes).reshape(-1, 4), np.linspace(0.9, 0.5, len(boxes)), [PERSON] * len(boxes))
+
+    def close(self) -> None:
+        pass
+
+
+class PeekingSource:
+    """Wraps a source so the oracle sees the frame it is given."""
+
+    def __init__(self, source, oracle) -> None:
+        self.source, self.oracle = source, oracle
+        self.uri, self.supports_pairs = source.uri, False
+
+    def read(self):
+        frame = self.source.read()
+        self.oracle.frame = frame
+        return frame
+
+    def info(self):
+        return self.source.info()
+
+
+def test_detect_loop_writes_log_video_summary_and_scores_truth(tmp_path, rollcam_camera):
+    oracle = OracleDetector()
+    src = PeekingSource(rollcam_camera("imx219", size="320x180", seed=2, pedestrians=8, speed="fast"), oracle)
+    result = run_detect(src, oracle, frames=3, out_dir=tmp_path)
+    assert result.complete and result.frames == 3
+    assert result.truth.totals["rs"].precision == 1.0 and result.truth.totals["rs"].recall == 1.0
+    records = [json.loads(line) for line in (tmp_path / LOG).read_text().splitlines()]
+    assert [r["sequence"] for r in records] == [0, 1, 2]
+    assert records[1]["timestamp_ns"] > 0 and records[0]["line_time_ns"] > 0 and "objects" in records[0]
+    assert records[0]["match"]["rs"]["fp"] == 0
+    cap = cv2.VideoCapture(str(tmp_path / VIDEO))
+    assert int(cap.get(cv2.CAP_PROP_FRAME_COUNT)) == 3
+    cap.release()
+    summary = json.loads((tmp_path / SUMMARY).read_text())
+    assert summary["complete"] and summary["truth"]["rs"]["recall"] == 1.0 and summary["detect_ms"]["p50"] >= 0
+
+
+def test_interrupt_keeps_whole_records_and_a_playable_video(tmp_path, rollcam_camera):
+    oracle = OracleDetector(interrupt_at=3)
+    src = PeekingSource(rollcam_camera("imx219", size="320x180", seed=2), oracle)
+    with pytest.raises(DetectInterrupted) as info:
+        run_detect(src, oracle, frames=10, out_dir=tmp_path)
+    assert info.value.result.frames == 2 and not info.value.result.complete
+    assert len([json.loads(line) for line in (tmp_path / LOG).read_text().splitlines()]) == 2
+    cap = cv2.VideoCapture(str(tmp_path / VIDEO))
+    assert int(cap.get(cv2.CAP_PROP_FRAME_COUNT)) == 2
+    cap.release()
+    assert not json.loads((tmp_path / SUMMARY).read_text())["complete"]
+    assert not list(tmp_path.glob("*.part*"))
+
+
+def test_match_counts_ignored_boxes_apart():
+    kept = np.array([[0, 0, 10, 20]], float)
+    ignored = np.array([[50, 0, 52, 4]], float)
+    c = match(np.array([[0, 0, 10, 19], [0, 0, 10, 19], [50, 0, 52, 4], [80, 80, 90, 90]], float), kept, ignored, 0.5)
+    assert (c.tp, c.fp, c.fn, c.ignored) == (1, 2, 0, 1)
+    pr = RunningPR()
+    assert pr.summary().count("-") == 4
+
+
+def test_cli_detect_json_summary(tmp_path, capsys):
+    rc = main(["detect", URI, "--detector", "hog?stride=16", "--frames", "2", "--out", str(tmp_path), "--json",
+               "--no-video"])
+    assert rc == 0
+    out = json.loads(capsys.readouterr().out)
+    assert out["frames"] == 2 and out["complete"] and out["truth"]["frames"] == 2
+    assert not (tmp_path / VIDEO).exists()
+    assert main(["detect", URI, "--detector", "hog", "--frames", "1", "--out", str(tmp_path)]) == 2  # no overwrite
+    assert main(["detect", URI, "--detector", "nope", "--frames", "1"]) == 2
+
+
+@pytest.mark.skipif(sys.platform == "win32", reason="SIGINT to a child process")
+def test_cli_ctrl_c_exits_130_with_files_intact(tmp_path):
+    exe = Path(sys.executable).with_name("rollcam")
+    proc = subprocess.Popen([str(exe), "detect", URI, "--detector", "hog?stride=16", "--out", str(tmp_path)],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, env={**os.environ, "PYTHONUNBUFFERED": "1"})
+    log = tmp_path / LOG
+    deadline = time.monotonic() + 120
+    while time.monotonic() < deadline and (not log.exists() or log.read_text().count("\n") < 2):
+        time.sleep(0.1)
+    proc.send_signal(signal.SIGINT)
+    _, err = proc.communicate(timeout=60)
+    assert proc.returncode == 130, err
+    lines = log.read_text().splitlines()
+    assert len(lines) >= 2 and all(json.loads(line)["detections"] is not None for line in lines)
+    cap = cv2.VideoCapture(str(tmp_path / VIDEO))
+    assert int(cap.get(cv2.CAP_PROP_FRAME_COUNT)) >= len(lines) - 1
+    cap.release()
+    assert "interrupted after" in err.decode()

@@ -1,0 +1,39 @@
+"""The depthai host node on a real host-only depthai pipeline (no device needed)."""
+
+from __future__ import annotations
+
+import pytest
+from rollcam.host import open_camera
+from rollcam.sim.errors import SourceError
+
+dai = pytest.importorskip("depthai")
+
+URI = "emu:imx378?size=320x180&seed=3&pedestrians=5"
+
+
+def test_host_pipeline_receives_emulated_imgframes():
+    from rollcam.host.oaknode import EmulatedCamera
+
+    with open_camera(URI + "&frames=3") as src:
+        expected = list(src)
+    got = []
+    with dai.Pipeline(False) as pipeline:
+        cam = pipeline.create(EmulatedCamera).build(URI, frames=3)
+        queue = cam.out.createOutputQueue()
+        pipeline.start()
+        while len(got) < 3:
+            msg = queue.get()
+            got.append((msg.getSequenceNum(), msg.getTimestampDevice(), msg.getCvFrame(), msg.getType()))
+    assert cam.error is None
+    for (seq, stamp, img, kind), frame in zip(got, expected, strict=True):
+        assert seq == frame.sequence and kind == dai.ImgFrame.Type.BGR888i
+        assert stamp.total_seconds() * 1e9 == pytest.approx(frame.timestamp_ns, abs=1000)
+        assert (img == frame.data).all()
+        assert cam.truth[seq] == frame.objects
+
+
+def test_bad_uri_fails_in_build():
+    from rollcam.host.oaknode import EmulatedCamera
+
+    with dai.Pipeline(False) as pipeline, pytest.raises(SourceError, match="nope"):
+        pipeline.create(EmulatedCamera).build("emu:nope")

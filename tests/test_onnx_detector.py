@@ -1,0 +1,162 @@
+"""``onnx:`` detectors on tiny models the tests build with onnx.helper, one per output layout."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from rollcam.host.detectors import load_detector
+from rollcam.host.detectors.ops import iou_matrix, letterbox, nms, tile_windows
+from rollcam.sim.errors import ConfigError
+
+onnx = pytest.importorskip("onnx")
+pytest.importorskip("onnxruntime")
+from onnx import TensorProto, helper  # noqa: E402
+
+
+def _constant_model(path, inp, outputs, input_dtype=TensorProto.FLOAT):
+    """A model whose outputs are fixed tensors plus 0 * mean(input), so the input is really read."""
+    nodes = [helper.make_node("Cast", ["images"], ["x"], to=TensorProto.FLOAT),
+             helper.make_node("ReduceMean", ["x"], ["m"], keepdims=0),
+             helper.make_node("Constant", [], ["zero"], value=helper.make_tensor("z", TensorProto.FLOAT, [], [0.0])),
+             helper.make_node("Mul", ["m", "zero"], ["m0"])]
+    outs = []
+    for name, value in outputs.items():
+        value = np.asarray(value, np.float32)
+        nodes.append(helper.make_node("Constant", [], [name + "_c"], value=helper.make_tensor(
+            name + "_t", TensorProto.FLOAT, value.shape, value.ravel().tolist())))
+        nodes.append(helper.make_node("Add", [name + "_c", "m0"], [name]))
+        outs.append(helper.make_tensor_value_info(name, TensorProto.FLOAT, list(value.shape)))
+    graph = helper.make_graph(nodes, "tiny", [helper.make_tensor_value_info("images", input_dtype, inp)], outs)
+    model = helper.make_model(graph, opset_imports=[helper.make_opsetid("", 13)])
+    model.ir_version = 8
+    onnx.checker.check_model(model)
+    onnx.save(model, str(path))
+    return str(path)
+
+
+@pytest.fixture
+def yolo_model(tmp_path):
+    # [1, 4 + 2 classes, 4 candidates] in 64x64 input pixels: cx, cy, w, h, score(class 0), score(class 1)
+    cand = np.array([
+        [32, 32, 16, 32, 0.10, 0.90],   # class 1, kept
+        [33, 32, 16, 32, 0.05, 0.80],   # duplicate of the first: NMS drops it
+        [10, 40, 8, 8, 0.70, 0.00],     # class 0, kept
+        [50, 20, 8, 8, 0.10, 0.20],     # below conf
+    ] + [[0, 0, 1, 1, 0, 0]] * 6, np.float32)  # N > 4 + C, as in real exports (8400 candidates)
+    return _constant_model(tmp_path / "yolo.onnx", [1, 3, 64, 64], {"output0": cand.T[None]})
+
+
+def test_yolo_layout_letterbox_nms_and_class_filter(yolo_model):
+    det = load_detector(f"onnx:{yolo_model}?conf=0.5")
+    assert det.layout == "yolo" and (det.width, det.height) == (64, 64) and det.letterbox
+    image = np.zeros((64, 128, 3), np.uint8)  # letterboxed: scale 0.5, 16 px bars above and below
+    d = det.detect(image)
+    assert d.classes.tolist() == [1, 0]
+    assert d.scores.tolist() == pytest.approx([0.9, 0.7])
+    # net box (24, 16, 40, 48) -> source ((24-0)/0.5, (16-16)/0.5, ...) = (48, 0, 80, 64)
+    np.testing.assert_allclose(d.boxes[0], [48, 0, 80, 64], atol=1e-4)
+    np.testing.assert_allclose(d.boxes[1], [12, 40, 28, 56], atol=1e-4)
+    only0 = load_detector(f"onnx:{yolo_model}?conf=0.5&classes=0").detect(image)
+    assert only0.classes.tolist() == [0]
+    assert len(load_detector(f"onnx:{yolo_model}?conf=0.5&iou=0.99").detect(image)) == 3
+
+
+def test_yolo_transposed_output(tmp_path):
+    cand = np.array([[32, 32, 16, 32, 0.9]] + [[0, 0, 1, 1, 0.0]] * 9, np.float32)  # [1, N=10, 5]
+    path = _constant_model(tmp_path / "t.onnx", [1, 3, 64, 64], {"output0": cand[None]})
+    d = load_detector(f"onnx:{path}").detect(np.zeros((64, 64, 3), np.uint8))
+    assert len(d) == 1
+    np.testing.assert_allclose(d.boxes[0], [24, 16, 40, 48], atol=1e-4)
+
+
+@pytest.fixture
+def ssd_model(tmp_path):
+    boxes = np.array([[[0.25, 0.5, 0.75, 1.0], [0.0, 0.0, 0.5, 0.25], [0.1, 0.1, 0.2, 0.2], [0, 0, 0, 0]]])
+    return _constant_model(tmp_path / "ssd.onnx", [1, 32, 32, 3], {
+        "detection_boxes": boxes, "detection_scores": [[0.95, 0.6, 0.1, 0.9]],
+        "detection_classes": [[1, 3, 1, 1]], "num_detections": [3]}, input_dtype=TensorProto.UINT8)
+
+
+def test_ssd_layout_normalised_yxyx_and_class_offset(ssd_model):
+    det = load_detector(f"onnx:{ssd_model}?conf=0.5&class_offset=1")
+    assert det.layout == "ssd" and not det.letterbox and det._uint8
+    d = det.detect(np.zeros((100, 200, 3), np.uint8))
+    assert d.classes.tolist() == [0, 2]  # the 4th box lies past num_detections
+    np.testing.assert_allclose(d.boxes[0], [100, 25, 200, 75], atol=1e-3)
+    np.testing.assert_allclose(d.boxes[1], [0, 0, 50, 50], atol=1e-3)
+    persons = load_detector(f"onnx:{ssd_model}?conf=0.5&class_offset=1&classes=0").detect(
+        np.zeros((100, 200, 3), np.uint8))
+    assert persons.classes.tolist() == [0]
+
+
+def test_tiling_finds_boxes_in_each_tile_and_merges(yolo_model):
+    det = load_detector(f"onnx:{yolo_model}?conf=0.5&tiles=2x1&overlap=0&full=0&classes=1")
+    d = det.detect(np.zeros((64, 256, 3), np.uint8))
+    # each 128x64 tile has the class-1 box at (48, 0, 80, 64) in tile pixels
+    np.testing.assert_allclose(np.sort(d.boxes[:, 0]), [48, 176], atol=1e-3)
+
+
+def test_bad_onnx_specs(tmp_path, yolo_model):
+    with pytest.raises(ConfigError, match="does not exist"):
+        load_detector(f"onnx:{tmp_path / 'none.onnx'}")
+    with pytest.raises(ConfigError, match="name a model"):
+        load_detector("onnx:")
+    with pytest.raises(ConfigError, match="conf"):
+        load_detector(f"onnx:{yolo_model}?conf=2")
+    with pytest.raises(ConfigError, match="fixed"):
+        load_detector(f"onnx:{yolo_model}?size=32x32")
+    (tmp_path / "junk.onnx").write_bytes(b"not a model")
+    with pytest.raises(ConfigError, match="cannot be loaded"):
+        load_detector(f"onnx:{tmp_path / 'junk.onnx'}")
+
+
+def test_ops():
+    img, place = letterbox(np.zeros((50, 100, 3), np.uint8), 64, 64)
+    assert img.shape == (64, 64, 3) and place.pad_y == 16 and place.scale_x == pytest.approx(0.64)
+    assert iou_matrix([[0, 0, 2, 2]], [[1, 0, 3, 2], [5, 5, 6, 6]]).tolist() == [[pytest.approx(1 / 3), 0.0]]
+    keep = nms(np.array([[0, 0, 10, 10], [1, 0, 11, 10], [1, 0, 11, 10]]), np.array([0.5, 0.9, 0.8]),
+               np.array([0, 0, 1]), 0.5)
+    assert keep.tolist() == [1, 2]
+    wins = list(tile_windows(100, 50, 2, 1, 0.2))
+    assert wins[0][0] == 0 and wins[-1][2] == 100 and wins[0][2] > wins[1][0]
+
+
+def test_ssdlite_is_packaged_and_finds_a_rendered_pedestrian():
+    from rollcam.host import open_camera
+    from rollcam.host.detectors.ops import iou_matrix
+
+    det = load_detector("ssdlite")
+    assert det.name == "ssdlite" and det.class_names == {0: "person"} and (det.width, det.height) == (300, 300)
+    assert len(det.detect(np.full((300, 300, 3), 200, np.uint8))) == 0
+    with open_camera("emu:letsroll?seed=2&pedestrians=30&camera=1&shutter=global&frames=1") as cam:
+        frame = cam.read()
+    d = det.detect(frame.data)
+    truth = [o.box_gs for o in frame.objects if o.box_gs is not None]
+    assert len(d) >= 1 and (d.classes == 0).all()
+    assert iou_matrix(d.boxes, truth).max(axis=1).max() > 0.5
+    with pytest.raises(ConfigError, match="fixed by the ssdlite model"):
+        load_detector("ssdlite?layout=yolo")
+
+
+def test_raw_input_model_gets_the_mosaic(tmp_path):
+    cand = np.array([[16, 16, 8, 8, 0.9]] + [[0, 0, 1, 1, 0.0]] * 9, np.float32)
+    path = _constant_model(tmp_path / "raw.onnx", [1, 1, 32, 32], {"output0": cand.T[None]})
+    det = load_detector(f"onnx:{path}?input=raw&letterbox=0")
+    assert det.input == "raw"
+    tensor, _ = det._prepare(np.full((64, 64), 1023, np.uint16))
+    assert tensor.shape == (1, 1, 32, 32) and tensor.max() == pytest.approx(1023 / 65535)
+    ten_bit = load_detector(f"onnx:{path}?input=raw&letterbox=0&bits=10")
+    assert ten_bit._prepare(np.full((64, 64), 1023, np.uint16))[0].max() == pytest.approx(1.0)
+    d = det.detect(np.zeros((64, 64), np.uint16))
+    np.testing.assert_allclose(d.boxes[0], [24, 24, 40, 40], atol=1e-4)
+
+
+def test_missing_runtimes_name_the_install(monkeypatch, yolo_model):
+    import onnxruntime
+
+    if "CUDAExecutionProvider" not in onnxruntime.get_available_providers():
+        with pytest.raises(ConfigError, match="onnxruntime-gpu"):
+            load_detector(f"onnx:{yolo_model}?device=cuda")
+    monkeypatch.setitem(__import__("sys").modules, "onnxruntime", None)
+    with pytest.raises(ConfigError, match=r"pip install 'rollcam\[onnx\]'"):
+        load_detector("ssdlite")

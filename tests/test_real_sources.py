@@ -1,0 +1,195 @@
+"""``http://``, ``opencv:``, ``v4l2:`` and ``oak:`` sources: real libraries where they run here, mocks elsewhere."""
+
+from __future__ import annotations
+
+import sys
+
+import cv2
+import numpy as np
+import pytest
+from rollcam.host import open_camera
+from rollcam.host.sources import SourceURI
+from rollcam.host.sources.http import HttpMjpegSource, MjpegParser, boundary_of
+from rollcam.sim.errors import ProtocolError, SourceError
+
+SMALL = {"size": "320x180", "seed": 2, "pedestrians": 6}
+
+
+@pytest.fixture
+def emu_frames(rollcam_camera):
+    cam = rollcam_camera("imx219", **SMALL)
+    return [cam.read() for _ in range(3)]
+
+
+def test_http_mjpeg_carries_device_timing(emu_frames, rollcam_mjpeg_server):
+    server = rollcam_mjpeg_server(emu_frames)
+    with open_camera(server.url) as src:
+        got = list(src)
+    assert [f.sequence for f in got] == [f.sequence for f in emu_frames]
+    for mine, sent in zip(got, emu_frames, strict=True):
+        assert (mine.timestamp_ns, mine.exposure_ns, mine.line_time_ns) == (
+            sent.timestamp_ns, sent.exposure_ns, sent.line_time_ns)
+        assert mine.shutter == "rolling" and mine.format == "BGR3" and mine.data.shape == sent.data.shape
+        assert mine.row_times_ns[1] - mine.row_times_ns[0] == sent.line_time_ns
+        assert np.abs(mine.data.astype(int) - sent.data).mean() < 6  # JPEG round trip
+
+
+def test_http_without_headers_uses_host_clock_and_named_sensor(emu_frames, rollcam_mjpeg_server):
+    server = rollcam_mjpeg_server(emu_frames, timing_headers=False, content_length=False)
+    ticks = iter(range(1000, 10**6, 1000))
+    uri = server.url + "#sensor=imx219&frames=2"
+    from rollcam.host.sources import parse_uri
+
+    with HttpMjpegSource(parse_uri(uri), clock=lambda: next(ticks)) as src:
+        got = list(src)
+    assert [(f.sequence, f.timestamp_ns) for f in got] == [(0, 1000), (1, 2000)]
+    assert got[0].shutter == "rolling" and got[0].line_time_ns > 0  # imx219's readout spread over 180 lines
+
+
+def test_opencv_reads_the_same_mjpeg_stream(emu_frames, rollcam_mjpeg_server):
+    server = rollcam_mjpeg_server(emu_frames)
+    cap = cv2.VideoCapture(server.url)
+    if not cap.isOpened():
+        pytest.skip("this OpenCV build cannot read HTTP streams (no FFmpeg network support)")
+    n = 0
+    while True:
+        ok, img = cap.read()
+        if not ok:
+            break
+        assert img.shape == emu_frames[0].data.shape
+        n += 1
+    cap.release()
+    assert n == len(emu_frames)
+
+
+def test_mjpeg_parser_edge_cases():
+    import io
+
+    assert boundary_of('multipart/x-mixed-replace; boundary="--abc"') == b"--abc"
+    with pytest.raises(ProtocolError, match="multipart"):
+        boundary_of("image/jpeg")
+    stream = io.BytesIO(b"--abc\r\nContent-Length: 3\r\n\r\nxyz\r\n----abc\r\n\r\nrest\r\n--abc--\r\n")
+    parser = MjpegParser(stream, b"--abc")
+    assert parser.next_part() == ({"content-length": "3"}, b"xyz")
+    assert parser.next_part() == ({}, b"rest")
+    assert parser.next_part() is None
+    bad = MjpegParser(io.BytesIO(b"--abc\r\nno colon here\r\n\r\n"), b"abc")
+    with pytest.raises(ProtocolError, match="malformed"):
+        bad.next_part()
+
+
+def test_http_errors_are_clear():
+    with pytest.raises(SourceError, match="cannot connect"):
+        open_camera("http://127.0.0.1:9/stream.mjpg#timeout=1")
+    with pytest.raises(SourceError, match="unknown option"):
+        open_camera("http://127.0.0.1:9/x#bogus=1")
+
+
+def test_opencv_file_source_and_vectors(tmp_path, emu_frames):
+    path = tmp_path / "clip.avi"
+    writer = cv2.VideoWriter(str(path), cv2.VideoWriter_fourcc(*"MJPG"), 25, (320, 180))
+    for f in emu_frames:
+        writer.write(f.data)
+    writer.release()
+    with open_camera(f"opencv:{path}?sensor=imx219") as src:
+        got = list(src)
+        info = src.info()
+    assert [f.sequence for f in got] == [0, 1, 2]
+    assert [f.timestamp_ns for f in got] == [0, 40_000_000, 80_000_000]
+    assert got[0].line_time_ns > 0 and info["sensor"] == "imx219"
+    with open_camera(f"opencv:{path}") as src:
+        assert src.read().shutter == "unknown"
+
+
+def test_missing_cameras_say_what_to_plug_in():
+    with pytest.raises(SourceError, match="no device '/dev/video99'"):
+        open_camera("v4l2:/dev/video99")
+    with pytest.raises(SourceError, match="no camera at that index"):
+        open_camera("opencv:63")
+    with pytest.raises(SourceError, match="sensor='nope'"):
+        open_camera("opencv:63?sensor=nope")
+
+
+def test_oak_source_on_the_mock(mock_depthai):
+    with open_camera("oak:?size=320x180&frames=3") as src:
+        frames = list(src)
+        assert src.info()["sensor"] == "imx378"
+    assert [f.sequence for f in frames] == [0, 1, 2]
+    assert frames[0].shutter == "rolling" and frames[0].line_time_ns > 0 and frames[0].data.shape == (180, 320, 3)
+    assert frames[1].timestamp_ns > frames[0].timestamp_ns
+    with open_camera("oak:14442C10D13EABCE00?size=320x180&exposure_us=2000&gain=2") as src:
+        f = src.read()
+        assert f.exposure_ns == pytest.approx(2_000_000, rel=0.05) and f.meta["iso"] == 200
+        src.set_control("exposure_us", 4000)
+        assert src.read().exposure_ns == pytest.approx(4_000_000, rel=0.05)
+    with pytest.raises(SourceError, match="no OAK with id 'XYZ'"):
+        open_camera("oak:XYZ")
+    mock_depthai.devices.clear()
+    with pytest.raises(SourceError, match="no OAK device found; plug one in"):
+        open_camera("oak:")
+
+
+def test_oak_with_real_depthai_and_no_device():
+    dai = pytest.importorskip("depthai")
+    if dai.Device.getAllAvailableDevices():
+        pytest.skip("an OAK is attached")
+    with pytest.raises(SourceError, match="no OAK device found"):
+        open_camera("oak:")
+
+
+def test_oak_without_depthai_names_the_install(monkeypatch):
+    monkeypatch.setitem(sys.modules, "depthai", None)
+    with pytest.raises(SourceError, match=r"pip install 'rollcam\[oak\]'"):
+        open_camera("oak:")
+
+
+def test_typical_oak_capture_script_runs_on_the_mock(mock_depthai):
+    mock_depthai.devices[0].frames = 4
+    import depthai as dai  # the mock, installed by the fixture
+
+    shapes, seqs = [], []
+    with dai.Pipeline() as pipeline:
+        cam = pipeline.create(dai.node.Camera).build(dai.CameraBoardSocket.CAM_A)
+        queue = cam.requestOutput((640, 360), dai.ImgFrame.Type.BGR888i, fps=30).createOutputQueue()
+        pipeline.start()
+        while pipeline.isRunning():
+            frame: dai.ImgFrame = queue.get()
+            shapes.append(frame.getCvFrame().shape)
+            seqs.append(frame.getSequenceNum())
+    assert shapes == [(360, 640, 3)] * 4 and seqs == [0, 1, 2, 3]
+    assert not mock_depthai.devices[0].opened
+
+
+def test_source_uri_unchanged_for_http():
+    from rollcam.host.sources import parse_uri
+
+    assert parse_uri("http://h:1/a?b=c") == SourceURI("http://h:1/a?b=c", "http", "http://h:1/a?b=c", {})
+
+
+def test_http_latest_mode_skips_to_the_newest_frame(emu_frames, rollcam_mjpeg_server):
+    server = rollcam_mjpeg_server(emu_frames)
+    with open_camera(server.url + "#latest=1") as src:
+        src._latest._thread.join(timeout=30)  # the whole (finite) stream has arrived
+        newest = src.read()
+        assert src.read() is None
+    assert newest.sequence == emu_frames[-1].sequence and newest.meta["dropped"] == len(emu_frames) - 1
+
+
+def test_luxonis_style_example_on_the_mock(mock_depthai):
+    """The shape of depthai 3's camera example: default socket, no frame type, isRunning loop, break."""
+    import depthai as dai
+
+    with dai.Pipeline() as pipeline:
+        cam = pipeline.create(dai.node.Camera).build()
+        video_queue = cam.requestOutput((640, 400)).createOutputQueue()
+        full = cam.requestFullResolutionOutput()
+        pipeline.start()
+        n = 0
+        while pipeline.isRunning():
+            video_in = video_queue.get()
+            assert isinstance(video_in, dai.ImgFrame)
+            assert video_in.getCvFrame().shape == (400, 640, 3) and video_in.getTimestamp().total_seconds() >= 0
+            n += 1
+            if n == 2:
+                break
+    assert full.size == (1920, 1080)

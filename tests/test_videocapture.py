@@ -1,0 +1,92 @@
+"""The ``cv2.VideoCapture`` drop-in, driven by an unmodified OpenCV-style loop, and the preview conversions."""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+import pytest
+from rollcam.host import VideoCapture
+from rollcam.host.preview import to_bgr
+from rollcam.sim.errors import SourceError
+
+
+def opencv_script(capture_class, source, size=None):
+    """A loop as written for OpenCV: open, optionally set the size, read until the end, release."""
+    cap = capture_class(source)
+    if size:
+        cap.set(cv2.CAP_PROP_FRAME_WIDTH, size[0])
+        cap.set(cv2.CAP_PROP_FRAME_HEIGHT, size[1])
+    frames, stamps = [], []
+    while cap.isOpened():
+        ok, frame = cap.read()
+        if not ok:
+            break
+        frames.append(frame)
+        stamps.append(cap.get(cv2.CAP_PROP_POS_MSEC))
+    cap.release()
+    return frames, stamps
+
+
+def test_emu_uri_runs_an_opencv_loop():
+    frames, stamps = opencv_script(VideoCapture, "emu:imx219?frames=3&seed=1&pedestrians=4", size=(320, 180))
+    assert len(frames) == 3 and all(f.shape == (180, 320, 3) and f.dtype == np.uint8 for f in frames)
+    assert stamps[0] == 0.0 and stamps[1] > 0  # device timestamps in ms
+
+
+def test_emu_properties_and_seek():
+    cap = VideoCapture("emu:imx219?size=320x180&seed=1&pedestrians=4")
+    assert cap.isOpened() and cap.getBackendName() == "rollcam:emu"
+    assert (cap.get(cv2.CAP_PROP_FRAME_WIDTH), cap.get(cv2.CAP_PROP_FRAME_HEIGHT)) == (320, 180)
+    assert cap.get(cv2.CAP_PROP_FRAME_COUNT) == -1 and cap.get(cv2.CAP_PROP_FPS) > 0
+    assert cap.set(cv2.CAP_PROP_EXPOSURE, 2000) and cap.get(cv2.CAP_PROP_EXPOSURE) == pytest.approx(2000, rel=0.05)
+    assert cap.set(cv2.CAP_PROP_POS_FRAMES, 5)
+    ok, _img = cap.read()
+    assert ok and cap.frame.sequence == 5 and cap.frame.objects is not None
+    assert cap.get(cv2.CAP_PROP_POS_FRAMES) == 6
+    assert cap.set(cv2.CAP_PROP_CONVERT_RGB, 0)
+    assert cap.read()[1] is cap.frame.data
+    assert not cap.set(cv2.CAP_PROP_ZOOM, 2)
+    cap.release()
+    cap.release()
+    assert not cap.isOpened() and cap.read() == (False, None)
+
+
+def test_paths_and_files_behave_like_opencv(tmp_path):
+    path = str(tmp_path / "clip.avi")
+    writer = cv2.VideoWriter(path, cv2.VideoWriter_fourcc(*"MJPG"), 10, (64, 48))
+    for i in range(4):
+        writer.write(np.full((48, 64, 3), 40 * i, np.uint8))
+    writer.release()
+    ours, _ = opencv_script(VideoCapture, path)
+    theirs, _ = opencv_script(cv2.VideoCapture, path)
+    assert len(ours) == len(theirs) == 4
+    assert all(np.array_equal(a, b) for a, b in zip(ours, theirs, strict=True))
+    via_uri, stamps = opencv_script(VideoCapture, f"file:{path}")
+    assert len(via_uri) == 4 and stamps[1] == pytest.approx(100.0)
+
+
+def test_unopenable_uri_reports_like_opencv():
+    cap = VideoCapture("emu:no_such_sensor")
+    assert not cap.isOpened() and isinstance(cap.error, SourceError)
+    assert cap.read() == (False, None)
+
+
+def test_demosaic_table_matches_bayer_orders():
+    red = np.zeros((4, 4), np.uint8)
+    red[0::2, 0::2] = 200  # red sites of an RGGB mosaic
+    assert to_bgr(red, "RGGB")[1, 1].tolist() == [0, 0, 200]
+    assert to_bgr(red.astype(np.uint16) * 4, "RG10")[1, 1].tolist() == [0, 0, 200]
+    blue = np.zeros((4, 4), np.uint8)
+    blue[0::2, 0::2] = 200  # blue sites of a BGGR mosaic
+    assert to_bgr(blue, "BA81")[1, 1].tolist() == [200, 0, 0]
+    assert to_bgr(np.full((2, 2), 4095, np.uint16), "Y12 ").shape == (2, 2, 3)
+    with pytest.raises(SourceError, match="bit-packed"):
+        to_bgr(np.zeros(10, np.uint8), "pRAA")
+
+
+def test_http_mjpeg_through_the_drop_in(rollcam_camera, rollcam_mjpeg_server):
+    cam = rollcam_camera("imx219", size="160x90", seed=1, pedestrians=2)
+    sent = [cam.read(), cam.read()]
+    server = rollcam_mjpeg_server(sent)
+    frames, stamps = opencv_script(VideoCapture, server.url)
+    assert len(frames) == 2 and stamps == [f.timestamp_ns / 1e6 for f in sent]
