@@ -15,7 +15,8 @@ counter-based hash (SplitMix64), so frame n's noise does not depend on which fra
 a cropped mode sees the same pattern as the full array. Gaussian draws come from a 65,536-entry inverse-CDF
 table with linear interpolation (rescaled to unit variance; tails truncated at 4.4 sigma). Shot noise is
 exact Poisson (inversion) below 30 electrons and Gaussian with variance mu_e above, where the two agree to
-within the skew of 1/sqrt(30).
+within the skew of 1/sqrt(30); where the signal is further than 6 sigma from the full well, shot and read
+noise are drawn as one Gaussian of summed variance (the same distribution, one draw instead of two).
 
 ``flux_photons_per_s`` is the photon flux per pixel at linear radiance 1.0 (lens and pixel area folded in);
 by default, linear 1.0 fills the full well at the 10 ms reference exposure and unity gain, so a sensor-path
@@ -119,19 +120,23 @@ def _expose(lin, cfa, mono, flux_s, qe, dark_e, read_e, dsnu_e, prnu, full_well,
                     mu = max(mu, 0.0)
             mu += dark_e if dark else 0.0
             ht = _mix(frame_key + pix * _GOLD)
-            if shot:
-                if mu < POISSON_EXACT_BELOW_E:
-                    e = _poisson(mu, float(np.int64(ht >> np.uint64(32))) * (1.0 / 4294967296.0))
-                else:
-                    e = mu + math.sqrt(mu) * _normal(ht >> np.uint64(32), table)
+            off = dsnu_e * _normal(hf & mask32, table) if dsnu_on else 0.0
+            var_read = read_e * read_e if read else 0.0
+            if shot and mu >= POISSON_EXACT_BELOW_E and (not sat or mu + off + 6.0 * math.sqrt(mu) < full_well):
+                # Far from both ends shot and read noise are one Gaussian of summed variance: one draw.
+                e = mu + off + math.sqrt(mu + var_read) * _normal(ht >> np.uint64(32), table)
             else:
-                e = mu
-            if dsnu_on:
-                e += dsnu_e * _normal(hf & mask32, table)
-            if sat:
-                e = min(max(e, 0.0), full_well)
-            if read:
-                e += read_e * _normal(ht & mask32, table)
+                if shot and mu < POISSON_EXACT_BELOW_E:
+                    e = _poisson(max(mu, 0.0), float(np.int64(ht >> np.uint64(32))) * (1.0 / 4294967296.0))
+                elif shot:
+                    e = mu + math.sqrt(mu) * _normal(ht >> np.uint64(32), table)
+                else:
+                    e = mu
+                e += off
+                if sat:
+                    e = min(max(e, 0.0), full_well)
+                if read:
+                    e += read_e * _normal(ht & mask32, table)
             dn = e * k_dn + black
             if quantize:
                 v = math.floor(dn + 0.5)
