@@ -574,11 +574,19 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--scenes", default=None, help=f"comma-separated subset of {','.join(SCENES)}")
     parser.add_argument("--hog", action="store_true",
                         help="run the HOG people-detector recall study on the synthetic walkers instead (~1 min)")
+    parser.add_argument("--ptc", nargs="?", const="imx219", default=None, metavar="SENSOR",
+                        help="measure the photon transfer curve of emu:SENSOR (default imx219) instead: ptc.png")
+    parser.add_argument("--sensor", action="store_true",
+                        help="time the sensor model (noise, mosaic, packing) and adaptive motion-blur sampling")
 
 
 def run(args: argparse.Namespace) -> int:
     """Entry point of ``rollcam bench``: 0 done, 2 bad options."""
     overrides: dict[str, Any] = {}
+    if getattr(args, "ptc", None) or getattr(args, "sensor", False):
+        from .sensor_bench import run_sensor_cli
+
+        return run_sensor_cli(args)
     if getattr(args, "hog", False):
         from .hog_recall import hog_recall
 
