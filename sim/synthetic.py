@@ -24,6 +24,7 @@ import numpy as np
 
 from .errors import ConfigError
 from .exposure import DEFAULT_BOUND_PX, integrate, plan_samples
+from .formats import pixel_format as fourcc_of
 from .frame import Frame
 from .hwconfig import SensorConfig, SensorMode
 from .render import LineTruth, Renderer
@@ -156,14 +157,14 @@ class SyntheticCamera:
         brightness = s.gain * s.exposure_ns / max(ref_exposure, 1)
         self.renderer = Renderer(scene, cam, gain=brightness)
         self.start_ns = int(start_ns)
-        self.pixel_format = pixel_format
-        self.physics = pixel_format != "BGR3" if physics is None else bool(physics)
-        if not self.physics and pixel_format != "BGR3":
+        self.pixel_format = fourcc_of(pixel_format).fourcc
+        self.physics = self.pixel_format != "BGR3" if physics is None else bool(physics)
+        if not self.physics and self.pixel_format != "BGR3":
             raise ConfigError(f"pixel format {pixel_format!r} needs the sensor model (physics on)")
         self.blur_px = blur_px or None
         self.pipeline: SensorPipeline | None = None
         if self.physics:
-            self.pipeline = SensorPipeline.for_sensor(sensor, pixel_format, gain=s.gain, serial=serial,
+            self.pipeline = SensorPipeline.for_sensor(sensor, self.pixel_format, gain=s.gain, serial=serial,
                                                       seed=noise_seed, stages=noise, origin=(crop.top, crop.left))
 
     def __repr__(self) -> str:
