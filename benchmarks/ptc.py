@@ -121,13 +121,25 @@ def measure_ptc(sensor: str = "imx219", *, size: tuple[int, int] = (256, 192), s
         f = 0.0 if t1 == t0 else (t - t0) / (t1 - t0)
         return m0 + f * (m1 - m0), v0 + f * (v1 - v0)
 
-    points = []
-    for i, t_want in enumerate(np.linspace(t_min, t_max, steps)):
-        fa, fb, t, gain = _pair(f"{base}&level={level}&exposure_us={t_want / 1000:.3f}&noise_seed={seed + 1 + i}",
-                                w)
-        mean, var = _stats(fa, fb)
-        md, vd = dark_at(t)
-        points.append({"exposure_ns": t, "mean_dn": mean - md, "var_dn2": var - vd, "mean_raw_dn": mean})
+    points: list[dict[str, float]] = []
+    gain = 1.0
+
+    def measure(exposures: np.ndarray) -> None:
+        nonlocal gain
+        for t_want in exposures:
+            i = len(points)
+            fa, fb, t, gain = _pair(f"{base}&level={level}&exposure_us={t_want / 1000:.3f}"
+                                    f"&noise_seed={seed + 1 + i}", w)
+            mean, var = _stats(fa, fb)
+            md, vd = dark_at(t)
+            points.append({"exposure_ns": t, "mean_dn": mean - md, "var_dn2": var - vd, "mean_raw_dn": mean})
+
+    measure(np.linspace(t_min, t_max, steps))
+    # Refine around the variance peak (EMVA's saturation point) with a third as many steps again.
+    i_peak = int(np.argmax([p["var_dn2"] for p in points]))
+    lo, hi = points[max(i_peak - 1, 0)]["exposure_ns"], points[min(i_peak + 1, len(points) - 1)]["exposure_ns"]
+    measure(np.linspace(lo, hi, max(steps // 3, 2) + 2)[1:-1])
+    points.sort(key=lambda p: p["exposure_ns"])
     mu = np.array([p["mean_dn"] for p in points])
     var = np.array([p["var_dn2"] for p in points])
     i_sat = int(np.argmax(var))

@@ -57,6 +57,9 @@ def _actor_speeds(actors, world, lut, bld, light, cam, rot_tab, pos_tab, times, 
         if int(actors[o, B.A_TYPE]) == B.TYPE_BAR:
             out[o] = abs(actors[o, B.R_VX])
             continue
+        if not actors[o, B.P_H] > 0.0:  # a zero-size walker shows no pixel (and has no stride to walk by)
+            out[o] = 0.0
+            continue
         K.actor_parts(actors[o], world, lut, bld, light, cam, rot_tab[0], pos_tab[0], times[0], pa, scratch)
         for k in range(1, times.shape[0]):
             K.actor_parts(actors[o], world, lut, bld, light, cam, rot_tab[k], pos_tab[k], times[k], pb, scratch)
