@@ -228,17 +228,25 @@ class CaptureWriter:
         assert self._log is not None, "writer is closed"
         records: list[str] = []
         written: list[Path] = []
+        start = self._log.tell()
         try:
             for frame in frames:
                 path = self.out_dir / f"{self.frames:06d}_{SUFFIX.get(frame.shutter, frame.shutter)}.{self.fmt}"
+                written.append(path)  # listed before it exists, so an interrupt mid-write still removes it
                 write_atomic(path, encode_image(frame, self.fmt))
-                written.append(path)
                 records.append(json.dumps(frame.to_json(path.name), default=_json_default))
+            self._log.write("".join(r + "\n" for r in records))
         except BaseException:
-            for path in written:  # half a pair is no record: leave the folder exactly as the log says
-                path.unlink(missing_ok=True)
+            # An interrupt can land anywhere, even just after the records went into the log's buffer: then the
+            # images stay (close() flushes their records); otherwise half a pair is no record, so the folder
+            # is left exactly as the log says.
+            if self._log.tell() == start:
+                for path in written:
+                    path.unlink(missing_ok=True)
+            else:
+                self.frames += 1
+                self.images += len(records)
             raise
-        self._log.write("".join(r + "\n" for r in records))
         self._log.flush()
         self.frames += 1
         self.images += len(records)
