@@ -16,6 +16,7 @@ mid-exposure one.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from collections.abc import Iterator
 from dataclasses import dataclass
@@ -25,11 +26,11 @@ import numpy as np
 from .errors import ConfigError
 from .exposure import DEFAULT_BOUND_PX, integrate, plan_samples
 from .formats import pixel_format as fourcc_of
-from .frame import Frame
+from .frame import Box, Frame, ObjectTruth
 from .hwconfig import SensorConfig, SensorMode
 from .render import LineTruth, Renderer
 from .scene import Scene
-from .sensor import SensorPipeline
+from .sensor import SensorPipeline, flip
 from .timing import LineTiming, Readout, line_sample_times_ns
 
 DEFAULT_EXPOSURE_NS = 10_000_000
@@ -135,13 +136,33 @@ def resolve_settings(
     return StreamSettings(width, height, mode, timing, ro, shutter, exp_ns, _finite("gain", gain), clamped)
 
 
+_REVERSED = {Readout.TOP_TO_BOTTOM: Readout.BOTTOM_TO_TOP, Readout.BOTTOM_TO_TOP: Readout.TOP_TO_BOTTOM,
+             Readout.LEFT_TO_RIGHT: Readout.RIGHT_TO_LEFT, Readout.RIGHT_TO_LEFT: Readout.LEFT_TO_RIGHT}
+
+
+def _flip_box(b: Box | None, w: int, h: int, hflip: bool, vflip: bool) -> Box | None:
+    if b is None:
+        return None
+    x0, y0, x1, y1 = b
+    if hflip:
+        x0, x1 = w - x1, w - x0
+    if vflip:
+        y0, y1 = h - y1, h - y0
+    return (x0, y0, x1, y1)
+
+
+def _flip_truth(o: ObjectTruth, w: int, h: int, hflip: bool, vflip: bool) -> ObjectTruth:
+    return dataclasses.replace(o, box_gs=_flip_box(o.box_gs, w, h, hflip, vflip),
+                               box_rs=_flip_box(o.box_rs, w, h, hflip, vflip))
+
+
 class SyntheticCamera:
     """Frames of one scene camera as a given sensor would deliver them, with exact ground truth."""
 
     def __init__(self, sensor: SensorConfig, scene: Scene, camera: int | str = 0, *, start_ns: int = 0,
                  pixel_format: str = "BGR3", physics: bool | None = None, blur_px: float | None = DEFAULT_BOUND_PX,
-                 noise: frozenset[str] | None = None, serial: str = "0", noise_seed: int = 0,
-                 **settings) -> None:
+                 noise: frozenset[str] | None = None, serial: str = "0", noise_seed: int = 0, hflip: bool = False,
+                 vflip: bool = False, **settings) -> None:
         self.sensor = sensor
         self.scene = scene
         self.settings = resolve_settings(sensor, **settings)
@@ -165,7 +186,14 @@ class SyntheticCamera:
         self.pipeline: SensorPipeline | None = None
         if self.physics:
             self.pipeline = SensorPipeline.for_sensor(sensor, self.pixel_format, gain=s.gain, serial=serial,
-                                                      seed=noise_seed, stages=noise, origin=(crop.top, crop.left))
+                                                      seed=noise_seed, stages=noise, origin=(crop.top, crop.left),
+                                                      hflip=hflip, vflip=vflip, size=(s.width, s.height))
+            self.pixel_format = self.pipeline.fourcc
+        self.hflip, self.vflip = bool(hflip), bool(vflip)
+        # A flipped readout scans the scene the other way: a vertical flip of a row readout (or a horizontal
+        # flip of a column readout) reads the scene's last line first.
+        scan_flip = vflip if not s.readout.by_column else hflip
+        self.scan_readout = _REVERSED[s.readout] if scan_flip else s.readout
 
     def __repr__(self) -> str:
         s = self.settings
@@ -178,12 +206,16 @@ class SyntheticCamera:
         return self.settings.timing.frame_start_ns(index, self.start_ns)
 
     def line_times_ns(self, index: int, shutter: str | None = None) -> np.ndarray:
-        """Sample time of every image line of frame ``index`` under ``shutter`` (default: the stream's)."""
+        """Sample time of every scene line of frame ``index`` under ``shutter`` (default: the stream's).
+
+        These are the render's times, in scene orientation; a flipped stream's ``Frame.row_times_ns`` are
+        the same times mirrored into output orientation.
+        """
         s = self.settings
         shutter = shutter or s.shutter
         t0 = self.timestamp_ns(index) + s.exposure_ns // 2
         timing = s.timing if shutter == "rolling" else None
-        return line_sample_times_ns(t0, s.n_lines, timing, s.readout)
+        return line_sample_times_ns(t0, s.n_lines, timing, self.scan_readout)
 
     def frame(self, index: int, shutter: str | None = None) -> Frame:
         """Render frame ``index`` (optionally under the other shutter, for paired GS/RS data)."""
@@ -206,8 +238,14 @@ class SyntheticCamera:
                 "time_of_day": self.scene.time_of_day, **extra}
         if s.clamped_exposure:
             meta["exposure_clamped"] = True
+        if data is None:
+            data = np.ascontiguousarray(flip(res.image, self.hflip, self.vflip))
+        if self.hflip or self.vflip:
+            objects = tuple(_flip_truth(o, s.width, s.height, self.hflip, self.vflip) for o in objects)
+            out_flip = self.vflip if not by_col else self.hflip
+            times = times[::-1].copy() if out_flip else times
         return Frame(
-            data=res.image if data is None else data,
+            data=data,
             format=fourcc,
             size=(s.width, s.height),
             sequence=index,

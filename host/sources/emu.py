@@ -11,7 +11,9 @@ processed YUYV, NV12, YU12, GREY, RGB3), ``physics`` (on/off: exposure integrati
 on by default for every format but BGR3, whose default is the clean render), ``blur_px`` (adaptive
 motion-blur bound in pixels, default 0.5; 0 samples mid-exposure only), ``noise`` (on, off, or a comma list
 of stages: shot, dark, read, dsnu, prnu, saturation), ``serial`` (device serial number: fixes DSNU/PRNU),
-``noise_seed`` (temporal noise seed). Example: ``emu:imx219?format=pRAA&scene=flat&level=0.3&gain=2``.
+``noise_seed`` (temporal noise seed), ``hflip`` / ``vflip`` (on/off: mirrored readout; a vertical flip
+scans the scene bottom-up, and a raw stream's Bayer order, hence fourcc, changes as the sensor's does).
+Example: ``emu:imx219?format=pRAA&scene=flat&level=0.3&gain=2``.
 """
 
 from __future__ import annotations
@@ -29,7 +31,7 @@ from .base import CameraSource, SourceURI, finite_float, non_negative_int, posit
 
 OPTIONS = {"scene", "seed", "speed", "camera", "time", "pedestrians", "ego", "vx", "level", "shutter", "readout",
            "exposure_us", "gain", "fps", "size", "start_ns", "frames", "format", "physics", "blur_px", "noise",
-           "serial", "noise_seed"}
+           "serial", "noise_seed", "hflip", "vflip"}
 
 
 def parse_size(text: str) -> tuple[int, int]:
@@ -88,6 +90,8 @@ def build_camera(sensor_name: str, opts: SourceURI) -> SyntheticCamera:
             noise=parse_stages(opts.get("noise", str)),
             serial=opts.get("serial", str, "0"),
             noise_seed=opts.get("noise_seed", non_negative_int, 0),
+            hflip=opts.get("hflip", _on_off, False),
+            vflip=opts.get("vflip", _on_off, False),
         )
     except ConfigError as exc:
         raise SourceError(f"source {opts.uri!r}: {exc}") from None
