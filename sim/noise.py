@@ -97,9 +97,22 @@ def _poisson(lam, u):
     return float(k)
 
 
+@njit(cache=True, parallel=True)
+def _fixed_patterns(fp_key, oy, ox, array_w, prnu, dsnu_e, table, gain_map, off_map):
+    """PRNU gain (1 + prnu * N) and DSNU offset (dsnu * N, electrons) of each pixel, from its array position."""
+    h, w = gain_map.shape
+    mask32 = np.uint64(0xFFFFFFFF)
+    for y in prange(h):
+        row_idx = np.uint64((y + oy) * array_w + ox)
+        for x in range(w):
+            hf = _mix(fp_key + (row_idx + np.uint64(x)) * _GOLD)
+            gain_map[y, x] = max(1.0 + prnu * _normal(hf >> np.uint64(32), table), 0.0)
+            off_map[y, x] = dsnu_e * _normal(hf & mask32, table)
+
+
 @njit(cache=True, parallel=True, fastmath=True)
-def _expose(lin, cfa, mono, flux_s, qe, dark_e, read_e, dsnu_e, prnu, full_well, k_dn, black, max_dn, frame_key,
-            fp_key, oy, ox, array_w, on, table, out_int, out_f, quantize):
+def _expose(lin, cfa, mono, flux_s, qe, dark_e, read_e, full_well, k_dn, black, max_dn, frame_key, oy, ox, array_w,
+            on, table, gain_map, off_map, out_int, out_f, quantize):
     """The per-pixel model; ``on`` = flags (shot, dark, read, dsnu, prnu, saturation)."""
     h, w = out_int.shape if quantize else out_f.shape
     shot, dark, read, dsnu_on, prnu_on, sat = on[0], on[1], on[2], on[3], on[4], on[5]
@@ -113,14 +126,11 @@ def _expose(lin, cfa, mono, flux_s, qe, dark_e, read_e, dsnu_e, prnu, full_well,
                 rad = lin[y, x, cfa[y & 1, x & 1]]
             mu = qe * max(rad, 0.0) * flux_s
             pix = row_idx + np.uint64(x)
-            if dsnu_on or prnu_on:
-                hf = _mix(fp_key + pix * _GOLD)
-                if prnu_on:
-                    mu *= 1.0 + prnu * _normal(hf >> np.uint64(32), table)
-                    mu = max(mu, 0.0)
+            if prnu_on:
+                mu *= gain_map[y, x]
             mu += dark_e if dark else 0.0
             ht = _mix(frame_key + pix * _GOLD)
-            off = dsnu_e * _normal(hf & mask32, table) if dsnu_on else 0.0
+            off = off_map[y, x] if dsnu_on else 0.0
             var_read = read_e * read_e if read else 0.0
             if shot and mu >= POISSON_EXACT_BELOW_E and (not sat or mu + off + 6.0 * math.sqrt(mu) < full_well):
                 # Far from both ends shot and read noise are one Gaussian of summed variance: one draw.
@@ -164,6 +174,7 @@ class SensorModel:
     seed: int = 0
     stages: frozenset[str] = field(default_factory=lambda: frozenset(STAGES))
     flux_photons_per_s: float | None = None
+    _patterns: dict = field(default_factory=dict, init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
         unknown = set(self.stages) - set(STAGES)
@@ -192,6 +203,23 @@ class SensorModel:
         """DN per electron at these gains (EMVA K)."""
         return self.noise.system_gain_dn_per_e * analog_gain * digital_gain
 
+    def fixed_patterns(self, h: int, w: int, origin: tuple[int, int] = (0, 0), array_width: int | None = None
+                       ) -> tuple[np.ndarray, np.ndarray]:
+        """PRNU gain and DSNU offset (electrons) maps, float32 (h, w), of the pixels at ``origin`` on the array.
+
+        They depend on the serial number and pixel position only; computed once per geometry and kept.
+        """
+        key = (h, w, int(origin[0]), int(origin[1]), int(array_width or w))
+        cache = self._patterns
+        if key not in cache:
+            if len(cache) >= 4:  # a stream uses one geometry; keep a few, not every size ever asked for
+                cache.pop(next(iter(cache)))
+            gain_map, off_map = np.empty((h, w), np.float32), np.empty((h, w), np.float32)
+            _fixed_patterns(_key("fixed", str(self.serial)), key[2], key[3], key[4], self.noise.prnu_fraction,
+                            self.noise.dsnu_e, normal_table(), gain_map, off_map)
+            cache[key] = (gain_map, off_map)
+        return cache[key]
+
     def expose(self, radiance: np.ndarray, exposure_ns: int, frame_index: int, *, analog_gain: float = 1.0,
                digital_gain: float = 1.0, origin: tuple[int, int] = (0, 0), array_width: int | None = None
                ) -> np.ndarray:
@@ -219,11 +247,12 @@ class SensorModel:
         out_i = np.empty((h, w) if quantize else (0, 0), np.uint16)
         out_f = np.empty((0, 0) if quantize else (h, w), np.float64)
         lin = np.ascontiguousarray(radiance, dtype=np.float32)
+        gain_map, off_map = self.fixed_patterns(h, w, origin, int(array_width or w))
         _expose(lin, cfa, self.cfa == "mono", self.flux * t_s, n.quantum_efficiency,
-                n.dark_current_e_per_s * t_s, n.dark_noise_e, n.dsnu_e, n.prnu_fraction, n.full_well_e,
+                n.dark_current_e_per_s * t_s, n.dark_noise_e, n.full_well_e,
                 self.system_gain(analog_gain, digital_gain), n.black_level_dn, float(self.max_dn),
-                _key("frame", self.seed, int(frame_index)), _key("fixed", str(self.serial)), int(origin[0]),
-                int(origin[1]), int(array_width or w), on, normal_table(), out_i, out_f, quantize)
+                _key("frame", self.seed, int(frame_index)), int(origin[0]), int(origin[1]), int(array_width or w),
+                on, normal_table(), gain_map, off_map, out_i, out_f, quantize)
         return out_i if quantize else out_f
 
 
