@@ -226,13 +226,17 @@ def integrate(renderer: Renderer, plan: SamplePlan, *, by_column: bool = False) 
         assert lin is not None
         painted += res.lines_painted
         if acc is None:
-            acc = lin.astype(np.float32, copy=True)
+            # Each render returns fresh arrays, so the first pass's can be the accumulator.
+            acc = lin if lin.flags.writeable and lin.dtype == np.float32 else lin.astype(np.float32)
             continue
-        take = plan.n > j
-        if by_column:
-            acc[:, take] += lin[:, take]
-        else:
-            acc[take] += lin[take]
+        # Add the lines that have a sample j, as slices over runs of consecutive lines (no temporaries).
+        take = np.concatenate(([False], plan.n > j, [False]))
+        edges = np.flatnonzero(take[1:] != take[:-1])
+        for a, b in zip(edges[0::2], edges[1::2], strict=True):
+            if by_column:
+                acc[:, a:b] += lin[:, a:b]
+            else:
+                acc[a:b] += lin[a:b]
     assert acc is not None
     if passes > 1:
         inv = (1.0 / plan.n).astype(np.float32)
