@@ -18,9 +18,10 @@ exact Poisson (inversion) below 30 electrons and Gaussian with variance mu_e abo
 within the skew of 1/sqrt(30); where the signal is further than 6 sigma from the full well, shot and read
 noise are drawn as one Gaussian of summed variance (the same distribution, one draw instead of two).
 
-``flux_photons_per_s`` is the photon flux per pixel at linear radiance 1.0 (lens and pixel area folded in);
-by default, linear 1.0 fills the full well at the 10 ms reference exposure and unity gain, so a sensor-path
-frame at default settings is as bright as the clean render.
+``flux_photons_per_s`` is the photon flux per pixel at linear radiance 1.0 (lens and pixel area folded in;
+``SensorModel``'s own, else the sensor YAML's ``noise.flux_photons_per_s``); by default, linear 1.0 fills
+the full well at the 10 ms reference exposure and unity gain, so a sensor-path frame at default settings is
+as bright as the clean render.
 """
 
 from __future__ import annotations
@@ -192,6 +193,8 @@ class SensorModel:
         """Photons per pixel per second at linear radiance 1.0."""
         if self.flux_photons_per_s is not None:
             return self.flux_photons_per_s
+        if self.noise.flux_photons_per_s is not None:
+            return self.noise.flux_photons_per_s
         return self.noise.full_well_e / (self.noise.quantum_efficiency * REFERENCE_EXPOSURE_S)
 
     @property

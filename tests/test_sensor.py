@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 
@@ -251,3 +252,12 @@ def test_vflip_scans_the_scene_bottom_up():
         scene_times = cam.camera.line_times_ns(0)
     assert np.all(np.diff(scene_times) < 0)  # the scene's bottom line is read first
     assert np.array_equal(f.row_times_ns, scene_times[::-1])
+
+
+def test_photon_flux_from_the_sensor_description():
+    noise = dataclasses.replace(N, flux_photons_per_s=1e5)
+    m = SensorModel(noise, 10, "RGGB", stages=frozenset({"quantization"}))
+    assert m.flux == 1e5
+    assert np.all(m.expose(flat(1.0), 10_000_000, 0) == math.floor(0.65 * 1e3 * 0.213 + 64.5))
+    with pytest.raises(ConfigError, match="flux_photons_per_s"):
+        dataclasses.replace(N, flux_photons_per_s=-1.0)
