@@ -99,7 +99,7 @@ def test_8k_sensor_timing_and_sensor_model():
 @pytest.mark.slow
 def test_8k_frame_renders_through_the_sensor_path():
     cam = SyntheticCamera(IMX219, make_street_scene(0, speed="fast", width=7680, height=4320), size=(7680, 4320),
-                          pixel_format="pRAA")
+                          pixel_format="pRAA", blur_px=None)
     f = cam.frame(0)
     assert f.data.shape == (4320, 9600) and f.width == 7680
 
