@@ -577,6 +577,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--detect", action="store_true",
                         help="time the detect loop's overhead and each built-in detector instead")
     parser.add_argument("--onnx", action="append", metavar="MODEL", help="with --detect: also time onnx:MODEL")
+    parser.add_argument("--ptc", nargs="?", const="imx219", default=None, metavar="SENSOR",
+                        help="measure the photon transfer curve of emu:SENSOR (default imx219) instead: ptc.png")
+    parser.add_argument("--sensor", action="store_true",
+                        help="time the sensor model (noise, mosaic, packing) and adaptive motion-blur sampling")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -586,6 +590,10 @@ def run(args: argparse.Namespace) -> int:
         from .detect import run_detect_bench
 
         return run_detect_bench(args)
+    if getattr(args, "ptc", None) or getattr(args, "sensor", False):
+        from .sensor_bench import run_sensor_cli
+
+        return run_sensor_cli(args)
     if getattr(args, "hog", False):
         from .hog_recall import hog_recall
 

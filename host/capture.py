@@ -22,18 +22,19 @@ from typing import Any, TextIO
 
 import numpy as np
 from rollcam.sim.errors import ConfigError, SourceError
+from rollcam.sim.formats import FORMATS
 from rollcam.sim.frame import Frame
 
 from .sources import CameraSource
 
 FRAMES_LOG = "frames.jsonl"
 CAPTURE_INFO = "capture.json"
-IMAGE_FORMATS = ("png", "jpg")
+IMAGE_FORMATS = ("png", "jpg", "npy")
 SHUTTER_CHOICES = ("rolling", "global", "both")
 SUFFIX = {"rolling": "rs", "global": "gs"}
 _TMP_SUFFIX = ".part"
 # Files a capture writes; --overwrite removes only these, never anything else the folder holds.
-_CAPTURE_FILE = re.compile(r"\d{6,}_(rs|gs)\.(png|jpg)(\.part)?|\.?(frames\.jsonl|capture\.json)(\.part)?")
+_CAPTURE_FILE = re.compile(r"\d{6,}_(rs|gs)\.(png|jpg|npy)(\.part)?|\.?(frames\.jsonl|capture\.json)(\.part)?")
 
 
 @dataclass
@@ -116,26 +117,45 @@ def write_atomic(path: Path, data: bytes) -> None:
         raise
 
 
+_PICTURES = ("BGR3", "RGB3", "GREY")
+
+
 def image_array(frame: Frame, fmt: str) -> np.ndarray:
-    """Pixel data in the layout ``cv2.imencode`` stores (BGR or single channel) for image format ``fmt``."""
+    """Pixel data in the layout ``cv2.imencode`` stores for image format ``fmt``.
+
+    BGR3/RGB3 become BGR pictures, GREY a grey one. Any other format (raw Bayer or mono, CSI-2 packed,
+    YUYV, NV12) is stored losslessly as its memory layout in 2-D: rows by bytes (uint8) or by samples
+    (uint16, 16-bit PNG), so ``frames.jsonl``'s format, width, height and bytesperline restore the frame.
+    JPEG would lose samples, so it takes only the picture formats.
+    """
     data = frame.data
-    if data.ndim == 3 and data.shape[2] == 3:
-        img = data[..., ::-1] if frame.format == "RGB3" else data
-    elif data.ndim == 2 or (data.ndim == 3 and data.shape[2] == 1):
-        img = data
-    else:
-        raise SourceError(f"frame {frame.sequence} ({frame.format}, shape {data.shape}) cannot be stored as an "
-                          "image file; capture needs BGR3, RGB3 or single-channel frames")
-    if img.dtype == np.uint16 and fmt == "png":
+    if frame.format in _PICTURES or frame.format not in FORMATS:
+        if data.ndim == 3 and data.shape[2] == 3:
+            img = data[..., ::-1] if frame.format == "RGB3" else data
+        elif data.ndim == 2 or (data.ndim == 3 and data.shape[2] == 1):
+            img = data
+        else:
+            raise SourceError(f"frame {frame.sequence} ({frame.format}, shape {data.shape}) cannot be stored as an "
+                              "image file; capture needs BGR3, RGB3 or single-channel frames")
+        if img.dtype != np.uint8 and not (img.dtype == np.uint16 and fmt == "png"):
+            raise ConfigError(f"--format {fmt} cannot hold {frame.format} frames of dtype {img.dtype}"
+                              + ("; use --format png" if img.dtype == np.uint16 else ""))
         return img
-    if img.dtype != np.uint8:
-        raise ConfigError(f"--format {fmt} cannot hold {frame.format} frames of dtype {img.dtype}"
-                          + ("; use --format png" if img.dtype == np.uint16 else ""))
-    return img
+    if fmt == "jpg":
+        raise ConfigError(f"--format jpg would lose the samples of {frame.format!r} frames; use png or npy")
+    if data.dtype not in (np.uint8, np.uint16):
+        raise SourceError(f"frame {frame.sequence} ({frame.format}) has dtype {data.dtype}, not uint8/uint16")
+    return data.reshape(data.shape[0], -1)
 
 
 def encode_image(frame: Frame, fmt: str) -> bytes:
-    """The frame as PNG or JPEG bytes."""
+    """The frame as PNG or JPEG bytes, or its data array exactly as ``.npy``."""
+    if fmt == "npy":
+        import io
+
+        buf = io.BytesIO()
+        np.save(buf, np.ascontiguousarray(frame.data), allow_pickle=False)
+        return buf.getvalue()
     import cv2
 
     ok, buf = cv2.imencode(f".{fmt}", image_array(frame, fmt))
@@ -208,17 +228,25 @@ class CaptureWriter:
         assert self._log is not None, "writer is closed"
         records: list[str] = []
         written: list[Path] = []
+        start = self._log.tell()
         try:
             for frame in frames:
                 path = self.out_dir / f"{self.frames:06d}_{SUFFIX.get(frame.shutter, frame.shutter)}.{self.fmt}"
+                written.append(path)  # listed before it exists, so an interrupt mid-write still removes it
                 write_atomic(path, encode_image(frame, self.fmt))
-                written.append(path)
                 records.append(json.dumps(frame.to_json(path.name), default=_json_default))
+            self._log.write("".join(r + "\n" for r in records))
         except BaseException:
-            for path in written:  # half a pair is no record: leave the folder exactly as the log says
-                path.unlink(missing_ok=True)
+            # An interrupt can land anywhere, even just after the records went into the log's buffer: then the
+            # images stay (close() flushes their records); otherwise half a pair is no record, so the folder
+            # is left exactly as the log says.
+            if self._log.tell() == start:
+                for path in written:
+                    path.unlink(missing_ok=True)
+            else:
+                self.frames += 1
+                self.images += len(records)
             raise
-        self._log.write("".join(r + "\n" for r in records))
         self._log.flush()
         self.frames += 1
         self.images += len(records)

@@ -201,7 +201,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--out", required=True, metavar="DIR", help="output folder")
     p.add_argument("--shutter", choices=("rolling", "global", "both"), default=None,
                    help="'both' stores GS and RS frames of the same instants (default: the source's shutter)")
-    p.add_argument("--format", choices=("png", "jpg"), default="png", help="image file format (default: png)")
+    p.add_argument("--format", choices=("png", "jpg", "npy"), default="png",
+                   help="image file format (default: png; raw frames go losslessly into png or npy)")
     p.add_argument("--overwrite", action="store_true", help="replace an earlier capture in DIR")
     p.add_argument("--json", action="store_true", help="print a JSON summary on stdout")
     p.add_argument("--progress", action="store_true", help="show progress even when stderr is not a terminal")

@@ -55,7 +55,8 @@ class Frame:
 
     ``timestamp_ns`` is the start of exposure of the first line read, in the device clock. ``row_times_ns``
     holds the sample time of every image line (row, or column when ``readout`` is by column) in int64 ns;
-    ``line_time_ns`` is the nominal line time rounded to whole ns (0 for a global shutter).
+    ``line_time_ns`` is the nominal line time rounded to whole ns (0 for a global shutter). ``data`` is laid
+    out as ``format`` says (``rollcam.sim.formats``); ``size`` (width, height) is the image size in pixels.
     """
 
     data: np.ndarray
@@ -69,16 +70,25 @@ class Frame:
     row_times_ns: np.ndarray | None = field(default=None, repr=False)
     objects: tuple[ObjectTruth, ...] | None = field(default=None, repr=False)
     meta: dict[str, Any] = field(default_factory=dict, repr=False)
+    size: tuple[int, int] | None = field(default=None, repr=False)
 
     @property
     def height(self) -> int:
-        """Image height in pixels."""
-        return int(self.data.shape[0])
+        """Image height in pixels (``size`` when given: packed and planar layouts differ from the shape)."""
+        return int(self.size[1]) if self.size is not None else int(self.data.shape[0])
 
     @property
     def width(self) -> int:
-        """Image width in pixels."""
-        return int(self.data.shape[1])
+        """Image width in pixels (``size`` when given, e.g. for CSI-2 packed data of bytesperline columns)."""
+        return int(self.size[0]) if self.size is not None else int(self.data.shape[1])
+
+    @property
+    def bytesperline(self) -> int | None:
+        """V4L2 ``bytesperline`` of the first plane when the format is one rollcam knows, else None."""
+        from .formats import FORMATS
+
+        f = FORMATS.get(self.format)
+        return None if f is None else f.bytesperline(self.width)
 
     def __repr__(self) -> str:
         n_obj = "-" if self.objects is None else len(self.objects)
@@ -99,6 +109,8 @@ class Frame:
             "width": self.width,
             "height": self.height,
             "format": self.format,
+            "bytesperline": self.bytesperline,
+            "dtype": str(self.data.dtype),
             "file": file,
         }
         if self.objects is not None:

@@ -211,6 +211,8 @@ class NoiseParams(_Checked):
     prnu_fraction: float = _f(float, "a number in [0, 1)", lambda v: 0 <= v < 1)
     black_level_dn: float = _f(float, "a number >= 0 (DN)", _nonneg)
     ideal: bool = _f(bool, "true or false", None, False)
+    flux_photons_per_s: float | None = _f(float, "a positive number (photons per pixel per second at linear "
+                                          "radiance 1.0), or null for full well at 10 ms", _pos, None)
 
 
 @dataclass(frozen=True, kw_only=True)

@@ -6,10 +6,17 @@ clock, exact after any uptime). Each line is sampled at the middle of its exposu
 what a real pixel integrates: a global-shutter frame samples every line at ``timestamp + exposure / 2``, a
 rolling-shutter frame line ``k`` (in readout order) ``line_offset(k)`` later. Brightness scales with
 exposure and gain relative to the sensor's default exposure.
+
+With ``physics`` (the default for any ``pixel_format`` but BGR3) frames go through the sensor model
+instead: each line integrates the scene over its own exposure window with adaptive motion-blur sampling
+(``rollcam.sim.exposure``, bound ``blur_px``; None samples mid-exposure only), then EMVA 1288 noise, the
+ADC, and the requested raw layout or the preview ISP (``rollcam.sim.sensor``). Ground truth stays the
+mid-exposure one.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from collections.abc import Iterator
 from dataclasses import dataclass
@@ -17,10 +24,13 @@ from dataclasses import dataclass
 import numpy as np
 
 from .errors import ConfigError
-from .frame import Frame
+from .exposure import DEFAULT_BOUND_PX, integrate, plan_samples
+from .formats import pixel_format as fourcc_of
+from .frame import Box, Frame, ObjectTruth
 from .hwconfig import SensorConfig, SensorMode
 from .render import LineTruth, Renderer
 from .scene import Scene
+from .sensor import SensorPipeline, flip
 from .timing import LineTiming, Readout, line_sample_times_ns
 
 DEFAULT_EXPOSURE_NS = 10_000_000
@@ -126,11 +136,33 @@ def resolve_settings(
     return StreamSettings(width, height, mode, timing, ro, shutter, exp_ns, _finite("gain", gain), clamped)
 
 
+_REVERSED = {Readout.TOP_TO_BOTTOM: Readout.BOTTOM_TO_TOP, Readout.BOTTOM_TO_TOP: Readout.TOP_TO_BOTTOM,
+             Readout.LEFT_TO_RIGHT: Readout.RIGHT_TO_LEFT, Readout.RIGHT_TO_LEFT: Readout.LEFT_TO_RIGHT}
+
+
+def _flip_box(b: Box | None, w: int, h: int, hflip: bool, vflip: bool) -> Box | None:
+    if b is None:
+        return None
+    x0, y0, x1, y1 = b
+    if hflip:
+        x0, x1 = w - x1, w - x0
+    if vflip:
+        y0, y1 = h - y1, h - y0
+    return (x0, y0, x1, y1)
+
+
+def _flip_truth(o: ObjectTruth, w: int, h: int, hflip: bool, vflip: bool) -> ObjectTruth:
+    return dataclasses.replace(o, box_gs=_flip_box(o.box_gs, w, h, hflip, vflip),
+                               box_rs=_flip_box(o.box_rs, w, h, hflip, vflip))
+
+
 class SyntheticCamera:
     """Frames of one scene camera as a given sensor would deliver them, with exact ground truth."""
 
     def __init__(self, sensor: SensorConfig, scene: Scene, camera: int | str = 0, *, start_ns: int = 0,
-                 **settings) -> None:
+                 pixel_format: str = "BGR3", physics: bool | None = None, blur_px: float | None = DEFAULT_BOUND_PX,
+                 noise: frozenset[str] | None = None, serial: str = "0", noise_seed: int = 0, hflip: bool = False,
+                 vflip: bool = False, **settings) -> None:
         self.sensor = sensor
         self.scene = scene
         self.settings = resolve_settings(sensor, **settings)
@@ -146,6 +178,22 @@ class SyntheticCamera:
         brightness = s.gain * s.exposure_ns / max(ref_exposure, 1)
         self.renderer = Renderer(scene, cam, gain=brightness)
         self.start_ns = int(start_ns)
+        self.pixel_format = fourcc_of(pixel_format).fourcc
+        self.physics = self.pixel_format != "BGR3" if physics is None else bool(physics)
+        if not self.physics and self.pixel_format != "BGR3":
+            raise ConfigError(f"pixel format {pixel_format!r} needs the sensor model (physics on)")
+        self.blur_px = blur_px or None
+        self.pipeline: SensorPipeline | None = None
+        if self.physics:
+            self.pipeline = SensorPipeline.for_sensor(sensor, self.pixel_format, gain=s.gain, serial=serial,
+                                                      seed=noise_seed, stages=noise, origin=(crop.top, crop.left),
+                                                      hflip=hflip, vflip=vflip, size=(s.width, s.height))
+            self.pixel_format = self.pipeline.fourcc
+        self.hflip, self.vflip = bool(hflip), bool(vflip)
+        # A flipped readout scans the scene the other way: a vertical flip of a row readout (or a horizontal
+        # flip of a column readout) reads the scene's last line first.
+        scan_flip = vflip if not s.readout.by_column else hflip
+        self.scan_readout = _REVERSED[s.readout] if scan_flip else s.readout
 
     def __repr__(self) -> str:
         s = self.settings
@@ -158,12 +206,16 @@ class SyntheticCamera:
         return self.settings.timing.frame_start_ns(index, self.start_ns)
 
     def line_times_ns(self, index: int, shutter: str | None = None) -> np.ndarray:
-        """Sample time of every image line of frame ``index`` under ``shutter`` (default: the stream's)."""
+        """Sample time of every scene line of frame ``index`` under ``shutter`` (default: the stream's).
+
+        These are the render's times, in scene orientation; a flipped stream's ``Frame.row_times_ns`` are
+        the same times mirrored into output orientation.
+        """
         s = self.settings
         shutter = shutter or s.shutter
         t0 = self.timestamp_ns(index) + s.exposure_ns // 2
         timing = s.timing if shutter == "rolling" else None
-        return line_sample_times_ns(t0, s.n_lines, timing, s.readout)
+        return line_sample_times_ns(t0, s.n_lines, timing, self.scan_readout)
 
     def frame(self, index: int, shutter: str | None = None) -> Frame:
         """Render frame ``index`` (optionally under the other shutter, for paired GS/RS data)."""
@@ -173,15 +225,29 @@ class SyntheticCamera:
             raise ConfigError(f"shutter {shutter!r} is not one of {SHUTTERS}")
         times = self.line_times_ns(index, shutter)
         by_col = s.readout.by_column
-        res = self.renderer.render_lines(times, by_column=by_col)
+        data, fourcc, extra = None, "BGR3", {}
+        if self.pipeline is not None:
+            res, data, extra = self._sensor_frame(index, times, shutter)
+            fourcc = self.pipeline.fourcc
+        else:
+            res = self.renderer.render_lines(times, by_column=by_col)
         t_ref = self.timestamp_ns(index) + s.exposure_ns // 2
         gs_truth: LineTruth | None = res.truth if shutter == "global" else None
         objects = self.renderer.object_truth(res.truth, t_ref, by_column=by_col, gs_truth=gs_truth)
         meta = {"scene": self.scene.kind, "seed": self.scene.seed, "camera": self.camera.name,
-                "time_of_day": self.scene.time_of_day}
+                "time_of_day": self.scene.time_of_day, **extra}
+        if s.clamped_exposure:
+            meta["exposure_clamped"] = True
+        if data is None:
+            data = np.ascontiguousarray(flip(res.image, self.hflip, self.vflip))
+        if self.hflip or self.vflip:
+            objects = tuple(_flip_truth(o, s.width, s.height, self.hflip, self.vflip) for o in objects)
+            out_flip = self.vflip if not by_col else self.hflip
+            times = times[::-1].copy() if out_flip else times
         return Frame(
-            data=res.image,
-            format="BGR3",
+            data=data,
+            format=fourcc,
+            size=(s.width, s.height),
             sequence=index,
             timestamp_ns=self.timestamp_ns(index),
             line_time_ns=s.timing.line_time_ns if shutter == "rolling" else 0,
@@ -192,6 +258,26 @@ class SyntheticCamera:
             objects=objects,
             meta=meta,
         )
+
+    def _sensor_frame(self, index: int, mid_times: np.ndarray, shutter: str):
+        """Truth render at mid-exposure, radiance integrated over each line's window, sensor output."""
+        s, pipe = self.settings, self.pipeline
+        assert pipe is not None
+        by_col = s.readout.by_column
+        starts = mid_times - s.exposure_ns // 2
+        extra: dict = pipe.info()
+        if self.blur_px is None:
+            res = self.renderer.render_lines(mid_times, by_column=by_col, linear=True)
+            radiance = res.linear
+            extra["blur_samples_max"] = 1
+        else:
+            plan = plan_samples(self.renderer, starts, s.exposure_ns, by_column=by_col, bound_px=self.blur_px)
+            radiance = integrate(self.renderer, plan, by_column=by_col).linear
+            res = self.renderer.render_lines(mid_times, by_column=by_col, truth_only=True)
+            extra.update(blur_bound_px=self.blur_px, blur_samples_max=int(plan.n.max()),
+                         blur_evaluations=plan.evaluations, blur_capped=plan.capped)
+        assert radiance is not None
+        return res, pipe.deliver(radiance, s.exposure_ns, index), extra
 
     def frames(self, n: int | None = None, shutter: str | None = None, first: int = 0) -> Iterator[Frame]:
         """Consecutive frames (forever when ``n`` is None)."""

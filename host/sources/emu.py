@@ -5,6 +5,15 @@ Options: ``scene`` (street | chart | flat), ``seed``, ``speed`` (static | normal
 ``ego`` (none | pan | walk | vehicle | drone), ``vx`` (chart speed, px/s), ``level`` (flat-field radiance),
 ``shutter`` (rolling | global), ``readout``, ``exposure_us``, ``gain``, ``fps``, ``size`` (WxH),
 ``start_ns`` (device clock at frame 0), ``frames`` (stop after N frames; endless by default).
+
+Sensor path: ``format`` (a V4L2 fourcc: BGR3 by default; raw Bayer/mono such as RGGB, RG10, pRAA, Y10, or
+processed YUYV, NV12, YU12, GREY, RGB3), ``physics`` (on/off: exposure integration, EMVA noise and the ADC;
+on by default for every format but BGR3, whose default is the clean render), ``blur_px`` (adaptive
+motion-blur bound in pixels, default 0.5; 0 samples mid-exposure only), ``noise`` (on, off, or a comma list
+of stages: shot, dark, read, dsnu, prnu, saturation), ``serial`` (device serial number: fixes DSNU/PRNU),
+``noise_seed`` (temporal noise seed), ``hflip`` / ``vflip`` (on/off: mirrored readout; a vertical flip
+scans the scene bottom-up, and a raw stream's Bayer order, hence fourcc, changes as the sensor's does).
+Example: ``emu:imx219?format=pRAA&scene=flat&level=0.3&gain=2``.
 """
 
 from __future__ import annotations
@@ -14,13 +23,15 @@ from typing import Any
 from rollcam.sim.errors import ConfigError, SourceError
 from rollcam.sim.frame import Frame
 from rollcam.sim.hwconfig import load_sensor
+from rollcam.sim.noise import parse_stages
 from rollcam.sim.scenegen import ego_preset, make_scene
 from rollcam.sim.synthetic import SyntheticCamera
 
 from .base import CameraSource, SourceURI, finite_float, non_negative_int, positive_int
 
 OPTIONS = {"scene", "seed", "speed", "camera", "time", "pedestrians", "ego", "vx", "level", "shutter", "readout",
-           "exposure_us", "gain", "fps", "size", "start_ns", "frames"}
+           "exposure_us", "gain", "fps", "size", "start_ns", "frames", "format", "physics", "blur_px", "noise",
+           "serial", "noise_seed", "hflip", "vflip"}
 
 
 def parse_size(text: str) -> tuple[int, int]:
@@ -73,9 +84,31 @@ def build_camera(sensor_name: str, opts: SourceURI) -> SyntheticCamera:
             readout=opts.get("readout", str),
             exposure_ns=None if exposure_us is None else round(exposure_us * 1000),
             gain=opts.get("gain", finite_float, 1.0),
+            pixel_format=opts.get("format", str, "BGR3"),
+            physics=opts.get("physics", _on_off),
+            blur_px=opts.get("blur_px", _non_negative_float, 0.5),
+            noise=parse_stages(opts.get("noise", str)),
+            serial=opts.get("serial", str, "0"),
+            noise_seed=opts.get("noise_seed", non_negative_int, 0),
+            hflip=opts.get("hflip", _on_off, False),
+            vflip=opts.get("vflip", _on_off, False),
         )
     except ConfigError as exc:
         raise SourceError(f"source {opts.uri!r}: {exc}") from None
+
+
+def _on_off(text: str) -> bool:
+    table = {"on": True, "1": True, "true": True, "off": False, "0": False, "false": False}
+    if text.lower() not in table:
+        raise ConfigError(f"expected on or off, got {text!r}")
+    return table[text.lower()]
+
+
+def _non_negative_float(text: str) -> float:
+    value = finite_float(text)
+    if value < 0:
+        raise ConfigError(f"expected a number >= 0, got {text!r}")
+    return value
 
 
 class EmuSource(CameraSource):
@@ -122,7 +155,9 @@ class EmuSource(CameraSource):
         return {"uri": self.uri, "sensor": self.camera.sensor.name, "width": s.width, "height": s.height,
                 "shutter": s.shutter, "readout": s.readout.value, "line_time_ns": s.timing.line_time_ns,
                 "fps": s.timing.fps, "exposure_ns": s.exposure_ns, "exposure_clamped": s.clamped_exposure,
-                "scene": self.camera.scene.kind, "seed": self.camera.scene.seed}
+                "scene": self.camera.scene.kind, "seed": self.camera.scene.seed,
+                "format": self.camera.pixel_format, "physics": self.camera.physics,
+                **(self.camera.pipeline.info() if self.camera.pipeline is not None else {})}
 
 
 def open_source(uri: SourceURI) -> EmuSource:

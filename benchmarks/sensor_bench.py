@@ -1,0 +1,172 @@
+"""Costs of the sensor model: ``rollcam bench --sensor``.
+
+Two measurements on a seeded street of the study's "fast" pedestrians (20 walkers, static camera):
+
+- ``sensor_overhead``: on an IMX219 1920x1080 rolling-shutter stream, the time of one clean BGR3 frame
+  (``SyntheticCamera.frame``, the study's render), of the linear-radiance render the sensor path needs, and
+  of the sensor stages on it: EMVA noise with mosaic (one kernel), then CSI-2 RAW10 packing (pRAA).
+  Overhead = (noise + mosaic + packing) / RS frame time. Medians over frames at different indices.
+- ``adaptive_blur``: on the study's camera (letsroll, 10 ms exposure), the adaptive plan (bound 0.5 px)
+  against fixed dense sampling (every line at one sample per 0.05 px of the fastest motion): scene
+  evaluations (line renders), wall time, and the error of the adaptive and of the mid-exposure point-sampled
+  frame against the dense one, in 8-bit sRGB DN over every pixel and channel.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from typing import Any
+
+import numpy as np
+from rollcam.sim.exposure import DEFAULT_BOUND_PX, dense_plan, integrate, plan_samples
+from rollcam.sim.formats import encode_raw
+from rollcam.sim.hwconfig import load_sensor
+from rollcam.sim.render import srgb_lut
+from rollcam.sim.scenegen import make_street_scene
+from rollcam.sim.synthetic import SyntheticCamera
+
+_LUT = srgb_lut()
+
+
+def _median_ms(fn: Callable[[int], Any], n: int) -> float:
+    fn(0)  # warm-up (numba dispatch, first allocations)
+    out = []
+    for i in range(1, n + 1):
+        t = time.perf_counter()
+        fn(i)
+        out.append(time.perf_counter() - t)
+    return float(np.median(out) * 1e3)
+
+
+def _srgb(lin: np.ndarray) -> np.ndarray:
+    idx = np.clip(lin, 0.0, 1.0) * (_LUT.size - 1) + 0.5
+    return _LUT[idx.astype(np.int64)].astype(np.float64)
+
+
+def sensor_overhead(size: tuple[int, int] = (1920, 1080), frames: int = 5, seed: int = 0) -> dict[str, Any]:
+    """Noise + mosaic + packing time against the RS frame time (see the module docstring)."""
+    sensor = load_sensor("imx219")
+    scene = make_street_scene(seed, speed="fast", width=size[0], height=size[1])
+    clean = SyntheticCamera(sensor, scene, size=size)
+    raw = SyntheticCamera(sensor, scene, size=size, pixel_format="pRAA", blur_px=None)
+    pipe = raw.pipeline
+    assert pipe is not None
+    frame_ms = _median_ms(lambda i: clean.frame(i), frames)
+    radiances = {}
+
+    def render(i: int) -> None:
+        radiances[i] = raw.renderer.render_lines(raw.line_times_ns(i), linear=True).linear
+
+    linear_ms = _median_ms(render, frames)
+    exp_ns = raw.settings.exposure_ns
+    samples: dict[int, np.ndarray] = {}
+
+    def noise(i: int) -> None:
+        samples[i] = pipe.samples(radiances[i], exp_ns, i)
+
+    noise_ms = _median_ms(noise, frames)
+    pack_ms = _median_ms(lambda i: encode_raw(samples[i], "pRAA", 10), frames)
+    raw_frame_ms = _median_ms(lambda i: raw.frame(i), frames)
+    return {"sensor": "imx219", "size": f"{size[0]}x{size[1]}", "format": "pRAA",
+            "rs_frame_ms": round(frame_ms, 3), "linear_render_ms": round(linear_ms, 3),
+            "noise_mosaic_ms": round(noise_ms, 3), "pack_ms": round(pack_ms, 3),
+            "raw_frame_ms": round(raw_frame_ms, 3),
+            "overhead_vs_rs_frame": round((noise_ms + pack_ms) / frame_ms, 4),
+            "overhead_vs_linear_render": round((noise_ms + pack_ms) / linear_ms, 4), "target": 0.25}
+
+
+def adaptive_blur(size: tuple[int, int] = (1920, 1080), frame: int = 3, seed: int = 0,
+                  bound_px: float = DEFAULT_BOUND_PX, dense_step_px: float = 0.05) -> dict[str, Any]:
+    """Adaptive against dense exposure sampling on the fast pedestrians (see the module docstring)."""
+    sensor = load_sensor("letsroll")
+    scene = make_street_scene(seed, speed="fast", width=size[0], height=size[1])
+    cam = SyntheticCamera(sensor, scene, size=size, exposure_ns=10_000_000)
+    r, s = cam.renderer, cam.settings
+    mid = cam.line_times_ns(frame)
+    starts = mid - s.exposure_ns // 2
+    t = time.perf_counter()
+    plan = plan_samples(r, starts, s.exposure_ns, bound_px=bound_px)
+    adaptive = integrate(r, plan)
+    adaptive_s = time.perf_counter() - t
+    dense = dense_plan(plan, dense_step_px)
+    t = time.perf_counter()
+    ref = integrate(r, dense)
+    dense_s = time.perf_counter() - t
+    point = r.render_lines(mid, linear=True).linear
+    assert point is not None
+    ref8 = _srgb(ref.linear)
+    err = np.abs(_srgb(adaptive.linear) - ref8)
+    err_point = np.abs(_srgb(point) - ref8)
+    moving = plan.n > 1
+    return {"sensor": "letsroll", "size": f"{size[0]}x{size[1]}", "exposure_ns": s.exposure_ns,
+            "bound_px": bound_px, "dense_step_px": dense_step_px,
+            "max_speed_px_s": round(float(plan.speed_px_s.max()), 1),
+            "lines_moving": int(moving.sum()), "adaptive_samples_max": int(plan.n.max()),
+            "dense_samples_per_line": int(dense.n[0]),
+            "adaptive_evaluations": adaptive.evaluations, "dense_evaluations": ref.evaluations,
+            "evaluation_ratio": round(ref.evaluations / max(adaptive.evaluations, 1), 2),
+            "adaptive_lines_painted": adaptive.lines_painted, "dense_lines_painted": ref.lines_painted,
+            "adaptive_s": round(adaptive_s, 3), "dense_s": round(dense_s, 3),
+            "mean_abs_err_dn": round(float(err.mean()), 4), "max_abs_err_dn": round(float(err.max()), 2),
+            "point_sampled_mean_abs_err_dn": round(float(err_point.mean()), 4),
+            "point_sampled_max_abs_err_dn": round(float(err_point.max()), 2), "target_ratio": 5.0}
+
+
+def run_sensor_bench(quick: bool = False) -> dict[str, Any]:
+    """Both measurements; ``quick`` runs them at 480x270."""
+    size = (480, 270) if quick else (1920, 1080)
+    return {"sensor_overhead": sensor_overhead(size), "adaptive_blur": adaptive_blur(size)}
+
+
+def format_sensor_bench(doc: dict[str, Any]) -> str:
+    """The rows ``rollcam bench --sensor`` prints."""
+    o, a = doc["sensor_overhead"], doc["adaptive_blur"]
+    verdict = "PASS" if o["overhead_vs_rs_frame"] <= o["target"] else "MISS"
+    lines = [f"sensor_overhead {o['sensor']} {o['size']} {o['format']}: RS frame {o['rs_frame_ms']} ms, linear render "
+             f"{o['linear_render_ms']} ms, noise+mosaic {o['noise_mosaic_ms']} ms, packing {o['pack_ms']} ms, "
+             f"raw frame {o['raw_frame_ms']} ms",
+             f"  {verdict} overhead {o['overhead_vs_rs_frame']:.1%} of the RS frame (target <= {o['target']:.0%}); "
+             f"{o['overhead_vs_linear_render']:.1%} of the linear render"]
+    verdict = "PASS" if a["evaluation_ratio"] >= a["target_ratio"] else "MISS"
+    lines += [f"adaptive_blur {a['sensor']} {a['size']} exposure {a['exposure_ns']} ns, fastest "
+              f"{a['max_speed_px_s']} px/s, {a['lines_moving']} lines moving: adaptive {a['adaptive_evaluations']} "
+              f"line evaluations (max {a['adaptive_samples_max']}/line, {a['adaptive_s']} s), dense "
+              f"{a['dense_evaluations']} ({a['dense_samples_per_line']}/line, {a['dense_s']} s)",
+              f"  {verdict} {a['evaluation_ratio']}x fewer evaluations (target >= {a['target_ratio']}x); error vs "
+              f"dense: mean {a['mean_abs_err_dn']} DN, max {a['max_abs_err_dn']} DN (point-sampled: mean "
+              f"{a['point_sampled_mean_abs_err_dn']}, max {a['point_sampled_max_abs_err_dn']} DN)"]
+    return "\n".join(lines)
+
+
+def run_sensor_cli(args: Any) -> int:
+    """``rollcam bench --ptc [SENSOR]`` / ``--sensor``: print the rows, write JSON (and ptc.png) under --out."""
+    import json
+    import sys
+    from pathlib import Path
+
+    from rollcam.sim.errors import RollcamError
+
+    from .ptc import format_ptc, run_ptc
+
+    out = Path(args.out)
+    try:
+        doc: dict[str, Any] = {}
+        if args.ptc:
+            result = run_ptc(args.ptc, out)
+            doc["ptc"] = result.to_json()
+            if not args.json:
+                print(format_ptc(result))
+                print(f"wrote {out / 'ptc.png'}")
+        if args.sensor:
+            doc.update(run_sensor_bench(quick=args.quick))
+            out.mkdir(parents=True, exist_ok=True)
+            (out / "sensor_bench.json").write_text(json.dumps(doc, indent=1))
+            if not args.json:
+                print(format_sensor_bench(doc))
+    except RollcamError as exc:
+        print(f"rollcam: error: {exc}", file=sys.stderr)
+        return 2
+    if args.json:
+        print(json.dumps(doc, indent=1))
+    return 0

@@ -1,0 +1,328 @@
+"""V4L2 pixel formats the emulated sensor delivers: the fourcc table and pure encode/decode functions.
+
+Layouts follow the kernel's documentation (Documentation/userspace-api/media/v4l/pixfmt-*):
+
+- 8-bit Bayer / GREY: ``uint8 (H, W)``.
+- 10/12/16-bit unpacked (RG10, RG12, Y10, Y12, Y16, ...): ``uint16 (H, W)``, little-endian, value in the low
+  bits (a 10-bit sample 0..1023 stays 0..1023).
+- MIPI CSI-2 packed (pRAA, pRCC, Y10P, ...): ``uint8 (H, bytesperline)``. 10-bit: every 4 pixels take 5
+  bytes, the 8 high bits of each pixel then one byte of their 2 low bits (pixel 0 in bits 1:0). 12-bit: every
+  2 pixels take 3 bytes, the 8 high bits of each then one byte with pixel 0's low nibble in bits 3:0.
+- YUYV: ``uint8 (H, W, 2)`` (Y0 U0 Y1 V0 ...), NV12: ``uint8 (H * 3 / 2, W)`` (Y plane, then interleaved UV),
+  YU12: ``uint8 (H * 3 / 2, W)`` (Y, U, V planes), BGR3 / RGB3: ``uint8 (H, W, 3)``.
+
+Flips change a Bayer sensor's order as a real sensor's do (``flipped_order``): the readout starts on
+another colour of the 2x2 tile.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from numba import njit
+
+from .errors import ConfigError
+
+BAYER_ORDERS = ("RGGB", "BGGR", "GRBG", "GBRG")
+_BAYER_FOURCCS = {  # order -> fourcc of 8, 10, 10 packed, 12, 12 packed, 16 bits (V4L2_PIX_FMT_S*)
+    "RGGB": ("RGGB", "RG10", "pRAA", "RG12", "pRCC", "RG16"),
+    "BGGR": ("BA81", "BG10", "pBAA", "BG12", "pBCC", "BYR2"),
+    "GRBG": ("GRBG", "BA10", "pgAA", "BA12", "pgCC", "GR16"),
+    "GBRG": ("GBRG", "GB10", "pGAA", "GB12", "pGCC", "GB16"),
+}
+_BAYER_LAYOUTS = (("raw", 8), ("raw", 10), ("csi2", 10), ("raw", 12), ("csi2", 12), ("raw", 16))
+
+
+@dataclass(frozen=True)
+class PixelFormat:
+    """One fourcc: sample bits, memory layout (``packing``) and colour filter (Bayer order, 'mono' or None).
+
+    ``packing`` is 'raw' (one sample per pixel, uint8 up to 8 bits, else uint16), 'csi2' (MIPI CSI-2 packed),
+    'yuyv', 'nv12', 'yu12', 'bgr' or 'rgb'.
+    """
+
+    fourcc: str
+    bits: int
+    packing: str
+    cfa: str | None
+
+    @property
+    def is_raw(self) -> bool:
+        """True for sensor samples (Bayer or mono), False for formats an ISP produces."""
+        return self.cfa is not None
+
+    def bytesperline(self, width: int) -> int:
+        """Bytes of one line of the first plane (V4L2 ``bytesperline``), unpadded."""
+        per = {"raw": 1 if self.bits <= 8 else 2, "yuyv": 2, "nv12": 1, "yu12": 1, "bgr": 3, "rgb": 3}
+        if self.packing == "csi2":
+            return math.ceil(width * self.bits / 8)
+        return width * per[self.packing]
+
+    def sizeimage(self, width: int, height: int) -> int:
+        """Bytes of a whole frame (V4L2 ``sizeimage``)."""
+        if self.packing in ("nv12", "yu12"):
+            return width * height * 3 // 2
+        return self.bytesperline(width) * height
+
+    def shape(self, width: int, height: int) -> tuple[int, ...]:
+        """Array shape of a frame's ``data`` in this format."""
+        if self.packing in ("nv12", "yu12"):
+            return (height * 3 // 2, width)
+        if self.packing == "yuyv":
+            return (height, width, 2)
+        if self.packing in ("bgr", "rgb"):
+            return (height, width, 3)
+        return (height, self.bytesperline(width)) if self.packing == "csi2" else (height, width)
+
+    @property
+    def dtype(self) -> type:
+        """numpy dtype of ``data``."""
+        return np.uint16 if self.packing == "raw" and self.bits > 8 else np.uint8
+
+
+FORMATS: dict[str, PixelFormat] = {
+    **{f: PixelFormat(f, bits, packing, order)
+       for order, fs in _BAYER_FOURCCS.items() for f, (packing, bits) in zip(fs, _BAYER_LAYOUTS, strict=True)},
+    "GREY": PixelFormat("GREY", 8, "raw", "mono"), "Y10 ": PixelFormat("Y10 ", 10, "raw", "mono"),
+    "Y12 ": PixelFormat("Y12 ", 12, "raw", "mono"), "Y16 ": PixelFormat("Y16 ", 16, "raw", "mono"),
+    "Y10P": PixelFormat("Y10P", 10, "csi2", "mono"), "Y12P": PixelFormat("Y12P", 12, "csi2", "mono"),
+    "YUYV": PixelFormat("YUYV", 8, "yuyv", None), "NV12": PixelFormat("NV12", 8, "nv12", None),
+    "YU12": PixelFormat("YU12", 8, "yu12", None), "BGR3": PixelFormat("BGR3", 8, "bgr", None),
+    "RGB3": PixelFormat("RGB3", 8, "rgb", None),
+}
+"""Every fourcc the emulated sensor can deliver. GREY is the mono sensor's 8-bit output; a colour stream
+asked for GREY gets the ISP's luma (see ``rollcam.sim.isp``)."""
+
+
+def pixel_format(fourcc: str) -> PixelFormat:
+    """The table row of ``fourcc`` (a 3-letter one such as 'Y10' gets its trailing space back)."""
+    key = fourcc if len(fourcc) == 4 else fourcc.ljust(4)
+    try:
+        return FORMATS[key]
+    except KeyError:
+        raise ConfigError(f"pixel format {fourcc!r} is not one the emulator produces; known: {sorted(FORMATS)}"
+                          ) from None
+
+
+def bayer_fourcc(order: str, bits: int, packed: bool = False) -> str:
+    """The fourcc of Bayer ``order`` at ``bits`` (8, 10, 12, 16), CSI-2 packed or not; mono gives Y../GREY."""
+    for f in FORMATS.values():
+        if f.cfa == order and f.bits == bits and (f.packing == "csi2") == packed:
+            return f.fourcc
+    raise ConfigError(f"no {'packed ' if packed else ''}{bits}-bit format for CFA {order!r}")
+
+
+def flipped_order(order: str, hflip: bool = False, vflip: bool = False) -> str:
+    """Bayer order read out with horizontal and/or vertical flip (RGGB + hflip -> GRBG, + vflip -> GBRG)."""
+    if order == "mono":
+        return order
+    if order not in BAYER_ORDERS:
+        raise ConfigError(f"Bayer order {order!r} is not one of {list(BAYER_ORDERS)} or 'mono'")
+    tile = [order[0:2], order[2:4]]
+    if vflip:
+        tile = tile[::-1]
+    if hflip:
+        tile = [row[::-1] for row in tile]
+    return tile[0] + tile[1]
+
+
+_CHANNEL = {"B": 0, "G": 1, "R": 2}  # index in a BGR image
+
+
+def cfa_channels(order: str, rgb: bool = False) -> np.ndarray:
+    """2x2 int array: the image channel each position of the Bayer tile samples (BGR indices, or RGB)."""
+    idx = np.array([_CHANNEL[c] for c in order], np.int64).reshape(2, 2)
+    return 2 - idx if rgb else idx
+
+
+def mosaic(image: np.ndarray, order: str, *, rgb: bool = False) -> np.ndarray:
+    """Sample a 3-channel image (BGR, or RGB with ``rgb``) through a Bayer filter of ``order`` -> (H, W).
+
+    'mono' gives Rec. 709 luma weights of the three channels (a mono sensor sees all colours).
+    """
+    if image.ndim != 3 or image.shape[2] != 3:
+        raise ConfigError(f"mosaic needs an (H, W, 3) image, got shape {image.shape}")
+    if order == "mono":
+        w = np.array([0.0722, 0.7152, 0.2126] if not rgb else [0.2126, 0.7152, 0.0722], np.float32)
+        out = image.astype(np.float32) @ w
+        return out.astype(image.dtype) if np.issubdtype(image.dtype, np.floating) else \
+            np.round(out).astype(image.dtype)
+    ch = cfa_channels(order, rgb)
+    out = np.empty(image.shape[:2], image.dtype)
+    for dy in (0, 1):
+        for dx in (0, 1):
+            out[dy::2, dx::2] = image[dy::2, dx::2, ch[dy, dx]]
+    return out
+
+
+# ------------------------------------------------------------------------------------------ CSI-2 packing
+@njit(cache=True)
+def _pack10(v, out):
+    h, w = v.shape
+    for y in range(h):
+        for g in range(w // 4):
+            x, b = 4 * g, 5 * g
+            low = 0
+            for i in range(4):
+                s = v[y, x + i]
+                out[y, b + i] = (s >> 2) & 0xFF
+                low |= (s & 3) << (2 * i)
+            out[y, b + 4] = low
+        r = w % 4
+        if r:
+            x, b = w - r, 5 * (w // 4)
+            low = 0
+            for i in range(r):
+                s = v[y, x + i]
+                out[y, b + i] = (s >> 2) & 0xFF
+                low |= (s & 3) << (2 * i)
+            out[y, b + r] = low
+
+
+@njit(cache=True)
+def _unpack10(p, out):
+    h, w = out.shape
+    for y in range(h):
+        for x in range(w):
+            g, i = x // 4, x % 4
+            n = min(4, w - 4 * g)
+            out[y, x] = (np.uint16(p[y, 5 * g + i]) << 2) | ((p[y, 5 * g + n] >> (2 * i)) & 3)
+
+
+@njit(cache=True)
+def _pack12(v, out):
+    h, w = v.shape
+    for y in range(h):
+        for g in range((w + 1) // 2):
+            x, b = 2 * g, 3 * g
+            s0 = v[y, x]
+            s1 = v[y, x + 1] if x + 1 < w else 0
+            out[y, b] = (s0 >> 4) & 0xFF
+            if x + 1 < w:
+                out[y, b + 1] = (s1 >> 4) & 0xFF
+                out[y, b + 2] = (s0 & 0xF) | ((s1 & 0xF) << 4)
+            else:
+                out[y, b + 1] = s0 & 0xF
+
+
+@njit(cache=True)
+def _unpack12(p, out):
+    h, w = out.shape
+    for y in range(h):
+        for x in range(w):
+            g, i = x // 2, x % 2
+            n = 2 if 2 * g + 1 < w else 1
+            out[y, x] = (np.uint16(p[y, 3 * g + i]) << 4) | ((p[y, 3 * g + n] >> (4 * i)) & 0xF)
+
+
+def pack_csi2(values: np.ndarray, bits: int) -> np.ndarray:
+    """MIPI CSI-2 RAW10 / RAW12 packing of ``uint16 (H, W)`` samples -> ``uint8 (H, ceil(W * bits / 8))``."""
+    if bits not in (10, 12):
+        raise ConfigError(f"CSI-2 packing is defined here for 10 and 12 bits, not {bits!r}")
+    v = np.ascontiguousarray(values, dtype=np.uint16)
+    if v.ndim != 2:
+        raise ConfigError(f"pack_csi2 needs (H, W) samples, got shape {v.shape}")
+    out = np.empty((v.shape[0], math.ceil(v.shape[1] * bits / 8)), np.uint8)
+    (_pack10 if bits == 10 else _pack12)(v, out)
+    return out
+
+
+def unpack_csi2(packed: np.ndarray, bits: int, width: int) -> np.ndarray:
+    """Inverse of ``pack_csi2``: ``uint8 (H, bytesperline)`` -> ``uint16 (H, width)``."""
+    if bits not in (10, 12):
+        raise ConfigError(f"CSI-2 unpacking is defined here for 10 and 12 bits, not {bits!r}")
+    p = np.ascontiguousarray(packed, dtype=np.uint8)
+    need = math.ceil(width * bits / 8)
+    if p.ndim != 2 or p.shape[1] < need:
+        raise ConfigError(f"{width} pixels of {bits}-bit CSI-2 need (H, >= {need}) bytes, got shape {p.shape}")
+    out = np.empty((p.shape[0], width), np.uint16)
+    (_unpack10 if bits == 10 else _unpack12)(p, out)
+    return out
+
+
+# ------------------------------------------------------------------------------------------ YUV
+def bgr_to_yuyv(bgr: np.ndarray) -> np.ndarray:
+    """BGR3 -> YUYV 4:2:2, ``uint8 (H, W, 2)`` (W even)."""
+    import cv2
+
+    if bgr.shape[1] % 2:
+        raise ConfigError(f"YUYV needs an even width, got {bgr.shape[1]}")
+    return cv2.cvtColor(np.ascontiguousarray(bgr), cv2.COLOR_BGR2YUV_YUYV)
+
+
+def yuyv_to_bgr(yuyv: np.ndarray) -> np.ndarray:
+    """YUYV ``(H, W, 2)`` (or ``(H, 2W)`` bytes) -> BGR3."""
+    import cv2
+
+    a = np.ascontiguousarray(yuyv, dtype=np.uint8)
+    if a.ndim == 2:
+        a = a.reshape(a.shape[0], a.shape[1] // 2, 2)
+    return cv2.cvtColor(a, cv2.COLOR_YUV2BGR_YUYV)
+
+
+def bgr_to_yu12(bgr: np.ndarray) -> np.ndarray:
+    """BGR3 -> YU12 (I420) planar 4:2:0, ``uint8 (H * 3 / 2, W)`` (W and H even)."""
+    import cv2
+
+    if bgr.shape[0] % 2 or bgr.shape[1] % 2:
+        raise ConfigError(f"4:2:0 formats need even width and height, got {bgr.shape[1]}x{bgr.shape[0]}")
+    return cv2.cvtColor(np.ascontiguousarray(bgr), cv2.COLOR_BGR2YUV_I420)
+
+
+def bgr_to_nv12(bgr: np.ndarray) -> np.ndarray:
+    """BGR3 -> NV12 4:2:0 (Y plane, then interleaved U V), ``uint8 (H * 3 / 2, W)``."""
+    i420 = bgr_to_yu12(bgr)
+    h, w = bgr.shape[:2]
+    out = np.empty_like(i420)
+    out[:h] = i420[:h]
+    chroma = i420[h:].reshape(-1)
+    n = (h // 2) * (w // 2)
+    uv = out[h:].reshape(-1)
+    uv[0::2], uv[1::2] = chroma[:n], chroma[n:]
+    return out
+
+
+def nv12_to_bgr(nv12: np.ndarray) -> np.ndarray:
+    """NV12 ``(H * 3 / 2, W)`` -> BGR3."""
+    import cv2
+
+    return cv2.cvtColor(np.ascontiguousarray(nv12, dtype=np.uint8), cv2.COLOR_YUV2BGR_NV12)
+
+
+def yu12_to_bgr(yu12: np.ndarray) -> np.ndarray:
+    """YU12 (I420) ``(H * 3 / 2, W)`` -> BGR3."""
+    import cv2
+
+    return cv2.cvtColor(np.ascontiguousarray(yu12, dtype=np.uint8), cv2.COLOR_YUV2BGR_I420)
+
+
+# ------------------------------------------------------------------------------------------ raw samples
+def encode_raw(dn: np.ndarray, fourcc: str, adc_bits: int) -> np.ndarray:
+    """ADC samples (``uint16 (H, W)``, ``adc_bits`` wide) in a raw fourcc's layout.
+
+    A format narrower than the ADC keeps the high bits (as a sensor set to RAW8 output does); a wider one is
+    refused, as hwconfig refuses it for a sensor.
+    """
+    f = pixel_format(fourcc)
+    if not f.is_raw:
+        raise ConfigError(f"{fourcc!r} is not a raw sensor format; use rollcam.sim.isp for processed ones")
+    if f.bits > adc_bits:
+        raise ConfigError(f"{fourcc!r} holds {f.bits} bits, more than the sensor's {adc_bits}-bit ADC")
+    v = dn if f.bits == adc_bits else (dn >> (adc_bits - f.bits))
+    if f.packing == "csi2":
+        return pack_csi2(v, f.bits)
+    return v.astype(f.dtype, copy=False)
+
+
+def decode_raw(data: np.ndarray, fourcc: str, width: int | None = None) -> np.ndarray:
+    """Samples of a raw frame as ``uint16 (H, W)`` in the format's own bit depth (unpacks CSI-2)."""
+    f = pixel_format(fourcc)
+    if not f.is_raw:
+        raise ConfigError(f"{fourcc!r} is not a raw sensor format")
+    if f.packing == "csi2":
+        if width is None:
+            width = data.shape[1] * 8 // f.bits
+        return unpack_csi2(data, f.bits, width)
+    return data.astype(np.uint16, copy=False)

@@ -1,0 +1,133 @@
+"""Pixel formats: the fourcc table, CSI-2 packing, mosaic and flips, YUV conversions, the preview ISP."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from rollcam.sim import formats as F
+from rollcam.sim.errors import ConfigError
+from rollcam.sim.hwconfig import FOURCCS
+from rollcam.sim.isp import IspParams, demosaic, preview, to_processed
+
+
+def test_table_agrees_with_hwconfig_fourccs():
+    for fourcc, (order, bits) in FOURCCS.items():
+        if fourcc not in F.FORMATS:
+            continue  # compressed formats (MJPG, H264) and others the emulator does not make
+        f = F.FORMATS[fourcc]
+        assert f.bits == bits, fourcc
+        if order is not None and fourcc != "GREY":
+            assert f.cfa == order, fourcc
+
+
+@pytest.mark.parametrize(("fourcc", "w", "h", "bpl", "size", "shape"), [
+    ("pRAA", 1920, 1080, 2400, 2400 * 1080, (1080, 2400)),
+    ("pRAA", 6, 2, 8, 16, (2, 8)),  # ceil(6 * 10 / 8) = 8
+    ("pRCC", 1920, 1080, 2880, 2880 * 1080, (1080, 2880)),
+    ("RG10", 640, 480, 1280, 1280 * 480, (480, 640)),
+    ("RGGB", 640, 480, 640, 640 * 480, (480, 640)),
+    ("YUYV", 640, 480, 1280, 1280 * 480, (480, 640, 2)),
+    ("NV12", 640, 480, 640, 640 * 480 * 3 // 2, (720, 640)),
+    ("BGR3", 640, 480, 1920, 1920 * 480, (480, 640, 3)),
+    ("Y10 ", 640, 400, 1280, 1280 * 400, (400, 640)),
+])
+def test_bytesperline_sizeimage_shape(fourcc, w, h, bpl, size, shape):
+    f = F.pixel_format(fourcc)
+    assert (f.bytesperline(w), f.sizeimage(w, h), f.shape(w, h)) == (bpl, size, shape)
+
+
+def test_pixel_format_errors_and_short_names():
+    assert F.pixel_format("Y10").fourcc == "Y10 "
+    with pytest.raises(ConfigError, match="'XXXX'"):
+        F.pixel_format("XXXX")
+
+
+def test_csi2_raw10_layout_matches_the_kernel_docs():
+    v = np.array([[0x3FF, 0x000, 0x155, 0x2AA, 0x001]], np.uint16)
+    p = F.pack_csi2(v, 10)
+    # High 8 bits of pixels 0..3, then their low 2 bits (pixel 0 in bits 1:0); a tail group of 1 pixel.
+    assert p.tolist() == [[0xFF, 0x00, 0x55, 0xAA, 0b10_01_00_11, 0x00, 0b01]]
+    assert F.unpack_csi2(p, 10, 5).tolist() == v.tolist()
+
+
+def test_csi2_raw12_layout_matches_the_kernel_docs():
+    v = np.array([[0xABC, 0x123, 0xFFF]], np.uint16)
+    p = F.pack_csi2(v, 12)
+    assert p.tolist() == [[0xAB, 0x12, 0x3C, 0xFF, 0x0F]]
+    assert F.unpack_csi2(p, 12, 3).tolist() == v.tolist()
+
+
+@settings(max_examples=60, deadline=None)
+@given(bits=st.sampled_from([10, 12]), h=st.integers(1, 4), w=st.integers(1, 21), seed=st.integers(0, 2**32 - 1))
+def test_csi2_round_trip(bits, h, w, seed):
+    v = np.random.default_rng(seed).integers(0, 1 << bits, (h, w)).astype(np.uint16)
+    p = F.pack_csi2(v, bits)
+    assert p.shape == (h, -(-w * bits // 8))
+    assert np.array_equal(F.unpack_csi2(p, bits, w), v)
+
+
+def test_flipped_order():
+    assert F.flipped_order("RGGB", hflip=True) == "GRBG"
+    assert F.flipped_order("RGGB", vflip=True) == "GBRG"
+    assert F.flipped_order("RGGB", hflip=True, vflip=True) == "BGGR"
+    assert F.flipped_order("mono", hflip=True) == "mono"
+    for order in F.BAYER_ORDERS:  # flipping twice restores the order
+        assert F.flipped_order(F.flipped_order(order, True, True), True, True) == order
+
+
+def test_flip_of_mosaic_is_mosaic_of_flipped_order():
+    img = np.random.default_rng(0).integers(0, 255, (6, 8, 3)).astype(np.uint8)
+    for order in F.BAYER_ORDERS:
+        m = F.mosaic(img, order)
+        assert np.array_equal(m[:, ::-1], F.mosaic(img[:, ::-1], F.flipped_order(order, hflip=True)))
+        assert np.array_equal(m[::-1], F.mosaic(img[::-1], F.flipped_order(order, vflip=True)))
+
+
+@pytest.mark.parametrize("order", F.BAYER_ORDERS)
+def test_mosaic_then_demosaic_recovers_flat_colour(order):
+    bgr = np.zeros((8, 8, 3), np.uint8)
+    bgr[...] = (40, 120, 200)
+    out = demosaic(F.mosaic(bgr, order), order)
+    assert out[2:-2, 2:-2].reshape(-1, 3).tolist() == [[40, 120, 200]] * 16
+
+
+def test_bayer_fourcc_and_encode_raw():
+    assert F.bayer_fourcc("GRBG", 10, packed=True) == "pgAA"
+    assert F.bayer_fourcc("BGGR", 8) == "BA81"
+    dn = np.array([[1023, 512, 4, 0]], np.uint16)
+    assert F.encode_raw(dn, "RGGB", 10).tolist() == [[255, 128, 1, 0]]  # 8-bit output keeps the high bits
+    assert F.encode_raw(dn, "RG10", 10).dtype == np.uint16
+    assert np.array_equal(F.decode_raw(F.encode_raw(dn, "pRAA", 10), "pRAA", 4), dn)
+    with pytest.raises(ConfigError, match="more than"):
+        F.encode_raw(dn, "RG12", 10)
+
+
+def test_yuv_round_trips():
+    rng = np.random.default_rng(1)
+    bgr = np.repeat(np.repeat(rng.integers(30, 220, (4, 4, 3)), 4, 0), 4, 1).astype(np.uint8)
+    for enc, dec, shape in ((F.bgr_to_yuyv, F.yuyv_to_bgr, (16, 16, 2)), (F.bgr_to_nv12, F.nv12_to_bgr, (24, 16)),
+                            (F.bgr_to_yu12, F.yu12_to_bgr, (24, 16))):
+        coded = enc(bgr)
+        assert coded.shape == shape
+        back = dec(coded).astype(int)
+        assert np.abs(back - bgr).max() <= 6  # chroma subsampling of 4x4-constant blocks: rounding only
+    nv12, yu12 = F.bgr_to_nv12(bgr), F.bgr_to_yu12(bgr)
+    assert np.array_equal(nv12[:16], yu12[:16])
+    assert np.array_equal(nv12[16:].reshape(-1)[0::2], yu12[16:20].reshape(-1))  # U interleaved first
+
+
+def test_preview_isp_black_white_and_gamma():
+    raw = np.full((4, 4), 64, np.uint16)
+    p = IspParams(black_level_dn=64, white_level_dn=1023)
+    assert preview(raw, "RGGB", p).max() == 0
+    raw[:] = 1023
+    assert preview(raw, "RGGB", p).min() == 255
+    raw[:] = 64 + round(0.214 * 959)  # linear 0.214 -> sRGB ~ 128
+    assert abs(int(preview(raw, "mono", p)[0, 0, 0]) - 128) <= 1
+    assert to_processed(np.zeros((4, 4, 3), np.uint8), "YUYV").shape == (4, 4, 2)
+    with pytest.raises(ConfigError):
+        to_processed(np.zeros((4, 4, 3), np.uint8), "RG10")
+    with pytest.raises(ConfigError):
+        IspParams(black_level_dn=100, white_level_dn=50)
