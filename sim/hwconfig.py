@@ -26,6 +26,7 @@ from typing import Any, ClassVar, NamedTuple
 import yaml
 
 from .errors import ConfigError
+from .formats import FORMATS
 from .timing import LineTiming, Readout
 
 _PACKAGE = "rollcam.hw_configs"
@@ -36,15 +37,9 @@ _short.maxstring = _short.maxother = 60
 BAYER_ORDERS = ("RGGB", "BGGR", "GRBG", "GBRG", "mono")
 REGISTER_ROLES = ("chip_id", "mode_select", "frame_length", "line_length", "exposure", "analog_gain",
                   "digital_gain", "orientation", "test_pattern")
-_BAYER_FOURCCS = {  # order -> fourccs of 8, 10, 10 packed, 12, 12 packed bits (V4L2_PIX_FMT_S*)
-    "RGGB": ("RGGB", "RG10", "pRAA", "RG12", "pRCC"), "BGGR": ("BA81", "BG10", "pBAA", "BG12", "pBCC"),
-    "GRBG": ("GRBG", "BA10", "pgAA", "BA12", "pgCC"), "GBRG": ("GBRG", "GB10", "pGAA", "GB12", "pGCC"),
-}
 FOURCCS: dict[str, tuple[str | None, int]] = {
-    **{f: (order, bits)
-       for order, fs in _BAYER_FOURCCS.items() for f, bits in zip(fs, (8, 10, 10, 12, 12), strict=True)},
-    "Y10 ": ("mono", 10), "Y10P": ("mono", 10), "Y12 ": ("mono", 12), "Y16 ": ("mono", 16),
-    **dict.fromkeys(("GREY", "YUYV", "UYVY", "NV12", "YU12", "BGR3", "RGB3", "XR24", "MJPG", "H264"), (None, 8)),
+    **{f: (None if f == "GREY" else p.cfa, p.bits) for f, p in FORMATS.items()},
+    **dict.fromkeys(("UYVY", "XR24", "MJPG", "H264"), (None, 8)),
 }
 """Known V4L2 fourccs -> (Bayer order, "mono", or None for processed formats; bits per sample).
 

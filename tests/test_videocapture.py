@@ -80,8 +80,14 @@ def test_demosaic_table_matches_bayer_orders():
     blue[0::2, 0::2] = 200  # blue sites of a BGGR mosaic
     assert to_bgr(blue, "BA81")[1, 1].tolist() == [200, 0, 0]
     assert to_bgr(np.full((2, 2), 4095, np.uint16), "Y12 ").shape == (2, 2, 3)
+    from rollcam.sim.formats import pack_csi2
+
+    packed = pack_csi2(red.astype(np.uint16) * 4, 10)
+    assert to_bgr(packed, "pRAA", width=4)[1, 1].tolist() == [0, 0, 200]
     with pytest.raises(SourceError, match="bit-packed"):
         to_bgr(np.zeros(10, np.uint8), "pRAA")
+    with pytest.raises(SourceError, match="no BGR preview"):
+        to_bgr(np.zeros((2, 2), np.uint8), "ZZZZ")
 
 
 def test_http_mjpeg_through_the_drop_in(rollcam_camera, rollcam_mjpeg_server):
