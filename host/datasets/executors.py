@@ -9,6 +9,7 @@ folder mounted at the same path.
 
 from __future__ import annotations
 
+import multiprocessing
 from collections.abc import Callable, Iterable, Iterator
 from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from typing import Any
@@ -50,7 +51,9 @@ class PoolExecutor:
         if workers < 1:
             raise ConfigError(f"--workers must be >= 1, got {workers!r}")
         self.workers = workers
-        self._pool: ProcessPoolExecutor | None = ProcessPoolExecutor(max_workers=workers)
+        # Spawned, not forked: the renderer's OpenMP threads make fork() unsafe once a frame has been drawn.
+        ctx = multiprocessing.get_context("spawn")
+        self._pool: ProcessPoolExecutor | None = ProcessPoolExecutor(max_workers=workers, mp_context=ctx)
 
     def map_unordered(self, fn: TaskFn, tasks: Iterable[Task]) -> Iterator[Any]:
         """Results as tasks finish."""

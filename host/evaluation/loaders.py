@@ -99,7 +99,8 @@ def load_yolo(yaml_path: Path, split: str) -> EvalSet:
     entries = []
     for i, p in enumerate(files, start=1):
         rel = p.relative_to(img_dir)
-        label = Path(str(img_dir).replace("/images", "/labels", 1)) / rel.with_suffix(".txt")
+        # Ultralytics' rule: the label of .../images/x.png is .../labels/x.txt (last "images" in the path).
+        label = Path("/labels/".join(str(p.with_suffix(".txt")).rsplit("/images/", 1)))
         with Image.open(p) as im:
             w, h = im.size
         rows = np.loadtxt(label, ndmin=2) if label.is_file() and label.stat().st_size else np.zeros((0, 5))
