@@ -6,7 +6,7 @@ from rollcam.benchmarks.dataset import bench_dataset, format_report, synthetic_e
 
 
 def test_bench_dataset_small():
-    doc = bench_dataset((192, 108), pairs=6, scale_pairs=6, repeats=1)
+    doc = bench_dataset((192, 108), pairs=6, scale_pairs=6, rounds=1)
     assert set(doc["targets"]) == {"generation_overhead", "two_worker_speedup", "metrics_1000_images_s"}
     assert doc["generation_s"] > 0 and doc["bare_s"] > 0 and doc["bytes_per_pair"] > 0
     assert "targets:" in format_report(doc)

@@ -98,6 +98,7 @@ def build_dataset(
     *,
     workers: int = 1,
     executor: str | None = None,
+    threads_per_worker: int | None = None,
     worker_writes: bool | None = None,
     overwrite: bool = False,
     progress: bool | None = None,
@@ -107,7 +108,9 @@ def build_dataset(
 ) -> BuildResult:
     """Build (or finish building) the dataset ``cfg`` describes in ``out_dir``.
 
-    ``executor``: None/``local`` (``workers`` processes) or ``dask://HOST:PORT``. ``worker_writes``: workers
+    ``executor``: None (``workers`` processes, or this process when 1), ``local`` (a pool even of one) or
+    ``dask://HOST:PORT``; ``threads_per_worker``: renderer threads of each local worker (default: an even
+    share of the cores). ``worker_writes``: workers
     write image and label files themselves (default for local pools; on a cluster only when ``out_dir`` is
     shared storage mounted at the same path on every worker); otherwise they return the bytes and this
     process writes them. ``on_commit`` is called after each sample is committed (a seam for tests).
@@ -124,7 +127,7 @@ def build_dataset(
     todo = [replace(t, samples=tuple(s for s in t.samples if s.key not in done)) for t in tasks]
     todo = [t for t in todo if t.samples]
     n_todo = sum(len(t.samples) for t in todo)
-    ex = open_executor(executor, workers)
+    ex = open_executor(executor, workers, threads_per_worker)
     writes = (not ex.remote) if worker_writes is None else worker_writes
     fn = functools.partial(run_task, cfg, root=str(out) if writes and ex.name != "inline" else None)
     bar = Progress(n_todo, label=f"dataset ({ex.name} x{ex.workers})", stream=stream, enabled=progress,

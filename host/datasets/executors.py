@@ -10,6 +10,7 @@ folder mounted at the same path.
 from __future__ import annotations
 
 import multiprocessing
+import os
 from collections.abc import Callable, Iterable, Iterator
 from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from typing import Any
@@ -41,19 +42,32 @@ class InlineExecutor:
         """Nothing to release."""
 
 
+def _init_worker(threads: int) -> None:
+    """Give each worker process its share of the cores for the renderer's parallel kernels (numba)."""
+    import numba
+
+    numba.set_num_threads(max(1, min(threads, numba.config.NUMBA_NUM_THREADS)))
+
+
 class PoolExecutor:
-    """A local process pool; at most ``2 * workers`` tasks are in flight so memory stays bounded."""
+    """A local process pool; at most ``2 * workers`` tasks are in flight so memory stays bounded.
+
+    Each worker runs the renderer's parallel kernels on ``threads_per_worker`` threads (default: the cores
+    divided among the workers), so ``workers`` processes never oversubscribe the machine.
+    """
 
     name = "local"
     remote = False
 
-    def __init__(self, workers: int) -> None:
+    def __init__(self, workers: int, threads_per_worker: int | None = None) -> None:
         if workers < 1:
             raise ConfigError(f"--workers must be >= 1, got {workers!r}")
         self.workers = workers
+        threads = threads_per_worker or max(1, (os.cpu_count() or 1) // workers)
         # Spawned, not forked: the renderer's OpenMP threads make fork() unsafe once a frame has been drawn.
         ctx = multiprocessing.get_context("spawn")
-        self._pool: ProcessPoolExecutor | None = ProcessPoolExecutor(max_workers=workers, mp_context=ctx)
+        self._pool: ProcessPoolExecutor | None = ProcessPoolExecutor(
+            max_workers=workers, mp_context=ctx, initializer=_init_worker, initargs=(threads,))
 
     def map_unordered(self, fn: TaskFn, tasks: Iterable[Task]) -> Iterator[Any]:
         """Results as tasks finish."""
@@ -118,10 +132,14 @@ class DaskExecutor:
             client.close()
 
 
-def open_executor(spec: str | None, workers: int = 1) -> InlineExecutor | PoolExecutor | DaskExecutor:
-    """``None``/``local``: a pool of ``workers`` processes (in process when 1); ``dask://HOST:PORT``: a cluster."""
-    if spec in (None, "", "local"):
-        return InlineExecutor() if workers == 1 else PoolExecutor(workers)
+def open_executor(spec: str | None, workers: int = 1,
+                  threads_per_worker: int | None = None) -> InlineExecutor | PoolExecutor | DaskExecutor:
+    """``None``: a pool of ``workers`` processes (in this process when 1); ``local``: a pool even of one;
+    ``dask://HOST:PORT``: a cluster."""
+    if spec in (None, ""):
+        return InlineExecutor() if workers == 1 else PoolExecutor(workers, threads_per_worker)
+    if spec == "local":
+        return PoolExecutor(workers, threads_per_worker)
     if spec.startswith("dask://"):
         address = spec[len("dask://"):].rstrip("/")
         if not address:
