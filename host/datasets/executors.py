@@ -111,7 +111,8 @@ class DaskExecutor:
         try:
             self._client: Any = Client(address, timeout="20s")
         except OSError as exc:
-            raise ConfigError(f"--executor dask://{address}: cannot reach the scheduler ({exc})") from None
+            where = address.split("://", 1)[-1]
+            raise ConfigError(f"--executor dask://{where}: cannot reach the scheduler ({exc})") from None
         self.workers = max(len(self._client.scheduler_info().get("workers", {})), 1)
 
     def map_unordered(self, fn: TaskFn, tasks: Iterable[Task]) -> Iterator[Any]:
