@@ -134,9 +134,11 @@ def run_detector(detector: Any, s: EvalSet, on_image: Callable[[], None] | None 
 
     names = {n.lower(): i for i, n in enumerate(s.class_names)}
     to_set = {c: names[n.lower()] for c, n in detector.class_names.items() if n.lower() in names}
+    # A raw-input detector gets the stored mosaic as it is (8 or 16 bit); others get 8-bit BGR.
+    flags = cv2.IMREAD_UNCHANGED if getattr(detector, "input", "bgr") == "raw" else cv2.IMREAD_COLOR
     out = []
     for e in s.images:
-        img = cv2.imread(str(e.path), cv2.IMREAD_COLOR)
+        img = cv2.imread(str(e.path), flags)
         if img is None:
             raise ConfigError(f"cannot read image {str(e.path)!r}")
         d = detector.detect(img)
