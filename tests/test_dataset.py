@@ -162,4 +162,9 @@ def test_cli_dataset_then_eval_with_ground_truth_detections(tmp_path, capsys):
     # The detector path runs end to end too (HOG finds little at 192x108; the point is the plumbing).
     assert main(["eval", str(out), "--detector", "hog", "--split", "val", "--out", str(tmp_path / "ev")]) == 0
     assert "Normal_GS" in capsys.readouterr().out
+    # One subset as a plain COCO file (images found beside annotations/) and as an Ultralytics data.yaml.
+    assert main(["eval", str(out / "fast_rs" / "annotations" / "val.json"), "--detector", "hog",
+                 "--out", str(tmp_path / "ev")]) == 0
+    assert main(["eval", str(out / "fast_rs" / "data.yaml"), "--detector", "hog", "--split", "val",
+                 "--out", str(tmp_path / "ev")]) == 0
     assert main(["dataset", "--out", str(tmp_path / "bad"), "--frames", "6", "--times", "midnight"]) == 2

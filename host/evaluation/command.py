@@ -29,8 +29,10 @@ def register(sub: Any) -> None:
     src.add_argument("--detections", metavar="FILE", help="detections.jsonl or a COCO results JSON")
     p.add_argument("--split", default="test", help="split to evaluate (default: test)")
     p.add_argument("--subset", default=None, metavar="NAME", help="evaluate one subset only, e.g. normal_rs")
-    p.add_argument("--images", default=None, metavar="DIR", help="image folder of a COCO JSON (default: its folder)")
-    p.add_argument("--out", default=None, metavar="DIR", help="folder for eval.json and eval.png "
+    p.add_argument("--images", default=None, metavar="DIR",
+                   help="folder the COCO JSON's file names are relative to (default: its folder, or the folder "
+                        "above when it lies in annotations/)")
+    p.add_argument("--out", default=None, metavar="DIR", help="folder for DETECTOR_SPLIT.json and .png "
                    "(default: DATASET/eval/ for a folder, else rollcam_out/eval)")
     p.add_argument("--save-detections", default=None, metavar="FILE", help="also write the detector's detections "
                    "as detections.jsonl (to re-evaluate without inference)")

@@ -123,7 +123,9 @@ def load_sets(dataset: str | Path, split: str, images: str | Path | None = None)
         doc = json.loads(path.read_text())
         if not isinstance(doc, dict) or "images" not in doc:
             raise ConfigError(f"{str(path)!r} is not a COCO dataset file (no 'images')")
-        return [_coco_set(path.stem, doc, Path(images) if images else path.parent, "")]
+        # COCO's own layout keeps annotations/ beside the image folders, and file names relative to their parent.
+        default_root = path.parent.parent if path.parent.name == "annotations" else path.parent
+        return [_coco_set(path.stem, doc, Path(images) if images else default_root, "")]
     raise ConfigError(f"dataset {str(dataset)!r} is not a rollcam dataset folder, a YOLO data.yaml (or folder with "
                       "one), or a COCO JSON file")
 
