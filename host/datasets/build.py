@@ -127,7 +127,8 @@ def build_dataset(
     todo = [replace(t, samples=tuple(s for s in t.samples if s.key not in done)) for t in tasks]
     todo = [t for t in todo if t.samples]
     n_todo = sum(len(t.samples) for t in todo)
-    ex = open_executor(executor, workers, threads_per_worker)
+    # Nothing left to render (a finished dataset rerun): no pool or cluster connection needed.
+    ex = open_executor(executor if todo else None, workers if todo else 1, threads_per_worker)
     writes = (not ex.remote) if worker_writes is None else worker_writes
     fn = functools.partial(run_task, cfg, root=str(out) if writes and ex.name != "inline" else None)
     bar = Progress(n_todo, label=f"dataset ({ex.name} x{ex.workers})", stream=stream, enabled=progress,
