@@ -572,6 +572,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--out", default="rollcam_out/bench", help="folder for bench.json and bench.png")
     parser.add_argument("--size", default=None, help="WIDTHxHEIGHT instead of the study's 1920x1080")
     parser.add_argument("--scenes", default=None, help=f"comma-separated subset of {','.join(SCENES)}")
+    parser.add_argument("--dataset", action="store_true",
+                        help="time dataset generation (vs render+encode, 1 vs 2 workers) and eval metrics instead")
     parser.add_argument("--hog", action="store_true",
                         help="run the HOG people-detector recall study on the synthetic walkers instead (~1 min)")
     parser.add_argument("--detect", action="store_true",
@@ -594,6 +596,15 @@ def run(args: argparse.Namespace) -> int:
         from .sensor_bench import run_sensor_cli
 
         return run_sensor_cli(args)
+    if getattr(args, "dataset", False):
+        from .dataset import bench_dataset, format_report
+
+        size = tuple(int(v) for v in args.size.lower().split("x")) if args.size else (1920, 1080)
+        doc = bench_dataset(size, say=_stderr_progress())
+        Path(args.out).mkdir(parents=True, exist_ok=True)
+        (Path(args.out) / "dataset_bench.json").write_text(json.dumps(doc, indent=1))
+        print(json.dumps(doc, indent=1) if args.json else format_report(doc))
+        return 0
     if getattr(args, "hog", False):
         from .hog_recall import hog_recall
 

@@ -66,8 +66,8 @@ class Progress:
     """A one-line ``\\r``-refreshed counter with rate and ETA on a text stream (no-op when disabled)."""
 
     def __init__(self, total: int, *, label: str, stream: TextIO | None = None, enabled: bool | None = None,
-                 clock: Callable[[], float] = time.monotonic, min_interval_s: float = 0.1) -> None:
-        self.total, self.label = total, label
+                 clock: Callable[[], float] = time.monotonic, min_interval_s: float = 0.1, unit: str = "fps") -> None:
+        self.total, self.label, self.unit = total, label, unit
         self.stream = sys.stderr if stream is None else stream
         self.enabled = _isatty(self.stream) if enabled is None else enabled
         self.clock, self.min_interval_s = clock, min_interval_s
@@ -86,7 +86,7 @@ class Progress:
         elapsed = max(now - self.start, 1e-9)
         rate = done / elapsed
         eta = f"ETA {(self.total - done) / rate:5.0f} s" if rate > 0 and done < self.total else f"{elapsed:5.1f} s"
-        self.stream.write(f"\r{self.label} {done}/{self.total}  {rate:6.1f} fps  {eta}  ")
+        self.stream.write(f"\r{self.label} {done}/{self.total}  {rate:6.1f} {self.unit}  {eta}  ")
         self.stream.flush()
         self._shown = True
 

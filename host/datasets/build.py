@@ -1,0 +1,156 @@
+"""``build_dataset``: plan, render (on any executor), commit sample by sample, then write the final files.
+
+Resumable and atomic: every file goes in via a temporary name and a rename, and a sample's record is
+written after its files; a rerun with the same config skips samples that have a record and redoes the rest
+(overwriting whatever an interrupted sample left). ``config.json`` pins the config: rerunning into the same
+folder with a different config is refused unless ``overwrite``.
+"""
+
+from __future__ import annotations
+
+import functools
+import json
+import shutil
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, replace
+from pathlib import Path
+from typing import Any, TextIO
+
+from rollcam.sim.errors import ConfigError
+
+from ..capture import Progress, write_atomic
+from ..sources import open_camera
+from .executors import open_executor
+from .layout import CARD_JSON, CARD_MD, finalize
+from .plan import SHUTTERS, DatasetConfig, make_plan, sample_uri, subset_name
+from .sample import RECORDS, SampleResult, commit_record, read_records, remove_partials, run_task, write_files
+
+CONFIG_FILE = "config.json"
+
+
+@dataclass
+class BuildResult:
+    """What a build did: pairs in the dataset, pairs rendered by this run, pairs found done, seconds, card."""
+
+    out_dir: Path
+    pairs: int
+    rendered: int
+    resumed: int
+    seconds: float
+    executor: str
+    workers: int
+    card: dict[str, Any]
+
+    def to_json(self) -> dict[str, Any]:
+        """The summary ``rollcam dataset --json`` prints."""
+        return {"out": str(self.out_dir), "pairs": self.pairs, "rendered": self.rendered, "resumed": self.resumed,
+                "seconds": round(self.seconds, 3), "pairs_per_s": round(self.rendered / self.seconds, 3)
+                if self.seconds > 0 else None, "executor": self.executor, "workers": self.workers,
+                "card": str(self.out_dir / CARD_JSON), "subsets": sorted(self.card["subsets"])}
+
+
+def rollcam_version() -> str:
+    """The installed rollcam version (recorded in dataset cards)."""
+    from importlib.metadata import PackageNotFoundError, version
+
+    try:
+        return version("rollcam")
+    except PackageNotFoundError:
+        return "unknown"
+
+
+def _prepare(out: Path, cfg: DatasetConfig, overwrite: bool) -> None:
+    if out.exists() and not out.is_dir():
+        raise ConfigError(f"--out {str(out)!r} exists and is not a directory")
+    out.mkdir(parents=True, exist_ok=True)
+    pinned = out / CONFIG_FILE
+    want = json.loads(json.dumps(cfg.to_json()))
+    if pinned.exists():
+        have = json.loads(pinned.read_text())
+        if have == want:
+            return
+        if not overwrite:
+            diff = sorted(k for k in set(have) | set(want) if have.get(k) != want.get(k))
+            raise ConfigError(f"{str(out)!r} holds a dataset built with other options (differing: {diff}); pass "
+                              "--overwrite to replace it, or choose another --out")
+        _clear(out, have)
+    elif any(out.iterdir()) and not overwrite:
+        raise ConfigError(f"--out {str(out)!r} is not empty and holds no rollcam dataset; choose an empty folder")
+    write_atomic(pinned, (json.dumps(want, indent=1) + "\n").encode())
+
+
+def _clear(out: Path, old_cfg: dict[str, Any]) -> None:
+    """Remove what a dataset build writes (and nothing else in the folder)."""
+    names = [RECORDS, CARD_JSON, CARD_MD, CONFIG_FILE]
+    names += [subset_name(sp, sh) for sp in old_cfg.get("speeds", ()) for sh in SHUTTERS]
+    for name in names:
+        p = out / name
+        if p.is_dir():
+            shutil.rmtree(p)
+        else:
+            p.unlink(missing_ok=True)
+
+
+def build_dataset(
+    cfg: DatasetConfig,
+    out_dir: str | Path,
+    *,
+    workers: int = 1,
+    executor: str | None = None,
+    threads_per_worker: int | None = None,
+    worker_writes: bool | None = None,
+    overwrite: bool = False,
+    progress: bool | None = None,
+    stream: TextIO | None = None,
+    on_commit: Callable[[SampleResult], None] | None = None,
+    clock: Callable[[], float] = time.monotonic,
+) -> BuildResult:
+    """Build (or finish building) the dataset ``cfg`` describes in ``out_dir``.
+
+    ``executor``: None (``workers`` processes, or this process when 1), ``local`` (a pool even of one) or
+    ``dask://HOST:PORT``; ``threads_per_worker``: renderer threads of each local worker (default: an even
+    share of the cores). ``worker_writes``: workers
+    write image and label files themselves (default for local pools; on a cluster only when ``out_dir`` is
+    shared storage mounted at the same path on every worker); otherwise they return the bytes and this
+    process writes them. ``on_commit`` is called after each sample is committed (a seam for tests).
+    """
+    out = Path(out_dir).resolve()
+    tasks = make_plan(cfg)
+    first = tasks[0].samples[0]
+    with open_camera(sample_uri(cfg, first)):  # bad sensor, size or source options fail here, before any work
+        pass
+    _prepare(out, cfg, overwrite)
+    remove_partials(out)
+    planned = {s.key for t in tasks for s in t.samples}
+    done = set(read_records(out)) & planned
+    todo = [replace(t, samples=tuple(s for s in t.samples if s.key not in done)) for t in tasks]
+    todo = [t for t in todo if t.samples]
+    n_todo = sum(len(t.samples) for t in todo)
+    # Nothing left to render (a finished dataset rerun): no pool or cluster connection needed.
+    ex = open_executor(executor if todo else None, workers if todo else 1, threads_per_worker)
+    writes = (not ex.remote) if worker_writes is None else worker_writes
+    fn = functools.partial(run_task, cfg, root=str(out) if writes and ex.name != "inline" else None)
+    bar = Progress(n_todo, label=f"dataset ({ex.name} x{ex.workers})", stream=stream, enabled=progress,
+                   clock=clock, unit="pairs/s")
+    start = clock()
+    rendered = 0
+    try:
+        for results in ex.map_unordered(fn, todo):
+            for result in results:
+                if result.files:
+                    write_files(out, result.files)
+                commit_record(out, result)
+                rendered += 1
+                bar.update(rendered)
+                if on_commit is not None:
+                    on_commit(result)
+    finally:
+        bar.close()
+        ex.close()
+    records = {k: v for k, v in read_records(out).items() if k in planned}
+    missing = planned - set(records)
+    if missing:
+        raise ConfigError(f"{len(missing)} planned sample(s) have no record after the run, e.g. {sorted(missing)[0]}")
+    card = finalize(out, cfg, records, rollcam_version())
+    return BuildResult(out, len(planned), rendered, len(done), clock() - start, ex.name, ex.workers, card)

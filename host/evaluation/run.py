@@ -1,0 +1,70 @@
+"""``evaluate_dataset``: load the sets, get detections (a detector or a file), compute the metrics."""
+
+from __future__ import annotations
+
+import json
+import time
+from pathlib import Path
+from typing import Any
+
+from rollcam.sim.errors import ConfigError
+
+from .loaders import EvalSet, load_detections, load_sets, run_detector
+from .metrics import Dets, evaluate
+from .report import build_document
+
+
+def _save(path: Path, sets: list[EvalSet], dets: list[list[Dets]]) -> None:
+    from ..capture import write_atomic
+
+    lines = []
+    for s, ds in zip(sets, dets, strict=True):
+        for e, d in zip(s.images, ds, strict=True):
+            items = [{"box": [round(float(v), 2) for v in b], "score": round(float(sc), 6), "cls": int(c)}
+                     for b, sc, c in zip(d.boxes, d.scores, d.classes, strict=True)]
+            lines.append(json.dumps({"image": e.key, "detections": items}))
+    path.parent.mkdir(parents=True, exist_ok=True)
+    write_atomic(path, ("\n".join(lines) + "\n").encode())
+
+
+def evaluate_dataset(dataset: str | Path, *, detector: str | None = None, detections: str | Path | None = None,
+                     split: str = "test", subset: str | None = None, images: str | Path | None = None,
+                     save_detections: str | Path | None = None, progress: bool | None = None) -> dict[str, Any]:
+    """The evaluation document of ``rollcam eval`` (see ``report.build_document``)."""
+    from ..capture import Progress
+
+    if (detector is None) == (detections is None):
+        raise ConfigError("give exactly one of a detector spec or a detections file")
+    sets = load_sets(dataset, split, images)
+    if subset is not None:
+        sets = [s for s in sets if s.name == subset]
+        if not sets:
+            raise ConfigError(f"--subset {subset!r} is not in {str(dataset)!r}")
+    t0 = time.perf_counter()
+    if detector is not None:
+        from ..detectors import load_detector
+
+        det = load_detector(detector)
+        bar = Progress(sum(len(s.images) for s in sets), label=f"eval {detector}", enabled=progress, unit="img/s")
+        n = [0]
+
+        def tick() -> None:
+            n[0] += 1
+            bar.update(n[0])
+
+        try:
+            all_dets = [run_detector(det, s, tick) for s in sets]
+        finally:
+            bar.close()
+            det.close()
+        if save_detections is not None:
+            _save(Path(save_detections), sets, all_dets)
+    else:
+        all_dets = load_detections(detections, sets)
+    t1 = time.perf_counter()
+    rows = [{"name": s.name, "speed": s.speed, "shutter": s.shutter,
+             "metrics": evaluate([e.truth for e in s.images], d)} for s, d in zip(sets, all_dets, strict=True)]
+    t2 = time.perf_counter()
+    meta = {"dataset": str(dataset), "detector": detector or f"file:{detections}", "split": split,
+            "timing": {"inference_s": round(t1 - t0, 3), "metrics_s": round(t2 - t1, 4)}}
+    return build_document(rows, meta)
