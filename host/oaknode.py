@@ -19,13 +19,18 @@ newest ``TRUTH_KEPT`` frames, so an endless stream does not grow without bound).
 ``realtime=True`` frames are paced at the source's frame period; otherwise they come as fast as they render.
 After ``frames`` (or the end of a finite source) the node stops the pipeline, so ``isRunning()`` loops end.
 ``EmulatedCamera`` is built on first access, because depthai is an optional dependency (``rollcam[oak]``).
+Import depthai before ``faster_coco_eval`` (used by ``rollcam eval``) in one process: the other order breaks
+depthai's host-node subclassing, and ``EmulatedCamera`` then refuses with an error saying so.
 """
 
 from __future__ import annotations
 
 import datetime
+import sys
 import time
 from typing import Any
+
+from rollcam.sim.errors import SourceError
 
 from .sources.oak import import_depthai
 
@@ -93,6 +98,11 @@ def _make_class(dai: Any) -> type:
 
 def __getattr__(name: str) -> Any:
     if name == "EmulatedCamera":
+        if "depthai" not in sys.modules and "faster_coco_eval" in sys.modules:
+            # Both are pybind11 extensions; loaded in this order, depthai's Pipeline.create() silently makes
+            # the base ThreadedHostNode instead of a Python subclass (seen with depthai 3.12, faster-coco-eval 1.8).
+            raise SourceError("EmulatedCamera needs depthai imported before faster_coco_eval in this process "
+                              "(a pybind11 clash between the two); import depthai first")
         dai = import_depthai()
         if id(dai) not in _CLASS:
             _CLASS[id(dai)] = _make_class(dai)
