@@ -1,0 +1,308 @@
+"""The emulated UVC 1.5 camera as a USB function: standard and class requests on endpoint 0, and the streaming
+endpoint that turns the producer's frames into payloads.
+
+``UVCFunction`` is what every USB transport drives (the pyusb backend in process, the USB/IP server over TCP):
+``control(setup, data)`` answers a control transfer or raises ``Stall``; ``read(endpoint, max_len, timeout_ms)``
+returns one payload (a bulk transfer, or one isochronous packet). In real-time mode frames are sent at their
+device times and a host that reads too slowly skips to the newest frame, the skipped ones counted in
+``stats.frames_dropped``; only the frame being sent is held, so memory stays bounded whatever the host does.
+"""
+
+from __future__ import annotations
+
+import struct
+import threading
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+
+from rollcam.sim.errors import DeviceError
+
+from . import constants as C
+from .convert import encode
+from .descriptors import (
+    STREAM_EP,
+    DescriptorSet,
+    DeviceIdentity,
+    FrameSize,
+    StreamFormat,
+    build_descriptors,
+    string_descriptor,
+)
+from .payload import PayloadBatch, PayloadPacker
+from .producer import FrameProducer
+from .requests import Stall, VideoControls
+
+DEFAULT_BULK_PAYLOAD = 512 * 1024
+MICROFRAMES_PER_S = 8000
+
+
+class TransferTimeout(DeviceError):
+    """No data became ready on an endpoint within the transfer's timeout."""
+
+
+class TransferOverflow(DeviceError):
+    """The host's buffer is smaller than the payload the device has to send (a babble/overflow error)."""
+
+
+@dataclass(frozen=True)
+class Setup:
+    """The 8-byte SETUP packet of a control transfer."""
+
+    bmRequestType: int
+    bRequest: int
+    wValue: int
+    wIndex: int
+    wLength: int
+
+    @classmethod
+    def unpack(cls, raw: bytes) -> Setup:
+        return cls(*struct.unpack("<BBHHH", raw))
+
+    def pack(self) -> bytes:
+        return struct.pack("<BBHHH", self.bmRequestType, self.bRequest, self.wValue, self.wIndex, self.wLength)
+
+    @property
+    def is_in(self) -> bool:
+        return bool(self.bmRequestType & C.DIR_IN)
+
+
+@dataclass
+class StreamStats:
+    """What the streaming endpoint did: frames and payloads sent, frames dropped or aborted."""
+
+    frames_sent: int = 0
+    frames_dropped: int = 0
+    frames_aborted: int = 0
+    payloads_sent: int = 0
+    bytes_sent: int = 0
+    stalls: int = 0
+
+
+class UVCFunction:
+    """A UVC 1.5 camera function over a ``FrameProducer``: descriptors, requests and the stream."""
+
+    def __init__(self, producer: FrameProducer, *, fourccs: Sequence[str] = ("YUYV", "NV12", "MJPG"),
+                 transfer: str = "iso", identity: DeviceIdentity | None = None, clock_hz: int = 1_000_000_000,
+                 realtime: bool = False, bulk_payload_size: int = DEFAULT_BULK_PAYLOAD,
+                 sleep: Callable[[float], None] = time.sleep) -> None:
+        self.producer = producer
+        self.realtime = realtime
+        self.transfer = transfer
+        self._sleep = sleep
+        self._lock = threading.RLock()
+        intervals: dict[tuple[int, int], tuple[tuple[int, int], ...]] = {}
+        frames = []
+        for w, h in producer.sizes():
+            ns = sorted(set(producer.intervals_ns(w, h)))
+            frames.append((FrameSize(w, h, tuple(dict.fromkeys(max(round(n / 100), 1) for n in ns))), ns))
+        formats = tuple(StreamFormat(f, tuple(fs for fs, _ in frames)) for f in fourccs)
+        for fi in range(1, len(formats) + 1):
+            for ri, (_, ns) in enumerate(frames, 1):
+                intervals[(fi, ri)] = tuple((max(round(n / 100), 1), n) for n in ns)
+        self.descriptors: DescriptorSet = build_descriptors(formats, identity, transfer=transfer, clock_hz=clock_hz)
+        self.formats = formats
+        self.clock_hz = clock_hz
+        self._bulk_payload = int(bulk_payload_size)
+        self.controls = VideoControls(producer, formats, intervals, clock_hz, self._payload_size)
+        self.configuration = 0
+        self.alt = {0: 0, 1: 0}
+        self.stats = StreamStats()
+        self._error_frames = 0
+        self._stop_stream()
+
+    def __repr__(self) -> str:
+        c = self.controls.committed
+        what = f"{c.fourcc} {c.width}x{c.height}" if c else "not committed"
+        return f"UVCFunction({self.producer.name!r}, {self.transfer}, {what}, streaming={self.streaming})"
+
+    # ------------------------------------------------------------------------------------ control
+    def control(self, setup: Setup, data: bytes = b"") -> bytes:
+        """Answer one control transfer: IN returns up to wLength bytes, OUT returns b''; refusals raise Stall."""
+        with self._lock:
+            try:
+                kind = setup.bmRequestType & C.TYPE_MASK
+                if kind == C.TYPE_STANDARD:
+                    out = self._standard(setup)
+                elif kind == C.TYPE_CLASS and setup.bmRequestType & C.RECIP_MASK == C.RECIP_INTERFACE:
+                    if self.configuration == 0:
+                        raise Stall("class request before SET_CONFIGURATION", C.ERR_WRONG_STATE)
+                    direction_ok = setup.is_in == (setup.bRequest != C.SET_CUR)
+                    if not direction_ok:
+                        raise Stall(f"request {setup.bRequest:#04x} with direction bit {setup.is_in}",
+                                    C.ERR_INVALID_REQUEST)
+                    out = self.controls.request(setup.bRequest, setup.wIndex & 0xFF, setup.wIndex >> 8,
+                                                setup.wValue >> 8, setup.wLength, bytes(data))
+                else:
+                    raise Stall(f"bmRequestType {setup.bmRequestType:#04x} is not handled", C.ERR_INVALID_REQUEST)
+            except Stall:
+                self.stats.stalls += 1
+                raise
+            return out[: setup.wLength] if setup.is_in else b""
+
+    def _standard(self, s: Setup) -> bytes:
+        r, recip = s.bRequest, s.bmRequestType & C.RECIP_MASK
+        if r == C.REQ_GET_DESCRIPTOR and s.is_in:
+            return self._descriptor(s.wValue >> 8, s.wValue & 0xFF)
+        if r == C.REQ_GET_STATUS and s.is_in:
+            return b"\x00\x00"
+        if r == C.REQ_GET_CONFIGURATION and s.is_in:
+            return bytes((self.configuration,))
+        if r == C.REQ_GET_INTERFACE and s.is_in:
+            if s.wIndex not in self.alt:
+                raise Stall(f"no interface {s.wIndex}", C.ERR_INVALID_UNIT)
+            return bytes((self.alt[s.wIndex],))
+        if s.is_in:
+            raise Stall(f"standard IN request {r:#04x} is not supported", C.ERR_INVALID_REQUEST)
+        if r == C.REQ_SET_CONFIGURATION:
+            if s.wValue not in (0, 1):
+                raise Stall(f"configuration {s.wValue} does not exist", C.ERR_INVALID_VALUE)
+            self._stop_stream()
+            self.configuration = s.wValue
+            self.alt = {0: 0, 1: 0}
+            return b""
+        if r == C.REQ_SET_INTERFACE:
+            self.set_interface(s.wIndex, s.wValue)
+            return b""
+        if r == C.REQ_CLEAR_FEATURE and recip == C.RECIP_ENDPOINT:
+            if s.wIndex == STREAM_EP and self.transfer == "bulk":
+                self._stop_stream()  # how a UVC host stops a bulk stream
+            return b""
+        if r in (C.REQ_SET_ADDRESS, C.REQ_SET_FEATURE, C.REQ_CLEAR_FEATURE):
+            return b""
+        raise Stall(f"standard request {r:#04x} is not supported", C.ERR_INVALID_REQUEST)
+
+    def _descriptor(self, kind: int, index: int) -> bytes:
+        d = self.descriptors
+        if kind == C.DT_DEVICE:
+            return d.device
+        if kind == C.DT_CONFIGURATION and index == 0:
+            return d.configuration
+        if kind == C.DT_STRING:
+            try:
+                return string_descriptor(index, d.strings)
+            except KeyError:
+                raise Stall(f"no string {index}", C.ERR_OUT_OF_RANGE) from None
+        if kind == C.DT_DEVICE_QUALIFIER:
+            return struct.pack("<BBH4BBB", 10, C.DT_DEVICE_QUALIFIER, 0x0200, *d.device[4:8], 1, 0)
+        raise Stall(f"no descriptor of type {kind:#04x} index {index}", C.ERR_OUT_OF_RANGE)
+
+    def set_interface(self, interface: int, alt: int) -> None:
+        """SET_INTERFACE: on the streaming interface of an isochronous camera, alt > 0 starts the stream."""
+        with self._lock:
+            n_alt = len(self.descriptors.iso_packet_sizes) + 1 if interface == 1 else 1
+            if self.configuration == 0 or interface not in self.alt or not 0 <= alt < n_alt:
+                raise Stall(f"interface {interface} has no alternate setting {alt}", C.ERR_INVALID_VALUE)
+            self.alt[interface] = alt
+            if interface == 1 and self.transfer == "iso":
+                self._stop_stream()
+                if alt:
+                    if self.controls.committed is None:
+                        raise Stall("alternate setting selected before commit", C.ERR_WRONG_STATE)
+                    self._start_stream(self.descriptors.iso_packet_sizes[alt - 1])
+
+    def _payload_size(self, frame_bytes: int, interval_ns: int) -> int:
+        if self.transfer == "bulk":
+            return self._bulk_payload
+        per_uframe = -(-frame_bytes * 1_000_000_000 // (interval_ns * MICROFRAMES_PER_S)) + 12
+        return min(per_uframe, max(self.descriptors.iso_packet_sizes))
+
+    # ------------------------------------------------------------------------------------- stream
+    @property
+    def streaming(self) -> bool:
+        return self._packer is not None
+
+    def _start_stream(self, payload_size: int) -> None:
+        c = self.controls.committed
+        self._packer = PayloadPacker(payload_size, self.clock_hz)
+        self._format = c
+        self._next_index = 0
+        self.controls.streaming = True
+
+    def _stop_stream(self) -> None:
+        batch = getattr(self, "_batch", None)
+        if batch is not None and self._pos < len(batch):
+            self.stats.frames_aborted += 1  # the host went away mid-frame
+        self._packer: PayloadPacker | None = None
+        self._batch: PayloadBatch | None = None
+        self._pos = 0
+        if hasattr(self, "controls"):
+            self.controls.streaming = False
+
+    def mark_errors(self, n_frames: int) -> None:
+        """Fault injection: the next ``n_frames`` frames go out with ERR set in their payload headers."""
+        self._error_frames += int(n_frames)
+
+    def reset(self) -> None:
+        """The host detached: stop streaming, unconfigure (a mid-frame stop is counted as aborted)."""
+        with self._lock:
+            self._stop_stream()
+            self.configuration = 0
+            self.alt = {0: 0, 1: 0}
+
+    def read(self, endpoint: int, max_len: int, timeout_ms: int | None = None) -> bytes:
+        """One payload from the streaming endpoint; b'' (a zero-length packet) when an isochronous stream has
+        nothing due. A bulk read waits for the next frame up to ``timeout_ms`` (None or 0: forever)."""
+        with self._lock:
+            if endpoint != STREAM_EP:
+                raise Stall(f"endpoint {endpoint:#04x} is not an IN endpoint of this device", C.ERR_INVALID_UNIT)
+            if self.transfer == "bulk" and self._packer is None and self.controls.committed is not None \
+                    and self.configuration:
+                self._start_stream(self.controls.committed.payload_size)
+            if self._packer is None:
+                raise Stall("the streaming endpoint is not active (commit, then select an alternate setting)",
+                            C.ERR_WRONG_STATE)
+            deadline = None if not timeout_ms else time.monotonic() + timeout_ms / 1000
+            while self._batch is None or self._pos >= len(self._batch):
+                wait_ns = self._next_batch()
+                if wait_ns == 0:
+                    break
+                if self.transfer == "iso":
+                    return b""
+                if deadline is not None and time.monotonic() + wait_ns / 1e9 > deadline:
+                    self._sleep(max(deadline - time.monotonic(), 0))
+                    raise TransferTimeout(f"no frame within {timeout_ms} ms")
+                self._sleep(wait_ns / 1e9)
+            payload = self._batch[self._pos]
+            if len(payload) > max_len:
+                raise TransferOverflow(f"payload of {len(payload)} bytes does not fit a {max_len}-byte read")
+            self._pos += 1
+            self.stats.payloads_sent += 1
+            self.stats.bytes_sent += len(payload)
+            return bytes(payload)
+
+    def _next_batch(self) -> int:
+        """Pack the next frame due; returns 0, or the ns to wait until one is due (real-time mode)."""
+        p = self.producer
+        index = self._next_index
+        now = p.now_ns()
+        if self.realtime:
+            due = p.frame_due_ns(index)
+            if due > now:
+                return due - now
+            newest = _newest_due(p, index, now)  # the host fell behind: skip to the newest frame
+            self.stats.frames_dropped += newest - index
+            index = newest
+        frame = p.frame(index)
+        c = self._format
+        data = encode(frame.data, c.fourcc, c.jpeg_quality)
+        err = self._error_frames > 0
+        self._error_frames -= err
+        send_ns = now if self.realtime else p.frame_due_ns(index)
+        self._batch = self._packer.pack(data, frame.timestamp_ns, send_ns, error=err)
+        self._pos = 0
+        self._next_index = index + 1
+        self.stats.frames_sent += 1
+        return 0
+
+
+def _newest_due(p: FrameProducer, index: int, now_ns: int) -> int:
+    """The last frame index >= ``index`` already due at ``now_ns`` (galloping then bisecting: any gap is cheap)."""
+    step = 1
+    while p.frame_due_ns(index + step) <= now_ns:
+        step *= 2
+    lo, hi = index + step // 2, index + step  # due(lo) <= now < due(hi)
+    while hi - lo > 1:
+        mid = (lo + hi) // 2
+        lo, hi = (mid, hi) if p.frame_due_ns(mid) <= now_ns else (lo, mid)
+    return lo
