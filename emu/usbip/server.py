@@ -54,10 +54,8 @@ class _Export:
 def describe(function: UVCFunction, busnum: int, devnum: int) -> P.ExportedDevice:
     """The device record a USB/IP device list shows for ``function``."""
     dev = struct.unpack("<BBHBBBBHHHBBBB", function.descriptors.device)
-    intfs = []
-    for d in split_descriptors(function.descriptors.configuration):
-        if d[1] == C.DT_INTERFACE and d[3] == 0:
-            intfs.append((d[5], d[6], d[7]))
+    intfs = [(d[5], d[6], d[7]) for d in split_descriptors(function.descriptors.configuration)
+             if d[1] == C.DT_INTERFACE and d[3] == 0]
     busid = f"{busnum}-{devnum}"
     return P.ExportedDevice(f"/sys/devices/platform/rollcam/usb{busnum}/{busid}", busid, busnum, devnum,
                             C.SPEED_HIGH, dev[7], dev[8], dev[9], dev[3], dev[4], dev[5], function.configuration or 1,
@@ -182,6 +180,13 @@ class USBIPServer:
             return export
 
 
+def _read_or_none(fn: UVCFunction, ep: int, length: int) -> bytes | None:
+    try:
+        return fn.read(ep, length, POLL_MS)
+    except TransferTimeout:
+        return None
+
+
 @dataclass
 class _UrbSession:
     """The URB phase of one imported connection: a reader (this thread) and an in-order worker."""
@@ -272,12 +277,12 @@ class _UrbSession:
             return P.RetSubmit(urb.seqnum, -errno.ESHUTDOWN, number_of_packets=n_pkt)
 
     def _bulk(self, fn: UVCFunction, urb: P.Submit) -> bytes:
-        while True:
-            try:
-                return fn.read(0x80 | urb.ep, urb.transfer_buffer_length, POLL_MS)
-            except TransferTimeout:
-                if self.done:
-                    raise DeviceError("connection closing") from None
+        data = None
+        while data is None:
+            if self.done:
+                raise DeviceError("connection closing")
+            data = _read_or_none(fn, 0x80 | urb.ep, urb.transfer_buffer_length)
+        return data
 
     def _iso(self, fn: UVCFunction, urb: P.Submit) -> P.RetSubmit:
         out, packets, errors = [], [], 0

@@ -35,6 +35,7 @@ from .requests import Stall, VideoControls
 
 DEFAULT_BULK_PAYLOAD = 512 * 1024
 MICROFRAMES_PER_S = 8000
+MICROFRAME_NS = 125_000
 
 
 class TransferTimeout(DeviceError):
@@ -257,7 +258,8 @@ class UVCFunction:
                 wait_ns = self._next_batch()
                 if wait_ns == 0:
                     break
-                if self.transfer == "iso":
+                if self.transfer == "iso":  # one empty packet per microframe while the next frame is read out
+                    self._sleep(min(wait_ns, MICROFRAME_NS) / 1e9)
                     return b""
                 if deadline is not None and time.monotonic() + wait_ns / 1e9 > deadline:
                     self._sleep(max(deadline - time.monotonic(), 0))

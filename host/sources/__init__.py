@@ -13,7 +13,7 @@ from rollcam.sim.errors import SourceError
 
 from .base import CameraSource, SourceURI
 
-SCHEMES = {"emu": "emu", "file": "file"}
+SCHEMES = {"emu": "emu", "file": "file", "uvc": "uvc"}
 """URI scheme -> module name under ``rollcam.host.sources``."""
 
 
