@@ -118,7 +118,7 @@ def test_malformed_requests_stall_and_set_the_error_code(request_):
 
 
 def test_standard_request_errors_stall():
-    _, fn, dev = _open()
+    _, _fn, dev = _open()
     for args in [(0x00, C.REQ_SET_CONFIGURATION, 7, 0, b""), (0x01, C.REQ_SET_INTERFACE, 9, 1, b""),
                  (0x80, C.REQ_GET_DESCRIPTOR, 0x0300 | 9, 0, 255), (0x80, C.REQ_GET_DESCRIPTOR, 0x2200, 0, 9)]:
         with pytest.raises(usb.core.USBError):
@@ -162,7 +162,7 @@ def test_pyusb_streams_frames_through_the_backend(transfer, fmt):
 
 
 def test_commit_while_streaming_is_refused():
-    _, fn, dev = _open()
+    _, _fn, dev = _open()
     probe = _commit(dev)
     dev.set_interface_altsetting(VS, 4)
     with pytest.raises(usb.core.USBError):
