@@ -17,6 +17,7 @@ leave a gap in the sequence numbers.
 from __future__ import annotations
 
 import time
+from collections import deque
 from typing import Any
 
 import numpy as np
@@ -194,6 +195,7 @@ class UVCSource(CameraSource):
         if self.function is not None and self.sensor is None:
             self.sensor = self.function.producer.sensor
         self.index = 0
+        self._pending: deque = deque()
         try:
             head = self.link.control(0x80, 0x06, 0x0200, 0, 9)
             config = self.link.control(0x80, 0x06, 0x0200, 0, int.from_bytes(head[2:4], "little"))
@@ -282,17 +284,19 @@ class UVCSource(CameraSource):
             return None
         deadline = time.monotonic() + self.timeout_ms / 1000
         while True:
+            while self._pending:
+                parsed = self._pending.popleft()
+                frame = self._frame(parsed) if parsed.complete and not parsed.error else None
+                if frame is not None:
+                    self.index += 1
+                    return frame
             payloads = self.link.payloads(self.stream.endpoint, self.read_size, self.stream.transfer)
             if any(payloads):
                 deadline = time.monotonic() + self.timeout_ms / 1000
             elif time.monotonic() > deadline:
                 raise SourceError(f"source {self.uri!r}: no data from the camera for {self.timeout_ms} ms")
-            for parsed in self.parser.feed_many(payloads):
-                if parsed.complete and not parsed.error:
-                    frame = self._frame(parsed)
-                    if frame is not None:
-                        self.index += 1
-                        return frame
+            # One isochronous URB can end several small frames: keep them all, in order.
+            self._pending.extend(self.parser.feed_many(payloads))
 
     def _frame(self, parsed: Any) -> Frame | None:
         from rollcam.emu.uvc.convert import decode
