@@ -73,5 +73,5 @@ def test_bad_uvc_uris_are_clear_errors(uri, match):
 
 
 def test_real_libusb_without_a_camera_is_a_clear_error():
-    with pytest.raises(SourceError, match="libusb|no USB device"):
+    with pytest.raises(SourceError, match=r"libusb|no USB device"):
         open_camera("uvc:1d6b:0102?frames=1")
