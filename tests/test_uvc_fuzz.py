@@ -197,3 +197,26 @@ def test_fuzz_usbip_server_survives_random_peers():
 def test_probe_decoder_rejects_wrong_lengths(length):
     with pytest.raises(ProtocolError):
         Probe.unpack(bytes(length))
+
+
+def test_fuzz_batch_parser_matches_payload_by_payload():
+    count = 0
+
+    @FUZZ
+    @given(damaged_streams() | st.lists(st.binary(max_size=80), max_size=20), st.integers(1, 5))
+    def run(payloads, n_batches):
+        nonlocal count
+        count += 1
+        one, batched = PayloadParser(10**9, frame_size=300), PayloadParser(10**9, frame_size=300)
+        expected = one.feed_many(payloads)
+        got = []
+        step = -(-len(payloads) // n_batches) if payloads else 1
+        for i in range(0, max(len(payloads), 1), step):
+            part = payloads[i:i + step]
+            got += batched.feed_batch(b"".join(part), [len(p) for p in part])
+        key = lambda f: (f.data, f.fid, f.pts_ns, f.scr, f.error, f.complete, f.payloads)  # noqa: E731
+        assert [key(f) for f in got] == [key(f) for f in expected]
+        assert batched.stats == one.stats
+
+    run()
+    _report("batch vs per-payload parsing", count, 400)

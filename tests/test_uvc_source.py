@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import time
+
 import numpy as np
 import pytest
 from rollcam.emu.usbip import USBIPServer
@@ -54,6 +56,9 @@ def test_uvc_source_over_usbip():
             assert src.info()["width"] == 32
         assert [f.timestamp_ns for f in frames] == [fn.producer.timestamp_ns(i) for i in range(2)]
         assert frames[0].shutter == "unknown" and frames[0].line_time_ns == 0  # no sensor= given
+        deadline = time.monotonic() + 5
+        while srv.exports["1-1"].owner is not None and time.monotonic() < deadline:
+            time.sleep(0.01)  # the server notices the closed connection on its own thread
         with pytest.raises(SourceError, match="is 1d6b:0102"):
             open_camera(f"uvc:1d6b:9999?backend=usbip&usbip={host}:{port}")
 

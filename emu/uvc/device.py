@@ -16,6 +16,7 @@ import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
+import numpy as np
 from rollcam.sim.errors import DeviceError
 
 from . import constants as C
@@ -110,6 +111,7 @@ class UVCFunction:
         self.alt = {0: 0, 1: 0}
         self.stats = StreamStats()
         self._error_frames = 0
+        self._pack_buf = np.empty(0, np.uint8)
         self._stop_stream()
 
     def __repr__(self) -> str:
@@ -291,7 +293,11 @@ class UVCFunction:
         err = self._error_frames > 0
         self._error_frames -= err
         send_ns = now if self.realtime else p.frame_due_ns(index)
-        self._batch = self._packer.pack(data, frame.timestamp_ns, send_ns, error=err)
+        need = self._packer.buffer_size(data.size)
+        if self._pack_buf.size < need:
+            self._pack_buf = np.empty(need, np.uint8)
+        # The previous frame's payloads were all copied out by the reads that sent them: its buffer is free.
+        self._batch = self._packer.pack(data, frame.timestamp_ns, send_ns, error=err, out=self._pack_buf)
         self._pos = 0
         self._next_index = index + 1
         self.stats.frames_sent += 1

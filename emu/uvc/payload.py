@@ -13,6 +13,7 @@ payloads in arrival order, recovers the 64-bit PTS across wraps, and tells compl
 
 from __future__ import annotations
 
+import itertools
 from collections.abc import Iterator
 from dataclasses import dataclass, field
 
@@ -124,8 +125,17 @@ class PayloadPacker:
         self.send_step_ns = int(send_step_ns)  # one payload per (micro)frame: its SCR advances by this
         self.fid = 0
 
-    def pack(self, data: bytes | np.ndarray, pts_ns: int, send_ns: int, *, error: bool = False) -> PayloadBatch:
-        """The payloads of one frame: PTS ``pts_ns``, SCR from ``send_ns`` on, EOF on the last, ERR if ``error``."""
+    def buffer_size(self, frame_bytes: int) -> int:
+        """Bytes ``pack`` needs to build the payloads of a frame of ``frame_bytes``."""
+        return max(-(-frame_bytes // (self.payload_size - HEADER_LEN)), 1) * self.payload_size
+
+    def pack(self, data: bytes | np.ndarray, pts_ns: int, send_ns: int, *, error: bool = False,
+             out: np.ndarray | None = None) -> PayloadBatch:
+        """The payloads of one frame: PTS ``pts_ns``, SCR from ``send_ns`` on, EOF on the last, ERR if ``error``.
+
+        ``out`` (uint8, at least ``buffer_size(len(data))`` bytes) is built in instead of a new buffer; a
+        streaming endpoint reuses one, so frames cost no fresh pages (the batch lives until ``out`` is reused).
+        """
         raw = np.frombuffer(data, np.uint8) if isinstance(data, (bytes, bytearray, memoryview)) else \
             np.ascontiguousarray(data).reshape(-1).view(np.uint8)
         ps, chunk = self.payload_size, self.payload_size - HEADER_LEN
@@ -141,7 +151,7 @@ class PayloadPacker:
         hdr["stc"] = ns_to_ticks(send, self.clock_hz) & 0xFFFFFFFF
         hdr["sof"] = (send // SOF_PERIOD_NS) & 0x7FF
         total = n * HEADER_LEN + size
-        buf = np.empty(n * ps, np.uint8)
+        buf = np.empty(n * ps, np.uint8) if out is None or out.size < n * ps else out[: n * ps]
         grid = buf.reshape(n, ps)
         grid[:, :HEADER_LEN] = hdr.view(np.uint8).reshape(n, HEADER_LEN)
         full = (n - 1) * chunk
@@ -245,9 +255,78 @@ class PayloadParser:
 
     def feed_many(self, payloads) -> list[ParsedFrame]:
         """``feed`` each payload of an iterable (a PayloadBatch, a list of packets) in order."""
+        if isinstance(payloads, PayloadBatch):
+            return self.feed_batch(payloads.buffer, payloads.lengths)
         out: list[ParsedFrame] = []
         for p in payloads:
             out += self.feed(p)
+        return out
+
+    def feed_batch(self, buffer: bytes | np.ndarray, lengths) -> list[ParsedFrame]:
+        """Payloads stored back to back in ``buffer`` (an isochronous URB's data, a PayloadBatch).
+
+        Same result as ``feed`` on each payload in turn; headers are checked with numpy and the loop runs
+        once per frame boundary, not once per payload. A batch with a malformed header or ERR set takes the
+        per-payload path.
+        """
+        lens = np.asarray(lengths, np.int64)
+        buf = np.frombuffer(buffer, np.uint8) if not isinstance(buffer, np.ndarray) else buffer.reshape(-1)
+        offs = np.zeros(lens.size, np.int64)
+        np.cumsum(lens[:-1], out=offs[1:])
+        if lens.size == 0 or int(lens.sum()) > buf.size:
+            return self._feed_each(buf, offs, lens)
+        keep = lens > 0
+        o, n = offs[keep], lens[keep]
+        if n.size == 0 or n.min() < 2:
+            return self._feed_each(buf, offs, lens)
+        hl = buf[o].astype(np.int64)
+        info = buf[o + 1]
+        need = 2 + np.where(info & BH_PTS, 4, 0) + np.where(info & BH_SCR, 6, 0)
+        if ((hl < need) | (hl > n)).any() or (info & BH_ERR).any():
+            return self._feed_each(buf, offs, lens)
+        self.stats.payloads += lens.size
+        self.stats.empty += lens.size - n.size
+        fid = (info & BH_FID).astype(np.int8)
+        eof = (info & BH_EOF) != 0
+        prev_fid = np.empty_like(fid)
+        prev_fid[0] = self._fid if self._n else fid[0]
+        prev_fid[1:] = fid[:-1]
+        prev_eof = np.empty_like(eof)
+        prev_eof[0] = self._n == 0
+        prev_eof[1:] = eof[:-1]
+        cut_before = (fid != prev_fid) & ~prev_eof  # FID toggled before EOF: the frame in progress ends
+        starts, ends = (o + hl).tolist(), (o + n).tolist()
+        mv = memoryview(buf)
+        out: list[ParsedFrame] = []
+        bounds = sorted(set(np.flatnonzero(cut_before).tolist()) | {int(i) + 1 for i in np.flatnonzero(eof)}
+                        | {0, n.size})
+        for a, b in itertools.pairwise(bounds):
+            if cut_before[a] and self._n:
+                out.append(self._finish())
+            if not self._n:
+                self._fid = int(fid[a])
+            self._n += b - a
+            self._parts += [mv[x:y] for x, y in zip(starts[a:b], ends[a:b], strict=True) if y > x]
+            if self._pts is None:
+                has = np.flatnonzero(info[a:b] & BH_PTS)
+                if has.size:
+                    p = int(o[a + has[0]]) + 2
+                    self._pts = int.from_bytes(mv[p:p + 4], "little")
+            has = np.flatnonzero(info[a:b] & BH_SCR)
+            if has.size:
+                j = a + int(has[-1])
+                p = int(o[j]) + (6 if info[j] & BH_PTS else 2)
+                self._scr = (int.from_bytes(mv[p:p + 4], "little"), int.from_bytes(mv[p + 4:p + 6], "little")
+                             & 0x7FF)
+            if eof[b - 1]:
+                out.append(self._finish())
+        return out
+
+    def _feed_each(self, buf: np.ndarray, offs: np.ndarray, lens: np.ndarray) -> list[ParsedFrame]:
+        mv = memoryview(buf)
+        out: list[ParsedFrame] = []
+        for x, k in zip(offs.tolist(), lens.tolist(), strict=True):
+            out += self.feed(mv[x:x + k])  # a payload claimed past the buffer's end arrives truncated
         return out
 
     def _unwrap(self, pts: int | None) -> int | None:
