@@ -574,11 +574,21 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--scenes", default=None, help=f"comma-separated subset of {','.join(SCENES)}")
     parser.add_argument("--hog", action="store_true",
                         help="run the HOG people-detector recall study on the synthetic walkers instead (~1 min)")
+    parser.add_argument("--uvc", action="store_true",
+                        help="run the UVC payload packing/parsing throughput bench instead (a few seconds)")
 
 
 def run(args: argparse.Namespace) -> int:
     """Entry point of ``rollcam bench``: 0 done, 2 bad options."""
     overrides: dict[str, Any] = {}
+    if getattr(args, "uvc", False):
+        from .uvc import format_uvc, run_uvc_bench
+
+        doc = run_uvc_bench()
+        Path(args.out).mkdir(parents=True, exist_ok=True)
+        (Path(args.out) / "uvc.json").write_text(json.dumps(doc, indent=1))
+        print(json.dumps(doc, indent=1) if args.json else format_uvc(doc))
+        return 0
     if getattr(args, "hog", False):
         from .hog_recall import hog_recall
 

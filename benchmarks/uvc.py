@@ -129,7 +129,7 @@ def path_throughput(frames: int, rng: np.random.Generator) -> dict[str, Any]:
         parser = PayloadParser(probe.dwClockFrequency, size)
         t0 = time.perf_counter()
         while parser.stats.frames < frames:
-            parser.feed_many(dev.iso_read(0x81, 64, 3072))
+            parser.feed_batch(*dev.iso_read_batch(0x81, 64, 3072))
         dt = time.perf_counter() - t0
         out["usbip_iso_loopback"] = {"fps": round(frames / dt, 1), "mb_s": round(frames * size / dt / 1e6, 1),
                                      "frames_ok": parser.stats.complete}

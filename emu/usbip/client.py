@@ -132,12 +132,24 @@ class ImportedDevice:
         """One bulk IN transfer of up to ``length`` bytes."""
         return self._wait(self.submit(ep & 0x0F, P.DIR_IN, length)).data
 
-    def iso_read(self, ep: int, n_packets: int, packet_size: int) -> list[bytes]:
-        """One isochronous IN URB of ``n_packets`` packets; returns each packet's data."""
+    def iso_read_batch(self, ep: int, n_packets: int, packet_size: int) -> tuple[bytes, list[int]]:
+        """One isochronous IN URB of ``n_packets`` packets: the packets' data back to back, and their lengths
+        (a failed packet counts as empty), ready for ``PayloadParser.feed_batch``."""
         rep = self._wait(self.submit(ep & 0x0F, P.DIR_IN, n_packets * packet_size,
                                      iso_lengths=(packet_size,) * n_packets))
-        out, pos = [], 0
+        if all(p.status == 0 for p in rep.iso):
+            return rep.data, [p.actual_length for p in rep.iso]
+        parts, pos = [], 0
         for p in rep.iso:
-            out.append(rep.data[pos:pos + p.actual_length] if p.status == 0 else b"")
+            parts.append(rep.data[pos:pos + p.actual_length] if p.status == 0 else b"")
             pos += p.actual_length
+        return b"".join(parts), [len(x) for x in parts]
+
+    def iso_read(self, ep: int, n_packets: int, packet_size: int) -> list[bytes]:
+        """One isochronous IN URB of ``n_packets`` packets; returns each packet's data."""
+        data, lengths = self.iso_read_batch(ep, n_packets, packet_size)
+        out, pos = [], 0
+        for n in lengths:
+            out.append(data[pos:pos + n])
+            pos += n
         return out

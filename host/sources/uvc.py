@@ -74,13 +74,15 @@ class _PyUSBLink:
     def set_interface(self, intf: int, alt: int) -> None:
         self.dev.set_interface_altsetting(intf, alt)
 
-    def payloads(self, ep: int, size: int, transfer: str) -> list[bytes]:
+    def read_into(self, parser: Any, ep: int, size: int, transfer: str) -> tuple[list, bool]:
+        """Read one transfer (one payload) into ``parser``: the frames it completed, and whether data came."""
         try:
-            return [bytes(self.dev.read(ep, size, self.timeout_ms))]
+            payload = bytes(self.dev.read(ep, size, self.timeout_ms))
         except self.usb.core.USBTimeoutError:
-            return []
+            return [], False
         except self.usb.core.USBError as exc:
             raise SourceError(f"reading endpoint {ep:#04x} failed: {exc}") from None
+        return parser.feed(payload), bool(payload)
 
     def close(self) -> None:
         self.usb.util.dispose_resources(self.dev)
@@ -108,10 +110,13 @@ class _USBIPLink:
     def set_interface(self, intf: int, alt: int) -> None:
         self.control(0x01, 0x0B, alt, intf, b"")
 
-    def payloads(self, ep: int, size: int, transfer: str) -> list[bytes]:
+    def read_into(self, parser: Any, ep: int, size: int, transfer: str) -> tuple[list, bool]:
+        """Read one URB into ``parser`` (an isochronous URB's packets in one batch)."""
         if transfer == "iso":
-            return self.dev.iso_read(ep, self.ISO_PACKETS, size)
-        return [self.dev.bulk_read(ep, size)]
+            data, lengths = self.dev.iso_read_batch(ep, self.ISO_PACKETS, size)
+            return parser.feed_batch(data, lengths), bool(data)
+        payload = self.dev.bulk_read(ep, size)
+        return parser.feed(payload), bool(payload)
 
     def close(self) -> None:
         self.dev.close()
@@ -290,13 +295,13 @@ class UVCSource(CameraSource):
                 if frame is not None:
                     self.index += 1
                     return frame
-            payloads = self.link.payloads(self.stream.endpoint, self.read_size, self.stream.transfer)
-            if any(payloads):
+            # One isochronous URB can end several small frames: keep them all, in order.
+            parsed, got = self.link.read_into(self.parser, self.stream.endpoint, self.read_size, self.stream.transfer)
+            self._pending.extend(parsed)
+            if got:
                 deadline = time.monotonic() + self.timeout_ms / 1000
             elif time.monotonic() > deadline:
                 raise SourceError(f"source {self.uri!r}: no data from the camera for {self.timeout_ms} ms")
-            # One isochronous URB can end several small frames: keep them all, in order.
-            self._pending.extend(self.parser.feed_many(payloads))
 
     def _frame(self, parsed: Any) -> Frame | None:
         from rollcam.emu.uvc.convert import decode
