@@ -167,3 +167,28 @@ def test_a_flooding_client_does_not_block_the_others(server):
         with contextlib.suppress(BlockingIOError):
             s.sendall(urb)  # never reads a reply: the server's queue and socket buffers fill, then it pushes back
         assert len(list_devices(*server.address)) == 2
+
+
+def test_an_independent_usbip_client_lists_imports_and_streams(server):
+    """The PyPI ``usbip`` package's host side (another implementation of the protocol) against this server."""
+    usbip = pytest.importorskip("usbip")
+    from usbip import protocol as UP
+
+    host, port = server.address
+    with socket.create_connection((host, port)) as s:
+        listed = UP.client_devlist(s)
+    assert [(d["busid"], d["idVendor"], d["bNumInterfaces"]) for d in listed] == [("1-1", 0x1D6B, 2), ("1-2", 0x1D6B, 2)]
+    handle = usbip.attach(host, "1-1", port=port, vid=0x1D6B, pid=0x0102)
+    try:
+        assert handle.device_descriptor.bDeviceClass == 0xEF
+        handle.control(0x21, C.SET_CUR, PROBE, 1, Probe(bFormatIndex=1, bFrameIndex=1).pack())
+        probe = Probe.unpack(bytes(handle.control(0xA1, C.GET_CUR, PROBE, 1, 48)))
+        handle.control(0x21, C.SET_CUR, COMMIT, 1, probe.pack())
+        handle.control(0x01, C.REQ_SET_INTERFACE, 4, 1, b"")
+        parser = PayloadParser(probe.dwClockFrequency, 64 * 48 * 2)
+        frames = []
+        while len(frames) < 3:
+            frames += parser.feed_many(handle.iso_in(0x81, 3072, 8))
+        assert [f.pts_ns for f in frames[:3]] == [0, 33_333_333, 66_666_666]
+    finally:
+        handle.close()
