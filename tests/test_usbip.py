@@ -177,7 +177,8 @@ def test_an_independent_usbip_client_lists_imports_and_streams(server):
     host, port = server.address
     with socket.create_connection((host, port)) as s:
         listed = UP.client_devlist(s)
-    assert [(d["busid"], d["idVendor"], d["bNumInterfaces"]) for d in listed] == [("1-1", 0x1D6B, 2), ("1-2", 0x1D6B, 2)]
+    assert [(d["busid"], d["idVendor"], d["bNumInterfaces"]) for d in listed] == [("1-1", 0x1D6B, 2),
+                                                                                 ("1-2", 0x1D6B, 2)]
     handle = usbip.attach(host, "1-1", port=port, vid=0x1D6B, pid=0x0102)
     try:
         assert handle.device_descriptor.bDeviceClass == 0xEF
