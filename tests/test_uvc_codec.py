@@ -25,7 +25,7 @@ from rollcam.emu.uvc.payload import (
 from rollcam.emu.uvc.probe import Probe
 from rollcam.sim.errors import ProtocolError
 
-FORMATS = (StreamFormat("YUYV", (FrameSize(640, 480, (333333, 666667)), FrameSize(320, 240, (333333,)))),
+FORMATS = (StreamFormat("YUYV", (FrameSize(640, 480, (333333, 666667), 666667), FrameSize(320, 240, (333333,)))),
            StreamFormat("NV12", (FrameSize(640, 480, (333333,)),)),
            StreamFormat("MJPG", (FrameSize(640, 480, (166667, 333333)),)))
 
@@ -42,6 +42,7 @@ def test_descriptor_set_round_trips_formats_sizes_intervals_and_alt_settings():
         assert needed in subtypes
     info = parse_streaming(d.configuration)
     assert info.formats == FORMATS
+    assert info.formats[0].frames[0].default_100ns == 666667 and info.formats[0].frames[1].default_100ns == 333333
     assert info.transfer == "iso" and info.endpoint == 0x81 and info.interface == 1
     assert info.alt_packet_sizes == {1: 512, 2: 1024, 3: 2048, 4: 3072}
     assert info.clock_hz == 48_000_000

@@ -22,6 +22,7 @@ def test_emulated_uvc_frames_carry_exact_device_timing():
         info = src.info()
     assert len(frames) == 3 and [f.sequence for f in frames] == [0, 1, 2]
     assert info["format"] == "YUYV" and info["transfer"] == "iso" and info["frames_damaged"] == 0
+    assert info["fps"] == pytest.approx(30, rel=0.01)  # the mode's own rate is the default interval
     for i, f in enumerate(frames):
         truth = producer.frame(i)
         assert f.timestamp_ns == truth.timestamp_ns  # PTS at 1 GHz: exact integer ns

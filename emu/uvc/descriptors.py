@@ -33,11 +33,16 @@ HEADER_MAX = 12
 
 @dataclass(frozen=True)
 class FrameSize:
-    """One frame descriptor: size and the frame intervals offered (100 ns units, shortest first)."""
+    """One frame descriptor: size, the frame intervals offered (100 ns units) and the default one."""
 
     width: int
     height: int
     intervals_100ns: tuple[int, ...]
+    default_100ns: int | None = None  # None: the first interval
+
+    def __post_init__(self) -> None:
+        if self.default_100ns is None and self.intervals_100ns:
+            object.__setattr__(self, "default_100ns", self.intervals_100ns[0])
 
 
 @dataclass(frozen=True)
@@ -126,9 +131,9 @@ def _formats(formats: Sequence[StreamFormat]) -> bytes:
         for ri, size in enumerate(fmt.frames, 1):
             iv = size.intervals_100ns
             buf = fmt.frame_bytes(size)
-            rate = [buf * 8 * 10_000_000 // i for i in (iv[-1], iv[0])]
+            rate = [buf * 8 * 10_000_000 // i for i in (max(iv), min(iv))]
             out += struct.pack(f"<BBBBBHHIIIIB{len(iv)}I", 26 + 4 * len(iv), C.CS_INTERFACE, frame_subtype, ri, 0,
-                               size.width, size.height, rate[0], rate[1], buf, iv[0], len(iv), *iv)
+                               size.width, size.height, rate[0], rate[1], buf, size.default_100ns, len(iv), *iv)
         out += struct.pack("<BBBBBB", 6, C.CS_INTERFACE, C.VS_COLORFORMAT, 1, 1, 4)  # BT.709 / sRGB
     return out
 
@@ -237,7 +242,8 @@ def parse_streaming(config: bytes) -> StreamingInfo:
                 n = d[25]
                 ivs = struct.unpack_from(f"<{n}I", d, 26) if n and len(d) >= 26 + 4 * n else \
                     struct.unpack_from("<III", d, 26)[:3] if len(d) >= 38 else ()
-                frames.append(FrameSize(w, h, tuple(ivs)))
+                default = struct.unpack_from("<I", d, 21)[0]
+                frames.append(FrameSize(w, h, tuple(ivs), default if default in ivs else None))
         elif kind == C.DT_ENDPOINT and len(d) >= 7 and cur_intf[2] == C.SC_VIDEOSTREAMING:
             interface, endpoint = cur_intf[0], d[2]
             wmax = struct.unpack_from("<H", d, 4)[0]

@@ -96,12 +96,14 @@ class UVCFunction:
         intervals: dict[tuple[int, int], tuple[tuple[int, int], ...]] = {}
         frames = []
         for w, h in producer.sizes():
-            ns = sorted(set(producer.intervals_ns(w, h)))
-            frames.append((FrameSize(w, h, tuple(dict.fromkeys(max(round(n / 100), 1) for n in ns))), ns))
+            offered = list(producer.intervals_ns(w, h))  # the first is the default
+            ns = sorted(set(offered))
+            units = tuple(dict.fromkeys(_units(n) for n in ns))
+            frames.append((FrameSize(w, h, units, _units(offered[0])), ns))
         formats = tuple(StreamFormat(f, tuple(fs for fs, _ in frames)) for f in fourccs)
         for fi in range(1, len(formats) + 1):
             for ri, (_, ns) in enumerate(frames, 1):
-                intervals[(fi, ri)] = tuple((max(round(n / 100), 1), n) for n in ns)
+                intervals[(fi, ri)] = tuple((_units(n), n) for n in ns)
         self.descriptors: DescriptorSet = build_descriptors(formats, identity, transfer=transfer, clock_hz=clock_hz)
         self.formats = formats
         self.clock_hz = clock_hz
@@ -302,6 +304,11 @@ class UVCFunction:
         self._next_index = index + 1
         self.stats.frames_sent += 1
         return 0
+
+
+def _units(interval_ns: int) -> int:
+    """A frame period in the 100 ns units of UVC descriptors and probes."""
+    return max(round(interval_ns / 100), 1)
 
 
 def _newest_due(p: FrameProducer, index: int, now_ns: int) -> int:

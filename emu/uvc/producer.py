@@ -44,7 +44,7 @@ class FrameProducer(Protocol):
         """Output sizes (width, height) offered, the default first."""
 
     def intervals_ns(self, width: int, height: int) -> Sequence[int]:
-        """Frame periods (ns) offered at a size, shortest first."""
+        """Frame periods (ns) offered at a size; the first is the default."""
 
     def configure(self, width: int, height: int, interval_ns: int) -> None:
         """Program size and frame period; frame indices restart at 0 from the device's current time."""
@@ -97,8 +97,8 @@ class SyntheticProducer:
 
     def intervals_ns(self, width: int, height: int) -> list[int]:
         native = resolve_settings(self.sensor, size=(width, height), shutter=self._shutter).timing
-        out = {native.frame_period_ns} | {p for p in map(lambda f: self._period_ns(width, height, f), self._fps) if p}
-        return sorted(out)
+        others = {p for p in (self._period_ns(width, height, f) for f in self._fps) if p} - {native.frame_period_ns}
+        return [native.frame_period_ns, *sorted(others)]  # the mode's own rate is the default
 
     def _period_ns(self, width: int, height: int, fps: float) -> int | None:
         try:

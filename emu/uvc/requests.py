@@ -197,7 +197,7 @@ class VideoControls:
     def default_probe(self) -> Probe:
         """Format 1, frame 1, its default interval."""
         return Probe(bmHint=1, bFormatIndex=1, bFrameIndex=1,
-                     dwFrameInterval=self.formats[0].frames[0].intervals_100ns[0], wCompQuality=DEFAULT_QUALITY)
+                     dwFrameInterval=self.formats[0].frames[0].default_100ns, wCompQuality=DEFAULT_QUALITY)
 
     def _lookup(self, probe: Probe) -> tuple[StreamFormat, int, int]:
         fi, ri = probe.bFormatIndex, probe.bFrameIndex

@@ -234,7 +234,8 @@ class UVCSource(CameraSource):
         ri = sizes.index(size) + 1 if size else 1
         intervals = fmt.frames[ri - 1].intervals_100ns
         fps = uri.get("fps", finite_float)
-        interval = intervals[0] if fps is None else min(intervals, key=lambda i: abs(i - 1e7 / fps))
+        default = fmt.frames[ri - 1].default_100ns or intervals[0]
+        interval = default if fps is None else min(intervals, key=lambda i: abs(i - 1e7 / fps))
         vs = s.interface
         length = int.from_bytes(self.link.control(0xA1, C.GET_LEN, C.VS_PROBE_CONTROL << 8, vs, 2), "little")
         length = length if length in C.PROBE_LENGTHS else C.PROBE_LEN_11
