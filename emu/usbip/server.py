@@ -2,9 +2,10 @@
 
 Each TCP connection starts with one operation: OP_REQ_DEVLIST (answered, then closed) or OP_REQ_IMPORT (on
 success the connection carries URBs for that device until the peer leaves). A device serves one importer at
-a time; others are told it is not available. URBs run in order on a worker thread, so CMD_UNLINK can cancel
-one still queued; the queue is bounded, so a client that floods costs itself back-pressure, not server memory.
-A malformed message closes that connection only; the server keeps serving everyone else.
+a time; others are told it is not available. URBs run in order per endpoint (control, stream) on worker
+threads, so CMD_UNLINK can cancel one still queued; the queues are bounded, so a client that floods costs
+itself back-pressure, not server memory. A malformed message closes that connection only; the server keeps
+serving everyone else.
 """
 
 from __future__ import annotations
@@ -189,13 +190,14 @@ def _read_or_none(fn: UVCFunction, ep: int, length: int) -> bytes | None:
 
 @dataclass
 class _UrbSession:
-    """The URB phase of one imported connection: a reader (this thread) and an in-order worker."""
+    """The URB phase of one imported connection: a reader (this thread) and two in-order workers, one for
+    endpoint 0 and one for the streaming endpoint, so control requests are not held behind waiting reads."""
 
     conn: socket.socket
     recv: Callable[[int], bytes]
     export: _Export
     server: USBIPServer
-    queue: deque = field(default_factory=deque)
+    queues: tuple[deque, deque] = field(default_factory=lambda: (deque(), deque()))
     frame_number: int = 0
 
     def __post_init__(self) -> None:
@@ -208,8 +210,10 @@ class _UrbSession:
             self.conn.sendall(data)
 
     def run(self) -> None:
-        worker = threading.Thread(target=self._work, name="usbip-urbs", daemon=True)
-        worker.start()
+        workers = [threading.Thread(target=self._work, args=(q,), name="usbip-urbs", daemon=True)
+                   for q in self.queues]
+        for w in workers:
+            w.start()
         try:
             while True:
                 cmd = P.read_command(self.recv)
@@ -217,33 +221,34 @@ class _UrbSession:
                     self._unlink(cmd)
                     continue
                 with self.cond:
-                    while len(self.queue) >= MAX_QUEUED_URBS and not self.done:
+                    while sum(map(len, self.queues)) >= MAX_QUEUED_URBS and not self.done:
                         self.cond.wait(0.5)
-                    self.queue.append(cmd)
+                    self.queues[cmd.ep != 0].append(cmd)
                     self.cond.notify_all()
         finally:
             with self.cond:
                 self.done = True
                 self.cond.notify_all()
-            worker.join(timeout=5)
+            for w in workers:
+                w.join(timeout=5)
 
     def _unlink(self, cmd: P.Unlink) -> None:
         with self.cond:
-            hit = next((u for u in self.queue if u.seqnum == cmd.unlink_seqnum), None)
+            hit = next((u for q in self.queues for u in q if u.seqnum == cmd.unlink_seqnum), None)
             if hit is not None:
-                self.queue.remove(hit)
+                self.queues[hit.ep != 0].remove(hit)
                 self.server.stats.unlinked += 1
                 self.cond.notify_all()
         self.send(P.RetUnlink(cmd.seqnum, -errno.ECONNRESET if hit else 0).pack())
 
-    def _work(self) -> None:
+    def _work(self, queue: deque) -> None:
         while True:
             with self.cond:
-                while not self.queue and not self.done:
+                while not queue and not self.done:
                     self.cond.wait()
                 if self.done:
                     return
-                urb = self.queue.popleft()
+                urb = queue.popleft()
                 self.cond.notify_all()
             try:
                 self.send(self.execute(urb).pack())

@@ -247,7 +247,23 @@ class UVCFunction:
 
     def read(self, endpoint: int, max_len: int, timeout_ms: int | None = None) -> bytes:
         """One payload from the streaming endpoint; b'' (a zero-length packet) when an isochronous stream has
-        nothing due. A bulk read waits for the next frame up to ``timeout_ms`` (None or 0: forever)."""
+        nothing due. A bulk read waits for the next frame up to ``timeout_ms`` (None or 0: forever).
+        Waiting happens outside the function's lock, so control requests are answered meanwhile."""
+        deadline = None if not timeout_ms else time.monotonic() + timeout_ms / 1000
+        while True:
+            wait_ns = self._try_read(endpoint, max_len)
+            if isinstance(wait_ns, bytes):
+                return wait_ns
+            if self.transfer == "iso":  # one empty packet per microframe while the next frame is read out
+                self._sleep(min(wait_ns, MICROFRAME_NS) / 1e9)
+                return b""
+            if deadline is not None and time.monotonic() + wait_ns / 1e9 > deadline:
+                self._sleep(max(deadline - time.monotonic(), 0))
+                raise TransferTimeout(f"no frame within {timeout_ms} ms")
+            self._sleep(wait_ns / 1e9)
+
+    def _try_read(self, endpoint: int, max_len: int) -> bytes | int:
+        """The next payload, or the ns until the next frame is due."""
         with self._lock:
             if endpoint != STREAM_EP:
                 raise Stall(f"endpoint {endpoint:#04x} is not an IN endpoint of this device", C.ERR_INVALID_UNIT)
@@ -257,18 +273,10 @@ class UVCFunction:
             if self._packer is None:
                 raise Stall("the streaming endpoint is not active (commit, then select an alternate setting)",
                             C.ERR_WRONG_STATE)
-            deadline = None if not timeout_ms else time.monotonic() + timeout_ms / 1000
-            while self._batch is None or self._pos >= len(self._batch):
+            if self._batch is None or self._pos >= len(self._batch):
                 wait_ns = self._next_batch()
-                if wait_ns == 0:
-                    break
-                if self.transfer == "iso":  # one empty packet per microframe while the next frame is read out
-                    self._sleep(min(wait_ns, MICROFRAME_NS) / 1e9)
-                    return b""
-                if deadline is not None and time.monotonic() + wait_ns / 1e9 > deadline:
-                    self._sleep(max(deadline - time.monotonic(), 0))
-                    raise TransferTimeout(f"no frame within {timeout_ms} ms")
-                self._sleep(wait_ns / 1e9)
+                if wait_ns:
+                    return wait_ns
             payload = self._batch[self._pos]
             if len(payload) > max_len:
                 raise TransferOverflow(f"payload of {len(payload)} bytes does not fit a {max_len}-byte read")
