@@ -145,6 +145,8 @@ def test_unlink_cancels_a_queued_urb():
         first = dev.submit(1, P.DIR_IN, size)  # blocks: no frame is due on the manual clock
         second = dev.submit(1, P.DIR_IN, size)
         time.sleep(0.1)
+        # control requests are answered while the stream endpoint waits
+        assert Probe.unpack(dev.control(0xA1, C.GET_CUR, COMMIT, 1, 34)).bFormatIndex == 1
         unlink = dev.unlink(second)
         rep = dev.reply()
         assert isinstance(rep, P.RetUnlink) and rep.seqnum == unlink and rep.status == -errno.ECONNRESET

@@ -55,6 +55,7 @@ class ImportedDevice:
         self._recv = _recv_exact(self._sock)
         self._seq = itertools.count(1)
         self._outstanding: dict[int, P.Submit] = {}
+        self._early: dict[int, P.RetSubmit | P.RetUnlink] = {}
         self.closed = False
         try:
             self._sock.sendall(P.req_import(busid))
@@ -102,20 +103,31 @@ class ImportedDevice:
         return seq
 
     def reply(self) -> P.RetSubmit | P.RetUnlink:
-        """The next reply from the server."""
+        """The next reply from the server (replies that arrived while waiting for another come first)."""
+        if self._early:
+            return self._early.pop(next(iter(self._early)))
+        return self._read_reply()
+
+    def _read_reply(self) -> P.RetSubmit | P.RetUnlink:
         rep = P.read_reply(self._recv, self._outstanding)
         if isinstance(rep, P.RetSubmit):
             self._outstanding.pop(rep.seqnum, None)
         return rep
 
     def _wait(self, seq: int) -> P.RetSubmit:
-        while True:
-            rep = self.reply()
-            if isinstance(rep, P.RetSubmit) and rep.seqnum == seq:
-                if rep.status < 0:
-                    name = errno.errorcode.get(-rep.status, str(rep.status))
-                    raise UrbError(f"URB {seq} on endpoint failed with -{name}", rep.status)
-                return rep
+        rep = self._early.pop(seq, None)
+        while rep is None:
+            got = self._read_reply()
+            if got.seqnum == seq:
+                rep = got
+            else:
+                self._early[got.seqnum] = got  # another URB's reply: keep it for whoever asks
+        if not isinstance(rep, P.RetSubmit):
+            raise ProtocolError(f"seqnum {seq} answered by {type(rep).__name__}")
+        if rep.status < 0:
+            name = errno.errorcode.get(-rep.status, str(rep.status))
+            raise UrbError(f"URB {seq} failed with -{name}", rep.status)
+        return rep
 
     # ------------------------------------------------------------------------------- transfers
     def control(self, bmRequestType: int, bRequest: int, wValue: int = 0, wIndex: int = 0,
