@@ -21,8 +21,9 @@ from dataclasses import dataclass, field
 
 from rollcam.emu.uvc import constants as C
 from rollcam.emu.uvc.descriptors import split_descriptors
-from rollcam.emu.uvc.device import Setup, TransferOverflow, TransferTimeout, UVCFunction
+from rollcam.emu.uvc.device import Setup, UVCFunction
 from rollcam.emu.uvc.requests import Stall
+from rollcam.emu.uvc.stream import TransferOverflow, TransferTimeout
 from rollcam.sim.errors import DeviceError, ProtocolError
 
 from . import protocol as P

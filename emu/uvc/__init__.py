@@ -12,11 +12,12 @@ Typical use::
 from __future__ import annotations
 
 from .descriptors import DescriptorSet, DeviceIdentity, FrameSize, StreamFormat, build_descriptors, parse_streaming
-from .device import Setup, StreamStats, TransferOverflow, TransferTimeout, UVCFunction
+from .device import Setup, UVCFunction
 from .payload import ParsedFrame, PayloadBatch, PayloadPacker, PayloadParser, pack_header, parse_header
 from .probe import Probe
 from .producer import ControlRange, FrameProducer, SyntheticProducer
 from .requests import Stall
+from .stream import StreamStats, TransferOverflow, TransferTimeout
 
 __all__ = [
     "ControlRange", "DescriptorSet", "DeviceIdentity", "FrameProducer", "FrameSize", "ParsedFrame", "PayloadBatch",

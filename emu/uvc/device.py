@@ -1,5 +1,5 @@
 """The emulated UVC 1.5 camera as a USB function: standard and class requests on endpoint 0, and the streaming
-endpoint that turns the producer's frames into payloads.
+endpoint (``stream.py``) that turns the producer's frames into payloads.
 
 ``UVCFunction`` is what every USB transport drives (the pyusb backend in process, the USB/IP server over TCP):
 ``control(setup, data)`` answers a control transfer or raises ``Stall``; ``read(endpoint, max_len, timeout_ms)``
@@ -16,11 +16,7 @@ import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
-import numpy as np
-from rollcam.sim.errors import DeviceError
-
 from . import constants as C
-from .convert import encode
 from .descriptors import (
     STREAM_EP,
     DescriptorSet,
@@ -30,21 +26,12 @@ from .descriptors import (
     build_descriptors,
     string_descriptor,
 )
-from .payload import PayloadBatch, PayloadPacker
 from .producer import FrameProducer
 from .requests import Stall, VideoControls
+from .stream import MICROFRAME_NS, StreamEndpoint, TransferTimeout
 
 DEFAULT_BULK_PAYLOAD = 512 * 1024
 MICROFRAMES_PER_S = 8000
-MICROFRAME_NS = 125_000
-
-
-class TransferTimeout(DeviceError):
-    """No data became ready on an endpoint within the transfer's timeout."""
-
-
-class TransferOverflow(DeviceError):
-    """The host's buffer is smaller than the payload the device has to send (a babble/overflow error)."""
 
 
 @dataclass(frozen=True)
@@ -67,18 +54,6 @@ class Setup:
     @property
     def is_in(self) -> bool:
         return bool(self.bmRequestType & C.DIR_IN)
-
-
-@dataclass
-class StreamStats:
-    """What the streaming endpoint did: frames and payloads sent, frames dropped or aborted."""
-
-    frames_sent: int = 0
-    frames_dropped: int = 0
-    frames_aborted: int = 0
-    payloads_sent: int = 0
-    bytes_sent: int = 0
-    stalls: int = 0
 
 
 class UVCFunction:
@@ -111,10 +86,8 @@ class UVCFunction:
         self.controls = VideoControls(producer, formats, intervals, clock_hz, self._payload_size)
         self.configuration = 0
         self.alt = {0: 0, 1: 0}
-        self.stats = StreamStats()
-        self._error_frames = 0
-        self._pack_buf = np.empty(0, np.uint8)
-        self._stop_stream()
+        self.stream = StreamEndpoint(producer, clock_hz, realtime, sleep)
+        self.stats = self.stream.stats
 
     def __repr__(self) -> str:
         c = self.controls.committed
@@ -215,28 +188,20 @@ class UVCFunction:
     # ------------------------------------------------------------------------------------- stream
     @property
     def streaming(self) -> bool:
-        return self._packer is not None
+        return self.stream.active
 
     def _start_stream(self, payload_size: int) -> None:
-        c = self.controls.committed
-        self._packer = PayloadPacker(payload_size, self.clock_hz)
-        self._format = c
-        self._next_index = 0
+        self.stream.start(self.controls.committed, payload_size)
         self.controls.streaming = True
 
     def _stop_stream(self) -> None:
-        batch = getattr(self, "_batch", None)
-        if batch is not None and self._pos < len(batch):
-            self.stats.frames_aborted += 1  # the host went away mid-frame
-        self._packer: PayloadPacker | None = None
-        self._batch: PayloadBatch | None = None
-        self._pos = 0
-        if hasattr(self, "controls"):
-            self.controls.streaming = False
+        self.stream.stop()
+        self.controls.streaming = False
 
     def mark_errors(self, n_frames: int) -> None:
         """Fault injection: the next ``n_frames`` frames go out with ERR set in their payload headers."""
-        self._error_frames += int(n_frames)
+        with self._lock:
+            self.stream.mark_errors(n_frames)
 
     def reset(self) -> None:
         """The host detached: stop streaming, unconfigure (a mid-frame stop is counted as aborted)."""
@@ -251,81 +216,31 @@ class UVCFunction:
         Waiting happens outside the function's lock, so control requests are answered meanwhile."""
         deadline = None if not timeout_ms else time.monotonic() + timeout_ms / 1000
         while True:
-            wait_ns = self._try_read(endpoint, max_len)
-            if isinstance(wait_ns, bytes):
-                return wait_ns
+            got = self._try_read(endpoint, max_len)
+            if isinstance(got, bytes):
+                return got
             if self.transfer == "iso":  # one empty packet per microframe while the next frame is read out
-                self._sleep(min(wait_ns, MICROFRAME_NS) / 1e9)
+                self._sleep(min(got, MICROFRAME_NS) / 1e9)
                 return b""
-            if deadline is not None and time.monotonic() + wait_ns / 1e9 > deadline:
+            if deadline is not None and time.monotonic() + got / 1e9 > deadline:
                 self._sleep(max(deadline - time.monotonic(), 0))
                 raise TransferTimeout(f"no frame within {timeout_ms} ms")
-            self._sleep(wait_ns / 1e9)
+            self._sleep(got / 1e9)
 
     def _try_read(self, endpoint: int, max_len: int) -> bytes | int:
         """The next payload, or the ns until the next frame is due."""
         with self._lock:
             if endpoint != STREAM_EP:
                 raise Stall(f"endpoint {endpoint:#04x} is not an IN endpoint of this device", C.ERR_INVALID_UNIT)
-            if self.transfer == "bulk" and self._packer is None and self.controls.committed is not None \
+            if self.transfer == "bulk" and not self.streaming and self.controls.committed is not None \
                     and self.configuration:
                 self._start_stream(self.controls.committed.payload_size)
-            if self._packer is None:
+            if not self.streaming:
                 raise Stall("the streaming endpoint is not active (commit, then select an alternate setting)",
                             C.ERR_WRONG_STATE)
-            if self._batch is None or self._pos >= len(self._batch):
-                wait_ns = self._next_batch()
-                if wait_ns:
-                    return wait_ns
-            payload = self._batch[self._pos]
-            if len(payload) > max_len:
-                raise TransferOverflow(f"payload of {len(payload)} bytes does not fit a {max_len}-byte read")
-            self._pos += 1
-            self.stats.payloads_sent += 1
-            self.stats.bytes_sent += len(payload)
-            return bytes(payload)
-
-    def _next_batch(self) -> int:
-        """Pack the next frame due; returns 0, or the ns to wait until one is due (real-time mode)."""
-        p = self.producer
-        index = self._next_index
-        now = p.now_ns()
-        if self.realtime:
-            due = p.frame_due_ns(index)
-            if due > now:
-                return due - now
-            newest = _newest_due(p, index, now)  # the host fell behind: skip to the newest frame
-            self.stats.frames_dropped += newest - index
-            index = newest
-        frame = p.frame(index)
-        c = self._format
-        data = encode(frame.data, c.fourcc, c.jpeg_quality)
-        err = self._error_frames > 0
-        self._error_frames -= err
-        send_ns = now if self.realtime else p.frame_due_ns(index)
-        need = self._packer.buffer_size(data.size)
-        if self._pack_buf.size < need:
-            self._pack_buf = np.empty(need, np.uint8)
-        # The previous frame's payloads were all copied out by the reads that sent them: its buffer is free.
-        self._batch = self._packer.pack(data, frame.timestamp_ns, send_ns, error=err, out=self._pack_buf)
-        self._pos = 0
-        self._next_index = index + 1
-        self.stats.frames_sent += 1
-        return 0
+            return self.stream.next_payload(max_len)
 
 
 def _units(interval_ns: int) -> int:
     """A frame period in the 100 ns units of UVC descriptors and probes."""
     return max(round(interval_ns / 100), 1)
-
-
-def _newest_due(p: FrameProducer, index: int, now_ns: int) -> int:
-    """The last frame index >= ``index`` already due at ``now_ns`` (galloping then bisecting: any gap is cheap)."""
-    step = 1
-    while p.frame_due_ns(index + step) <= now_ns:
-        step *= 2
-    lo, hi = index + step // 2, index + step  # due(lo) <= now < due(hi)
-    while hi - lo > 1:
-        mid = (lo + hi) // 2
-        lo, hi = (mid, hi) if p.frame_due_ns(mid) <= now_ns else (lo, mid)
-    return lo

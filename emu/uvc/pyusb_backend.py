@@ -19,8 +19,9 @@ from rollcam.sim.errors import SourceError
 
 from . import constants as C
 from .descriptors import split_descriptors
-from .device import Setup, TransferOverflow, TransferTimeout, UVCFunction
+from .device import Setup, UVCFunction
 from .requests import Stall
+from .stream import TransferOverflow, TransferTimeout
 
 try:
     import usb.backend
