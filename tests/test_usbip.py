@@ -138,7 +138,8 @@ def test_malformed_peers_lose_their_connection_only(server):
 
 def test_unlink_cancels_a_queued_urb():
     clock, gate = ManualClock(), threading.Event()
-    fn = UVCFunction(FakeProducer(clock=clock), transfer="bulk", realtime=True, sleep=gate.wait)
+    fn = UVCFunction(FakeProducer(clock=clock), transfer="bulk", realtime=True, sleep=gate.wait,
+                     render_ahead=False)
     with USBIPServer([fn], port=0) as srv, ImportedDevice(*srv.address, "1-1") as dev:
         probe = _commit(dev)
         size = probe.dwMaxPayloadTransferSize

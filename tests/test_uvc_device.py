@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import errno
+import itertools
 
 import numpy as np
 import pytest
@@ -173,7 +174,7 @@ def test_commit_while_streaming_is_refused():
 def test_realtime_slow_host_drops_frames_and_counts_them():
     clock = ManualClock()
     producer = FakeProducer(clock=clock)
-    fn = UVCFunction(producer, realtime=True, sleep=clock.sleep)
+    fn = UVCFunction(producer, realtime=True, sleep=clock.sleep, render_ahead=False)
     dev = usb.core.find(idVendor=0x1D6B, backend=EmulatedBackend([fn]))
     dev.set_configuration()
     probe = _commit(dev)
@@ -200,7 +201,8 @@ def test_realtime_slow_host_drops_frames_and_counts_them():
 def test_bulk_read_times_out_when_no_frame_is_due():
     clock = ManualClock()
     producer = FakeProducer(clock=clock)
-    fn = UVCFunction(producer, transfer="bulk", realtime=True, sleep=lambda s: None)
+    fn = UVCFunction(producer, transfer="bulk", realtime=True, sleep=lambda s: None,
+                     render_ahead=False)
     dev = usb.core.find(idVendor=0x1D6B, backend=EmulatedBackend([fn]))
     dev.set_configuration()
     _commit(dev)
@@ -219,3 +221,30 @@ def test_reset_mid_frame_counts_an_aborted_frame():
     dev.read(0x81, 512)
     dev.reset()
     assert fn.stats.frames_aborted == 1 and not fn.streaming and fn.configuration == 0
+
+
+def test_render_ahead_offers_the_newest_completed_frame_and_counts_the_rest():
+    """Real clock: frames every 10 ms, a host that reads every ~25 ms gets the newest frame each time."""
+    import time
+
+    t0 = time.monotonic_ns()
+    producer = FakeProducer(intervals_ns=(10_000_000,), clock=lambda: time.monotonic_ns() - t0)
+    fn = UVCFunction(producer, transfer="bulk", realtime=True)
+    dev = usb.core.find(idVendor=0x1D6B, backend=EmulatedBackend([fn]))
+    dev.set_configuration()
+    probe = _commit(dev, interval=100_000)
+    parser = PayloadParser(probe.dwClockFrequency, 64 * 48 * 2)
+    got = []
+    while len(got) < 6:
+        got += parser.feed(bytes(dev.read(0x81, probe.dwMaxPayloadTransferSize, timeout=2000)))
+        if got and len(got) % 2:
+            time.sleep(0.025)
+    indices = [(f.pts_ns - producer.t0) // 10_000_000 for f in got]
+    assert indices == sorted(set(indices)) and all(f.complete for f in got)
+    for f, i in zip(got, indices, strict=True):
+        assert f.pts_ns == producer.timestamp_ns(i)
+        assert abs(float(np.median(decode(f.data, "YUYV", 64, 48))) - ((i * 37) % 200 + 20)) <= 3
+    skipped = sum(b - a - 1 for a, b in itertools.pairwise(indices))
+    assert skipped > 0 and fn.stats.frames_dropped >= skipped
+    dev.clear_halt(0x81)  # stops the stream and its renderer thread
+    assert not fn.streaming and fn.stream._ahead is None

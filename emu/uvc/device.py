@@ -62,7 +62,7 @@ class UVCFunction:
     def __init__(self, producer: FrameProducer, *, fourccs: Sequence[str] = ("YUYV", "NV12", "MJPG"),
                  transfer: str = "iso", identity: DeviceIdentity | None = None, clock_hz: int = 1_000_000_000,
                  realtime: bool = False, bulk_payload_size: int = DEFAULT_BULK_PAYLOAD,
-                 sleep: Callable[[float], None] = time.sleep) -> None:
+                 sleep: Callable[[float], None] = time.sleep, render_ahead: bool = True) -> None:
         self.producer = producer
         self.realtime = realtime
         self.transfer = transfer
@@ -86,7 +86,7 @@ class UVCFunction:
         self.controls = VideoControls(producer, formats, intervals, clock_hz, self._payload_size)
         self.configuration = 0
         self.alt = {0: 0, 1: 0}
-        self.stream = StreamEndpoint(producer, clock_hz, realtime, sleep)
+        self.stream = StreamEndpoint(producer, clock_hz, realtime, sleep, render_ahead)
         self.stats = self.stream.stats
 
     def __repr__(self) -> str:
@@ -209,6 +209,16 @@ class UVCFunction:
             self._stop_stream()
             self.configuration = 0
             self.alt = {0: 0, 1: 0}
+
+    def close(self) -> None:
+        """Stop streaming (and the renderer thread of real-time mode); safe to call twice."""
+        self.reset()
+
+    def __enter__(self) -> UVCFunction:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
 
     def read(self, endpoint: int, max_len: int, timeout_ms: int | None = None) -> bytes:
         """One payload from the streaming endpoint; b'' (a zero-length packet) when an isochronous stream has

@@ -112,6 +112,10 @@ class SyntheticProducer:
             raise DeviceError(f"size {width}x{height} is not one of {self._sizes}")
         self._size, self._interval_ns = (width, height), int(interval_ns)
         self._build(self.now_ns())
+        # One render fills the renderer's caches (static layers, compiled kernels) before the timeline starts,
+        # so a real-time stream does not open with a burst of dropped frames.
+        self.cam.frame(0)
+        self.cam.start_ns = self.now_ns()
 
     def _build(self, start_ns: int) -> None:
         try:

@@ -1,8 +1,10 @@
 """The streaming endpoint of the UVC function: frames from the producer, packed into payloads on demand.
 
-Only the frame being sent is held (in one reused buffer). In real-time mode a frame goes out once the device
-clock has passed its readout; a host that reads too slowly skips to the newest due frame, the skipped ones
-counted in ``stats.frames_dropped`` and never rendered; a stop mid-frame counts in ``frames_aborted``.
+Only the frame being sent is held (in one reused buffer), plus in real-time mode the one frame ``RenderAhead``
+has ready. In real-time mode a frame goes out once the device clock has passed its readout; a host that reads
+too slowly gets the newest completed frame, the ones it missed counted in ``stats.frames_dropped``; a stop
+mid-frame counts in ``frames_aborted``. Without render-ahead (``render_ahead=False``) frames are rendered
+when the host asks, and frames the host fell behind on are skipped without being rendered.
 """
 
 from __future__ import annotations
@@ -13,6 +15,7 @@ from dataclasses import dataclass
 import numpy as np
 from rollcam.sim.errors import DeviceError
 
+from .ahead import RenderAhead, newest_due
 from .convert import encode
 from .payload import PayloadBatch, PayloadPacker
 from .producer import FrameProducer
@@ -45,8 +48,10 @@ class StreamEndpoint:
     """Payload source of one UVC function (not thread-safe: the function serialises calls)."""
 
     def __init__(self, producer: FrameProducer, clock_hz: int, realtime: bool,
-                 sleep: Callable[[float], None]) -> None:
+                 sleep: Callable[[float], None], render_ahead: bool = True) -> None:
         self.producer, self.clock_hz, self.realtime, self.sleep = producer, clock_hz, realtime, sleep
+        self.render_ahead = render_ahead and realtime
+        self._ahead: RenderAhead | None = None
         self.stats = StreamStats()
         self._error_frames = 0
         self._buf = np.empty(0, np.uint8)
@@ -64,11 +69,17 @@ class StreamEndpoint:
         self._packer = PayloadPacker(payload_size, self.clock_hz)
         self._format = committed
         self._next_index = 0
+        if self.render_ahead:
+            self._ahead = RenderAhead(self.producer, lambda f: encode(f.data, committed.fourcc, committed.jpeg_quality),
+                                      self.stats)
 
     def stop(self) -> None:
         """End the stream (a frame cut short counts as aborted)."""
         if self._batch is not None and self._pos < len(self._batch):
             self.stats.frames_aborted += 1  # the host went away mid-frame
+        if self._ahead is not None:
+            self._ahead.stop()
+            self._ahead = None
         self._packer = None
         self._batch = None
         self._pos = 0
@@ -95,16 +106,22 @@ class StreamEndpoint:
         p = self.producer
         index = self._next_index
         now = p.now_ns()
-        if self.realtime:
-            due = p.frame_due_ns(index)
-            if due > now:
-                return due - now
-            newest = newest_due(p, index, now)  # the host fell behind: skip to the newest frame
-            self.stats.frames_dropped += newest - index
-            index = newest
-        frame = p.frame(index)
         c = self._format
-        data = encode(frame.data, c.fourcc, c.jpeg_quality)
+        if self._ahead is not None:
+            got = self._ahead.take()
+            if isinstance(got, int):
+                return got
+            index, frame, data = got
+        else:
+            if self.realtime:
+                due = p.frame_due_ns(index)
+                if due > now:
+                    return due - now
+                newest = newest_due(p, index, now)  # the host fell behind: skip to the newest frame
+                self.stats.frames_dropped += newest - index
+                index = newest
+            frame = p.frame(index)
+            data = encode(frame.data, c.fourcc, c.jpeg_quality)
         err = self._error_frames > 0
         self._error_frames -= err
         send_ns = now if self.realtime else p.frame_due_ns(index)
@@ -117,15 +134,3 @@ class StreamEndpoint:
         self._next_index = index + 1
         self.stats.frames_sent += 1
         return 0
-
-
-def newest_due(p: FrameProducer, index: int, now_ns: int) -> int:
-    """The last frame index >= ``index`` already due at ``now_ns`` (galloping then bisecting: any gap is cheap)."""
-    step = 1
-    while p.frame_due_ns(index + step) <= now_ns:
-        step *= 2
-    lo, hi = index + step // 2, index + step  # due(lo) <= now < due(hi)
-    while hi - lo > 1:
-        mid = (lo + hi) // 2
-        lo, hi = (mid, hi) if p.frame_due_ns(mid) <= now_ns else (lo, mid)
-    return lo

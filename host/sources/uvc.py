@@ -345,6 +345,8 @@ class UVCSource(CameraSource):
         """Release the device; safe to call twice."""
         if not self.closed and getattr(self, "link", None) is not None:
             self.link.close()
+            if self.function is not None:
+                self.function.close()  # the emulated camera belongs to this source
         self.closed = True
 
 
