@@ -87,7 +87,9 @@ class SyntheticProducer:
         self._gain_x100 = 100
         self._exposure_ns: int | None = None
         w, h = self._sizes[0]
-        self.configure(w, h, resolve_settings(sensor, size=(w, h), shutter=shutter).timing.frame_period_ns)
+        self._size = (w, h)
+        self._interval_ns = resolve_settings(sensor, size=(w, h), shutter=shutter).timing.frame_period_ns
+        self._build(0)  # programmed for real (and the renderer warmed) by the host's commit
 
     def __repr__(self) -> str:
         return f"SyntheticProducer({self.cam!r})"
