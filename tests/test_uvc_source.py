@@ -81,3 +81,17 @@ def test_bad_uvc_uris_are_clear_errors(uri, match):
 def test_real_libusb_without_a_camera_is_a_clear_error():
     with pytest.raises(SourceError, match=r"libusb|no USB device"):
         open_camera("uvc:1d6b:0102?frames=1")
+
+
+@pytest.mark.hardware
+def test_real_uvc_camera():
+    """Set ROLLCAM_UVC=VID:PID (hex) to stream from a real UVC camera through libusb."""
+    import os
+
+    ids = os.environ.get("ROLLCAM_UVC")
+    if not ids:
+        pytest.skip("no real UVC camera named in ROLLCAM_UVC")
+    with open_camera(f"uvc:{ids}?frames=3") as src:
+        frames = list(src)
+    assert len(frames) == 3 and all(f.data.size for f in frames)
+    assert frames[1].timestamp_ns > frames[0].timestamp_ns
