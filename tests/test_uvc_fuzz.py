@@ -19,7 +19,7 @@ from rollcam.emu.uvc import constants as C
 from rollcam.sim.errors import ProtocolError
 from uvc_fakes import FakeProducer
 
-FUZZ = settings(max_examples=400, deadline=None, derandomize=True,
+FUZZ = settings(max_examples=1000, deadline=None, derandomize=True,
                 suppress_health_check=[HealthCheck.too_slow, HealthCheck.function_scoped_fixture])
 
 
@@ -69,7 +69,7 @@ def test_fuzz_uvc_control_requests():
         assert len(fn.control(Setup(0xA1, C.GET_CUR, 0x0100, 1, 48))) == 48
 
     run()
-    _report("UVC control requests", count, 400)
+    _report("UVC control requests", count, 1000)
 
 
 # ------------------------------------------------------------------------------------- UVC payloads
@@ -123,7 +123,7 @@ def test_fuzz_payload_parser():
             assert f.complete == (len(f.data) == 300)
 
     run()
-    _report("UVC payload streams", count, 400)
+    _report("UVC payload streams", count, 1000)
 
 
 # -------------------------------------------------------------------------------------- USB/IP codec
@@ -168,7 +168,7 @@ def test_fuzz_usbip_decoder():
                 P.ExportedDevice.read(_recv_from(data), with_intf)
 
     run()
-    _report("USB/IP messages", count, 400)
+    _report("USB/IP messages", count, 1000)
 
 
 def test_fuzz_usbip_server_survives_random_peers():
@@ -219,4 +219,4 @@ def test_fuzz_batch_parser_matches_payload_by_payload():
         assert batched.stats == one.stats
 
     run()
-    _report("batch vs per-payload parsing", count, 400)
+    _report("batch vs per-payload parsing", count, 1000)
