@@ -218,8 +218,12 @@ def _bounded(what: str, value: int, limit: int) -> int:
     return value
 
 
+def _iso_packets(recv: RecvExact, n: int) -> tuple[IsoPacket, ...]:
+    return tuple(IsoPacket(*f) for f in _ISO.iter_unpack(recv(_ISO.size * n))) if n else ()
+
+
 def _read_iso(recv: RecvExact, n: int, total: int) -> tuple[IsoPacket, ...]:
-    packets = tuple(IsoPacket(*_ISO.unpack(recv(_ISO.size))) for _ in range(n))
+    packets = _iso_packets(recv, n)
     for p in packets:
         if p.offset + p.length > total:
             raise ProtocolError(f"iso packet at {p.offset}+{p.length} overruns a {total}-byte buffer")
@@ -263,5 +267,5 @@ def read_reply(recv: RecvExact, submitted: Mapping[int, Submit]) -> RetSubmit | 
     iso: tuple[IsoPacket, ...] = ()
     if urb.is_iso:
         _bounded("number_of_packets", n_pkt, len(urb.iso))
-        iso = tuple(IsoPacket(*_ISO.unpack(recv(_ISO.size))) for _ in range(n_pkt))
+        iso = _iso_packets(recv, n_pkt)
     return RetSubmit(seqnum, status, actual, start, n_pkt, errors, data, iso)

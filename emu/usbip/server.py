@@ -291,17 +291,15 @@ class _UrbSession:
         return data
 
     def _iso(self, fn: UVCFunction, urb: P.Submit) -> P.RetSubmit:
-        out, packets, errors = [], [], 0
-        for p in urb.iso:
-            try:
-                data = fn.read(0x80 | urb.ep, p.length, None)
-                status = 0
-            except TransferOverflow:
-                data, status = b"", -errno.EOVERFLOW
-                errors += 1
-            out.append(data)
-            packets.append(P.IsoPacket(p.offset, p.length, len(data), status))
-        data = b"".join(out)
+        n = len(urb.iso)
+        size = min((p.length for p in urb.iso), default=0)
+        try:
+            data, lengths = fn.read_packets(0x80 | urb.ep, n, size)
+            status = [0] * n
+        except TransferOverflow:
+            data, lengths, status = b"", [0] * n, [-errno.EOVERFLOW] * n
+        packets = tuple(P.IsoPacket(p.offset, p.length, k, st)
+                        for p, k, st in zip(urb.iso, lengths, status, strict=True))
         start = self.frame_number
-        self.frame_number = (self.frame_number + len(packets)) & 0x3FFF
-        return P.RetSubmit(urb.seqnum, 0, len(data), start, len(packets), errors, data, tuple(packets))
+        self.frame_number = (self.frame_number + n) & 0x3FFF
+        return P.RetSubmit(urb.seqnum, 0, len(data), start, n, sum(st != 0 for st in status), data, packets)

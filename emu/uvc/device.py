@@ -237,17 +237,32 @@ class UVCFunction:
                 raise TransferTimeout(f"no frame within {timeout_ms} ms")
             self._sleep(got / 1e9)
 
+    def read_packets(self, endpoint: int, n_packets: int, max_len: int) -> tuple[bytes, list[int]]:
+        """An isochronous URB's worth of packets: their data back to back and their lengths. Packets for which
+        no frame is due yet are zero-length, and take their bus time (125 us each) in real-time mode."""
+        if self.transfer != "iso":
+            raise Stall("packets are read from an isochronous endpoint", C.ERR_INVALID_REQUEST)
+        with self._lock:
+            self._check_stream(endpoint)
+            data, lengths, wait_ns = self.stream.next_payloads(n_packets, max_len)
+        if wait_ns:
+            self._sleep(min(wait_ns, (n_packets - len(lengths)) * MICROFRAME_NS) / 1e9)
+        return data, lengths + [0] * (n_packets - len(lengths))
+
+    def _check_stream(self, endpoint: int) -> None:
+        if endpoint != STREAM_EP:
+            raise Stall(f"endpoint {endpoint:#04x} is not an IN endpoint of this device", C.ERR_INVALID_UNIT)
+        if self.transfer == "bulk" and not self.streaming and self.controls.committed is not None \
+                and self.configuration:
+            self._start_stream(self.controls.committed.payload_size)
+        if not self.streaming:
+            raise Stall("the streaming endpoint is not active (commit, then select an alternate setting)",
+                        C.ERR_WRONG_STATE)
+
     def _try_read(self, endpoint: int, max_len: int) -> bytes | int:
         """The next payload, or the ns until the next frame is due."""
         with self._lock:
-            if endpoint != STREAM_EP:
-                raise Stall(f"endpoint {endpoint:#04x} is not an IN endpoint of this device", C.ERR_INVALID_UNIT)
-            if self.transfer == "bulk" and not self.streaming and self.controls.committed is not None \
-                    and self.configuration:
-                self._start_stream(self.controls.committed.payload_size)
-            if not self.streaming:
-                raise Stall("the streaming endpoint is not active (commit, then select an alternate setting)",
-                            C.ERR_WRONG_STATE)
+            self._check_stream(endpoint)
             return self.stream.next_payload(max_len)
 
 

@@ -102,6 +102,32 @@ class StreamEndpoint:
         self.stats.bytes_sent += len(payload)
         return bytes(payload)
 
+    def next_payloads(self, n: int, max_len: int) -> tuple[bytes, list[int], int]:
+        """Up to ``n`` payloads of at most ``max_len`` bytes each, back to back, with their lengths, and the ns
+        until the next frame is due when they ran out (0 otherwise). Each frame's run of payloads is copied
+        out in one piece (the packer reuses its buffer for the next frame), which makes an isochronous URB of
+        many packets cheap."""
+        chunks: list[bytes] = []
+        lengths: list[int] = []
+        while len(lengths) < n:
+            if self._batch is None or self._pos >= len(self._batch):
+                wait_ns = self._next_batch()
+                if wait_ns:
+                    return b"".join(chunks), lengths, wait_ns
+            b = self._batch
+            k = min(n - len(lengths), len(b) - self._pos)
+            run = b.lengths[self._pos:self._pos + k]
+            if int(run.max()) > max_len:
+                raise TransferOverflow(f"payload of {int(run.max())} bytes does not fit a {max_len}-byte packet")
+            start = int(b.offsets[self._pos])
+            end = int(b.offsets[self._pos + k - 1]) + int(run[-1])  # a frame's payloads are contiguous
+            chunks.append(b.buffer[start:end].tobytes())
+            lengths += run.tolist()
+            self._pos += k
+            self.stats.payloads_sent += k
+            self.stats.bytes_sent += end - start
+        return b"".join(chunks), lengths, 0
+
     def _next_batch(self) -> int:
         p = self.producer
         index = self._next_index
