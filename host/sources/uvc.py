@@ -21,13 +21,22 @@ from collections import deque
 from typing import Any
 
 import numpy as np
+from rollcam.emu.usbip import ImportedDevice, UrbError
+from rollcam.emu.uvc import DeviceIdentity, SyntheticProducer, UVCFunction
+from rollcam.emu.uvc import constants as C
+from rollcam.emu.uvc.convert import decode, frame_size
+from rollcam.emu.uvc.descriptors import parse_streaming
+from rollcam.emu.uvc.payload import PayloadParser
+from rollcam.emu.uvc.probe import Probe
 from rollcam.sim.errors import ConfigError, DeviceError, ProtocolError, SourceError
 from rollcam.sim.frame import Frame
 from rollcam.sim.hwconfig import SensorConfig, load_sensor
+from rollcam.sim.scenegen import make_scene
 from rollcam.sim.synthetic import resolve_settings
 from rollcam.sim.timing import Readout, line_sample_times_ns
 
 from .base import CameraSource, SourceURI, finite_float, non_negative_int, positive_int
+from .emu import parse_size
 
 OPTIONS = {"backend", "usbip", "busid", "format", "size", "fps", "exposure_us", "gain", "sensor", "decode", "frames",
            "timeout_ms", "scene", "seed", "transfer", "realtime"}
@@ -97,8 +106,6 @@ class _USBIPLink:
         self.dev = dev
 
     def control(self, rt: int, req: int, value: int, index: int, data_or_len: bytes | int) -> bytes:
-        from rollcam.emu.usbip import UrbError
-
         try:
             return self.dev.control(rt, req, value, index, data_or_len)
         except UrbError as exc:
@@ -131,8 +138,6 @@ def _open_link(uri: SourceURI, vid: int, pid: int, sensor: SensorConfig | None, 
     if backend != "emu" and extra:
         raise SourceError(f"source {uri.uri!r}: option(s) {sorted(extra)} need backend=emu")
     if backend == "usbip":
-        from rollcam.emu.usbip import ImportedDevice
-
         host, _, port = uri.get("usbip", str, "127.0.0.1:3240").rpartition(":")
         try:
             dev = ImportedDevice(host or "127.0.0.1", int(port), uri.get("busid", str, "1-1"))
@@ -160,11 +165,7 @@ def _open_link(uri: SourceURI, vid: int, pid: int, sensor: SensorConfig | None, 
 
 
 def _emulated(uri: SourceURI, vid: int, pid: int, sensor: SensorConfig | None) -> tuple[Any, Any]:
-    from rollcam.emu.uvc import DeviceIdentity, SyntheticProducer, UVCFunction
-    from rollcam.emu.uvc.pyusb_backend import EmulatedBackend
-    from rollcam.sim.scenegen import make_scene
-
-    from .emu import parse_size
+    from rollcam.emu.uvc.pyusb_backend import EmulatedBackend  # needs pyusb
 
     sensor = sensor or load_sensor("imx219")
     size = uri.get("size", parse_size)
@@ -183,9 +184,6 @@ class UVCSource(CameraSource):
     """Frames from a UVC camera: probe/commit negotiation, then payloads parsed into Frames."""
 
     def __init__(self, uri: SourceURI) -> None:
-        from rollcam.emu.uvc import constants as C
-        from rollcam.emu.uvc.descriptors import parse_streaming
-
         self.uri = uri.uri
         uri.take(set(), OPTIONS)
         vid, pid = _parse_ids(uri)
@@ -206,17 +204,12 @@ class UVCSource(CameraSource):
             config = self.link.control(0x80, 0x06, 0x0200, 0, int.from_bytes(head[2:4], "little"))
             self.stream = parse_streaming(config)
             self.link.set_configuration(config[5])
-            self._negotiate(uri, C)
+            self._negotiate(uri)
         except (DeviceError, ProtocolError) as exc:
             self.close()
             raise SourceError(f"source {uri.uri!r}: negotiation failed: {exc}") from None
 
-    def _negotiate(self, uri: SourceURI, C: Any) -> None:
-        from rollcam.emu.uvc.payload import PayloadParser
-        from rollcam.emu.uvc.probe import Probe
-
-        from .emu import parse_size
-
+    def _negotiate(self, uri: SourceURI) -> None:
         s = self.stream
         want = uri.get("format", str)
         fi = 1
@@ -261,8 +254,6 @@ class UVCSource(CameraSource):
             self.link.set_interface(vs, alt)
         else:
             self.read_size = probe.dwMaxPayloadTransferSize
-        from rollcam.emu.uvc.convert import frame_size
-
         self.clock_hz = probe.dwClockFrequency or s.clock_hz or 1_000_000_000
         self.parser = PayloadParser(self.clock_hz, frame_size(self.fourcc, self.width, self.height))
         self._timing()
@@ -305,8 +296,6 @@ class UVCSource(CameraSource):
                 raise SourceError(f"source {self.uri!r}: no data from the camera for {self.timeout_ms} ms")
 
     def _frame(self, parsed: Any) -> Frame | None:
-        from rollcam.emu.uvc.convert import decode
-
         w, h, fourcc = self.width, self.height, self.fourcc
         try:
             if self.decode:
