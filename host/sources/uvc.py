@@ -9,9 +9,10 @@ name: fills line time, readout and row times of each Frame; the emulated camera'
 (1: BGR3 frames, the default; 0: the wire format as sent), ``frames`` (stop after N), ``timeout_ms``.
 With ``backend=emu`` also ``scene``, ``seed``, ``transfer`` (iso | bulk) and ``realtime`` (0 | 1).
 
-Each Frame's timestamp is the payloads' PTS (start of exposure in the device clock, unwrapped to 64 bits and
-converted from dwClockFrequency ticks to integer ns); damaged frames (lost payloads, ERR) are dropped and
-leave a gap in the sequence numbers.
+Each Frame's timestamp is the payloads' PTS (start of exposure in the device clock, converted from
+dwClockFrequency ticks to integer ns). The PTS has 32 bits: the first frame's timestamp is the device clock
+modulo 2**32 ticks (4.29 s at the emulated camera's 1 GHz) and later ones unwrap from it. Damaged frames
+(lost payloads, ERR) are dropped and leave a gap in the sequence numbers.
 """
 
 from __future__ import annotations
