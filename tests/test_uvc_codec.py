@@ -165,3 +165,15 @@ def test_pixel_formats_round_trip(fourcc):
     assert np.abs(back.astype(int) - bgr).mean() < 4
     with pytest.raises(ProtocolError):
         decode(raw.tobytes()[:-2] if fourcc != "MJPG" else b"not a jpeg", fourcc, 64, 48)
+
+
+def test_a_reference_time_gives_the_first_pts_its_high_bits():
+    t = 3 * (1 << 32) + 123_456  # ns at 1 GHz: past three wraps
+    packer = PayloadPacker(1024, 10**9)
+    for ref in (t, t + 2_000_000_000, t - 2_000_000_000):
+        parser = PayloadParser(10**9, reference_ns=ref)
+        (a,) = parser.feed_many(packer.pack(b"z" * 10, t, t))
+        (b,) = parser.feed_many(packer.pack(b"z" * 10, t + 33_333_333, t))
+        assert (a.pts_ns, b.pts_ns) == (t, t + 33_333_333)
+    (plain,) = PayloadParser(10**9).feed_many(packer.pack(b"z", t, t))
+    assert plain.pts_ns == t % (1 << 32)

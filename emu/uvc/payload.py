@@ -200,12 +200,15 @@ class PayloadParser:
     """Reassembles frames from payloads in arrival order (host side of a UVC stream).
 
     ``frame_size`` (bytes of an uncompressed frame) marks frames of another size incomplete; leave it None for
-    MJPEG. A frame ends at EOF or when FID toggles; ERR or a malformed header marks it damaged.
+    MJPEG. A frame ends at EOF or when FID toggles; ERR or a malformed header marks it damaged. The first PTS
+    is taken as it comes (the device clock modulo 2**32 ticks) unless ``reference_ns``, a device time within
+    2**31 ticks of it (the device clock read while the first frame arrives), supplies the high bits.
     """
 
     clock_hz: int
     frame_size: int | None = None
     stats: ParserStats = field(default_factory=ParserStats)
+    reference_ns: int | None = None  # a device time within 2.1 s (at 1 GHz) of the first frame's PTS
 
     def __post_init__(self) -> None:
         self._parts: list[memoryview] = []
@@ -332,7 +335,11 @@ class PayloadParser:
     def _unwrap(self, pts: int | None) -> int | None:
         if pts is None:
             return None
-        if self._last_pts is not None and pts < self._last_pts and self._last_pts - pts > 1 << 31:
+        if self._last_pts is None and self.reference_ns is not None:
+            # The first PTS gets the high bits that put it nearest the reference time.
+            ref = ns_to_ticks(int(self.reference_ns), self.clock_hz)
+            self._pts_high = max((ref - pts + (1 << 31)) >> 32, 0) << 32
+        elif self._last_pts is not None and pts < self._last_pts and self._last_pts - pts > 1 << 31:
             self._pts_high += 1 << 32
         self._last_pts = pts
         return self._pts_high + pts

@@ -11,7 +11,8 @@ With ``backend=emu`` also ``scene``, ``seed``, ``transfer`` (iso | bulk) and ``r
 
 Each Frame's timestamp is the payloads' PTS (start of exposure in the device clock, converted from
 dwClockFrequency ticks to integer ns). The PTS has 32 bits: the first frame's timestamp is the device clock
-modulo 2**32 ticks (4.29 s at the emulated camera's 1 GHz) and later ones unwrap from it. Damaged frames
+modulo 2**32 ticks (4.29 s at the emulated camera's 1 GHz), except with ``backend=emu``, where the device
+clock is read to supply the high bits, and later ones unwrap from it. Damaged frames
 (lost payloads, ERR) are dropped and leave a gap in the sequence numbers.
 """
 
@@ -288,6 +289,9 @@ class UVCSource(CameraSource):
                 if frame is not None:
                     self.index += 1
                     return frame
+            if self.function is not None and self.parser.stats.frames == 0:
+                # In process the device clock can be read: it gives the first PTS its high bits.
+                self.parser.reference_ns = self.function.producer.now_ns()
             # One isochronous URB can end several small frames: keep them all, in order.
             parsed, got = self.link.read_into(self.parser, self.stream.endpoint, self.read_size, self.stream.transfer)
             self._pending.extend(parsed)
