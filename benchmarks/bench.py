@@ -583,6 +583,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="measure the photon transfer curve of emu:SENSOR (default imx219) instead: ptc.png")
     parser.add_argument("--sensor", action="store_true",
                         help="time the sensor model (noise, mosaic, packing) and adaptive motion-blur sampling")
+    parser.add_argument("--uvc", action="store_true",
+                        help="run the UVC payload packing/parsing throughput bench instead (a few seconds)")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -604,6 +606,13 @@ def run(args: argparse.Namespace) -> int:
         Path(args.out).mkdir(parents=True, exist_ok=True)
         (Path(args.out) / "dataset_bench.json").write_text(json.dumps(doc, indent=1))
         print(json.dumps(doc, indent=1) if args.json else format_report(doc))
+    if getattr(args, "uvc", False):
+        from .uvc import format_uvc, run_uvc_bench
+
+        doc = run_uvc_bench()
+        Path(args.out).mkdir(parents=True, exist_ok=True)
+        (Path(args.out) / "uvc.json").write_text(json.dumps(doc, indent=1))
+        print(json.dumps(doc, indent=1) if args.json else format_uvc(doc))
         return 0
     if getattr(args, "hog", False):
         from .hog_recall import hog_recall

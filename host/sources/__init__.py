@@ -14,7 +14,7 @@ from rollcam.sim.errors import SourceError
 from .base import CameraSource, SourceURI
 
 SCHEMES = {"emu": "emu", "file": "file", "http": "http", "https": "http", "opencv": "opencv", "v4l2": "v4l2",
-           "oak": "oak"}
+           "oak": "oak", "uvc": "uvc"}
 """URI scheme -> module name under ``rollcam.host.sources``."""
 
 

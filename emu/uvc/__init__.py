@@ -1,0 +1,27 @@
+"""USB Video Class 1.5 for the emulated camera, in layers: constants, then pure codecs (``descriptors``,
+``probe``, ``payload``, ``convert``), then the USB function (``requests``, ``device``) over a ``FrameProducer``,
+then the transports that drive it (``pyusb_backend`` here, ``rollcam.emu.usbip`` over TCP).
+
+Typical use::
+
+    producer = SyntheticProducer(load_sensor("imx219"), make_scene("street", 0), sizes=[(640, 480)])
+    function = UVCFunction(producer)                 # iso by default; transfer="bulk" for a bulk camera
+    dev = usb.core.find(idVendor=0x1D6B, idProduct=0x0102, backend=EmulatedBackend([function]))
+"""
+
+from __future__ import annotations
+
+from .descriptors import DescriptorSet, DeviceIdentity, FrameSize, StreamFormat, build_descriptors, parse_streaming
+from .device import Setup, UVCFunction
+from .payload import ParsedFrame, PayloadBatch, PayloadPacker, PayloadParser, pack_header, parse_header
+from .probe import Probe
+from .producer import ControlRange, FrameProducer, SyntheticProducer
+from .requests import Stall
+from .stream import StreamStats, TransferOverflow, TransferTimeout
+
+__all__ = [
+    "ControlRange", "DescriptorSet", "DeviceIdentity", "FrameProducer", "FrameSize", "ParsedFrame", "PayloadBatch",
+    "PayloadPacker", "PayloadParser", "Probe", "Setup", "Stall", "StreamFormat", "StreamStats", "SyntheticProducer",
+    "TransferOverflow", "TransferTimeout", "UVCFunction", "build_descriptors", "pack_header", "parse_header",
+    "parse_streaming",
+]

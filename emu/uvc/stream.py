@@ -1,0 +1,162 @@
+"""The streaming endpoint of the UVC function: frames from the producer, packed into payloads on demand.
+
+Only the frame being sent is held (in one reused buffer), plus in real-time mode the one frame ``RenderAhead``
+has ready. In real-time mode a frame goes out once the device clock has passed its readout; a host that reads
+too slowly gets the newest completed frame, the ones it missed counted in ``stats.frames_dropped``; a stop
+mid-frame counts in ``frames_aborted``. Without render-ahead (``render_ahead=False``) frames are rendered
+when the host asks, and frames the host fell behind on are skipped without being rendered.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+from rollcam.sim.errors import DeviceError
+
+from .ahead import RenderAhead, newest_due
+from .convert import encode
+from .payload import PayloadBatch, PayloadPacker
+from .producer import FrameProducer
+from .requests import Committed
+
+MICROFRAME_NS = 125_000
+
+
+class TransferTimeout(DeviceError):
+    """No data became ready on an endpoint within the transfer's timeout."""
+
+
+class TransferOverflow(DeviceError):
+    """The host's buffer is smaller than the payload the device has to send (a babble/overflow error)."""
+
+
+@dataclass
+class StreamStats:
+    """What the streaming endpoint did: frames and payloads sent, frames dropped or aborted."""
+
+    frames_sent: int = 0
+    frames_dropped: int = 0
+    frames_aborted: int = 0
+    payloads_sent: int = 0
+    bytes_sent: int = 0
+    stalls: int = 0
+
+
+class StreamEndpoint:
+    """Payload source of one UVC function (not thread-safe: the function serialises calls)."""
+
+    def __init__(self, producer: FrameProducer, clock_hz: int, realtime: bool,
+                 sleep: Callable[[float], None], render_ahead: bool = True) -> None:
+        self.producer, self.clock_hz, self.realtime, self.sleep = producer, clock_hz, realtime, sleep
+        self.render_ahead = render_ahead and realtime
+        self._ahead: RenderAhead | None = None
+        self.stats = StreamStats()
+        self._error_frames = 0
+        self._buf = np.empty(0, np.uint8)
+        self._packer: PayloadPacker | None = None
+        self._batch: PayloadBatch | None = None
+        self._pos = 0
+
+    @property
+    def active(self) -> bool:
+        return self._packer is not None
+
+    def start(self, committed: Committed, payload_size: int) -> None:
+        """Begin a stream of ``committed``'s format in payloads of ``payload_size`` bytes, at frame 0."""
+        self.stop()
+        self._packer = PayloadPacker(payload_size, self.clock_hz)
+        self._format = committed
+        self._next_index = 0
+        if self.render_ahead:
+            self._ahead = RenderAhead(self.producer, lambda f: encode(f.data, committed.fourcc, committed.jpeg_quality),
+                                      self.stats)
+
+    def stop(self) -> None:
+        """End the stream (a frame cut short counts as aborted)."""
+        if self._batch is not None and self._pos < len(self._batch):
+            self.stats.frames_aborted += 1  # the host went away mid-frame
+        if self._ahead is not None:
+            self._ahead.stop()
+            self._ahead = None
+        self._packer = None
+        self._batch = None
+        self._pos = 0
+
+    def mark_errors(self, n_frames: int) -> None:
+        """The next ``n_frames`` frames go out with ERR set."""
+        self._error_frames += int(n_frames)
+
+    def next_payload(self, max_len: int) -> bytes | int:
+        """The next payload, or the ns until the next frame is due (real-time mode)."""
+        if self._batch is None or self._pos >= len(self._batch):
+            wait_ns = self._next_batch()
+            if wait_ns:
+                return wait_ns
+        payload = self._batch[self._pos]
+        if len(payload) > max_len:
+            raise TransferOverflow(f"payload of {len(payload)} bytes does not fit a {max_len}-byte read")
+        self._pos += 1
+        self.stats.payloads_sent += 1
+        self.stats.bytes_sent += len(payload)
+        return bytes(payload)
+
+    def next_payloads(self, n: int, max_len: int) -> tuple[bytes, list[int], int]:
+        """Up to ``n`` payloads of at most ``max_len`` bytes each, back to back, with their lengths, and the ns
+        until the next frame is due when they ran out (0 otherwise). Each frame's run of payloads is copied
+        out in one piece (the packer reuses its buffer for the next frame), which makes an isochronous URB of
+        many packets cheap."""
+        chunks: list[bytes] = []
+        lengths: list[int] = []
+        while len(lengths) < n:
+            if self._batch is None or self._pos >= len(self._batch):
+                wait_ns = self._next_batch()
+                if wait_ns:
+                    return b"".join(chunks), lengths, wait_ns
+            b = self._batch
+            k = min(n - len(lengths), len(b) - self._pos)
+            run = b.lengths[self._pos:self._pos + k]
+            if int(run.max()) > max_len:
+                raise TransferOverflow(f"payload of {int(run.max())} bytes does not fit a {max_len}-byte packet")
+            start = int(b.offsets[self._pos])
+            end = int(b.offsets[self._pos + k - 1]) + int(run[-1])  # a frame's payloads are contiguous
+            chunks.append(b.buffer[start:end].tobytes())
+            lengths += run.tolist()
+            self._pos += k
+            self.stats.payloads_sent += k
+            self.stats.bytes_sent += end - start
+        return b"".join(chunks), lengths, 0
+
+    def _next_batch(self) -> int:
+        p = self.producer
+        index = self._next_index
+        now = p.now_ns()
+        c = self._format
+        if self._ahead is not None:
+            got = self._ahead.take()
+            if isinstance(got, int):
+                return got
+            index, frame, data = got
+        else:
+            if self.realtime:
+                due = p.frame_due_ns(index)
+                if due > now:
+                    return due - now
+                newest = newest_due(p, index, now)  # the host fell behind: skip to the newest frame
+                self.stats.frames_dropped += newest - index
+                index = newest
+            frame = p.frame(index)
+            data = encode(frame.data, c.fourcc, c.jpeg_quality)
+        err = self._error_frames > 0
+        self._error_frames -= err
+        send_ns = now if self.realtime else p.frame_due_ns(index)
+        need = self._packer.buffer_size(data.size)
+        if self._buf.size < need:
+            self._buf = np.empty(need, np.uint8)
+        # The previous frame's payloads were all copied out by the reads that sent them: its buffer is free.
+        self._batch = self._packer.pack(data, frame.timestamp_ns, send_ns, error=err, out=self._buf)
+        self._pos = 0
+        self._next_index = index + 1
+        self.stats.frames_sent += 1
+        return 0

@@ -1,0 +1,198 @@
+"""USB/IP over loopback: list, import and stream with a client; refusals, malformed peers, unlink, disconnects."""
+
+from __future__ import annotations
+
+import contextlib
+import errno
+import socket
+import struct
+import threading
+import time
+
+import pytest
+from rollcam.emu.usbip import ImportedDevice, UrbError, USBIPServer, list_devices
+from rollcam.emu.usbip import protocol as P
+from rollcam.emu.uvc import PayloadParser, Probe, UVCFunction
+from rollcam.emu.uvc import constants as C
+from uvc_fakes import FakeProducer, ManualClock
+
+PROBE, COMMIT = C.VS_PROBE_CONTROL << 8, C.VS_COMMIT_CONTROL << 8
+
+
+@pytest.fixture
+def server():
+    fns = [UVCFunction(FakeProducer()), UVCFunction(FakeProducer(), transfer="bulk")]
+    with USBIPServer(fns, port=0) as srv:
+        yield srv
+
+
+def _commit(dev, fmt=1, frame=1):
+    dev.control(0x00, C.REQ_SET_CONFIGURATION, 1, 0, b"")
+    dev.control(0x21, C.SET_CUR, PROBE, 1, Probe(bmHint=1, bFormatIndex=fmt, bFrameIndex=frame).pack(34))
+    probe = Probe.unpack(dev.control(0xA1, C.GET_CUR, PROBE, 1, 34))
+    dev.control(0x21, C.SET_CUR, COMMIT, 1, probe.pack(34))
+    return probe
+
+
+def _wait_for(cond, timeout=5.0):
+    end = time.monotonic() + timeout
+    while not cond():
+        assert time.monotonic() < end, "condition not reached"
+        time.sleep(0.01)
+
+
+def test_several_clients_list_the_devices_at_once(server):
+    results, errors = [], []
+
+    def run():
+        try:
+            results.append(list_devices(*server.address))
+        except Exception as exc:  # pragma: no cover - reported below
+            errors.append(exc)
+
+    threads = [threading.Thread(target=run) for _ in range(6)]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join()
+    assert not errors and len(results) == 6
+    devs = results[0]
+    assert [d.busid for d in devs] == ["1-1", "1-2"]
+    d = devs[0]
+    assert (d.idVendor, d.idProduct, d.speed, d.bDeviceClass) == (0x1D6B, 0x0102, 3, 0xEF)
+    assert d.interfaces == ((C.CC_VIDEO, C.SC_VIDEOCONTROL, 1), (C.CC_VIDEO, C.SC_VIDEOSTREAMING, 1))
+    assert all(r == devs for r in results)
+
+
+def test_import_and_stream_isochronous(server):
+    with ImportedDevice(*server.address, "1-1") as dev:
+        assert dev.control(0x80, C.REQ_GET_DESCRIPTOR, 0x0100, 0, 18) == \
+            server.exports["1-1"].function.descriptors.device
+        probe = _commit(dev, fmt=2)
+        dev.control(0x01, C.REQ_SET_INTERFACE, 4, 1, b"")
+        parser = PayloadParser(probe.dwClockFrequency, 64 * 48 * 3 // 2)
+        frames = []
+        while len(frames) < 3:
+            frames += parser.feed_many(dev.iso_read(0x81, 8, 3072))
+        producer = server.exports["1-1"].function.producer
+        assert [f.pts_ns for f in frames] == [producer.timestamp_ns(i) for i in range(len(frames))]
+        assert all(f.complete and not f.error for f in frames)
+        with pytest.raises(UrbError) as err:  # a STALL travels back as -EPIPE
+            dev.control(0xA1, C.GET_CUR, PROBE, 0x0509, 48)
+        assert err.value.status == -errno.EPIPE
+
+
+def test_import_and_stream_bulk(server):
+    with ImportedDevice(*server.address, "1-2") as dev:
+        probe = _commit(dev)
+        parser = PayloadParser(probe.dwClockFrequency, 64 * 48 * 2)
+        frames = []
+        while len(frames) < 2:
+            frames += parser.feed(dev.bulk_read(0x81, probe.dwMaxPayloadTransferSize))
+        assert all(f.complete for f in frames)
+
+
+def test_one_importer_at_a_time_and_release_on_disconnect(server):
+    fn = server.exports["1-1"].function
+    dev = ImportedDevice(*server.address, "1-1")
+    _commit(dev)
+    dev.control(0x01, C.REQ_SET_INTERFACE, 1, 1, b"")
+    dev.iso_read(0x81, 2, 512)  # part of a frame, then the client vanishes
+    with pytest.raises(Exception, match="refused"):
+        ImportedDevice(*server.address, "1-1")
+    with pytest.raises(Exception, match="refused"):
+        ImportedDevice(*server.address, "9-9")
+    dev.close()
+    _wait_for(lambda: server.exports["1-1"].owner is None)
+    assert fn.stats.frames_aborted == 1 and not fn.streaming
+    with ImportedDevice(*server.address, "1-1") as again:
+        assert again.control(0x80, C.REQ_GET_CONFIGURATION, 0, 0, 1) == b"\x00"  # reset for the next importer
+    assert server.stats.refused == 2
+
+
+def _raw(server, payload: bytes) -> bytes:
+    with socket.create_connection(server.address, timeout=5) as s:
+        s.sendall(payload)
+        s.shutdown(socket.SHUT_WR)
+        out = b""
+        try:
+            while chunk := s.recv(65536):
+                out += chunk
+        except ConnectionResetError:
+            pass  # the server closed with our unread bytes in its buffer
+        return out
+
+
+def test_malformed_peers_lose_their_connection_only(server):
+    assert _raw(server, b"\x02\x00\x80\x05\x00\x00\x00\x00") == b""  # wrong version
+    assert _raw(server, P.op_header(0x8123)) == P.op_header(0x0123, P.ST_ERROR)  # unknown operation
+    assert _raw(server, b"\x01") == b""  # truncated
+    bad_urb = P.req_import("1-2") + struct.pack(">IIIII", 9, 1, 0x10002, 0, 0) + bytes(28)
+    reply = _raw(server, bad_urb)
+    assert reply[:8] == P.op_header(P.OP_REP_IMPORT) and len(reply) == 8 + 312  # imported, then dropped
+    huge = P.Submit(1, 0x10002, P.DIR_OUT, 0, 0, 1 << 30, 0, P.NON_ISO, 0, bytes(8)).pack()
+    assert len(_raw(server, P.req_import("1-2") + huge)) == 8 + 312
+    _wait_for(lambda: server.stats.malformed == 4 and server.exports["1-2"].owner is None)
+    assert len(list_devices(*server.address)) == 2  # still serving
+
+
+def test_unlink_cancels_a_queued_urb():
+    clock, gate = ManualClock(), threading.Event()
+    fn = UVCFunction(FakeProducer(clock=clock), transfer="bulk", realtime=True, sleep=gate.wait,
+                     render_ahead=False)
+    with USBIPServer([fn], port=0) as srv, ImportedDevice(*srv.address, "1-1") as dev:
+        probe = _commit(dev)
+        size = probe.dwMaxPayloadTransferSize
+        first = dev.submit(1, P.DIR_IN, size)  # blocks: no frame is due on the manual clock
+        second = dev.submit(1, P.DIR_IN, size)
+        time.sleep(0.1)
+        # control requests are answered while the stream endpoint waits
+        assert Probe.unpack(dev.control(0xA1, C.GET_CUR, COMMIT, 1, 34)).bFormatIndex == 1
+        unlink = dev.unlink(second)
+        rep = dev.reply()
+        assert isinstance(rep, P.RetUnlink) and rep.seqnum == unlink and rep.status == -errno.ECONNRESET
+        clock.t_ns += 10**9
+        rep = dev.reply()
+        assert isinstance(rep, P.RetSubmit) and rep.seqnum == first and rep.status == 0 and rep.actual_length > 12
+        late = dev.unlink(first)
+        rep = dev.reply()
+        assert isinstance(rep, P.RetUnlink) and rep.seqnum == late and rep.status == 0
+        assert srv.stats.unlinked == 1
+
+
+def test_a_flooding_client_does_not_block_the_others(server):
+    with socket.create_connection(server.address) as s:
+        s.sendall(P.req_import("1-2"))
+        s.recv(8 + 312, socket.MSG_WAITALL)
+        setup = struct.pack("<BBHHH", 0x80, C.REQ_GET_DESCRIPTOR, 0x0200, 0, 4096)
+        urb = b"".join(P.Submit(i, 0x10002, P.DIR_IN, 0, 0, 4096, 0, 0, 0, setup).pack() for i in range(1, 2000))
+        s.setblocking(False)
+        with contextlib.suppress(BlockingIOError):
+            s.sendall(urb)  # never reads a reply: the server's queue and socket buffers fill, then it pushes back
+        assert len(list_devices(*server.address)) == 2
+
+
+def test_an_independent_usbip_client_lists_imports_and_streams(server):
+    """The PyPI ``usbip`` package's host side (another implementation of the protocol) against this server."""
+    usbip = pytest.importorskip("usbip")
+    from usbip import protocol as UP
+
+    host, port = server.address
+    with socket.create_connection((host, port)) as s:
+        listed = UP.client_devlist(s)
+    assert [(d["busid"], d["idVendor"], d["bNumInterfaces"]) for d in listed] == [("1-1", 0x1D6B, 2),
+                                                                                 ("1-2", 0x1D6B, 2)]
+    handle = usbip.attach(host, "1-1", port=port, vid=0x1D6B, pid=0x0102)
+    try:
+        assert handle.device_descriptor.bDeviceClass == 0xEF
+        handle.control(0x21, C.SET_CUR, PROBE, 1, Probe(bFormatIndex=1, bFrameIndex=1).pack())
+        probe = Probe.unpack(bytes(handle.control(0xA1, C.GET_CUR, PROBE, 1, 48)))
+        handle.control(0x21, C.SET_CUR, COMMIT, 1, probe.pack())
+        handle.control(0x01, C.REQ_SET_INTERFACE, 4, 1, b"")
+        parser = PayloadParser(probe.dwClockFrequency, 64 * 48 * 2)
+        frames = []
+        while len(frames) < 3:
+            frames += parser.feed_many(handle.iso_in(0x81, 3072, 8))
+        assert [f.pts_ns for f in frames[:3]] == [0, 33_333_333, 66_666_666]
+    finally:
+        handle.close()
