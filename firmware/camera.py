@@ -209,6 +209,11 @@ class FirmwareCamera:
         """True between stream_on and stream_off."""
         return self.state.streaming
 
+    @property
+    def next_seq(self) -> int:
+        """Sequence number the next planned frame gets (it counts across stream starts)."""
+        return self._next_seq
+
     def _mode_select(self, on: bool) -> None:
         (self.stream_on if on else self.stream_off)()
 
@@ -216,6 +221,7 @@ class FirmwareCamera:
         """Start streaming: frame ``next seq`` starts exposing now (device clock). Idempotent."""
         with self.changed:
             if not self.state.streaming:
+                self._synthetic()  # build the renderer before the clock starts, so frame 0 is not late
                 self.state.streaming = True
                 self._schedule = self._new_schedule(self.clock_ns(), self._next_seq)
                 self.changed.notify_all()
