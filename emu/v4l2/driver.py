@@ -133,6 +133,9 @@ class EmuDriver:
 
     def _deliver(self, slot: Slot, frame: Frame, size: int) -> None:
         f = self.faults
+        if f.disconnect_after is not None and self.stats["delivered"] >= f.disconnect_after:
+            self.queue.disconnect()  # unplugged before this frame: it is lost, as on a real unplug
+            return
         if f.drop_percent and self.rng.random() * 100 < f.drop_percent:
             self.stats["dropped_injected"] += 1
             self.queue.give_back(slot)
@@ -142,8 +145,6 @@ class EmuDriver:
         self.queue.complete(slot, bytesused=size, sequence=frame.sequence - self.seq0,
                             timestamp_ns=self.camera.host_ns(frame.timestamp_ns), error=error)
         self.stats["delivered"] += 1
-        if f.disconnect_after is not None and self.stats["delivered"] >= f.disconnect_after:
-            self.queue.disconnect()
 
     def produce_now(self) -> bool:
         """As-fast-as-possible mode: render the next frame into the oldest queued buffer; False if none is due."""
