@@ -11,6 +11,7 @@ requests get an HTTP error; the server keeps serving the others.
 from __future__ import annotations
 
 import json
+import sys
 import threading
 from dataclasses import dataclass
 from http import HTTPStatus
@@ -89,8 +90,7 @@ class MjpegServer:
         self._latest: Mailbox[Frame] = Mailbox()  # the frame waiting for the encoder (newest only)
         self._stop = threading.Event()
         self.stats = {"frames_encoded": 0, "clients_served": 0, "dropped_total": 0, "bad_requests": 0}
-        self.httpd = ThreadingHTTPServer((host, port), _handler_class(self))
-        self.httpd.daemon_threads = True
+        self.httpd = _Server((host, port), _handler_class(self))
         self._threads = [threading.Thread(target=self.httpd.serve_forever, name="rollcam-http", daemon=True),
                          threading.Thread(target=self._encode_loop, name="rollcam-http-jpeg", daemon=True)]
         self.closed = False
@@ -188,6 +188,17 @@ class MjpegServer:
                 self.stats["dropped_total"] += box.dropped
 
 
+class _Server(ThreadingHTTPServer):
+    """A threading HTTP server that treats a client vanishing mid-reply as routine, not as a traceback."""
+
+    daemon_threads = True
+
+    def handle_error(self, request: Any, client_address: Any) -> None:
+        exc = sys.exc_info()[1]
+        if not isinstance(exc, OSError):
+            super().handle_error(request, client_address)
+
+
 def _handler_class(server: MjpegServer) -> type[BaseHTTPRequestHandler]:
     class Handler(_Handler):
         owner = server
@@ -200,6 +211,7 @@ class _Handler(BaseHTTPRequestHandler):
 
     owner: MjpegServer
     server_version = "rollcam-mjpeg/1.0"
+    default_request_version = "HTTP/1.0"  # error replies to unparsable request lines still get a status line
     timeout = 10  # seconds a silent or stalled peer may hold a connection
 
     def log_message(self, format: str, *args: Any) -> None:
