@@ -572,6 +572,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--out", default="rollcam_out/bench", help="folder for bench.json and bench.png")
     parser.add_argument("--size", default=None, help="WIDTHxHEIGHT instead of the study's 1920x1080")
     parser.add_argument("--scenes", default=None, help=f"comma-separated subset of {','.join(SCENES)}")
+    parser.add_argument("--soak", action="store_true",
+                        help="stream an emulated 1080p30 RS V4L2 device in real time; report drops and jitter")
+    parser.add_argument("--minutes", type=float, default=10.0, help="--soak duration (default: 10)")
+    parser.add_argument("--soak-scene", default="street", choices=("street", "chart", "flat"),
+                        help="--soak scene (default: street; flat isolates pacing from rendering cost)")
     parser.add_argument("--hog", action="store_true",
                         help="run the HOG people-detector recall study on the synthetic walkers instead (~1 min)")
 
@@ -579,6 +584,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     """Entry point of ``rollcam bench``: 0 done, 2 bad options."""
     overrides: dict[str, Any] = {}
+    if getattr(args, "soak", False):
+        from .soak import run_from_args
+
+        return run_from_args(args)
     if getattr(args, "hog", False):
         from .hog_recall import hog_recall
 

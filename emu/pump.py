@@ -9,10 +9,13 @@ the frame rate) is skipped: the stream's sequence numbers show the gap, and ``st
 from __future__ import annotations
 
 import threading
+import time
 from typing import Protocol
 
 from rollcam.firmware.camera import FirmwareCamera, FramePlan
 from rollcam.sim.frame import Frame
+
+SPIN_NS = 1_000_000
 
 
 class Sink(Protocol):
@@ -71,13 +74,20 @@ class FramePump:
             self._thread.join(timeout=5)
 
     def _sleep_until(self, device_ns: int) -> bool:
-        """Wait until the camera's clock reads ``device_ns``; False when the pump is stopping."""
+        """Wait until the camera's clock reads ``device_ns``; False when the pump is stopping.
+
+        The last ``SPIN_NS`` are spent yielding rather than asleep: a thread woken from a timed sleep on a busy
+        machine waits for a CPU, one already running does not.
+        """
         while True:
             left = device_ns - self.camera.clock_ns()
             if left <= 0:
                 return not self._stop.is_set()
-            if self._stop.wait(left / 1e9):
-                return False
+            if left > SPIN_NS:
+                if self._stop.wait((left - SPIN_NS) / 1e9):
+                    return False
+            else:
+                time.sleep(0)
 
     def _run(self) -> None:
         cam = self.camera
@@ -101,6 +111,7 @@ class FramePump:
                     self.stats["max_late_ns"] = max(self.stats["max_late_ns"], late)
                     for sink in self._sinks:
                         sink.on_frame(frame, plan)
+                    time.sleep(0)  # let woken consumers take the GIL before the next render holds it
         except BaseException as exc:  # kept for the owner to report; a dead pump must not pass silently
             self.error = exc
             raise
