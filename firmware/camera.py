@@ -10,22 +10,19 @@ integer ns.
 from __future__ import annotations
 
 import collections
-import dataclasses
 import threading
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
-import numpy as np
 from rollcam.sim.errors import ConfigError, DeviceError
-from rollcam.sim.frame import Frame, ObjectTruth
+from rollcam.sim.frame import Frame
 from rollcam.sim.hwconfig import SensorConfig, load_sensor
-from rollcam.sim.synthetic import DEFAULT_EXPOSURE_NS, SHUTTERS, SyntheticCamera
-from rollcam.sim.timing import Readout
+from rollcam.sim.synthetic import DEFAULT_EXPOSURE_NS, SHUTTERS
 
 from . import controls as ctl
-from .patterns import render_pattern
+from .imaging import Imager
 from .pixfmt import FORMATS
 from .registers import RegisterFile
 from .scene import build_scene
@@ -53,10 +50,6 @@ class FramePlan:
     def due_ns(self) -> int:
         """Time the frame is complete (its last line read out)."""
         return self.schedule.frame_due_ns(self.seq)
-
-
-_OPPOSITE = {Readout.TOP_TO_BOTTOM: Readout.BOTTOM_TO_TOP, Readout.BOTTOM_TO_TOP: Readout.TOP_TO_BOTTOM,
-             Readout.LEFT_TO_RIGHT: Readout.RIGHT_TO_LEFT, Readout.RIGHT_TO_LEFT: Readout.LEFT_TO_RIGHT}
 
 
 class FirmwareCamera:
@@ -92,7 +85,7 @@ class FirmwareCamera:
         self._triggers: collections.deque[int] = collections.deque()
         self._schedule: FrameSchedule | None = None
         self._next_seq = 0
-        self._synth: tuple[tuple, SyntheticCamera] | None = None
+        self.imager = Imager(self.sensor)
         self.stats = {"frames": 0, "skipped": 0, "triggers": 0}
         build_scene(self.scene_options, mode.width, mode.height)  # validate now, not at the first frame
 
@@ -144,6 +137,14 @@ class FirmwareCamera:
     def frame_interval_ns(self) -> int:
         """Frame period as programmed (whole ns, rounded down)."""
         return self.state.timing.frame_period_ns
+
+    def set_frame_interval_ns(self, interval_ns: int) -> int:
+        """Program the frame length nearest ``interval_ns`` (within the mode's limits); returns the new interval."""
+        with self.lock:
+            s = self.state
+            lines = round(interval_ns * s.pixel_rate_hz / (s.line_length_pck * 1_000_000_000))
+        self.set_control("vblank", lines - s.mode.height)
+        return self.frame_interval_ns
 
     # ---------------------------------------------------------------------------------------- controls
     def controls(self) -> dict[str, dict[str, Any]]:
@@ -200,7 +201,6 @@ class FirmwareCamera:
             options.update(changes)
             build_scene(options, *self.size)
             self.scene_options = options
-            self._synth = None
             self.changed.notify_all()
 
     # ---------------------------------------------------------------------------------------- streaming
@@ -221,7 +221,7 @@ class FirmwareCamera:
         """Start streaming: frame ``next seq`` starts exposing now (device clock). Idempotent."""
         with self.changed:
             if not self.state.streaming:
-                self._synthetic()  # build the renderer before the clock starts, so frame 0 is not late
+                self.imager.camera(self.state, self.scene_options)  # built before the clock starts
                 self.state.streaming = True
                 self._schedule = self._new_schedule(self.clock_ns(), self._next_seq)
                 self.changed.notify_all()
@@ -290,67 +290,21 @@ class FirmwareCamera:
             self._next_seq = seq + 1
             return FramePlan(seq, sched)
 
+    def next_frame(self, now_ns: int | None = None) -> Frame | None:
+        """Plan and render the next frame at once (no pacing); None when none is due (idle, or no trigger)."""
+        plan = self.plan_next(now_ns)
+        return None if plan is None else self.render(plan)
+
     def wait_changed(self, timeout_s: float) -> None:
         """Block until a control, the stream state or a trigger changes, or ``timeout_s`` passes."""
         with self.changed:
             self.changed.wait(timeout_s)
 
     # ---------------------------------------------------------------------------------------- pixels
-    def _synthetic(self) -> SyntheticCamera:
-        s = self.state
-        readout = self.sensor.readout
-        line_flip = s.vflip if not readout.by_column else s.hflip
-        key = (s.mode.name, s.frame_length_lines, s.line_length_pck, s.exposure_lines, s.gain, s.shutter,
-               line_flip, tuple(sorted(self.scene_options.items(), key=str)))
-        if self._synth is None or self._synth[0] != key:
-            mode = dataclasses.replace(s.mode, frame_length_lines=s.frame_length_lines,
-                                       line_length_pck=s.line_length_pck)
-            sensor = dataclasses.replace(self.sensor, modes=(mode,), default_mode=mode.name)
-            scene = build_scene(self.scene_options, mode.width, mode.height)
-            cam = SyntheticCamera(sensor, scene, 0, size=(mode.width, mode.height), shutter=s.shutter,
-                                  readout=_OPPOSITE[readout] if line_flip else readout,
-                                  exposure_ns=int(s.timing.line_offset_ns(s.exposure_lines)), gain=s.gain)
-            self._synth = (key, cam)
-        return self._synth[1]
-
     def render(self, plan: FramePlan) -> Frame:
         """Make frame ``plan.seq``: the scene (or the test pattern) at its lines' device times, flips applied."""
         with self.lock:
-            s = self.state
-            cam = self._synthetic()
-            hflip, vflip, pattern = s.hflip, s.vflip, s.test_pattern
+            cam = self.imager.camera(self.state, self.scene_options)
+            look = (self.state.hflip, self.state.vflip, self.state.test_pattern, self.state.bayer_order)
             self.stats["frames"] += 1
-        sched = plan.schedule
-        cam.start_ns = sched.start_ns(plan.seq)
-        frame = cam.frame(0)
-        meta = {**frame.meta, "bayer_order": self.state.bayer_order, "test_pattern": pattern}
-        if pattern != "none":
-            return dataclasses.replace(frame, data=render_pattern(pattern, frame.width, frame.height),
-                                       sequence=plan.seq, objects=(), meta=meta)
-        data, rows, objects = frame.data, frame.row_times_ns, frame.objects
-        w, h = frame.width, frame.height
-        if hflip:
-            data, objects = data[:, ::-1], _flip_boxes(objects, w, None)
-            rows = rows[::-1] if rows is not None and self.sensor.readout.by_column else rows
-        if vflip:
-            data, objects = data[::-1], _flip_boxes(objects, None, h)
-            rows = rows[::-1] if rows is not None and not self.sensor.readout.by_column else rows
-        if hflip or vflip:
-            data = np.ascontiguousarray(data)
-        return dataclasses.replace(frame, data=data, row_times_ns=rows, objects=objects, sequence=plan.seq,
-                                   readout=self.sensor.readout, meta=meta)
-
-
-def _flip_boxes(objects: tuple[ObjectTruth, ...] | None, width: int | None, height: int | None
-                ) -> tuple[ObjectTruth, ...] | None:
-    """Ground-truth boxes mirrored across the image width or height (whichever is given)."""
-    if objects is None:
-        return None
-
-    def flip(b: tuple[float, float, float, float] | None) -> tuple[float, float, float, float] | None:
-        if b is None:
-            return None
-        x0, y0, x1, y1 = b
-        return (width - x1, y0, width - x0, y1) if width is not None else (x0, height - y1, x1, height - y0)
-
-    return tuple(dataclasses.replace(o, box_gs=flip(o.box_gs), box_rs=flip(o.box_rs)) for o in objects)
+        return self.imager.render(cam, plan, *look)

@@ -111,6 +111,20 @@ def test_slow_client_drops_frames_and_others_keep_streaming():
     assert srv.closed
 
 
+def test_client_leaving_mid_frame_costs_nothing(server):
+    before = status(server)["clients_served"]
+    for _ in range(3):
+        with socket.create_connection(server.address, timeout=5) as s:
+            s.sendall(b"GET /stream.mjpg HTTP/1.1\r\n\r\n")
+            assert s.recv(300).startswith(b"HTTP/1.0 200")  # then hang up inside the first part
+    deadline = time.monotonic() + 10
+    while status(server)["clients"] and time.monotonic() < deadline:
+        time.sleep(0.1)
+    st_ = status(server)
+    assert st_["clients_served"] >= before + 3 and st_["clients"] == {}
+    assert len(_parts(server.url, 2)) == 2
+
+
 def _http_exchange(addr: tuple[str, int], request: bytes) -> bytes:
     with socket.create_connection(addr, timeout=5) as s:
         s.sendall(request)

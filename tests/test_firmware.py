@@ -90,8 +90,9 @@ def test_flips_change_bayer_order_and_are_refused_while_streaming():
 
 
 def test_vflip_keeps_first_line_read_first_and_mirrors_the_image():
-    a = FirmwareCamera("imx219", scene={"scene": "chart"}, size=(640, 480))
-    b = FirmwareCamera("imx219", scene={"scene": "chart"}, size=(640, 480))
+    clock = FakeClock()  # both streams start at the same device time, so the moving chart is in one place
+    a = FirmwareCamera("imx219", scene={"scene": "chart"}, size=(640, 480), clock=clock)
+    b = FirmwareCamera("imx219", scene={"scene": "chart"}, size=(640, 480), clock=clock)
     b.set_control("vflip", 1)
     b.set_control("hflip", 1)
     a.stream_on()
@@ -197,3 +198,14 @@ def test_patterns_are_deterministic():
         assert img.shape == (32, 64, 3) and img.dtype == np.uint8
     pn = render_pattern("pn9", 64, 32)
     assert 0.3 < (np.unpackbits(pn[..., 0]).mean()) < 0.7
+
+
+def test_frame_interval_and_next_frame():
+    c = cam()
+    assert c.next_frame() is None  # idle
+    interval = c.set_frame_interval_ns(50_000_000)
+    assert abs(interval - 50_000_000) <= c.state.timing.line_time_ns
+    c.stream_on()
+    f0, f1 = c.next_frame(), c.next_frame()
+    assert (f0.sequence, f1.sequence) == (0, 1)
+    assert f1.timestamp_ns - f0.timestamp_ns == c.state.timing.frame_start_ns(1)

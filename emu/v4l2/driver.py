@@ -231,9 +231,7 @@ def _s_parm(d: EmuDriver, arg: raw.StreamParm) -> raw.StreamParm:
     """S_PARM: the frame interval becomes the nearest frame length (vertical blanking) the mode allows."""
     if arg.numerator <= 0 or arg.denominator <= 0:
         return _g_parm(d, None)  # the kernel treats a zero fraction as "keep the current interval"
-    s = d.camera.state
-    lines = round(Fraction(arg.numerator, arg.denominator) * s.pixel_rate_hz / s.line_length_pck)
-    d.camera.set_control("vblank", lines - s.mode.height)
+    d.camera.set_frame_interval_ns(round(Fraction(arg.numerator, arg.denominator) * 1_000_000_000))
     return _g_parm(d, None)
 
 
@@ -290,6 +288,8 @@ def _qbuf(d: EmuDriver, arg: raw.Buffer) -> raw.Buffer:
 def _dqbuf(d: EmuDriver, arg: dict[str, Any] | None) -> Slot:
     opts = arg or {}
     block, timeout_s = opts.get("block", True), opts.get("timeout_s")
+    if d.pump is not None and d.pump.error is not None:
+        raise V4L2Error(errno.EIO, f"the frame pump stopped: {d.pump.error!r}")
     # As fast as possible: frames are made on demand, while a buffer is queued and none is done (injected
     # drops hand their buffer back, so this may take several frames).
     while not d.realtime and d.queue.streaming and not d.queue.done and d.queue.queued:
