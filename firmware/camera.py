@@ -75,8 +75,11 @@ class FirmwareCamera:
         self.state = ctl.SensorState(self.sensor, self.traits, mode, t.frame_length_lines, t.line_length_pck, 1,
                                      0, 0, shutter)
         if fps is not None:
+            if not (isinstance(fps, (int, float)) and 0 < fps < float("inf")):
+                raise ConfigError(f"fps must be a positive finite number, got {fps!r}")
             self.state.set_frame_length(round(self.state.pixel_rate_hz / (fps * t.line_length_pck)))
-        self.state.set_exposure(round((exposure_ns or DEFAULT_EXPOSURE_NS) / max(t.line_offset_ns(1), 1)))
+        want_ns = DEFAULT_EXPOSURE_NS if exposure_ns is None else exposure_ns
+        self.state.set_exposure(round(want_ns / max(t.line_offset_ns(1), 1)))
         self.state.analog_code = ctl._clamp(self.traits.analog.to_code(max(gain, 1e-6)),
                                             *self.state.gain_range("analog"))
         self.state.digital_code = ctl._clamp(self.traits.digital.to_code(1.0), *self.state.gain_range("digital"))

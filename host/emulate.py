@@ -84,11 +84,24 @@ def start_serial(args: argparse.Namespace, camera: Any, pump: Any) -> Running | 
                                       "send '*IDN?' or 'HELP')"], {"path": server.path})
 
 
-TRANSPORTS: list[tuple[str, Callable[[argparse.Namespace, Any, Any], Running | None]]] = [
-    ("http", start_http),
-    ("serial", start_serial),
+def _http_option(g: argparse._ArgumentGroup) -> None:
+    g.add_argument("--http", type=host_port, default=None, metavar="HOST:PORT",
+                   help=f"serve MJPEG over HTTP (default when no transport is given: {DEFAULT_HTTP})")
+    g.add_argument("--quality", type=int, default=85, help="JPEG quality for HTTP (default: 85)")
+
+
+def _serial_option(g: argparse._ArgumentGroup) -> None:
+    g.add_argument("--serial", action="store_true", help="serve the control protocol on a pseudo-terminal")
+
+
+Starter = Callable[[argparse.Namespace, Any, Any], "Running | None"]
+TRANSPORTS: list[tuple[str, Callable[[argparse._ArgumentGroup], None], Starter]] = [
+    ("http", _http_option, start_http),
+    ("serial", _serial_option, start_serial),
 ]
-"""Transport starters, in start order; each returns None when its option was not given."""
+"""Transports in start order: (name = the option's dest, add its options, starter). A starter gets the parsed
+arguments, the FirmwareCamera and the shared FramePump, and returns None when its option was not given. A new
+transport (``--usbip HOST:PORT``) is one entry here."""
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -116,10 +129,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     g.add_argument("--exposure-us", type=float, default=None, help="exposure in microseconds")
     g.add_argument("--gain", type=float, default=1.0, help="analog gain, linear (default: 1.0)")
     g = p.add_argument_group("transports")
-    g.add_argument("--http", type=host_port, default=None, metavar="HOST:PORT",
-                   help=f"serve MJPEG over HTTP (default when no transport is given: {DEFAULT_HTTP})")
-    g.add_argument("--serial", action="store_true", help="serve the control protocol on a pseudo-terminal")
-    g.add_argument("--quality", type=int, default=85, help="JPEG quality for HTTP (default: 85)")
+    for _name, add_options, _start in TRANSPORTS:
+        add_options(g)
     p.add_argument("--duration", type=float, default=None, metavar="SECONDS", help="stop after this long")
     p.add_argument("--json", action="store_true", help="print the endpoints as one JSON line")
     p.set_defaults(func=cmd_emulate)
@@ -140,7 +151,7 @@ def cmd_emulate(args: argparse.Namespace) -> int:
 
     from .sources.emu import parse_size
 
-    if args.http is None and not args.serial:
+    if not any(getattr(args, name, None) for name, _add, _start in TRANSPORTS):
         args.http = host_port(DEFAULT_HTTP)
     size = parse_size(args.size) if args.size else None
     exposure_ns = None if args.exposure_us is None else round(args.exposure_us * 1000)
@@ -151,7 +162,7 @@ def cmd_emulate(args: argparse.Namespace) -> int:
     running: list[Running] = []
     pump = FramePump(camera, bands=1, name="rollcam-emulate")
     try:
-        for _name, starter in TRANSPORTS:
+        for _name, _add, starter in TRANSPORTS:
             started = starter(args, camera, pump)
             if started is not None:
                 running.append(started)

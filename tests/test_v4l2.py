@@ -9,6 +9,8 @@ from fractions import Fraction
 import cv2
 import numpy as np
 import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
 from rollcam.emu.v4l2 import Device, Faults, V4L2Error, raw
 from rollcam.emu.v4l2 import functions as fn
 from rollcam.sim.errors import DeviceError
@@ -166,3 +168,43 @@ def test_blocking_dqbuf_times_out_without_a_queued_buffer():
         fn.stream_on(h)
         assert errno_of(fn.dequeue_buffer, h, timeout_s=0.2) == errno.ETIMEDOUT
         assert h.stats["delivered"] == 0
+
+
+_OPS = st.lists(st.one_of(
+    st.tuples(st.just("reqbufs"), st.integers(-1, 40)),
+    st.tuples(st.just("qbuf"), st.integers(-1, 5)),
+    st.tuples(st.just("dqbuf"), st.booleans()),
+    st.tuples(st.sampled_from(["streamon", "streamoff", "querybuf", "s_fmt", "vflip"]), st.integers(0, 3)),
+), max_size=25)
+FUZZ_COUNTS: dict[str, int] = {}
+
+
+@settings(max_examples=200, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(ops=_OPS)
+def _fuzz_ioctl_sequences(ops):
+    FUZZ_COUNTS["ioctl"] = FUZZ_COUNTS.get("ioctl", 0) + 1
+    with dev(faults=Faults(drop_percent=20, seed=1)) as d:
+        h, q = d.driver, d.driver.queue
+        for op, n in ops:
+            call = {"reqbufs": lambda n=n: fn.request_buffers(h, n), "qbuf": lambda n=n: fn.queue_buffer(h, n),
+                    "dqbuf": lambda n=n: fn.dequeue_buffer(h, block=n, timeout_s=0.01),
+                    "streamon": lambda: fn.stream_on(h), "streamoff": lambda: fn.stream_off(h),
+                    "querybuf": lambda n=n: fn.query_buffer(h, n), "s_fmt": lambda: d.set_format(640, 480, "BGR3"),
+                    "vflip": lambda n=n: fn.set_control(h, raw.CID.VFLIP, n % 2)}[op]
+            try:
+                call()
+            except V4L2Error as exc:
+                assert exc.errno in (errno.EINVAL, errno.EBUSY, errno.EAGAIN, errno.ETIMEDOUT), (op, exc)
+            lists = [*q.queued, *q.done, *q.active]
+            assert len(lists) == len(set(lists)) <= len(q.slots)  # a buffer is in one place at most
+            for slot in q.slots:
+                queued = bool(slot.info.flags & raw.BufFlag.QUEUED)
+                assert queued == (slot.info.index in q.queued or slot.info.index in q.active), (op, slot.info)
+            assert q.streaming == h.camera.streaming
+
+
+def test_fuzz_ioctl_sequences_keep_the_queue_consistent():
+    FUZZ_COUNTS["ioctl"] = 0
+    _fuzz_ioctl_sequences()
+    assert FUZZ_COUNTS["ioctl"] >= 100
+    print(f"V4L2 ioctl-sequence fuzz: {FUZZ_COUNTS['ioctl']} sequences")
