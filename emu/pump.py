@@ -73,18 +73,19 @@ class FramePump:
         if self._thread.is_alive() and self._thread is not threading.current_thread():
             self._thread.join(timeout=5)
 
-    def _sleep_until(self, device_ns: int) -> bool:
+    def _sleep_until(self, device_ns: int, spin: bool = False) -> bool:
         """Wait until the camera's clock reads ``device_ns``; False when the pump is stopping.
 
-        The last ``SPIN_NS`` are spent yielding rather than asleep: a thread woken from a timed sleep on a busy
-        machine waits for a CPU, one already running does not.
+        With ``spin`` (the frame's last band) the last ``SPIN_NS`` are spent yielding rather than asleep: a
+        thread woken from a timed sleep on a busy machine waits for a CPU, one already running does not.
         """
+        margin = SPIN_NS if spin else 0
         while True:
             left = device_ns - self.camera.clock_ns()
             if left <= 0:
                 return not self._stop.is_set()
-            if left > SPIN_NS:
-                if self._stop.wait((left - SPIN_NS) / 1e9):
+            if left > margin:
+                if self._stop.wait((left - margin) / 1e9):
                     return False
             else:
                 time.sleep(0)
@@ -99,7 +100,8 @@ class FramePump:
                     continue
                 frame = cam.render(plan)
                 for band in range(self.bands):
-                    if not self._sleep_until(plan.schedule.band_due_ns(plan.seq, band, self.bands)):
+                    due = plan.schedule.band_due_ns(plan.seq, band, self.bands)
+                    if not self._sleep_until(due, spin=band == self.bands - 1):
                         return
                     if not cam.streaming:
                         break

@@ -251,3 +251,17 @@ def test_snapshot_and_status(server):
     with pytest.raises(urllib.error.HTTPError) as info:
         urllib.request.urlopen(server.url.replace("stream.mjpg", "missing"), timeout=5)
     assert info.value.code == 404
+
+
+def test_pty_client_that_never_reads_costs_dropped_replies_not_memory():
+    with PtySerialServer(camera()) as srv, serial.Serial(srv.path, timeout=5, write_timeout=10) as port:
+        port.write(b"*IDN?\n" * 3000)  # ~90 kB of replies, far more than a pty buffers
+        deadline = time.monotonic() + 20
+        while srv.session.lines < 3000 and time.monotonic() < deadline:
+            time.sleep(0.05)
+        assert srv.session.lines == 3000 and srv.stats["dropped_bytes"] > 0
+        port.reset_input_buffer()
+        time.sleep(0.2)
+        port.reset_input_buffer()
+        port.write(b"STATS?\n")
+        assert port.readline().startswith(b"frames=")  # still answering
