@@ -265,3 +265,25 @@ def test_pty_client_that_never_reads_costs_dropped_replies_not_memory():
         port.reset_input_buffer()
         port.write(b"STATS?\n")
         assert port.readline().startswith(b"frames=")  # still answering
+
+
+def test_client_limit_answers_503_and_frees_the_slot():
+    with MjpegServer(camera(), max_clients=1) as srv:
+        first = urllib.request.urlopen(srv.url, timeout=5)
+        with pytest.raises(urllib.error.HTTPError) as info:
+            urllib.request.urlopen(srv.url, timeout=5)
+        assert info.value.code == 503
+        first.close()
+        deadline = time.monotonic() + 10
+        while srv.clients and time.monotonic() < deadline:
+            time.sleep(0.1)
+        assert len(_parts(srv.url, 1)) == 1
+
+
+def test_rollcam_emulate_bad_input_exits_2():
+    cmd = [sys.executable, "-m", "rollcam.host.cli", "emulate", "nosuch", "--duration", "0.1"]
+    done = subprocess.run(cmd, capture_output=True, text=True, timeout=60)
+    assert done.returncode == 2 and "no sensor named 'nosuch'" in done.stderr
+    cmd = [sys.executable, "-m", "rollcam.host.cli", "emulate", "imx219", "--http", "localhost:http"]
+    done = subprocess.run(cmd, capture_output=True, text=True, timeout=60)
+    assert done.returncode == 2 and "expected HOST:PORT" in done.stderr
