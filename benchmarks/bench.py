@@ -577,6 +577,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--minutes", type=float, default=10.0, help="--soak duration (default: 10)")
     parser.add_argument("--soak-scene", default="street", choices=("street", "chart", "flat"),
                         help="--soak scene (default: street; flat isolates pacing from rendering cost)")
+    parser.add_argument("--rt-priority", type=int, default=None, metavar="N",
+                        help="--soak: run the pump's waits and the reader under SCHED_FIFO priority N")
     parser.add_argument("--hog", action="store_true",
                         help="run the HOG people-detector recall study on the synthetic walkers instead (~1 min)")
 

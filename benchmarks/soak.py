@@ -37,11 +37,17 @@ def _pct(values: np.ndarray, q: float) -> float | None:
 
 def run_soak(minutes: float = 10.0, *, sensor: str = "imx219", size: tuple[int, int] = (1920, 1080),
              fps: float = 30.0, fourcc: str = "YUYV", scene: str = "street", buffers: int = 4, bands: int = 8,
-             progress: Any = None) -> dict[str, Any]:
-    """Stream for ``minutes`` and return the figures as a JSON-ready dict."""
+             rt_priority: int | None = None, progress: Any = None) -> dict[str, Any]:
+    """Stream for ``minutes`` and return the figures as a JSON-ready dict.
+
+    ``rt_priority`` runs the device's pump waits and this reader's dequeue loop under SCHED_FIFO (as a
+    real-time capture application would); None keeps the normal policy.
+    """
     say = progress or (lambda _msg: None)
     arrivals, seqs, stamps = [], [], []
-    with Device.open(sensor, scene={"scene": scene}, size=size, fps=fps, realtime=True, bands=bands) as dev:
+    reader_rt = None
+    with Device.open(sensor, scene={"scene": scene}, size=size, fps=fps, realtime=True, bands=bands,
+                     rt_priority=rt_priority) as dev:
         dev.set_format(*size, fourcc)
         d = dev.driver
         cam = d.camera
@@ -53,6 +59,8 @@ def run_soak(minutes: float = 10.0, *, sensor: str = "imx219", size: tuple[int, 
         cam.render(cam.plan_next())
         cam.stream_off()
         fn.stream_on(d)
+        if rt_priority is not None:
+            reader_rt = _set_fifo(rt_priority)
         timing = cam.state.timing
         end = time.monotonic() + minutes * 60
         next_say = time.monotonic() + 10
@@ -66,6 +74,8 @@ def run_soak(minutes: float = 10.0, *, sensor: str = "imx219", size: tuple[int, 
                 gaps = int(np.sum(np.diff(seqs) - 1)) if len(seqs) > 1 else 0
                 say(f"soak: {len(seqs)} frames, {gaps} dropped, {(end - time.monotonic()) / 60:.1f} min left")
                 next_say += 10
+        if reader_rt and reader_rt.startswith("SCHED_FIFO"):
+            os.sched_setscheduler(0, os.SCHED_OTHER, os.sched_param(0))
         pump_stats = dict(d.pump.stats) if d.pump else {}
         driver_stats = dict(d.stats)
         camera_stats = dict(cam.stats)
@@ -84,7 +94,7 @@ def run_soak(minutes: float = 10.0, *, sensor: str = "imx219", size: tuple[int, 
     return {
         "config": {"sensor": sensor, "size": list(size), "fps": fps, "frame_period_ns": timing.frame_period_ns,
                    "line_time_ns": timing.line_time_ns, "fourcc": fourcc, "scene": scene, "buffers": n,
-                   "bands": bands, "minutes": minutes},
+                   "bands": bands, "minutes": minutes, "rt_priority": rt_priority, "reader_rt": reader_rt},
         "frames": int(seq.size),
         "dropped": dropped,
         "jitter_ms": {"p50": _pct(jitter_ms, 50), "p99": p99, "max": _pct(jitter_ms, 100)},
@@ -97,6 +107,14 @@ def run_soak(minutes: float = 10.0, *, sensor: str = "imx219", size: tuple[int, 
     }
 
 
+def _set_fifo(priority: int) -> str:
+    try:
+        os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(priority))
+    except (OSError, AttributeError) as exc:
+        return f"refused: {exc}"
+    return f"SCHED_FIFO {priority}"
+
+
 def format_report(doc: dict[str, Any]) -> str:
     """The figures as a few lines of text."""
     c, j, lat = doc["config"], doc["jitter_ms"], doc["latency_ms"]
@@ -104,7 +122,8 @@ def format_report(doc: dict[str, Any]) -> str:
     t = doc["targets"]
     return "\n".join([
         f"soak: {c['sensor']} {c['size'][0]}x{c['size'][1]} {c['fps']:g} fps {c['fourcc']} {c['scene']}, "
-        f"{c['minutes']:g} min, real time, {c['bands']} row bands",
+        f"{c['minutes']:g} min, real time, {c['bands']} row bands, "
+        f"rt: pump {doc['pump'].get('rt')}, reader {c['reader_rt']}",
         f"frames {doc['frames']}, dropped {doc['dropped']} (skipped late {doc['camera']['skipped']}, no buffer "
         f"{doc['driver']['dropped_no_buffer']})",
         f"frame-interval jitter ms: p50 {j['p50']}  p99 {j['p99']}  max {j['max']}",
@@ -118,10 +137,11 @@ def run_from_args(args: argparse.Namespace) -> int:
     """``rollcam bench --soak``: run, write soak.json into ``--out``, print the report (or JSON)."""
     t0 = time.perf_counter()
     say = lambda msg: print(f"[soak {time.perf_counter() - t0:6.1f}s] {msg}", file=sys.stderr, flush=True)  # noqa: E731
-    doc = run_soak(args.minutes, scene=getattr(args, "soak_scene", "street"), progress=say)
+    doc = run_soak(args.minutes, scene=getattr(args, "soak_scene", "street"),
+                   rt_priority=getattr(args, "rt_priority", None), progress=say)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
-    name = f"soak_{doc['config']['scene']}.json"
+    name = f"soak_{doc['config']['scene']}{'_rt' if doc['config']['rt_priority'] is not None else ''}.json"
     tmp = out / f"{name}.tmp"
     tmp.write_text(json.dumps(doc, indent=1) + "\n")
     tmp.replace(out / name)

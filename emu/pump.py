@@ -8,6 +8,8 @@ the frame rate) is skipped: the stream's sequence numbers show the gap, and ``st
 
 from __future__ import annotations
 
+import collections
+import os
 import threading
 import time
 from typing import Protocol
@@ -16,6 +18,7 @@ from rollcam.firmware.camera import FirmwareCamera, FramePlan
 from rollcam.sim.frame import Frame
 
 SPIN_NS = 1_000_000
+RENDER_MARGIN_NS = 3_000_000
 
 
 class Sink(Protocol):
@@ -31,16 +34,20 @@ class Sink(Protocol):
 class FramePump:
     """A thread streaming one camera in real time to any number of sinks; a context manager."""
 
-    def __init__(self, camera: FirmwareCamera, *, bands: int = 8, name: str = "rollcam-pump") -> None:
+    def __init__(self, camera: FirmwareCamera, *, bands: int = 8, name: str = "rollcam-pump",
+                 rt_priority: int | None = None) -> None:
         if bands < 1:
             raise ValueError(f"bands must be >= 1, got {bands!r}")
         self.camera = camera
         self.bands = bands
+        self.rt_priority = rt_priority
         self._sinks: list[Sink] = []
         self._lock = threading.Lock()
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._run, name=name, daemon=True)
-        self.stats = {"frames": 0, "max_late_ns": 0}
+        self._rt = False
+        self._render_ns: collections.deque[int] = collections.deque(maxlen=64)
+        self.stats: dict[str, object] = {"frames": 0, "max_late_ns": 0, "rt": None}
         self.error: BaseException | None = None
 
     def __enter__(self) -> FramePump:
@@ -79,7 +86,7 @@ class FramePump:
         With ``spin`` (the frame's last band) the last ``SPIN_NS`` are spent yielding rather than asleep: a
         thread woken from a timed sleep on a busy machine waits for a CPU, one already running does not.
         """
-        margin = SPIN_NS if spin else 0
+        margin = SPIN_NS if spin and not self._rt else 0
         while True:
             left = device_ns - self.camera.clock_ns()
             if left <= 0:
@@ -90,6 +97,22 @@ class FramePump:
             else:
                 time.sleep(0)
 
+    def _realtime(self, on: bool) -> None:
+        """Waits and band deliveries run under SCHED_FIFO (``rt_priority``), rendering under the normal policy."""
+        if self.rt_priority is None or on == self._rt:
+            return
+        try:
+            if on:
+                os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(self.rt_priority))
+            else:
+                os.sched_setscheduler(0, os.SCHED_OTHER, os.sched_param(0))
+        except (OSError, AttributeError) as exc:  # not permitted (no CAP_SYS_NICE) or not Linux: run without it
+            self.stats["rt"] = f"refused: {exc}"
+            self.rt_priority = None
+            return
+        self._rt = on
+        self.stats["rt"] = f"SCHED_FIFO {self.rt_priority}"
+
     def _run(self) -> None:
         cam = self.camera
         try:
@@ -98,7 +121,16 @@ class FramePump:
                 if plan is None:
                     cam.wait_changed(0.05)
                     continue
+                # Render as late as is safe (1.5x the slowest recent render, plus a margin, before the first band
+                # is due), so that readers woken by the previous frame get the GIL before the render takes it.
+                budget = 3 * max(self._render_ns, default=0) // 2 + RENDER_MARGIN_NS
+                if not self._sleep_until(plan.schedule.band_due_ns(plan.seq, 0, self.bands) - budget):
+                    return
+                self._realtime(False)
+                t0 = cam.clock_ns()
                 frame = cam.render(plan)
+                self._render_ns.append(cam.clock_ns() - t0)
+                self._realtime(True)
                 for band in range(self.bands):
                     due = plan.schedule.band_due_ns(plan.seq, band, self.bands)
                     if not self._sleep_until(due, spin=band == self.bands - 1):

@@ -57,3 +57,16 @@ def test_pump_idles_until_streaming_and_stops_cleanly():
     pump.close()
     pump.close()
     assert not pump._thread.is_alive()
+
+
+def test_realtime_priority_is_used_or_refusal_reported():
+    cam = FirmwareCamera("imx219", scene={"scene": "flat"}, size=(640, 480))
+    rec = Recorder(cam, 2)
+    with FramePump(cam, bands=2, rt_priority=1) as pump:
+        pump.add_sink(rec)
+        cam.stream_on()
+        assert rec.enough.wait(20)
+    assert pump.error is None
+    assert pump.stats["rt"] == "SCHED_FIFO 1" or str(pump.stats["rt"]).startswith("refused")
+    for _seq, _band, at, due in rec.bands:
+        assert at >= due

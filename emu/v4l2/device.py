@@ -87,10 +87,12 @@ class Device:
 
     @classmethod
     def open(cls, sensor: str, *, scene: dict[str, Any] | None = None, realtime: bool = True, bands: int = 8,
-             faults: Faults | None = None, clock: Clock | None = None, **camera_options: Any) -> Device:
-        """A device on a new FirmwareCamera of ``sensor`` (``realtime=False``: frames as fast as asked)."""
+             faults: Faults | None = None, clock: Clock | None = None, rt_priority: int | None = None,
+             **camera_options: Any) -> Device:
+        """A device on a new FirmwareCamera of ``sensor`` (``realtime=False``: frames as fast as asked;
+        ``rt_priority``: the real-time pump's waits run under SCHED_FIFO at that priority)."""
         camera = FirmwareCamera(sensor, scene=scene, clock=clock, **camera_options)
-        return cls(EmuDriver(camera, realtime=realtime, bands=bands, faults=faults))
+        return cls(EmuDriver(camera, realtime=realtime, bands=bands, faults=faults, rt_priority=rt_priority))
 
     def __enter__(self) -> Device:
         return self

@@ -51,9 +51,10 @@ class EmuDriver:
     """Driver state of one emulated /dev/videoN: format, buffer queue, streaming, faults, statistics."""
 
     def __init__(self, camera: FirmwareCamera, *, realtime: bool = True, bands: int = 8,
-                 faults: Faults | None = None) -> None:
+                 faults: Faults | None = None, rt_priority: int | None = None) -> None:
         self.camera = camera
         self.realtime = realtime
+        self.rt_priority = rt_priority
         self.bands = bands
         self.faults = faults or Faults()
         self.rng = np.random.default_rng(self.faults.seed)
@@ -305,7 +306,7 @@ def _streamon(d: EmuDriver, _arg: Any) -> None:
     d.seq0 = d.camera.next_seq  # V4L2 sequence numbers count from 0 at each STREAMON
     d.camera.stream_on()
     if d.realtime:
-        d.pump = FramePump(d.camera, bands=d.bands, name="rollcam-v4l2")
+        d.pump = FramePump(d.camera, bands=d.bands, name="rollcam-v4l2", rt_priority=d.rt_priority)
         d.pump.add_sink(d)
         d.pump.start()
 
