@@ -574,6 +574,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--scenes", default=None, help=f"comma-separated subset of {','.join(SCENES)}")
     parser.add_argument("--dataset", action="store_true",
                         help="time dataset generation (vs render+encode, 1 vs 2 workers) and eval metrics instead")
+    parser.add_argument("--soak", action="store_true",
+                        help="stream an emulated 1080p30 RS V4L2 device in real time; report drops and jitter")
+    parser.add_argument("--minutes", type=float, default=10.0, help="--soak duration (default: 10)")
+    parser.add_argument("--soak-scene", default="street", choices=("street", "chart", "flat"),
+                        help="--soak scene (default: street; flat isolates pacing from rendering cost)")
+    parser.add_argument("--rt-priority", type=int, default=None, metavar="N",
+                        help="--soak: run the pump's waits and the reader under SCHED_FIFO priority N")
     parser.add_argument("--hog", action="store_true",
                         help="run the HOG people-detector recall study on the synthetic walkers instead (~1 min)")
     parser.add_argument("--detect", action="store_true",
@@ -614,6 +621,10 @@ def run(args: argparse.Namespace) -> int:
         (Path(args.out) / "uvc.json").write_text(json.dumps(doc, indent=1))
         print(json.dumps(doc, indent=1) if args.json else format_uvc(doc))
         return 0
+    if getattr(args, "soak", False):
+        from .soak import run_from_args
+
+        return run_from_args(args)
     if getattr(args, "hog", False):
         from .hog_recall import hog_recall
 

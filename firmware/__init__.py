@@ -1,1 +1,9 @@
-"""Device-side logic (register map, control protocol, frame scheduler); grows with the device issue."""
+"""The emulated camera's own logic: register map, controls, serial control protocol, frame scheduler.
+
+``FirmwareCamera`` (``camera``) is the device every transport sits on: ``controls`` (programmable state and
+V4L2-named controls with their side effects), ``registers`` (the hw_config register map with the part's
+effects), ``traits`` (per-sensor register encodings), ``scheduler`` (device times of frames, lines and
+bands), ``patterns`` (test patterns), ``pixfmt`` (the one place BGR renders become YUYV, MJPG, ...),
+``scene`` (scene controls) and ``protocol`` (the line-based serial protocol). Nothing here knows of USB,
+sockets or ptys.
+"""

@@ -113,7 +113,7 @@ def sensor_rows() -> list[dict[str, Any]]:
     return rows
 
 
-COMMAND_MODULES: tuple[str, ...] = ("detect", "datasets.command", "evaluation.command")
+COMMAND_MODULES: tuple[str, ...] = ("emulate", "detect", "datasets.command", "evaluation.command")
 """Modules under ``rollcam.host`` that each add one command: ``register(sub)`` adds a subparser whose
 ``func(args) -> int`` runs it (import heavy work inside ``func``, so ``rollcam --help`` stays fast)."""
 

@@ -1,0 +1,144 @@
+"""The emulated V4L2 camera as an application sees it: ``Device``, a thin class over the functions.
+
+    from rollcam.emu.v4l2 import Device
+
+    with Device.open("imx219", scene={"scene": "street"}) as cam:
+        cam.set_format(1920, 1080, "YUYV")
+        cam.controls["vblank"].value = 1000            # longer frame: lower frame rate, wider exposure range
+        for buf in cam.stream(buffers=4, frames=10):
+            print(buf.sequence, buf.timestamp_ns, buf.bytesused, buf.image().shape)
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+from dataclasses import dataclass, field
+from typing import Any
+
+import cv2
+import numpy as np
+from rollcam.firmware.camera import Clock, FirmwareCamera
+
+from . import functions as fn
+from . import raw
+from .driver import CID_TO_CONTROL, EmuDriver, Faults
+
+
+@dataclass(frozen=True)
+class CapturedBuffer:
+    """One dequeued buffer's bytes (a copy) and metadata."""
+
+    sequence: int
+    timestamp_ns: int
+    bytesused: int
+    flags: int
+    fourcc: str
+    width: int
+    height: int
+    data: np.ndarray = field(repr=False)
+
+    @property
+    def error(self) -> bool:
+        """True when the driver flagged the buffer V4L2_BUF_FLAG_ERROR."""
+        return bool(self.flags & raw.BufFlag.ERROR)
+
+    def image(self) -> np.ndarray:
+        """The pixels as a BGR image (decoded from YUYV/MJPG; GREY stays single-channel)."""
+        w, h, d = self.width, self.height, self.data
+        decode = {"BGR3": lambda: d.reshape(h, w, 3), "RGB3": lambda: cv2.cvtColor(d.reshape(h, w, 3),
+                                                                                    cv2.COLOR_RGB2BGR),
+                  "YUYV": lambda: cv2.cvtColor(d.reshape(h, w, 2), cv2.COLOR_YUV2BGR_YUYV),
+                  "GREY": lambda: d.reshape(h, w), "MJPG": lambda: cv2.imdecode(d, cv2.IMREAD_COLOR)}
+        return decode[self.fourcc]()
+
+
+class ControlHandle:
+    """One control of a Device by name: ``.value`` reads and writes it, ``.info`` is its QUERYCTRL."""
+
+    def __init__(self, device: Device, cid: int) -> None:
+        self.device, self.id = device, cid
+
+    @property
+    def info(self) -> raw.QueryCtrl:
+        """VIDIOC_QUERYCTRL of the control (range as it is now)."""
+        return fn.query_control(self.device.driver, self.id)
+
+    @property
+    def value(self) -> int:
+        """Current value."""
+        return fn.get_control(self.device.driver, self.id)
+
+    @value.setter
+    def value(self, v: int) -> None:
+        fn.set_control(self.device.driver, self.id, v)
+
+    def __repr__(self) -> str:
+        i = self.info
+        return f"<control {i.name!r} = {self.value} [{i.minimum}..{i.maximum}]>"
+
+
+class Device:
+    """An open emulated /dev/videoN: format, controls, buffers and streaming; a context manager."""
+
+    def __init__(self, driver: EmuDriver) -> None:
+        self.driver = driver
+        self.controls = {name: ControlHandle(self, int(cid)) for cid, name in CID_TO_CONTROL.items()}
+        self.closed = False
+
+    @classmethod
+    def open(cls, sensor: str, *, scene: dict[str, Any] | None = None, realtime: bool = True, bands: int = 8,
+             faults: Faults | None = None, clock: Clock | None = None, rt_priority: int | None = None,
+             **camera_options: Any) -> Device:
+        """A device on a new FirmwareCamera of ``sensor`` (``realtime=False``: frames as fast as asked;
+        ``rt_priority``: the real-time pump's waits run under SCHED_FIFO at that priority)."""
+        camera = FirmwareCamera(sensor, scene=scene, clock=clock, **camera_options)
+        return cls(EmuDriver(camera, realtime=realtime, bands=bands, faults=faults, rt_priority=rt_priority))
+
+    def __enter__(self) -> Device:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    def __repr__(self) -> str:
+        f = self.driver.fmt
+        return (f"<emulated V4L2 device {self.driver.camera.sensor.name} {f.width}x{f.height} {f.pixelformat}"
+                f"{' streaming' if self.driver.queue.streaming else ''}{' closed' if self.closed else ''}>")
+
+    def close(self) -> None:
+        """Stop streaming and free the buffers. Idempotent."""
+        if not self.closed:
+            self.closed = True
+            self.driver.close()
+
+    @property
+    def info(self) -> raw.Capability:
+        """VIDIOC_QUERYCAP."""
+        return fn.querycap(self.driver)
+
+    def set_format(self, width: int, height: int, fourcc: str = "YUYV") -> raw.PixFormat:
+        """VIDIOC_S_FMT; returns the format set (rounded like TRY_FMT)."""
+        return fn.set_format(self.driver, width, height, fourcc)
+
+    def stream(self, buffers: int = 4, frames: int | None = None, timeout_s: float | None = 5.0
+               ) -> Iterator[CapturedBuffer]:
+        """REQBUFS, QBUF all, STREAMON, then DQBUF/copy/QBUF; stops after ``frames`` (STREAMOFF, REQBUFS 0)."""
+        d = self.driver
+        n = fn.request_buffers(d, buffers)
+        try:
+            for i in range(n):
+                fn.queue_buffer(d, i)
+            fn.stream_on(d)
+            count = 0
+            while frames is None or count < frames:
+                buf, view = fn.dequeue_buffer(d, timeout_s=timeout_s)
+                f = d.fmt
+                out = CapturedBuffer(buf.sequence, buf.timestamp_ns, buf.bytesused, buf.flags, f.pixelformat,
+                                     f.width, f.height, view.copy())
+                fn.queue_buffer(d, buf.index)
+                count += 1
+                yield out
+        finally:
+            if not d.queue.disconnected:
+                fn.stream_off(d)
+                fn.request_buffers(d, 0)

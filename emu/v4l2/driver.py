@@ -1,0 +1,329 @@
+"""The kernel side of the emulated V4L2 device (as vivid is to a real camera): ``ioctl(request, arg)``.
+
+``EmuDriver`` answers the VIDIOC requests of ``raw.Ioctl`` for one FirmwareCamera with the kernel's
+semantics and errnos. Frames are paced in real time (a ``FramePump`` fills the buffer band by band at the
+lines' device times) or made as fast as possible (each DQBUF renders the next frame). ``Faults`` injects
+what vivid can: dropped buffers, the ERROR flag, one-shot ioctl errors and a disconnect.
+"""
+
+from __future__ import annotations
+
+import errno
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from fractions import Fraction
+from typing import Any
+
+import numpy as np
+from rollcam.emu.pump import FramePump
+from rollcam.firmware.camera import FirmwareCamera, FramePlan
+from rollcam.firmware.controls import CONTROLS
+from rollcam.firmware.pixfmt import FORMATS, convert, pixel_format
+from rollcam.sim.errors import ConfigError, DeviceError
+from rollcam.sim.frame import Frame
+
+from . import raw
+from .queue import BufferQueue, Slot, V4L2Error
+
+CID_TO_CONTROL = {raw.CID.EXPOSURE: "exposure", raw.CID.ANALOGUE_GAIN: "analogue_gain",
+                  raw.CID.DIGITAL_GAIN: "digital_gain", raw.CID.VBLANK: "vblank", raw.CID.HBLANK: "hblank",
+                  raw.CID.PIXEL_RATE: "pixel_rate", raw.CID.TEST_PATTERN: "test_pattern", raw.CID.HFLIP: "hflip",
+                  raw.CID.VFLIP: "vflip"}
+CTRL_NAMES = {"exposure": "Exposure", "analogue_gain": "Analogue Gain", "digital_gain": "Digital Gain",
+              "vblank": "Vertical Blanking", "hblank": "Horizontal Blanking", "pixel_rate": "Pixel Rate",
+              "test_pattern": "Test Pattern", "hflip": "Horizontal Flip", "vflip": "Vertical Flip"}
+_CTRL_TYPES = {"int": raw.CtrlType.INTEGER, "bool": raw.CtrlType.BOOLEAN, "menu": raw.CtrlType.MENU}
+
+
+@dataclass
+class Faults:
+    """vivid-like fault injection: percentages of dropped and ERROR-flagged buffers, one-shot ioctl errors
+    (request -> errno, consumed by the next such call), and a disconnect after N delivered frames."""
+
+    drop_percent: float = 0.0
+    error_percent: float = 0.0
+    ioctl_errors: dict[str, int] = field(default_factory=dict)
+    disconnect_after: int | None = None
+    seed: int = 0
+
+
+class EmuDriver:
+    """Driver state of one emulated /dev/videoN: format, buffer queue, streaming, faults, statistics."""
+
+    def __init__(self, camera: FirmwareCamera, *, realtime: bool = True, bands: int = 8,
+                 faults: Faults | None = None, rt_priority: int | None = None) -> None:
+        self.camera = camera
+        self.realtime = realtime
+        self.rt_priority = rt_priority
+        self.bands = bands
+        self.faults = faults or Faults()
+        self.rng = np.random.default_rng(self.faults.seed)
+        self.queue = BufferQueue()
+        w, h = camera.size
+        self.fmt = _pix_format(w, h, "YUYV" if "YUYV" in FORMATS else next(iter(FORMATS)))
+        self.pump: FramePump | None = None
+        self.seq0 = 0
+        self.stats = {"delivered": 0, "dropped_no_buffer": 0, "dropped_injected": 0, "errors_injected": 0}
+        self._filling: tuple[int, Slot, np.ndarray] | None = None
+
+    def ioctl(self, request: raw.Ioctl | str, arg: Any = None) -> Any:
+        """Run one VIDIOC request; failures raise V4L2Error with the kernel's errno."""
+        request = raw.Ioctl(request)
+        if self.queue.disconnected:
+            raise V4L2Error(errno.ENODEV, f"{request.value}: device disconnected")
+        injected = self.faults.ioctl_errors.pop(request.value, None)
+        if injected is not None:
+            raise V4L2Error(injected, f"{request.value}: injected error")
+        try:
+            return _HANDLERS[request](self, arg)
+        except V4L2Error:
+            raise
+        except ConfigError as exc:
+            raise V4L2Error(errno.EINVAL, f"{request.value}: {exc}") from None
+        except DeviceError as exc:
+            raise V4L2Error(errno.EBUSY, f"{request.value}: {exc}") from None
+
+    def disconnect(self) -> None:
+        """Unplug: stop producing; every call and waiter from now on gets ENODEV."""
+        self._stop_pump()
+        self.camera.stream_off()
+        self.queue.disconnect()
+
+    def close(self) -> None:
+        """Release the device (stream off, buffers freed). Idempotent."""
+        self._stop_pump()
+        self.camera.stream_off()
+        self.queue.stop()
+
+    # ------------------------------------------------------------------------------------- frame delivery
+    def _stop_pump(self) -> None:
+        if self.pump is not None:
+            self.pump.close()
+            self.pump = None
+
+    def on_band(self, frame: Frame, plan: FramePlan, band: int, n_bands: int) -> None:
+        """Pump sink: copy the band's lines into the buffer being filled (taking one at the first band)."""
+        if band == 0:
+            slot = self.queue.take()
+            self._filling = None if slot is None else (plan.seq, slot, self._payload(frame))
+        if self._filling is None or self._filling[0] != plan.seq:
+            return
+        _, slot, payload = self._filling
+        fmt = self.fmt
+        if fmt.bytesperline and not self.camera.sensor.readout.by_column:
+            first, end = plan.schedule.band_lines(band, n_bands)
+            if self.camera.sensor.readout.reversed:
+                first, end = fmt.height - end, fmt.height - first
+            lo, hi = first * fmt.bytesperline, end * fmt.bytesperline
+            slot.memory[lo:hi] = payload[lo:hi]
+        elif band == n_bands - 1:
+            slot.memory[: payload.size] = payload
+
+    def on_frame(self, frame: Frame, plan: FramePlan) -> None:
+        """Pump sink: the frame is complete; deliver (or drop) the buffer."""
+        if self._filling is None or self._filling[0] != plan.seq:
+            self.stats["dropped_no_buffer"] += 1
+            return
+        _, slot, payload = self._filling
+        self._filling = None
+        self._deliver(slot, frame, payload.size)
+
+    def _payload(self, frame: Frame) -> np.ndarray:
+        data = convert(frame.data, self.fmt.pixelformat)
+        return np.ascontiguousarray(data).reshape(-1)
+
+    def _deliver(self, slot: Slot, frame: Frame, size: int) -> None:
+        f = self.faults
+        if f.disconnect_after is not None and self.stats["delivered"] >= f.disconnect_after:
+            self.queue.disconnect()  # unplugged before this frame: it is lost, as on a real unplug
+            return
+        if f.drop_percent and self.rng.random() * 100 < f.drop_percent:
+            self.stats["dropped_injected"] += 1
+            self.queue.give_back(slot)
+            return
+        error = bool(f.error_percent) and self.rng.random() * 100 < f.error_percent
+        self.stats["errors_injected"] += error
+        self.queue.complete(slot, bytesused=size, sequence=frame.sequence - self.seq0,
+                            timestamp_ns=self.camera.host_ns(frame.timestamp_ns), error=error)
+        self.stats["delivered"] += 1
+
+    def produce_now(self) -> bool:
+        """As-fast-as-possible mode: render the next frame into the oldest queued buffer; False if none is due."""
+        slot = self.queue.take()
+        if slot is None:
+            return False
+        plan = self.camera.plan_next()
+        if plan is None:
+            self.queue.give_back(slot)
+            return False
+        frame = self.camera.render(plan)
+        payload = self._payload(frame)
+        slot.memory[: payload.size] = payload
+        self._deliver(slot, frame, payload.size)
+        return True
+
+
+def _pix_format(width: int, height: int, fourcc: str) -> raw.PixFormat:
+    pf = pixel_format(fourcc)
+    return raw.PixFormat(width, height, fourcc, raw.Field.NONE, pf.bytesperline(width), pf.sizeimage(width, height),
+                         raw.Colorspace.JPEG if pf.compressed else raw.Colorspace.SRGB)
+
+
+# ------------------------------------------------------------------------------------------------ handlers
+def _querycap(d: EmuDriver, _arg: Any) -> raw.Capability:
+    caps = raw.Cap.VIDEO_CAPTURE | raw.Cap.STREAMING | raw.Cap.EXT_PIX_FORMAT
+    return raw.Capability("rollcam", f"rollcam {d.camera.sensor.name} emulator", "platform:rollcam-emu",
+                          0x00060800, int(caps | raw.Cap.DEVICE_CAPS), int(caps))
+
+
+def _enum_fmt(d: EmuDriver, arg: raw.FmtDesc) -> raw.FmtDesc:
+    formats = list(FORMATS.values())
+    if not 0 <= arg.index < len(formats):
+        raise V4L2Error(errno.EINVAL, f"format index {arg.index} out of range")
+    pf = formats[arg.index]
+    return raw.FmtDesc(arg.index, raw.BufType.VIDEO_CAPTURE, 1 if pf.compressed else 0, pf.description, pf.fourcc)
+
+
+def _try_fmt(d: EmuDriver, arg: raw.PixFormat) -> raw.PixFormat:
+    """TRY_FMT: the nearest mode size (as v4l2_find_nearest_size) and a supported format (else the first)."""
+    sizes = d.camera.sizes()
+    w, h = min(sizes, key=lambda s: abs(s[0] - arg.width) + abs(s[1] - arg.height))
+    fourcc = arg.pixelformat if arg.pixelformat in FORMATS else next(iter(FORMATS))
+    return _pix_format(w, h, fourcc)
+
+
+def _s_fmt(d: EmuDriver, arg: raw.PixFormat) -> raw.PixFormat:
+    fmt = _try_fmt(d, arg)
+    if d.queue.busy:
+        raise V4L2Error(errno.EBUSY, "S_FMT while buffers are allocated (REQBUFS 0 first)")
+    d.camera.set_size(fmt.width, fmt.height)
+    d.fmt = fmt
+    return fmt
+
+
+def _enum_framesizes(d: EmuDriver, arg: raw.FrmSize) -> raw.FrmSize:
+    sizes = d.camera.sizes()
+    if arg.pixel_format not in FORMATS or not 0 <= arg.index < len(sizes):
+        raise V4L2Error(errno.EINVAL, f"no frame size {arg.index} for format {arg.pixel_format!r}")
+    return raw.FrmSize(arg.index, arg.pixel_format, raw.FrmSizeType.DISCRETE, *sizes[arg.index])
+
+
+def _interval(d: EmuDriver, width: int, height: int) -> Fraction:
+    t = d.camera.sensor.timing(f"{width}x{height}")
+    return Fraction(t.frame_period_pck, t.pixel_rate_hz)
+
+
+def _enum_frameintervals(d: EmuDriver, arg: raw.FrmIval) -> raw.FrmIval:
+    if arg.index != 0 or (arg.width, arg.height) not in d.camera.sizes() or arg.pixel_format not in FORMATS:
+        raise V4L2Error(errno.EINVAL, f"no frame interval {arg.index} for {arg.pixel_format!r} "
+                                      f"{arg.width}x{arg.height}")
+    ival = _interval(d, arg.width, arg.height)
+    return raw.FrmIval(0, arg.pixel_format, arg.width, arg.height, raw.FrmSizeType.DISCRETE, ival.numerator,
+                       ival.denominator)
+
+
+def _g_parm(d: EmuDriver, _arg: Any) -> raw.StreamParm:
+    t = d.camera.state.timing
+    ival = Fraction(t.frame_period_pck, t.pixel_rate_hz)
+    return raw.StreamParm(numerator=ival.numerator, denominator=ival.denominator)
+
+
+def _s_parm(d: EmuDriver, arg: raw.StreamParm) -> raw.StreamParm:
+    """S_PARM: the frame interval becomes the nearest frame length (vertical blanking) the mode allows."""
+    if arg.numerator <= 0 or arg.denominator <= 0:
+        return _g_parm(d, None)  # the kernel treats a zero fraction as "keep the current interval"
+    d.camera.set_frame_interval_ns(round(Fraction(arg.numerator, arg.denominator) * 1_000_000_000))
+    return _g_parm(d, None)
+
+
+def _control_name(cid: int) -> str:
+    try:
+        return CID_TO_CONTROL[raw.CID(cid)]
+    except ValueError:
+        raise V4L2Error(errno.EINVAL, f"no control with id {cid:#x}") from None
+
+
+def _queryctrl(d: EmuDriver, arg: raw.QueryCtrl) -> raw.QueryCtrl:
+    name = _control_name(arg.id)
+    info = d.camera.controls()[name]
+    flags = raw.CtrlFlag.READ_ONLY if info["read_only"] else 0
+    if name in ("hflip", "vflip") and d.camera.streaming:
+        flags |= raw.CtrlFlag.GRABBED
+    default = CONTROLS[name].get(d.camera.state) if name in ("hblank", "pixel_rate") else info["value"]
+    return raw.QueryCtrl(arg.id, _CTRL_TYPES[info["kind"]], CTRL_NAMES[name], info["min"], info["max"], 1,
+                         default, int(flags))
+
+
+def _querymenu(d: EmuDriver, arg: raw.QueryMenu) -> raw.QueryMenu:
+    info = d.camera.controls()[_control_name(arg.id)]
+    if not info["menu"] or not 0 <= arg.index < len(info["menu"]):
+        raise V4L2Error(errno.EINVAL, f"no menu item {arg.index} for control {arg.id:#x}")
+    return raw.QueryMenu(arg.id, arg.index, info["menu"][arg.index])
+
+
+def _g_ctrl(d: EmuDriver, arg: raw.Control) -> raw.Control:
+    return raw.Control(arg.id, d.camera.get_control(_control_name(arg.id)))
+
+
+def _s_ctrl(d: EmuDriver, arg: raw.Control) -> raw.Control:
+    name = _control_name(arg.id)
+    if CONTROLS[name].set is None:
+        raise V4L2Error(errno.EACCES, f"control {name!r} is read-only")
+    return raw.Control(arg.id, d.camera.set_control(name, int(arg.value)))
+
+
+def _reqbufs(d: EmuDriver, arg: raw.RequestBuffers) -> raw.RequestBuffers:
+    count = d.queue.request(arg.count, arg.memory, d.fmt.sizeimage)
+    return raw.RequestBuffers(count, arg.type, arg.memory)
+
+
+def _querybuf(d: EmuDriver, arg: raw.Buffer) -> raw.Buffer:
+    return d.queue.query(arg.index)
+
+
+def _qbuf(d: EmuDriver, arg: raw.Buffer) -> raw.Buffer:
+    d.queue.queue(arg.index)
+    return d.queue.query(arg.index)
+
+
+def _dqbuf(d: EmuDriver, arg: dict[str, Any] | None) -> Slot:
+    opts = arg or {}
+    block, timeout_s = opts.get("block", True), opts.get("timeout_s")
+    if d.pump is not None and d.pump.error is not None:
+        raise V4L2Error(errno.EIO, f"the frame pump stopped: {d.pump.error!r}")
+    # As fast as possible: frames are made on demand, while a buffer is queued and none is done (injected
+    # drops hand their buffer back, so this may take several frames).
+    while not d.realtime and d.queue.streaming and not d.queue.done and d.queue.queued:
+        if not d.produce_now():
+            break
+    return d.queue.dequeue(block, timeout_s)
+
+
+def _streamon(d: EmuDriver, _arg: Any) -> None:
+    if d.queue.streaming:
+        return
+    d.queue.start()
+    d.seq0 = d.camera.next_seq  # V4L2 sequence numbers count from 0 at each STREAMON
+    d.camera.stream_on()
+    if d.realtime:
+        d.pump = FramePump(d.camera, bands=d.bands, name="rollcam-v4l2", rt_priority=d.rt_priority)
+        d.pump.add_sink(d)
+        d.pump.start()
+
+
+def _streamoff(d: EmuDriver, _arg: Any) -> None:
+    d._stop_pump()
+    d.camera.stream_off()
+    d.queue.stop()
+    d._filling = None
+
+
+_HANDLERS: dict[raw.Ioctl, Callable[[EmuDriver, Any], Any]] = {
+    raw.Ioctl.QUERYCAP: _querycap, raw.Ioctl.ENUM_FMT: _enum_fmt, raw.Ioctl.G_FMT: lambda d, _a: d.fmt,
+    raw.Ioctl.S_FMT: _s_fmt, raw.Ioctl.TRY_FMT: _try_fmt, raw.Ioctl.ENUM_FRAMESIZES: _enum_framesizes,
+    raw.Ioctl.ENUM_FRAMEINTERVALS: _enum_frameintervals, raw.Ioctl.G_PARM: _g_parm, raw.Ioctl.S_PARM: _s_parm,
+    raw.Ioctl.QUERYCTRL: _queryctrl, raw.Ioctl.QUERYMENU: _querymenu, raw.Ioctl.G_CTRL: _g_ctrl,
+    raw.Ioctl.S_CTRL: _s_ctrl, raw.Ioctl.REQBUFS: _reqbufs, raw.Ioctl.QUERYBUF: _querybuf, raw.Ioctl.QBUF: _qbuf,
+    raw.Ioctl.DQBUF: _dqbuf, raw.Ioctl.STREAMON: _streamon, raw.Ioctl.STREAMOFF: _streamoff,
+}
+"""VIDIOC request -> handler(driver, arg)."""

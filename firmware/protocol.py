@@ -1,0 +1,183 @@
+"""The camera's line-based serial control protocol: one command per line, one reply line per command.
+
+Commands are case-insensitive words separated by spaces; numbers are decimal or ``0x`` hex; lines end in
+LF, CR or CRLF. A query ends in ``?``. Replies: a value, ``OK`` (or ``OK <value>``), or
+``ERR <code> <message>`` naming the problem (codes in ``ERRORS``). The table ``COMMANDS`` is the protocol;
+``rollcam emulate --serial`` serves it on a pseudo-terminal and ``rollcam://`` through pyserial.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+
+from rollcam.sim.errors import ConfigError, DeviceError, ProtocolError
+
+from .camera import FirmwareCamera
+
+MAX_LINE = 256
+ERRORS = {100: "unknown command", 101: "wrong arguments", 102: "invalid value", 103: "refused by the device",
+          104: "malformed line"}
+
+
+class CommandError(ProtocolError):
+    """A command the protocol rejects; ``code`` is one of ``ERRORS``."""
+
+    def __init__(self, code: int, message: str) -> None:
+        super().__init__(message)
+        self.code = code
+
+
+def parse_int(text: str, what: str = "value") -> int:
+    """A decimal or 0x-hex integer argument."""
+    try:
+        return int(text, 0)
+    except ValueError:
+        raise CommandError(102, f"{what} {text!r} is not an integer (decimal or 0x hex)") from None
+
+
+def _reg_key(text: str) -> int | str:
+    return parse_int(text, "address") if text[:1].isdigit() else text
+
+
+def _on_off(text: str) -> bool:
+    word = text.upper()
+    if word not in ("ON", "OFF", "1", "0"):
+        raise CommandError(102, f"expected ON or OFF, got {text!r}")
+    return word in ("ON", "1")
+
+
+def _ctrl_line(cam: FirmwareCamera) -> str:
+    parts = []
+    for name, c in cam.controls().items():
+        extra = f" {'|'.join(c['menu'])}" if c["menu"] else (f" {c['unit']}" if c["unit"] else "")
+        parts.append(f"{name}={c['value']} [{c['min']}..{c['max']}]{extra}{' ro' if c['read_only'] else ''}")
+    return "; ".join(parts)
+
+
+def _size(cam: FirmwareCamera, text: str) -> str:
+    w, _, h = text.lower().partition("x")
+    cam.set_size(parse_int(w, "width"), parse_int(h, "height"))
+    return "OK"
+
+
+def _scene(cam: FirmwareCamera, key: str, value: str) -> str:
+    cam.set_scene(**{key.lower(): value})
+    return "OK"
+
+
+def _scene_query(cam: FirmwareCamera) -> str:
+    return " ".join(f"{k}={v}" for k, v in cam.scene_options.items())
+
+
+def _stats(cam: FirmwareCamera) -> str:
+    return " ".join(f"{k}={v}" for k, v in cam.stats.items())
+
+
+@dataclass(frozen=True)
+class Command:
+    """One protocol command: argument names, handler, one-line help."""
+
+    args: tuple[str, ...]
+    run: Callable[..., str]
+    help: str
+
+
+COMMANDS: dict[str, Command] = {
+    "*IDN?": Command((), lambda c: c.identity(), "identify: maker,model,serial,firmware"),
+    "HELP": Command((), lambda c: " | ".join(f"{k} {' '.join(v.args)}".strip() for k, v in COMMANDS.items()),
+                    "list the commands"),
+    "REG?": Command(("ADDR|NAME",), lambda c, k: f"0x{c.read_register(_reg_key(k)):04X}", "read a register"),
+    "REG": Command(("ADDR|NAME", "VALUE"),
+                   lambda c, k, v: f"OK 0x{c.write_register(_reg_key(k), parse_int(v)):04X}",
+                   "write a register; replies with its new value"),
+    "CTRL?": Command(("NAME",), lambda c, n: str(c.get_control(n.lower())), "read a control"),
+    "CTRL": Command(("NAME", "VALUE"), lambda c, n, v: f"OK {c.set_control(n.lower(), parse_int(v))}",
+                    "set a control (clamped to range); replies with the value in effect"),
+    "CTRLS?": Command((), _ctrl_line, "every control: name=value [min..max] unit"),
+    "STREAM": Command(("ON|OFF",), lambda c, v: (c.stream_on() if _on_off(v) else c.stream_off()) or "OK",
+                      "start or stop streaming"),
+    "STREAM?": Command((), lambda c: "ON" if c.streaming else "OFF", "streaming state"),
+    "SHUTTER": Command(("ROLLING|GLOBAL",), lambda c, v: c.set_shutter(v.lower()) or "OK",
+                       "shutter mode (sensors that have both)"),
+    "SHUTTER?": Command((), lambda c: c.state.shutter.upper(), "shutter mode"),
+    "TRIGMODE": Command(("FREE|EXTERNAL",), lambda c, v: c.set_trigger_mode(v.lower()) or "OK",
+                        "free-running or one frame per TRIGGER"),
+    "TRIGMODE?": Command((), lambda c: c.trigger_mode.upper(), "trigger mode"),
+    "TRIGGER": Command((), lambda c: f"OK {c.trigger()}", "start one frame; replies with its start (device ns)"),
+    "CLOCK?": Command((), lambda c: str(c.clock_ns()), "device clock, integer ns since boot"),
+    "INTERVAL?": Command((), lambda c: str(c.frame_interval_ns), "frame interval, ns"),
+    "SIZE": Command(("WxH",), _size, "select the mode of this output size (not while streaming)"),
+    "SIZE?": Command((), lambda c: "{}x{}".format(*c.size), "output size"),
+    "SCENE": Command(("KEY", "VALUE"), _scene, "scene control: scene, seed, and the kind's own options"),
+    "SCENE?": Command((), _scene_query, "scene options"),
+    "STATS?": Command((), _stats, "frames made, skipped, triggers"),
+}
+"""The protocol: command word -> Command."""
+
+
+def handle_line(camera: FirmwareCamera, line: str) -> str:
+    """The reply to one command line (never raises for bad input: errors become ``ERR`` replies)."""
+    try:
+        return _dispatch(camera, line)
+    except CommandError as exc:
+        return f"ERR {exc.code} {exc}"
+    except ConfigError as exc:
+        return f"ERR 102 {exc}"
+    except DeviceError as exc:
+        return f"ERR 103 {exc}"
+
+
+def _dispatch(camera: FirmwareCamera, line: str) -> str:
+    words = line.split()
+    if not words:
+        raise CommandError(104, "empty command; try HELP")
+    name, args = words[0].upper(), words[1:]
+    cmd = COMMANDS.get(name)
+    if cmd is None:
+        raise CommandError(100, f"unknown command {words[0]!r}; try HELP")
+    if len(args) != len(cmd.args):
+        form = " ".join((name, *cmd.args))
+        raise CommandError(101, f"{name} takes {len(cmd.args)} argument(s) ({form}), got {len(args)}")
+    return cmd.run(camera, *args)
+
+
+class ProtocolSession:
+    """Bytes in, reply bytes out, for one connection: splits lines, bounds their length, answers each."""
+
+    def __init__(self, camera: FirmwareCamera, newline: bytes = b"\r\n") -> None:
+        self.camera = camera
+        self.newline = newline
+        self._buf = bytearray()
+        self._discarding = False
+        self.lines = 0
+
+    def feed(self, data: bytes) -> bytes:
+        """Consume received bytes; return the replies to every line they complete."""
+        out = bytearray()
+        for byte in data:
+            if byte in (0x0A, 0x0D):
+                if self._discarding:
+                    out += f"ERR 104 line longer than {MAX_LINE} bytes".encode() + self.newline
+                    self._discarding = False
+                elif self._buf:
+                    out += self.reply(bytes(self._buf)) + self.newline
+                self._buf.clear()
+            elif self._discarding:
+                continue
+            elif len(self._buf) >= MAX_LINE:
+                self._discarding, self._buf = True, bytearray()
+            else:
+                self._buf.append(byte)
+        return bytes(out)
+
+    def reply(self, raw: bytes) -> bytes:
+        """The reply to one raw line (without its terminator)."""
+        self.lines += 1
+        try:
+            text = raw.decode("ascii")
+        except UnicodeDecodeError:
+            return f"ERR 104 line is not ASCII text: {raw[:40]!r}".encode()
+        if not text.isprintable():
+            return f"ERR 104 line holds control characters: {text[:40]!r}".encode()
+        return handle_line(self.camera, text).encode("ascii", "backslashreplace")

@@ -1,0 +1,189 @@
+"""``rollcam emulate SENSOR``: serve an emulated camera to other programs until Ctrl-C.
+
+One FirmwareCamera (``rollcam.firmware``) is streamed in real time by one FramePump and offered on every
+transport asked for: ``--http HOST:PORT`` (MJPEG for ``cv2.VideoCapture``, browsers, ffmpeg) and
+``--serial`` (the control protocol on a pseudo-terminal). With no transport option, HTTP on
+127.0.0.1:8080. A transport is one entry of ``TRANSPORTS``: its option and a starter that returns the
+running server (something with ``close()``) and the lines telling a user where to connect.
+"""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import json
+import signal
+import sys
+import threading
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any
+
+LOOPBACK = ("127.0.0.1", "localhost", "::1")
+DEFAULT_HTTP = "127.0.0.1:8080"
+
+
+def host_port(text: str) -> tuple[str, int]:
+    """``HOST:PORT``, ``:PORT`` or ``PORT`` -> (host, port); the host defaults to 127.0.0.1."""
+    host, sep, port = text.rpartition(":")
+    host = host.strip("[]") if sep else ""
+    try:
+        number = int(port)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected HOST:PORT, got {text!r}") from None
+    if not 0 <= number <= 65535:
+        raise argparse.ArgumentTypeError(f"port {number} is not in 0..65535 (in {text!r})")
+    return host or "127.0.0.1", number
+
+
+@dataclass
+class Running:
+    """A started transport: the object to close and the lines that say where to connect."""
+
+    name: str
+    server: Any
+    lines: list[str]
+    info: dict[str, Any]
+
+
+def _warn_if_wide(name: str, host: str) -> None:
+    if host not in LOOPBACK:
+        print(f"rollcam: warning: {name} bound to {host!r}, reachable from other machines; it has no "
+              "authentication", file=sys.stderr)
+
+
+def start_http(args: argparse.Namespace, camera: Any, pump: Any) -> Running | None:
+    """The MJPEG-over-HTTP server, when ``--http`` is given (or no transport at all)."""
+    if args.http is None:
+        return None
+    from rollcam.emu.http_mjpeg import MjpegServer
+
+    host, port = args.http
+    _warn_if_wide("HTTP", host)
+    try:
+        server = MjpegServer(camera, host, port, pump=pump, quality=args.quality)
+    except OSError as exc:
+        raise OSError(f"cannot serve HTTP on {host}:{port}: {exc.strerror or exc}") from None
+    server.start()
+    url = server.url
+    base = url.rsplit("/", 1)[0]
+    return Running("http", server, [f"MJPEG stream:  {url}   (cv2.VideoCapture({url!r}))",
+                                    f"snapshot:      {base}/snapshot.jpg", f"status:        {base}/status.json"],
+                   {"url": url})
+
+
+def start_serial(args: argparse.Namespace, camera: Any, pump: Any) -> Running | None:
+    """The control protocol on a pseudo-terminal, when ``--serial`` is given."""
+    if not args.serial:
+        return None
+    from rollcam.emu.serial_pty import PtySerialServer
+
+    server = PtySerialServer(camera)
+    server.start()
+    return Running("serial", server, [f"serial port:   {server.path}   (serial.Serial({server.path!r}); "
+                                      "send '*IDN?' or 'HELP')"], {"path": server.path})
+
+
+def _http_option(g: argparse._ArgumentGroup) -> None:
+    g.add_argument("--http", type=host_port, default=None, metavar="HOST:PORT",
+                   help=f"serve MJPEG over HTTP (default when no transport is given: {DEFAULT_HTTP})")
+    g.add_argument("--quality", type=int, default=85, help="JPEG quality for HTTP (default: 85)")
+
+
+def _serial_option(g: argparse._ArgumentGroup) -> None:
+    g.add_argument("--serial", action="store_true", help="serve the control protocol on a pseudo-terminal")
+
+
+Starter = Callable[[argparse.Namespace, Any, Any], "Running | None"]
+TRANSPORTS: list[tuple[str, Callable[[argparse._ArgumentGroup], None], Starter]] = [
+    ("http", _http_option, start_http),
+    ("serial", _serial_option, start_serial),
+]
+"""Transports in start order: (name = the option's dest, add its options, starter). A starter gets the parsed
+arguments, the FirmwareCamera and the shared FramePump, and returns None when its option was not given. A new
+transport (``--usbip HOST:PORT``) is one entry here."""
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    """Add the ``emulate`` command."""
+    p = sub.add_parser("emulate", help="serve an emulated camera over HTTP (MJPEG) and a serial pty",
+                       description="Stream an emulated sensor in real time and serve it until Ctrl-C: MJPEG over "
+                                   "HTTP (--http, default 127.0.0.1:8080) and the serial control protocol on a "
+                                   "pseudo-terminal (--serial).",
+                       epilog="Example: rollcam emulate imx219 --scene street --speed fast --http 127.0.0.1:8080 "
+                              "--serial")
+    p.add_argument("sensor", metavar="SENSOR", help="sensor name (see 'rollcam list') or a .yaml path")
+    g = p.add_argument_group("scene")
+    g.add_argument("--scene", default="street", choices=("street", "chart", "flat"), help="scene kind")
+    g.add_argument("--seed", type=int, default=0, help="scene seed (default: 0)")
+    g.add_argument("--speed", default=None, help="street: static | normal | fast | a multiplier")
+    g.add_argument("--time", default=None, help="street: dawn | morning | noon | afternoon | dusk")
+    g.add_argument("--pedestrians", type=int, default=None, help="street: number of walkers")
+    g.add_argument("--ego", default=None, help="street: none | pan | walk | vehicle | drone")
+    g.add_argument("--vx", type=float, default=None, help="chart: bar speed, px/s")
+    g.add_argument("--level", type=float, default=None, help="flat: radiance level")
+    g = p.add_argument_group("sensor programming")
+    g.add_argument("--size", default=None, help="output WxH: one of the sensor's modes (default: its default)")
+    g.add_argument("--fps", type=float, default=None, help="frame rate (sets the frame length)")
+    g.add_argument("--shutter", choices=("rolling", "global"), default=None, help="sensors with both only")
+    g.add_argument("--exposure-us", type=float, default=None, help="exposure in microseconds")
+    g.add_argument("--gain", type=float, default=1.0, help="analog gain, linear (default: 1.0)")
+    g = p.add_argument_group("transports")
+    for _name, add_options, _start in TRANSPORTS:
+        add_options(g)
+    p.add_argument("--duration", type=float, default=None, metavar="SECONDS", help="stop after this long")
+    p.add_argument("--json", action="store_true", help="print the endpoints as one JSON line")
+    p.set_defaults(func=cmd_emulate)
+
+
+def _scene_options(args: argparse.Namespace) -> dict[str, Any]:
+    opts: dict[str, Any] = {"scene": args.scene, "seed": args.seed}
+    for key in ("speed", "time", "pedestrians", "ego", "vx", "level"):
+        if getattr(args, key) is not None:
+            opts[key] = getattr(args, key)
+    return opts
+
+
+def cmd_emulate(args: argparse.Namespace) -> int:
+    """Run the emulator until Ctrl-C, SIGTERM or ``--duration``; every transport is closed on the way out."""
+    from rollcam.emu.pump import FramePump
+    from rollcam.firmware.camera import FirmwareCamera
+
+    from .sources.emu import parse_size
+
+    if not any(getattr(args, name, None) for name, _add, _start in TRANSPORTS):
+        args.http = host_port(DEFAULT_HTTP)
+    size = parse_size(args.size) if args.size else None
+    exposure_ns = None if args.exposure_us is None else round(args.exposure_us * 1000)
+    camera = FirmwareCamera(args.sensor, scene=_scene_options(args), size=size, fps=args.fps, shutter=args.shutter,
+                            exposure_ns=exposure_ns, gain=args.gain)
+    stop = threading.Event()
+    previous = signal.signal(signal.SIGTERM, lambda *_: stop.set())
+    running: list[Running] = []
+    pump = FramePump(camera, bands=1, name="rollcam-emulate")
+    try:
+        for _name, _add, starter in TRANSPORTS:
+            started = starter(args, camera, pump)
+            if started is not None:
+                running.append(started)
+        camera.stream_on()
+        pump.start()
+        if args.json:
+            print(json.dumps({"sensor": camera.sensor.name, "identity": camera.identity(),
+                              **{r.name: r.info for r in running}}), flush=True)
+        else:
+            print(f"emulating {camera!r}", flush=True)
+            for r in running:
+                for line in r.lines:
+                    print(f"  {line}", flush=True)
+            print("press Ctrl-C to stop", flush=True)
+        with contextlib.suppress(KeyboardInterrupt):  # Ctrl-C is the normal way to stop a server
+            stop.wait(args.duration)
+    finally:
+        pump.close()
+        for r in reversed(running):
+            r.server.close()
+        camera.stream_off()
+        signal.signal(signal.SIGTERM, previous)
+    print(f"stopped; {camera.stats['frames']} frames made, {camera.stats['skipped']} skipped", file=sys.stderr)
+    return 0
