@@ -1,6 +1,8 @@
-"""The emulated ISP's output formats: BGR renders converted to what a device streams (one place for all).
+"""The emulated ISP's output formats: BGR renders converted to what a device streams.
 
-``convert(image, fourcc)`` is the single conversion point used by every transport (V4L2, HTTP, UVC).
+``convert(image, fourcc)`` is the conversion point of the V4L2 and HTTP transports (UVC's wire formats are in
+``rollcam.emu.uvc.convert``); both defer to ``rollcam.sim.formats`` for the pixel layouts and to
+``encode_jpeg`` here for MJPEG.
 """
 
 from __future__ import annotations
@@ -10,6 +12,7 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 from rollcam.sim.errors import ConfigError
+from rollcam.sim.formats import bgr_to_yuyv
 
 
 @dataclass(frozen=True)
@@ -67,7 +70,7 @@ def convert(image_bgr: np.ndarray, fourcc: str, quality: int = JPEG_QUALITY) -> 
     if fourcc == "BGR3":
         return image_bgr
     if fourcc == "YUYV":
-        return cv2.cvtColor(image_bgr, cv2.COLOR_BGR2YUV_YUYV)
+        return bgr_to_yuyv(image_bgr)
     if fourcc == "RGB3":
         return cv2.cvtColor(image_bgr, cv2.COLOR_BGR2RGB)
     if fourcc == "GREY":

@@ -1,13 +1,16 @@
-"""Pixel conversion between the renderer's BGR frames and the UVC wire formats (YUYV, NV12, MJPEG), via OpenCV.
+"""Pixel conversion between the renderer's BGR frames and the UVC wire formats (YUYV, NV12, MJPEG).
 
-The one place the UVC code converts pixels: ``encode`` on the device side, ``decode`` on the host side.
+The one place the UVC code converts pixels: ``encode`` on the device side, ``decode`` on the host side;
+the layouts come from ``rollcam.sim.formats`` and JPEG from ``rollcam.firmware.pixfmt``.
 """
 
 from __future__ import annotations
 
 import cv2
 import numpy as np
-from rollcam.sim.errors import ProtocolError
+from rollcam.firmware.pixfmt import encode_jpeg
+from rollcam.sim.errors import ConfigError, ProtocolError
+from rollcam.sim.formats import bgr_to_nv12, bgr_to_yuyv, nv12_to_bgr, yuyv_to_bgr
 
 WIRE_FORMATS = ("YUYV", "NV12", "MJPG")
 
@@ -23,23 +26,15 @@ def encode(bgr: np.ndarray, fourcc: str, jpeg_quality: int = 85) -> np.ndarray:
         bgr = np.clip(bgr, 0, 255).astype(np.uint8)
     if bgr.ndim == 2:
         bgr = cv2.cvtColor(bgr, cv2.COLOR_GRAY2BGR)
-    if fourcc == "YUYV":
-        return cv2.cvtColor(bgr, cv2.COLOR_BGR2YUV_YUY2).reshape(-1)  # OpenCV >= 4.7
-    if fourcc == "NV12":
-        i420 = cv2.cvtColor(bgr, cv2.COLOR_BGR2YUV_I420).reshape(-1)
-        h, w = bgr.shape[:2]
-        n = h * w
-        q = n // 4
-        out = np.empty(n * 3 // 2, np.uint8)
-        out[:n] = i420[:n]
-        out[n::2] = i420[n:n + q]
-        out[n + 1::2] = i420[n + q:n + 2 * q]
-        return out
-    if fourcc == "MJPG":
-        ok, buf = cv2.imencode(".jpg", bgr, [cv2.IMWRITE_JPEG_QUALITY, int(jpeg_quality)])
-        if not ok:
-            raise ProtocolError(f"JPEG encoding of a {bgr.shape} frame failed")
-        return buf.reshape(-1)
+    try:
+        if fourcc == "YUYV":
+            return bgr_to_yuyv(bgr).reshape(-1)
+        if fourcc == "NV12":
+            return bgr_to_nv12(bgr).reshape(-1)
+        if fourcc == "MJPG":
+            return np.frombuffer(encode_jpeg(bgr, jpeg_quality), np.uint8)
+    except ConfigError as exc:
+        raise ProtocolError(f"cannot encode a {bgr.shape} frame as {fourcc}: {exc}") from None
     raise ProtocolError(f"wire format {fourcc!r} is not one of {WIRE_FORMATS}")
 
 
@@ -50,9 +45,9 @@ def decode(data: bytes, fourcc: str, width: int, height: int) -> np.ndarray:
     if need is not None and raw.size != need:
         raise ProtocolError(f"{fourcc} {width}x{height} frame needs {need} bytes, got {raw.size}")
     if fourcc == "YUYV":
-        return cv2.cvtColor(raw.reshape(height, width, 2), cv2.COLOR_YUV2BGR_YUYV)
+        return yuyv_to_bgr(raw.reshape(height, width, 2))
     if fourcc == "NV12":
-        return cv2.cvtColor(raw.reshape(height * 3 // 2, width), cv2.COLOR_YUV2BGR_NV12)
+        return nv12_to_bgr(raw.reshape(height * 3 // 2, width))
     if fourcc == "MJPG":
         img = cv2.imdecode(raw, cv2.IMREAD_COLOR) if raw.size else None
         if img is None:
