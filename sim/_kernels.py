@@ -481,17 +481,23 @@ def actor_parts_all(actors, world, lut, bld, light, cam, rot_tab, pos_tab, times
 @njit(cache=True, parallel=True)
 def render_lines_kernel(world, lut_b, bld, light, cam, rot_tab, pos_tab, actors, times, line_k, obj_line_k, slots,
                         parts_tab, include, lines, w, bg_lin, out_u8, out_lin, gain, lut, gt_l, gt_r, gt_tot,
-                        gt_vis, gt_only, full_lines):
+                        gt_vis, gt_only, full_lines, seed_lin):
     """Paint the given ``lines``; every other line already holds the cached composite (copied by the caller).
 
     ``obj_line_k[o, line]`` is actor o's time slot on that line (-1 when not touching). With ``full_lines``
     (moving camera, or building the composite) each line is rendered whole, from the background rendered
     at the line's own pose when the camera moves, else from the cached ``bg_lin``; otherwise only the pixel
     runs under actor spans are redone over ``bg_lin``. Ground truth of painted lines is recomputed.
+
+    An empty ``out_u8`` skips the sRGB encoding (linear-only renders). A non-empty ``seed_lin`` (the cached
+    linear composite) is copied into each painted line of ``out_lin`` first, so ``out_lin`` may be a scratch
+    buffer whose other lines are never touched.
     """
     n_obj = actors.shape[0]
     moving_cam = cam[C_MOVING] != 0.0
     want_lin = out_lin.shape[0] > 0
+    want_u8 = out_u8.shape[0] > 0
+    seed = seed_lin.shape[0] > 0 and want_lin and not full_lines
     cap = max(n_obj * MAX_PARTS, 1)
     n = lines.shape[0]
     for ch in prange(N_CHUNKS):
@@ -535,8 +541,11 @@ def render_lines_kernel(world, lut_b, bld, light, cam, rot_tab, pos_tab, actors,
                 _paint_spans(lin, line, m, ok, slots, parts_tab, local, gt_vis, depth, idx_o, idx_p, span_l, span_r,
                              owner, ia, ib, n_runs)
             if not gt_only:
+                if seed:
+                    out_lin[line, :, :] = seed_lin[line]
                 for r in range(n_runs):
                     x0, x1 = ia[r], ib[r]
                     if want_lin:
                         out_lin[line, x0:x1, :] = lin[x0:x1]
-                    encode_line(lin[x0:x1], gain, lut, out_u8[line, x0:x1])
+                    if want_u8:
+                        encode_line(lin[x0:x1], gain, lut, out_u8[line, x0:x1])

@@ -17,14 +17,15 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
-from numba import njit
+from numba import njit, prange
 
 from . import _body as B
 from . import _kernels as K
 from . import _world as Wd
-from .render import Renderer
+from .render import LinearFrame, Renderer
 
 DEFAULT_BOUND_PX = 0.5
 MAX_SAMPLES = 512
@@ -201,44 +202,74 @@ def dense_plan(plan: SamplePlan, step_px: float = 0.05) -> SamplePlan:
     return SamplePlan(plan.starts_ns, plan.exposure_ns, np.full_like(plan.n, n), plan.speed_px_s, False)
 
 
+@njit(cache=True, parallel=True)
+def _accumulate(acc, buf, painted, hits):
+    """acc[l] (+)= buf[l] on each painted line l (the first sample a line gets is stored, not added)."""
+    lines = np.flatnonzero(painted)
+    for i in prange(lines.shape[0]):
+        ln = lines[i]
+        if hits[ln] == 0:
+            acc[ln] = buf[ln]
+        else:
+            acc[ln] += buf[ln]
+        hits[ln] += 1
+
+
+@njit(cache=True, parallel=True)
+def _finish(acc, static, hits, n):
+    """acc[l] = mean of line l's n samples: its painted ones (summed in acc) and n - hits copies of static."""
+    for ln in prange(acc.shape[0]):
+        h = hits[ln]
+        if h == 0:
+            continue
+        if h < n[ln]:
+            acc[ln] += np.float32(n[ln] - h) * static[ln]
+        if n[ln] > 1:
+            acc[ln] *= np.float32(1.0 / n[ln])
+
+
 @dataclass
 class Integrated:
-    """A frame integrated over its exposure windows: linear RGB radiance (time-averaged) and the cost."""
+    """A frame integrated over its exposure windows: linear RGB radiance (time-averaged) and the cost.
 
-    linear: np.ndarray
+    ``radiance`` holds the lines some sample painted and points at the renderer's static composite for the
+    rest (every sample of such a line is the composite); ``linear`` is the whole frame as one array.
+    """
+
+    radiance: LinearFrame
     evaluations: int
     lines_painted: int
     passes: int
+
+    @cached_property
+    def linear(self) -> np.ndarray:
+        """The integrated frame as a float32 ``(H, W, 3)`` array in image orientation."""
+        return self.radiance.full()
 
 
 def integrate(renderer: Renderer, plan: SamplePlan, *, by_column: bool = False) -> Integrated:
     """Average the scene's linear radiance over each line's window with the plan's samples.
 
-    Pass j renders every line at its sample j (lines with fewer samples repeat their last one, mostly
-    copied from the renderer's static cache) and adds it to the lines that have a sample j.
+    Pass j renders only the lines that have a sample j, and of those only the ones a moving thing touches
+    (``Renderer.render_linear``); a line's samples that were not painted are the static composite, added
+    once per line at the end, so no pass copies a whole frame.
     """
+    n_lines = plan.n.shape[0]
+    n_along = renderer.camera.height if by_column else renderer.camera.width
+    shape = (n_lines, n_along, 3)
+    # Fresh np.empty pages are only faulted in where a line is written, so untouched lines cost nothing.
+    acc, buf = np.empty(shape, np.float32), np.empty(shape, np.float32)
+    hits = np.zeros(n_lines, np.int64)
     passes = int(plan.n.max())
-    acc: np.ndarray | None = None
     painted = 0
+    static = None
     for j in range(passes):
-        res = renderer.render_lines(plan.times_ns(j), by_column=by_column, linear=True)
-        lin = res.linear
-        assert lin is not None
+        res = renderer.render_linear(plan.times_ns(j), by_column=by_column, lines=plan.n > j, out=buf)
+        frame = res.radiance
+        assert frame is not None
+        static = frame.static
         painted += res.lines_painted
-        if acc is None:
-            # Each render returns fresh arrays, so the first pass's can be the accumulator.
-            acc = lin if lin.flags.writeable and lin.dtype == np.float32 else lin.astype(np.float32)
-            continue
-        # Add the lines that have a sample j, as slices over runs of consecutive lines (no temporaries).
-        take = np.concatenate(([False], plan.n > j, [False]))
-        edges = np.flatnonzero(take[1:] != take[:-1])
-        for a, b in zip(edges[0::2], edges[1::2], strict=True):
-            if by_column:
-                acc[:, a:b] += lin[:, a:b]
-            else:
-                acc[a:b] += lin[a:b]
-    assert acc is not None
-    if passes > 1:
-        inv = (1.0 / plan.n).astype(np.float32)
-        acc *= inv[None, :, None] if by_column else inv[:, None, None]
-    return Integrated(acc, plan.evaluations, painted, passes)
+        _accumulate(acc, buf, frame.painted, hits)
+    n = plan.n.astype(np.int64)
+    _finish(acc, static if static is not None else np.empty((0, n_along, 3), np.float32), hits, n)
+    return Integrated(LinearFrame(static, acc, hits > 0, by_column), plan.evaluations, painted, passes)

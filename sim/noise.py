@@ -35,6 +35,7 @@ from numba import njit, prange
 
 from .errors import ConfigError
 from .hwconfig import NoiseParams
+from .render import LinearFrame
 
 STAGES = ("shot", "dark", "read", "dsnu", "prnu", "saturation", "quantization")
 """Switchable stages of the model (all on by default; ``NoiseParams.ideal`` turns the random ones off)."""
@@ -111,20 +112,37 @@ def _fixed_patterns(fp_key, oy, ox, array_w, prnu, dsnu_e, table, gain_map, off_
             off_map[y, x] = dsnu_e * _normal(hf & mask32, table)
 
 
+@njit(cache=True, inline="always")
+def _radiance(lin, ln, al, mono, ch):
+    """Radiance a pixel's filter passes: channel ``ch`` of its Bayer colour, or luma for a mono sensor."""
+    if mono:
+        return 0.2126 * lin[ln, al, 0] + 0.7152 * lin[ln, al, 1] + 0.0722 * lin[ln, al, 2]
+    return lin[ln, al, ch]
+
+
 @njit(cache=True, parallel=True, fastmath=True)
-def _expose(lin, cfa, mono, flux_s, qe, dark_e, read_e, full_well, k_dn, black, max_dn, frame_key, oy, ox, array_w,
-            on, table, gain_map, off_map, out_int, out_f, quantize):
-    """The per-pixel model; ``on`` = flags (shot, dark, read, dsnu, prnu, saturation)."""
+def _expose(base, over, use_over, by_col, cfa, mono, flux_s, qe, dark_e, read_e, full_well, k_dn, black, max_dn,
+            frame_key, oy, ox, array_w, on, table, gain_map, off_map, out_int, out_f, quantize):
+    """The per-pixel model; ``on`` = flags (shot, dark, read, dsnu, prnu, saturation).
+
+    Radiance of line ``ln`` (row, or column when ``by_col``; arrays in render orientation) is read from
+    ``over`` where ``use_over[ln]``, else from ``base``: a frame held as a static composite plus painted lines.
+    """
     h, w = out_int.shape if quantize else out_f.shape
     shot, dark, read, dsnu_on, prnu_on, sat = on[0], on[1], on[2], on[3], on[4], on[5]
     mask32 = np.uint64(0xFFFFFFFF)
     for y in prange(h):
         row_idx = np.uint64((y + oy) * array_w + ox)
         for x in range(w):
-            if mono:
-                rad = 0.2126 * lin[y, x, 0] + 0.7152 * lin[y, x, 1] + 0.0722 * lin[y, x, 2]
+            # Integer line / along-line indices (prange's index is unsigned; mixing would make floats).
+            ln, al = np.int64(y), np.int64(x)
+            if by_col:
+                ln, al = np.int64(x), np.int64(y)
+            ch = cfa[y & 1, x & 1]
+            if use_over[ln]:
+                rad = _radiance(over, ln, al, mono, ch)
             else:
-                rad = lin[y, x, cfa[y & 1, x & 1]]
+                rad = _radiance(base, ln, al, mono, ch)
             mu = qe * max(rad, 0.0) * flux_s
             pix = row_idx + np.uint64(x)
             if prnu_on:
@@ -223,22 +241,34 @@ class SensorModel:
             cache[key] = (gain_map, off_map)
         return cache[key]
 
-    def expose(self, radiance: np.ndarray, exposure_ns: int, frame_index: int, *, analog_gain: float = 1.0,
-               digital_gain: float = 1.0, origin: tuple[int, int] = (0, 0), array_width: int | None = None
-               ) -> np.ndarray:
+    def expose(self, radiance: np.ndarray | LinearFrame, exposure_ns: int, frame_index: int, *,
+               analog_gain: float = 1.0, digital_gain: float = 1.0, origin: tuple[int, int] = (0, 0),
+               array_width: int | None = None) -> np.ndarray:
         """Linear RGB radiance ``(H, W, 3)`` over ``exposure_ns`` -> ADC samples ``uint16 (H, W)``.
+
+        ``radiance`` may be a ``LinearFrame`` (static composite plus painted lines), read in place.
 
         With the 'quantization' stage off, returns float64 DN before rounding and clipping (for analysis).
         ``origin`` (top, left) and ``array_width`` place the image on the pixel array, for the fixed patterns.
         """
-        if radiance.ndim != 3 or radiance.shape[2] != 3:
-            raise ConfigError(f"radiance must be (H, W, 3), got shape {radiance.shape}")
+        if isinstance(radiance, LinearFrame):
+            over, by_col, use_over = radiance.lines, radiance.by_column, radiance.painted
+            base = radiance.static if radiance.static is not None else over
+            if base.shape != over.shape or use_over.shape != over.shape[:1] or over.dtype != np.float32:
+                raise ConfigError(f"inconsistent LinearFrame: static {base.shape}, lines {over.shape} {over.dtype}, "
+                                  f"painted {use_over.shape}")
+            h, w = over.shape[1::-1] if by_col else over.shape[:2]
+        else:
+            if radiance.ndim != 3 or radiance.shape[2] != 3:
+                raise ConfigError(f"radiance must be (H, W, 3), got shape {radiance.shape}")
+            base = over = np.ascontiguousarray(radiance, dtype=np.float32)
+            by_col, use_over = False, np.zeros(radiance.shape[0], np.bool_)
+            h, w = radiance.shape[:2]
         if not isinstance(exposure_ns, (int, np.integer)) or exposure_ns < 0:
             raise ConfigError(f"exposure must be a whole number of ns >= 0, got {exposure_ns!r}")
         for name, g in (("analog_gain", analog_gain), ("digital_gain", digital_gain)):
             if not math.isfinite(g) or g <= 0:
                 raise ConfigError(f"{name} must be a finite number > 0, got {g!r}")
-        h, w = radiance.shape[:2]
         t_s = int(exposure_ns) * 1e-9
         n = self.noise
         s = self.stages
@@ -249,9 +279,8 @@ class SensorModel:
         quantize = "quantization" in s
         out_i = np.empty((h, w) if quantize else (0, 0), np.uint16)
         out_f = np.empty((0, 0) if quantize else (h, w), np.float64)
-        lin = np.ascontiguousarray(radiance, dtype=np.float32)
         gain_map, off_map = self.fixed_patterns(h, w, origin, int(array_width or w))
-        _expose(lin, cfa, self.cfa == "mono", self.flux * t_s, n.quantum_efficiency,
+        _expose(base, over, use_over, bool(by_col), cfa, self.cfa == "mono", self.flux * t_s, n.quantum_efficiency,
                 n.dark_current_e_per_s * t_s, n.dark_noise_e, n.full_well_e,
                 self.system_gain(analog_gain, digital_gain), n.black_level_dn, float(self.max_dn),
                 _key("frame", self.seed, int(frame_index)), int(origin[0]), int(origin[1]), int(array_width or w),

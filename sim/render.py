@@ -90,6 +90,33 @@ class RenderResult:
     linear: np.ndarray | None
     truth: LineTruth
     lines_painted: int = 0  # lines rendered rather than copied from the static cache
+    radiance: LinearFrame | None = None  # render_linear's result (image and linear are then empty/None)
+
+
+@dataclass
+class LinearFrame:
+    """Linear RGB radiance of a frame, held as the renderer's static composite plus the lines painted over it.
+
+    ``static`` and ``lines`` are float32 ``(lines, pixels per line, 3)`` in render orientation (rows, or
+    columns when ``by_column``); line i of the frame is ``lines[i]`` where ``painted[i]``, else ``static[i]``.
+    ``static`` is the renderer's cache, shared and never written (None for a moving camera, when every line is
+    painted). This lets the sensor path read untouched lines in place instead of copying 25 MB per frame.
+    """
+
+    static: np.ndarray | None
+    lines: np.ndarray
+    painted: np.ndarray  # (lines,) bool
+    by_column: bool = False
+
+    def full(self) -> np.ndarray:
+        """The whole frame as one fresh float32 ``(H, W, 3)`` array in image orientation."""
+        if self.static is None:
+            out = self.lines.copy()
+        else:
+            out = self.static.copy()
+            idx = np.flatnonzero(self.painted)
+            out[idx] = self.lines[idx]
+        return out.transpose(1, 0, 2) if self.by_column else out
 
 
 class _Layer:
@@ -148,6 +175,48 @@ class Renderer:
         res = self._render(cam, times_s, line_k.astype(np.int64), n_lines, n_along, layer, linear, truth_only,
                            include=np.ones(self.n_actors, np.bool_), force_paint=False)
         return res
+
+    def render_linear(
+        self,
+        times_ns: np.ndarray,
+        *,
+        by_column: bool = False,
+        lines: np.ndarray | None = None,
+        out: np.ndarray | None = None,
+    ) -> RenderResult:
+        """Linear radiance only, of the ``lines`` asked for (bool mask or indices; all when None).
+
+        No 8-bit image and no copy of the static composite: the result's ``radiance`` (a ``LinearFrame``)
+        holds the painted lines in ``out`` (a reusable float32 buffer in render orientation, or a fresh one)
+        and points at the cached composite for the rest. Lines not asked for are neither painted nor valid.
+        Painted lines equal ``render_lines(..., linear=True)``'s exactly, and so does ``truth`` on the lines
+        asked for (other lines hold the static composite's truth).
+        """
+        n_lines, n_along = self._shape(by_column)
+        times_ns = self._check_times(times_ns, by_column)
+        subset = np.ones(n_lines, np.bool_)
+        if lines is not None:
+            lines = np.asarray(lines)
+            if lines.dtype == np.bool_:
+                if lines.shape != (n_lines,):
+                    raise ConfigError(f"line mask must have {n_lines} entries, got shape {lines.shape}")
+                subset = lines
+            else:
+                if lines.size and (lines.min() < 0 or lines.max() >= n_lines):
+                    raise ConfigError(f"line indices must be in 0..{n_lines - 1}")
+                subset = np.zeros(n_lines, np.bool_)
+                subset[lines.astype(np.int64)] = True
+        if out is None:
+            out = np.empty((n_lines, n_along, 3), np.float32)
+        elif out.shape != (n_lines, n_along, 3) or out.dtype != np.float32 or not out.flags.c_contiguous:
+            raise ConfigError(f"out must be a C-contiguous float32 array of shape {(n_lines, n_along, 3)}, "
+                              f"got {out.dtype} {out.shape}")
+        ut_ns, line_k = np.unique(times_ns, return_inverse=True)
+        times_s = ut_ns.astype(np.float64) * 1e-9
+        layer = self._layer(by_column, times_s[0])
+        return self._render(self._cams[by_column], times_s, line_k.astype(np.int64), n_lines, n_along, layer, True,
+                            False, include=np.ones(self.n_actors, np.bool_), force_paint=False, subset=subset,
+                            into=out)
 
     def reference_frame(self, t_ns: int, *, by_column: bool = False) -> RenderResult:
         """One full render with every line at ``t_ns`` and no shortcuts: every line painted over the bare
@@ -279,7 +348,8 @@ class Renderer:
         return layer
 
     def _render(self, cam, times_s, line_k, n_lines, n_along, layer: _Layer, linear, truth_only, include,
-                force_paint, exhaustive=False) -> RenderResult:
+                force_paint, exhaustive=False, subset=None, into=None) -> RenderResult:
+        """Paint a frame; with ``into`` (render_linear), only the ``subset`` lines, linear only, into it."""
         c = self._c
         n_obj, n_t = self.n_actors, times_s.shape[0]
         static = c.actors[:, B.A_STATIC] != 0.0 if n_obj else np.zeros(0, np.bool_)
@@ -296,6 +366,8 @@ class Renderer:
         else:
             self._touch(cam, times_s, rot_tab, pos_tab, k_line, include & ~static, include, n_lines, n_along,
                         obj_line_k)
+        if subset is not None:
+            obj_line_k[:, ~subset] = -1  # lines not asked for are not painted: no parts or truth work for them
         # Parts of an actor at an instant that several lines share (GS, bands, static actors) are computed
         # once into a table; those only one line needs (RS) are computed on that line, in cache.
         o_idx, l_idx = np.nonzero(obj_line_k >= 0)
@@ -310,7 +382,21 @@ class Renderer:
                               times_s, s_o, s_k, parts)
         gt = LineTruth.empty(n_obj, n_lines, cam[Wd.C_TRANSPOSED] != 0.0)
         full_lines = force_paint or self.camera_moving
-        if full_lines:
+        seed = np.empty((0, 0, 3), np.float32)
+        if into is not None:
+            # Linear-only subset render: paint the asked-for lines a moving actor touches (all of them for a
+            # moving camera) into the buffer, each seeded from the composite in the kernel; no 8-bit image.
+            out_u8, out_lin = np.empty((0, n_along, 3), np.uint8), into
+            if full_lines:
+                lines = np.flatnonzero(subset)
+            else:
+                assert layer.comp_gt is not None and layer.comp_lin is not None
+                moving = include & ~static
+                lines = np.flatnonzero((obj_line_k[moving] >= 0).any(axis=0) & subset)
+                seed = layer.comp_lin
+                gt.left[:], gt.right[:] = layer.comp_gt[0], layer.comp_gt[1]
+                gt.area[:], gt.visible[:] = layer.comp_gt[2], layer.comp_gt[3]
+        elif full_lines:
             lines = np.arange(n_lines)
             out_u8 = np.empty((n_lines, n_along, 3), np.uint8)
             out_lin = np.empty((n_lines, n_along, 3) if linear else (0, 0, 3), np.float32)
@@ -326,7 +412,16 @@ class Renderer:
         bg = layer.bg_lin if layer.bg_lin is not None else np.empty((0, 0, 3), np.float32)
         K.render_lines_kernel(c.world, c.building_lut, c.buildings, c.light, cam, rot_tab, pos_tab, c.actors, times_s,
                               line_k, obj_line_k, slots, parts, include, lines, n_along, bg, out_u8, out_lin,
-                              self.gain, _SRGB, gt.left, gt.right, gt.area, gt.visible, truth_only, full_lines)
+                              self.gain, _SRGB, gt.left, gt.right, gt.area, gt.visible, truth_only, full_lines, seed)
+        if into is not None:
+            painted = np.zeros(n_lines, np.bool_)
+            painted[lines] = True
+            shared = None
+            if not full_lines:
+                shared = seed.view()
+                shared.flags.writeable = False  # the renderer's cache: readers must not write through it
+            frame = LinearFrame(shared, into, painted, bool(cam[Wd.C_TRANSPOSED] != 0.0))
+            return RenderResult(np.empty((0, 0, 3), np.uint8), None, gt, int(lines.size), frame)
         if truth_only:
             return RenderResult(np.empty((0, 0, 3), np.uint8), None, gt, int(lines.size))
         image = out_u8.transpose(1, 0, 2) if cam[Wd.C_TRANSPOSED] != 0.0 else out_u8

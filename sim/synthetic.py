@@ -267,12 +267,13 @@ class SyntheticCamera:
         starts = mid_times - s.exposure_ns // 2
         extra: dict = pipe.info()
         if self.blur_px is None:
-            res = self.renderer.render_lines(mid_times, by_column=by_col, linear=True)
-            radiance = res.linear
+            # Linear only, static lines read in place from the renderer's cache (no frame-sized copies).
+            res = self.renderer.render_linear(mid_times, by_column=by_col)
+            radiance = res.radiance
             extra["blur_samples_max"] = 1
         else:
             plan = plan_samples(self.renderer, starts, s.exposure_ns, by_column=by_col, bound_px=self.blur_px)
-            radiance = integrate(self.renderer, plan, by_column=by_col).linear
+            radiance = integrate(self.renderer, plan, by_column=by_col).radiance
             res = self.renderer.render_lines(mid_times, by_column=by_col, truth_only=True)
             extra.update(blur_bound_px=self.blur_px, blur_samples_max=int(plan.n.max()),
                          blur_evaluations=plan.evaluations, blur_capped=plan.capped)
