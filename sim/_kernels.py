@@ -478,10 +478,28 @@ def actor_parts_all(actors, world, lut, bld, light, cam, rot_tab, pos_tab, times
                         parts_tab[s], scratch)
 
 
+@njit(cache=True)
+def _add_line(dst, lin, seed_lin, line, seed, ia, ib, n_runs, add):
+    """dst (one line) = or += the painted line: ``lin`` inside the runs, the composite ``seed_lin`` between."""
+    x = 0
+    for r in range(n_runs + 1):
+        x_run = ia[r] if r < n_runs else dst.shape[0]
+        if seed:
+            for i in range(x, x_run):
+                for c in range(3):
+                    v = seed_lin[line, i, c]
+                    dst[i, c] = dst[i, c] + v if add else v
+        if r < n_runs:
+            for i in range(ia[r], ib[r]):
+                for c in range(3):
+                    dst[i, c] = dst[i, c] + lin[i, c] if add else lin[i, c]
+            x = ib[r]
+
+
 @njit(cache=True, parallel=True)
 def render_lines_kernel(world, lut_b, bld, light, cam, rot_tab, pos_tab, actors, times, line_k, obj_line_k, slots,
                         parts_tab, include, lines, w, bg_lin, out_u8, out_lin, gain, lut, gt_l, gt_r, gt_tot,
-                        gt_vis, gt_only, full_lines, seed_lin):
+                        gt_vis, gt_only, full_lines, seed_lin, acc_hits):
     """Paint the given ``lines``; every other line already holds the cached composite (copied by the caller).
 
     ``obj_line_k[o, line]`` is actor o's time slot on that line (-1 when not touching). With ``full_lines``
@@ -491,13 +509,15 @@ def render_lines_kernel(world, lut_b, bld, light, cam, rot_tab, pos_tab, actors,
 
     An empty ``out_u8`` skips the sRGB encoding (linear-only renders). A non-empty ``seed_lin`` (the cached
     linear composite) is copied into each painted line of ``out_lin`` first, so ``out_lin`` may be a scratch
-    buffer whose other lines are never touched.
+    buffer whose other lines are never touched. A non-empty ``acc_hits`` (int64 per line) turns ``out_lin`` into
+    an accumulator: a painted line is stored on its first hit and added on later ones, and its count goes up.
     """
     n_obj = actors.shape[0]
     moving_cam = cam[C_MOVING] != 0.0
     want_lin = out_lin.shape[0] > 0
     want_u8 = out_u8.shape[0] > 0
     seed = seed_lin.shape[0] > 0 and want_lin and not full_lines
+    accumulate = acc_hits.shape[0] > 0
     cap = max(n_obj * MAX_PARTS, 1)
     n = lines.shape[0]
     for ch in prange(N_CHUNKS):
@@ -540,7 +560,10 @@ def render_lines_kernel(world, lut_b, bld, light, cam, rot_tab, pos_tab, actors,
             if m > 0:
                 _paint_spans(lin, line, m, ok, slots, parts_tab, local, gt_vis, depth, idx_o, idx_p, span_l, span_r,
                              owner, ia, ib, n_runs)
-            if not gt_only:
+            if accumulate and not gt_only:
+                _add_line(out_lin[line], lin, seed_lin, line, seed, ia, ib, n_runs, acc_hits[line] > 0)
+                acc_hits[line] += 1
+            elif not gt_only:
                 if seed:
                     out_lin[line, :, :] = seed_lin[line]
                 for r in range(n_runs):

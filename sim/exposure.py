@@ -203,19 +203,6 @@ def dense_plan(plan: SamplePlan, step_px: float = 0.05) -> SamplePlan:
 
 
 @njit(cache=True, parallel=True)
-def _accumulate(acc, buf, painted, hits):
-    """acc[l] (+)= buf[l] on each painted line l (the first sample a line gets is stored, not added)."""
-    lines = np.flatnonzero(painted)
-    for i in prange(lines.shape[0]):
-        ln = lines[i]
-        if hits[ln] == 0:
-            acc[ln] = buf[ln]
-        else:
-            acc[ln] += buf[ln]
-        hits[ln] += 1
-
-
-@njit(cache=True, parallel=True)
 def _finish(acc, static, hits, n):
     """acc[l] = mean of line l's n samples: its painted ones (summed in acc) and n - hits copies of static."""
     for ln in prange(acc.shape[0]):
@@ -258,18 +245,16 @@ def integrate(renderer: Renderer, plan: SamplePlan, *, by_column: bool = False) 
     n_along = renderer.camera.height if by_column else renderer.camera.width
     shape = (n_lines, n_along, 3)
     # Fresh np.empty pages are only faulted in where a line is written, so untouched lines cost nothing.
-    acc, buf = np.empty(shape, np.float32), np.empty(shape, np.float32)
+    acc = np.empty(shape, np.float32)
     hits = np.zeros(n_lines, np.int64)
     passes = int(plan.n.max())
     painted = 0
     static = None
     for j in range(passes):
-        res = renderer.render_linear(plan.times_ns(j), by_column=by_column, lines=plan.n > j, out=buf)
-        frame = res.radiance
-        assert frame is not None
-        static = frame.static
+        res = renderer.render_linear(plan.times_ns(j), by_column=by_column, lines=plan.n > j, out=acc, hits=hits)
+        assert res.radiance is not None
+        static = res.radiance.static
         painted += res.lines_painted
-        _accumulate(acc, buf, frame.painted, hits)
     n = plan.n.astype(np.int64)
     _finish(acc, static if static is not None else np.empty((0, n_along, 3), np.float32), hits, n)
     return Integrated(LinearFrame(static, acc, hits > 0, by_column), plan.evaluations, painted, passes)

@@ -183,6 +183,7 @@ class Renderer:
         by_column: bool = False,
         lines: np.ndarray | None = None,
         out: np.ndarray | None = None,
+        hits: np.ndarray | None = None,
     ) -> RenderResult:
         """Linear radiance only, of the ``lines`` asked for (bool mask or indices; all when None).
 
@@ -190,7 +191,9 @@ class Renderer:
         holds the painted lines in ``out`` (a reusable float32 buffer in render orientation, or a fresh one)
         and points at the cached composite for the rest. Lines not asked for are neither painted nor valid.
         Painted lines equal ``render_lines(..., linear=True)``'s exactly, and so does ``truth`` on the lines
-        asked for (other lines hold the static composite's truth).
+        asked for (other lines hold the static composite's truth). With ``hits`` (int64, one count per line)
+        ``out`` accumulates instead: a painted line is stored in it on its first hit and added on later ones,
+        and ``hits`` counts them (what exposure integration needs, without a second buffer).
         """
         n_lines, n_along = self._shape(by_column)
         times_ns = self._check_times(times_ns, by_column)
@@ -211,12 +214,14 @@ class Renderer:
         elif out.shape != (n_lines, n_along, 3) or out.dtype != np.float32 or not out.flags.c_contiguous:
             raise ConfigError(f"out must be a C-contiguous float32 array of shape {(n_lines, n_along, 3)}, "
                               f"got {out.dtype} {out.shape}")
+        if hits is not None and (hits.shape != (n_lines,) or hits.dtype != np.int64):
+            raise ConfigError(f"hits must be an int64 array of {n_lines} counts, got {hits.dtype} {hits.shape}")
         ut_ns, line_k = np.unique(times_ns, return_inverse=True)
         times_s = ut_ns.astype(np.float64) * 1e-9
         layer = self._layer(by_column, times_s[0])
         return self._render(self._cams[by_column], times_s, line_k.astype(np.int64), n_lines, n_along, layer, True,
                             False, include=np.ones(self.n_actors, np.bool_), force_paint=False, subset=subset,
-                            into=out)
+                            into=out, hits=hits)
 
     def reference_frame(self, t_ns: int, *, by_column: bool = False) -> RenderResult:
         """One full render with every line at ``t_ns`` and no shortcuts: every line painted over the bare
@@ -348,7 +353,7 @@ class Renderer:
         return layer
 
     def _render(self, cam, times_s, line_k, n_lines, n_along, layer: _Layer, linear, truth_only, include,
-                force_paint, exhaustive=False, subset=None, into=None) -> RenderResult:
+                force_paint, exhaustive=False, subset=None, into=None, hits=None) -> RenderResult:
         """Paint a frame; with ``into`` (render_linear), only the ``subset`` lines, linear only, into it."""
         c = self._c
         n_obj, n_t = self.n_actors, times_s.shape[0]
@@ -412,7 +417,8 @@ class Renderer:
         bg = layer.bg_lin if layer.bg_lin is not None else np.empty((0, 0, 3), np.float32)
         K.render_lines_kernel(c.world, c.building_lut, c.buildings, c.light, cam, rot_tab, pos_tab, c.actors, times_s,
                               line_k, obj_line_k, slots, parts, include, lines, n_along, bg, out_u8, out_lin,
-                              self.gain, _SRGB, gt.left, gt.right, gt.area, gt.visible, truth_only, full_lines, seed)
+                              self.gain, _SRGB, gt.left, gt.right, gt.area, gt.visible, truth_only, full_lines, seed,
+                              hits if hits is not None else np.empty(0, np.int64))
         if into is not None:
             painted = np.zeros(n_lines, np.bool_)
             painted[lines] = True

@@ -157,3 +157,17 @@ def test_raw_stream_frames_equal_the_full_frame_path():
             plan = plan_samples(cam.renderer, mid - s.exposure_ns // 2, s.exposure_ns, bound_px=blur)
             lin = integrate(cam.renderer, plan).linear
         np.testing.assert_array_equal(cam.frame(2).data, pipe.deliver(lin, s.exposure_ns, 2))
+
+
+def test_render_linear_accumulates_with_hits():
+    r = _renderer(1, "fast", "none")
+    times = _times(54, "top_to_bottom")
+    one = r.render_linear(times).radiance
+    acc, hits = np.empty((54, 96, 3), np.float32), np.zeros(54, np.int64)
+    for _ in range(3):
+        got = r.render_linear(times, out=acc, hits=hits).radiance
+    assert got is not None and one is not None
+    np.testing.assert_array_equal(hits, 3 * one.painted)
+    np.testing.assert_allclose(acc[one.painted], 3 * one.lines[one.painted], rtol=1e-6)
+    with pytest.raises(ConfigError, match="hits must be"):
+        r.render_linear(times, out=acc, hits=np.zeros(54, np.int32))
