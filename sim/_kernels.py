@@ -479,21 +479,25 @@ def actor_parts_all(actors, world, lut, bld, light, cam, rot_tab, pos_tab, times
 
 
 @njit(cache=True)
-def _add_line(dst, lin, seed_lin, line, seed, ia, ib, n_runs, add):
-    """dst (one line) = or += the painted line: ``lin`` inside the runs, the composite ``seed_lin`` between."""
-    x = 0
-    for r in range(n_runs + 1):
-        x_run = ia[r] if r < n_runs else dst.shape[0]
-        if seed:
-            for i in range(x, x_run):
-                for c in range(3):
-                    v = seed_lin[line, i, c]
-                    dst[i, c] = dst[i, c] + v if add else v
-        if r < n_runs:
+def _add_line(dst, lin, seed_lin, line, seed, ia, ib, n_runs, first):
+    """Accumulate one painted line into ``dst`` (that line of the accumulator).
+
+    Over a composite (``seed``) only what differs from it is kept: dst gets lin - composite inside the runs
+    (pixels outside them equal the composite), zeroed on the line's first hit. Without one (a moving camera,
+    whole lines painted) dst is the plain sum of the painted lines.
+    """
+    if seed:
+        if first:
+            dst[:, :] = 0.0
+        for r in range(n_runs):
             for i in range(ia[r], ib[r]):
                 for c in range(3):
-                    dst[i, c] = dst[i, c] + lin[i, c] if add else lin[i, c]
-            x = ib[r]
+                    dst[i, c] += lin[i, c] - seed_lin[line, i, c]
+        return
+    for r in range(n_runs):
+        for i in range(ia[r], ib[r]):
+            for c in range(3):
+                dst[i, c] = lin[i, c] if first else dst[i, c] + lin[i, c]
 
 
 @njit(cache=True, parallel=True)
@@ -510,7 +514,7 @@ def render_lines_kernel(world, lut_b, bld, light, cam, rot_tab, pos_tab, actors,
     An empty ``out_u8`` skips the sRGB encoding (linear-only renders). A non-empty ``seed_lin`` (the cached
     linear composite) is copied into each painted line of ``out_lin`` first, so ``out_lin`` may be a scratch
     buffer whose other lines are never touched. A non-empty ``acc_hits`` (int64 per line) turns ``out_lin`` into
-    an accumulator: a painted line is stored on its first hit and added on later ones, and its count goes up.
+    an accumulator of painted lines (see ``_add_line``), and each painted line's count goes up.
     """
     n_obj = actors.shape[0]
     moving_cam = cam[C_MOVING] != 0.0
@@ -561,7 +565,7 @@ def render_lines_kernel(world, lut_b, bld, light, cam, rot_tab, pos_tab, actors,
                 _paint_spans(lin, line, m, ok, slots, parts_tab, local, gt_vis, depth, idx_o, idx_p, span_l, span_r,
                              owner, ia, ib, n_runs)
             if accumulate and not gt_only:
-                _add_line(out_lin[line], lin, seed_lin, line, seed, ia, ib, n_runs, acc_hits[line] > 0)
+                _add_line(out_lin[line], lin, seed_lin, line, seed, ia, ib, n_runs, acc_hits[line] == 0)
                 acc_hits[line] += 1
             elif not gt_only:
                 if seed:

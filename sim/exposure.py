@@ -204,15 +204,22 @@ def dense_plan(plan: SamplePlan, step_px: float = 0.05) -> SamplePlan:
 
 @njit(cache=True, parallel=True)
 def _finish(acc, static, hits, n):
-    """acc[l] = mean of line l's n samples: its painted ones (summed in acc) and n - hits copies of static."""
+    """Mean of each painted line's n samples, from ``render_linear``'s accumulator.
+
+    Over a composite, acc holds the sum of (sample - composite) over painted samples (the others equal the
+    composite): mean = composite + acc / n. Without one (moving camera) every sample was painted: acc / n.
+    """
+    has_static = static.shape[0] > 0
     for ln in prange(acc.shape[0]):
-        h = hits[ln]
-        if h == 0:
+        if hits[ln] == 0:
             continue
-        if h < n[ln]:
-            acc[ln] += np.float32(n[ln] - h) * static[ln]
-        if n[ln] > 1:
-            acc[ln] *= np.float32(1.0 / n[ln])
+        inv = np.float32(1.0 / n[ln])
+        for i in range(acc.shape[1]):
+            for c in range(3):
+                if has_static:
+                    acc[ln, i, c] = static[ln, i, c] + acc[ln, i, c] * inv
+                else:
+                    acc[ln, i, c] *= inv
 
 
 @dataclass
@@ -238,8 +245,8 @@ def integrate(renderer: Renderer, plan: SamplePlan, *, by_column: bool = False) 
     """Average the scene's linear radiance over each line's window with the plan's samples.
 
     Pass j renders only the lines that have a sample j, and of those only the ones a moving thing touches
-    (``Renderer.render_linear``); a line's samples that were not painted are the static composite, added
-    once per line at the end, so no pass copies a whole frame.
+    (``Renderer.render_linear``), accumulating just the pixels under actors as differences from the static
+    composite; the mean is composite + sum / n. No pass copies a whole frame or even a whole line.
     """
     n_lines = plan.n.shape[0]
     n_along = renderer.camera.height if by_column else renderer.camera.width

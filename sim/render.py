@@ -191,9 +191,12 @@ class Renderer:
         holds the painted lines in ``out`` (a reusable float32 buffer in render orientation, or a fresh one)
         and points at the cached composite for the rest. Lines not asked for are neither painted nor valid.
         Painted lines equal ``render_lines(..., linear=True)``'s exactly, and so does ``truth`` on the lines
-        asked for (other lines hold the static composite's truth). With ``hits`` (int64, one count per line)
-        ``out`` accumulates instead: a painted line is stored in it on its first hit and added on later ones,
-        and ``hits`` counts them (what exposure integration needs, without a second buffer).
+        asked for (other lines hold the static composite's truth).
+
+        With ``hits`` (int64, one count per line) ``out`` accumulates instead, for exposure integration:
+        ``hits`` counts each line's painted renders and ``out`` holds the sum of (painted line - composite)
+        over them (zeroed on a line's first hit; only pixels under actors are touched after), or for a
+        moving camera (``radiance.static`` None) the sum of the painted lines.
         """
         n_lines, n_along = self._shape(by_column)
         times_ns = self._check_times(times_ns, by_column)
@@ -216,10 +219,14 @@ class Renderer:
                               f"got {out.dtype} {out.shape}")
         if hits is not None and (hits.shape != (n_lines,) or hits.dtype != np.int64):
             raise ConfigError(f"hits must be an int64 array of {n_lines} counts, got {hits.dtype} {hits.shape}")
-        ut_ns, line_k = np.unique(times_ns, return_inverse=True)
+        # Only the asked-for lines' times are posed and bounded (a pass of an exposure needs few lines).
+        sub_idx = np.flatnonzero(subset)
+        ut_ns, sub_k = np.unique(times_ns[sub_idx] if sub_idx.size else times_ns[:1], return_inverse=True)
+        line_k = np.zeros(n_lines, np.int64)
+        line_k[sub_idx] = sub_k
         times_s = ut_ns.astype(np.float64) * 1e-9
-        layer = self._layer(by_column, times_s[0])
-        return self._render(self._cams[by_column], times_s, line_k.astype(np.int64), n_lines, n_along, layer, True,
+        layer = self._layer(by_column, float(times_ns.min()) * 1e-9)
+        return self._render(self._cams[by_column], times_s, line_k, n_lines, n_along, layer, True,
                             False, include=np.ones(self.n_actors, np.bool_), force_paint=False, subset=subset,
                             into=out, hits=hits)
 
@@ -302,8 +309,10 @@ class Renderer:
         return self._parts[:n_slots]
 
     def _touch(self, cam, times_s, rot_tab, pos_tab, k_line, moving, include, n_lines, n_along,
-               obj_line_k) -> None:
+               obj_line_k, only=None) -> None:
         """Fill ``obj_line_k[o, line]`` with actor o's time slot on each line its bounds reach.
+
+        ``only`` (line indices) limits the lines looked at; the others keep -1.
 
         The bounds are conservative boxes over groups of consecutive times (one group per time when the
         camera moves, since each time then has its own pose); a static actor needs only its one time.
@@ -320,11 +329,13 @@ class Renderer:
         bounds = np.empty((n_obj, n_g, 4))
         K.actor_bounds_all(c.actors, c.world, cam, rot_tab, pos_tab, times_s[k_first], k_first,
                            times_s[k_last] - times_s[k_first], need, bounds)
-        centre = np.arange(n_lines) + 0.5
+        idx = np.arange(n_lines) if only is None else only
+        centre = idx + 0.5
         for o in np.flatnonzero(include):
-            b = bounds[o, group_of_k[k_line[o]]]
+            k = k_line[o, idx]
+            b = bounds[o, group_of_k[k]]
             touch = (b[:, 0] <= centre) & (centre <= b[:, 1]) & (b[:, 2] < n_along) & (b[:, 3] > 0)
-            obj_line_k[o, touch] = k_line[o, touch]
+            obj_line_k[o, idx[touch]] = k[touch]
 
     def _layer(self, by_column: bool, t0_s: float) -> _Layer:
         """Static layers for this orientation, built on first use (nothing to cache for a moving camera)."""
@@ -369,10 +380,9 @@ class Renderer:
         if exhaustive:  # the oracle: every included actor is tried on every line
             obj_line_k[include] = k_line[include]
         else:
+            # Lines not asked for are not looked at: no parts or truth work for them.
             self._touch(cam, times_s, rot_tab, pos_tab, k_line, include & ~static, include, n_lines, n_along,
-                        obj_line_k)
-        if subset is not None:
-            obj_line_k[:, ~subset] = -1  # lines not asked for are not painted: no parts or truth work for them
+                        obj_line_k, None if subset is None else np.flatnonzero(subset))
         # Parts of an actor at an instant that several lines share (GS, bands, static actors) are computed
         # once into a table; those only one line needs (RS) are computed on that line, in cache.
         o_idx, l_idx = np.nonzero(obj_line_k >= 0)
