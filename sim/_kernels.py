@@ -503,7 +503,7 @@ def _add_line(dst, lin, seed_lin, line, seed, ia, ib, n_runs, first):
 @njit(cache=True, parallel=True)
 def render_lines_kernel(world, lut_b, bld, light, cam, rot_tab, pos_tab, actors, times, line_k, obj_line_k, slots,
                         parts_tab, include, lines, w, bg_lin, out_u8, out_lin, gain, lut, gt_l, gt_r, gt_tot,
-                        gt_vis, gt_only, full_lines, seed_lin, acc_hits):
+                        gt_vis, gt_only, full_lines, seed_lin, acc_hits, line_hit):
     """Paint the given ``lines``; every other line already holds the cached composite (copied by the caller).
 
     ``obj_line_k[o, line]`` is actor o's time slot on that line (-1 when not touching). With ``full_lines``
@@ -514,7 +514,9 @@ def render_lines_kernel(world, lut_b, bld, light, cam, rot_tab, pos_tab, actors,
     An empty ``out_u8`` skips the sRGB encoding (linear-only renders). A non-empty ``seed_lin`` (the cached
     linear composite) is copied into each painted line of ``out_lin`` first, so ``out_lin`` may be a scratch
     buffer whose other lines are never touched. A non-empty ``acc_hits`` (int64 per line) turns ``out_lin`` into
-    an accumulator of painted lines (see ``_add_line``), and each painted line's count goes up.
+    an accumulator of painted lines (see ``_add_line``), and each painted line's count goes up. In both modes
+    a line on which no actor has a span equals the composite and is left alone; ``line_hit`` (bool per line,
+    when non-empty) records which lines were written.
     """
     n_obj = actors.shape[0]
     moving_cam = cam[C_MOVING] != 0.0
@@ -564,6 +566,10 @@ def render_lines_kernel(world, lut_b, bld, light, cam, rot_tab, pos_tab, actors,
             if m > 0:
                 _paint_spans(lin, line, m, ok, slots, parts_tab, local, gt_vis, depth, idx_o, idx_p, span_l, span_r,
                              owner, ia, ib, n_runs)
+            if seed and m == 0:
+                continue  # no actor pixel on this line: it is the composite, nothing to write
+            if line_hit.shape[0] > 0:
+                line_hit[line] = True
             if accumulate and not gt_only:
                 _add_line(out_lin[line], lin, seed_lin, line, seed, ia, ib, n_runs, acc_hits[line] == 0)
                 acc_hits[line] += 1

@@ -425,19 +425,18 @@ class Renderer:
             gt.left[:], gt.right[:] = layer.comp_gt[0], layer.comp_gt[1]
             gt.area[:], gt.visible[:] = layer.comp_gt[2], layer.comp_gt[3]
         bg = layer.bg_lin if layer.bg_lin is not None else np.empty((0, 0, 3), np.float32)
+        painted = np.zeros(n_lines if into is not None else 0, np.bool_)
         K.render_lines_kernel(c.world, c.building_lut, c.buildings, c.light, cam, rot_tab, pos_tab, c.actors, times_s,
                               line_k, obj_line_k, slots, parts, include, lines, n_along, bg, out_u8, out_lin,
                               self.gain, _SRGB, gt.left, gt.right, gt.area, gt.visible, truth_only, full_lines, seed,
-                              hits if hits is not None else np.empty(0, np.int64))
+                              hits if hits is not None else np.empty(0, np.int64), painted)
         if into is not None:
-            painted = np.zeros(n_lines, np.bool_)
-            painted[lines] = True
             shared = None
             if not full_lines:
                 shared = seed.view()
                 shared.flags.writeable = False  # the renderer's cache: readers must not write through it
             frame = LinearFrame(shared, into, painted, bool(cam[Wd.C_TRANSPOSED] != 0.0))
-            return RenderResult(np.empty((0, 0, 3), np.uint8), None, gt, int(lines.size), frame)
+            return RenderResult(np.empty((0, 0, 3), np.uint8), None, gt, int(painted.sum()), frame)
         if truth_only:
             return RenderResult(np.empty((0, 0, 3), np.uint8), None, gt, int(lines.size))
         image = out_u8.transpose(1, 0, 2) if cam[Wd.C_TRANSPOSED] != 0.0 else out_u8

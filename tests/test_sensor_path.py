@@ -47,7 +47,8 @@ def test_render_linear_equals_render_lines(seed, speed, ego, readout):
         np.testing.assert_array_equal(getattr(fast.truth, name), getattr(full.truth, name))
     if ego == "none":
         assert frame.static is not None and not frame.static.flags.writeable
-        assert fast.lines_painted == full.lines_painted == int(frame.painted.sum())
+        # Lines the culling visits but no actor pixel lands on are left as the composite, not rewritten.
+        assert fast.lines_painted == int(frame.painted.sum()) <= full.lines_painted
     else:
         assert frame.static is None and frame.painted.all()
 
