@@ -56,20 +56,21 @@ def sensor_overhead(size: tuple[int, int] = (1920, 1080), frames: int = 5, seed:
     pipe = raw.pipeline
     assert pipe is not None
     frame_ms = _median_ms(lambda i: clean.frame(i), frames)
-    radiances = {}
-
-    def render(i: int) -> None:
-        radiances[i] = raw.renderer.render_linear(raw.line_times_ns(i)).radiance
-
-    linear_ms = _median_ms(render, frames)
     exp_ns = raw.settings.exposure_ns
-    samples: dict[int, np.ndarray] = {}
-
-    def noise(i: int) -> None:
-        samples[i] = pipe.samples(radiances[i], exp_ns, i)
-
-    noise_ms = _median_ms(noise, frames)
-    pack_ms = _median_ms(lambda i: encode_raw(samples[i], "pRAA", 10), frames)
+    buf = np.empty((size[1], size[0], 3), np.float32)  # reused, as the stream does
+    stages: dict[str, list[float]] = {"render": [], "noise": [], "pack": []}
+    for i in range(frames + 1):  # the first round warms up
+        t0 = time.perf_counter()
+        radiance = raw.renderer.render_linear(raw.line_times_ns(i), out=buf).radiance
+        t1 = time.perf_counter()
+        dn = pipe.samples(radiance, exp_ns, i)
+        t2 = time.perf_counter()
+        encode_raw(dn, "pRAA", 10)
+        t3 = time.perf_counter()
+        if i:
+            for key, dt in (("render", t1 - t0), ("noise", t2 - t1), ("pack", t3 - t2)):
+                stages[key].append(dt)
+    linear_ms, noise_ms, pack_ms = (float(np.median(stages[k]) * 1e3) for k in ("render", "noise", "pack"))
     raw_frame_ms = _median_ms(lambda i: raw.frame(i), frames)
     return {"sensor": "imx219", "size": f"{size[0]}x{size[1]}", "format": "pRAA",
             "rs_frame_ms": round(frame_ms, 3), "linear_render_ms": round(linear_ms, 3),

@@ -241,18 +241,21 @@ class Integrated:
         return self.radiance.full()
 
 
-def integrate(renderer: Renderer, plan: SamplePlan, *, by_column: bool = False) -> Integrated:
+def integrate(renderer: Renderer, plan: SamplePlan, *, by_column: bool = False, out: np.ndarray | None = None
+              ) -> Integrated:
     """Average the scene's linear radiance over each line's window with the plan's samples.
 
     Pass j renders only the lines that have a sample j, and of those only the ones a moving thing touches
     (``Renderer.render_linear``), accumulating just the pixels under actors as differences from the static
     composite; the mean is composite + sum / n. No pass copies a whole frame or even a whole line.
+    ``out`` (float32, render orientation: lines x pixels per line x 3) is a reusable accumulator; the result's
+    ``radiance`` keeps it, so it must not be reused while that is in use.
     """
     n_lines = plan.n.shape[0]
     n_along = renderer.camera.height if by_column else renderer.camera.width
     shape = (n_lines, n_along, 3)
     # Fresh np.empty pages are only faulted in where a line is written, so untouched lines cost nothing.
-    acc = np.empty(shape, np.float32)
+    acc = np.empty(shape, np.float32) if out is None else out
     hits = np.zeros(n_lines, np.int64)
     passes = int(plan.n.max())
     painted = 0
