@@ -203,10 +203,16 @@ def _expose(base, mos, over, use_over, by_col, cfa, mono, flux_s, qe, dark_e, re
             row_idx = np.uint64((y + oy) * array_w + ox)
             # The common case first, for every pixel in straight loops: shot and read noise as one Gaussian
             # of summed variance (exact where mu >= POISSON_EXACT_BELOW_E and 6 sigma below the full well).
-            for x in range(w):
-                ht_row[x] = _mix(frame_key + (row_idx + np.uint64(x)) * _GOLD) if draw else np.uint64(0)
-            for x in range(w):
-                off_row[x] = off_map[y, x] if dsnu_on else 0.0
+            if draw:
+                for x in range(w):
+                    ht_row[x] = _mix(frame_key + (row_idx + np.uint64(x)) * _GOLD)
+            else:
+                ht_row[:] = 0
+            if dsnu_on:
+                for x in range(w):
+                    off_row[x] = off_map[y, x]
+            else:
+                off_row[:] = 0.0
             if shot:
                 for x in range(w):
                     mu = mu_row[x]
