@@ -331,11 +331,13 @@ class Renderer:
                            times_s[k_last] - times_s[k_first], need, bounds)
         idx = np.arange(n_lines) if only is None else only
         centre = idx + 0.5
-        for o in np.flatnonzero(include):
-            k = k_line[o, idx]
-            b = bounds[o, group_of_k[k]]
-            touch = (b[:, 0] <= centre) & (centre <= b[:, 1]) & (b[:, 2] < n_along) & (b[:, 3] > 0)
-            obj_line_k[o, idx[touch]] = k[touch]
+        objs = np.flatnonzero(include)
+        # All included actors at once (one pass of an exposure is called often: Python loops add up).
+        k = k_line[objs[:, None], idx[None, :]]
+        b = bounds[objs[:, None], group_of_k[k]]
+        touch = (b[..., 0] <= centre) & (centre <= b[..., 1]) & (b[..., 2] < n_along) & (b[..., 3] > 0)
+        t_o, t_l = np.nonzero(touch)
+        obj_line_k[objs[t_o], idx[t_l]] = k[t_o, t_l]
 
     def _layer(self, by_column: bool, t0_s: float) -> _Layer:
         """Static layers for this orientation, built on first use (nothing to cache for a moving camera)."""
