@@ -11,6 +11,11 @@ edges) are evaluated at steps across the frame and the fastest displacement rate
 speed; the lines it can touch during a window come from the renderer's conservative swept bounds. A moving
 camera moves every line: its image speed is the rotation rate times the focal length (corner-corrected)
 plus the translation speed over the camera's height (the nearest static surface assumed at that depth).
+
+``integrate`` costs what the plan asks and no more: pass j renders only the lines with a sample j
+(``Renderer.render_linear``), and only where an actor is, as differences from the static composite; lines
+nothing moves over stay the composite (shared, not copied), so a 192-pass frame of fast walkers costs its
+painted lines, not 192 frame copies.
 """
 
 from __future__ import annotations

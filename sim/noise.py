@@ -22,6 +22,11 @@ noise are drawn as one Gaussian of summed variance (the same distribution, one d
 ``SensorModel``'s own, else the sensor YAML's ``noise.flux_photons_per_s``); by default, linear 1.0 fills
 the full well at the 10 ms reference exposure and unity gain, so a sensor-path frame at default settings is
 as bright as the clean render.
+
+``SensorModel.expose`` takes the radiance as an array or as a ``LinearFrame`` (the renderer's static
+composite plus painted lines), read in place; the composite is passed through the colour filter once and
+kept, so a frame reads one value per static pixel. Each row's mean electrons are computed in straight
+loops and only the random draws run pixel by pixel; the output is the same, bit for bit, either way.
 """
 
 from __future__ import annotations

@@ -10,6 +10,10 @@ Work the scene does not need is skipped: the static world (and any actor that do
 once and cached; lines no moving actor touches at their own time are copied from that cache; each actor's
 pose is evaluated once per distinct time it is needed at, so a static scene costs one render and a GS frame
 one pose per actor.
+
+``render_linear`` is the sensor path's call: linear radiance only (no 8-bit image), of a chosen subset of
+lines, returned as a ``LinearFrame`` (the cached static composite, shared, plus the painted lines in a
+reusable buffer) or accumulated into one for exposure integration. Painted lines equal ``render_lines``'s.
 """
 
 from __future__ import annotations
