@@ -502,11 +502,14 @@ def _add_line(dst, lin, seed_lin, line, seed, ia, ib, n_runs, first):
 
 @njit(cache=True, parallel=True)
 def render_lines_kernel(world, lut_b, bld, light, cam, rot_tab, pos_tab, actors, times, line_k, obj_line_k, slots,
-                        parts_tab, include, lines, w, bg_lin, out_u8, out_lin, gain, lut, gt_l, gt_r, gt_tot,
-                        gt_vis, gt_only, full_lines, seed_lin, acc_hits, line_hit):
+                        parts_tab, include, lines, e_start, ents, w, bg_lin, out_u8, out_lin, gain, lut, gt_l, gt_r,
+                        gt_tot, gt_vis, gt_only, full_lines, seed_lin, acc_hits, line_hit):
     """Paint the given ``lines``; every other line already holds the cached composite (copied by the caller).
 
-    ``obj_line_k[o, line]`` is actor o's time slot on that line (-1 when not touching). With ``full_lines``
+    Line ``lines[j]`` is painted once per entry ``ents[e_start[j]:e_start[j + 1]]`` (one entry per line, the
+    line itself, for a frame; one per sample for exposure integration, which accumulates them), in order, by
+    one worker. ``obj_line_k[o, e]`` is actor o's time slot on entry e (-1 when not touching) and
+    ``line_k[e]`` the entry's own time slot; ground truth is indexed by line. With ``full_lines``
     (moving camera, or building the composite) each line is rendered whole, from the background rendered
     at the line's own pose when the camera moves, else from the cached ``bg_lin``; otherwise only the pixel
     runs under actor spans are redone over ``bg_lin``. Ground truth of painted lines is recomputed.
@@ -542,43 +545,45 @@ def render_lines_kernel(world, lut_b, bld, light, cam, rot_tab, pos_tab, actors,
         scratch = parts_scratch()
         for j in range(ch, n, N_CHUNKS):
             line = lines[j]
-            ok = obj_line_k[:, line]
-            for o in range(n_obj):
-                gt_l[o, line], gt_r[o, line], gt_tot[o, line], gt_vis[o, line] = np.nan, np.nan, 0, 0
-                if include[o] and ok[o] >= 0 and slots[o, ok[o]] == SLOT_LOCAL:
-                    k = ok[o]
-                    actor_parts(actors[o], world, lut_b, bld, light, cam, rot_tab[k], pos_tab[k], times[k],
-                                local[o], scratch)
-            m = _collect_line(line, w, actors, ok, slots, parts_tab, local, include, gt_l, gt_r, gt_tot,
-                              depth, idx_o, idx_p, span_l, span_r, pa, pb)
-            if full_lines and not gt_only:
-                if moving_cam:
-                    k = line_k[line]
-                    background_line(world, lut_b, bld, light, cam, rot_tab[k], pos_tab[k], line, lin)
+            for q in range(e_start[j], e_start[j + 1]):
+                e = ents[q]
+                ok = obj_line_k[:, e]
+                for o in range(n_obj):
+                    gt_l[o, line], gt_r[o, line], gt_tot[o, line], gt_vis[o, line] = np.nan, np.nan, 0, 0
+                    if include[o] and ok[o] >= 0 and slots[o, ok[o]] == SLOT_LOCAL:
+                        k = ok[o]
+                        actor_parts(actors[o], world, lut_b, bld, light, cam, rot_tab[k], pos_tab[k], times[k],
+                                    local[o], scratch)
+                m = _collect_line(line, w, actors, ok, slots, parts_tab, local, include, gt_l, gt_r, gt_tot,
+                                  depth, idx_o, idx_p, span_l, span_r, pa, pb)
+                if full_lines and not gt_only:
+                    if moving_cam:
+                        k = line_k[e]
+                        background_line(world, lut_b, bld, light, cam, rot_tab[k], pos_tab[k], line, lin)
+                    else:
+                        lin[:, :] = bg_lin[line]
+                    ia[0], ib[0], n_runs = 0, w, 1
                 else:
-                    lin[:, :] = bg_lin[line]
-                ia[0], ib[0], n_runs = 0, w, 1
-            else:
-                n_runs = _span_runs(span_l, span_r, m, w, ia, ib)
-                if not gt_only:
+                    n_runs = _span_runs(span_l, span_r, m, w, ia, ib)
+                    if not gt_only:
+                        for r in range(n_runs):
+                            lin[ia[r]:ib[r]] = bg_lin[line, ia[r]:ib[r]]
+                if m > 0:
+                    _paint_spans(lin, line, m, ok, slots, parts_tab, local, gt_vis, depth, idx_o, idx_p, span_l,
+                                 span_r, owner, ia, ib, n_runs)
+                if seed and m == 0:
+                    continue  # no actor pixel on this line: it is the composite, nothing to write
+                if line_hit.shape[0] > 0:
+                    line_hit[line] = True
+                if accumulate and not gt_only:
+                    _add_line(out_lin[line], lin, seed_lin, line, seed, ia, ib, n_runs, acc_hits[line] == 0)
+                    acc_hits[line] += 1
+                elif not gt_only:
+                    if seed:
+                        out_lin[line, :, :] = seed_lin[line]
                     for r in range(n_runs):
-                        lin[ia[r]:ib[r]] = bg_lin[line, ia[r]:ib[r]]
-            if m > 0:
-                _paint_spans(lin, line, m, ok, slots, parts_tab, local, gt_vis, depth, idx_o, idx_p, span_l, span_r,
-                             owner, ia, ib, n_runs)
-            if seed and m == 0:
-                continue  # no actor pixel on this line: it is the composite, nothing to write
-            if line_hit.shape[0] > 0:
-                line_hit[line] = True
-            if accumulate and not gt_only:
-                _add_line(out_lin[line], lin, seed_lin, line, seed, ia, ib, n_runs, acc_hits[line] == 0)
-                acc_hits[line] += 1
-            elif not gt_only:
-                if seed:
-                    out_lin[line, :, :] = seed_lin[line]
-                for r in range(n_runs):
-                    x0, x1 = ia[r], ib[r]
-                    if want_lin:
-                        out_lin[line, x0:x1, :] = lin[x0:x1]
-                    if want_u8:
-                        encode_line(lin[x0:x1], gain, lut, out_u8[line, x0:x1])
+                        x0, x1 = ia[r], ib[r]
+                        if want_lin:
+                            out_lin[line, x0:x1, :] = lin[x0:x1]
+                        if want_u8:
+                            encode_line(lin[x0:x1], gain, lut, out_u8[line, x0:x1])

@@ -23,6 +23,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 from functools import cached_property
+from itertools import pairwise
 
 import numpy as np
 from numba import njit, prange
@@ -34,6 +35,7 @@ from .render import LinearFrame, Renderer
 
 DEFAULT_BOUND_PX = 0.5
 MAX_SAMPLES = 512
+_BATCH_SAMPLES = 32_768  # (line, sample) pairs per render call: bounds the per-call tables (actors x pairs)
 _SPEED_STEP_NS = 250_000  # actor speed sampling step; gait changes little within a quarter millisecond
 
 
@@ -263,13 +265,19 @@ def integrate(renderer: Renderer, plan: SamplePlan, *, by_column: bool = False, 
     acc = np.empty(shape, np.float32) if out is None else out
     hits = np.zeros(n_lines, np.int64)
     passes = int(plan.n.max())
+    # Every (line, sample) pair, a line's samples together, in batches of whole lines of bounded size.
+    n = plan.n.astype(np.int64)
+    line_of = np.repeat(np.arange(n_lines, dtype=np.int64), n)
+    first = np.cumsum(n) - n
+    k = np.arange(line_of.size, dtype=np.int64) - first[line_of]
+    # Midpoint rule on integer ns, as SamplePlan.times_ns: sample k of n at start + (2k + 1) exposure / (2n).
+    times = plan.starts_ns[line_of] + ((2 * k + 1) * plan.exposure_ns) // (2 * n[line_of])
     painted = 0
     static = None
-    for j in range(passes):
-        res = renderer.render_linear(plan.times_ns(j), by_column=by_column, lines=plan.n > j, out=acc, hits=hits)
-        assert res.radiance is not None
-        static = res.radiance.static
-        painted += res.lines_painted
-    n = plan.n.astype(np.int64)
+    bounds = np.searchsorted(first, np.arange(0, line_of.size, _BATCH_SAMPLES), side="right") - 1
+    cuts = np.unique(np.append(first[bounds], line_of.size))
+    for a, b in pairwise(cuts.tolist()):
+        static, got = renderer.accumulate_samples(times[a:b], line_of[a:b], acc, hits, by_column=by_column)
+        painted += got
     _finish(acc, static if static is not None else np.empty((0, n_along, 3), np.float32), hits, n)
     return Integrated(LinearFrame(static, acc, hits > 0, by_column), plan.evaluations, painted, passes)
