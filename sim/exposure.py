@@ -35,7 +35,7 @@ from .render import LinearFrame, Renderer
 
 DEFAULT_BOUND_PX = 0.5
 MAX_SAMPLES = 512
-_BATCH_SAMPLES = 32_768  # (line, sample) pairs per render call: bounds the per-call tables (actors x pairs)
+BATCH_SAMPLES = 32_768  # (line, sample) pairs per render call: bounds the per-call tables (actors x pairs)
 _SPEED_STEP_NS = 250_000  # actor speed sampling step; gait changes little within a quarter millisecond
 
 
@@ -248,15 +248,16 @@ class Integrated:
         return self.radiance.full()
 
 
-def integrate(renderer: Renderer, plan: SamplePlan, *, by_column: bool = False, out: np.ndarray | None = None
-              ) -> Integrated:
+def integrate(renderer: Renderer, plan: SamplePlan, *, by_column: bool = False, out: np.ndarray | None = None,
+              batch_samples: int = BATCH_SAMPLES) -> Integrated:
     """Average the scene's linear radiance over each line's window with the plan's samples.
 
     Pass j renders only the lines that have a sample j, and of those only the ones a moving thing touches
     (``Renderer.render_linear``), accumulating just the pixels under actors as differences from the static
     composite; the mean is composite + sum / n. No pass copies a whole frame or even a whole line.
     ``out`` (float32, render orientation: lines x pixels per line x 3) is a reusable accumulator; the result's
-    ``radiance`` keeps it, so it must not be reused while that is in use.
+    ``radiance`` keeps it, so it must not be reused while that is in use. ``batch_samples`` bounds the
+    (line, sample) pairs per render call (whole lines per call; the result does not depend on it).
     """
     n_lines = plan.n.shape[0]
     n_along = renderer.camera.height if by_column else renderer.camera.width
@@ -274,7 +275,7 @@ def integrate(renderer: Renderer, plan: SamplePlan, *, by_column: bool = False, 
     times = plan.starts_ns[line_of] + ((2 * k + 1) * plan.exposure_ns) // (2 * n[line_of])
     painted = 0
     static = None
-    bounds = np.searchsorted(first, np.arange(0, line_of.size, _BATCH_SAMPLES), side="right") - 1
+    bounds = np.searchsorted(first, np.arange(0, line_of.size, max(int(batch_samples), 1)), side="right") - 1
     cuts = np.unique(np.append(first[bounds], line_of.size))
     for a, b in pairwise(cuts.tolist()):
         static, got = renderer.accumulate_samples(times[a:b], line_of[a:b], acc, hits, by_column=by_column)

@@ -179,3 +179,26 @@ def test_render_linear_accumulates_with_hits(ego):
     np.testing.assert_allclose(acc[p], want, rtol=1e-6, atol=1e-6)
     with pytest.raises(ConfigError, match="hits must be"):
         r.render_linear(times, out=acc, hits=np.zeros(54, np.int32))
+
+
+def test_integrate_batches_do_not_change_the_result():
+    r = _renderer(4, 50.0, "none")
+    exposure = 20_000_000
+    plan = plan_samples(r, _times(54, "top_to_bottom") - exposure // 2, exposure, bound_px=0.1)
+    whole = integrate(r, plan)
+    for batch in (1, 7, 100):
+        got = integrate(r, plan, batch_samples=batch)
+        np.testing.assert_array_equal(got.linear, whole.linear)
+        assert got.lines_painted == whole.lines_painted
+
+
+def test_accumulate_samples_checks_its_inputs():
+    r = _renderer(0, "fast", "none")
+    acc, hits = np.empty((54, 96, 3), np.float32), np.zeros(54, np.int64)
+    t = np.full(3, 40_000_000, np.int64)
+    with pytest.raises(ConfigError, match="non-decreasing"):
+        r.accumulate_samples(t, np.array([2, 1, 3]), acc, hits)
+    with pytest.raises(ConfigError, match="non-decreasing"):
+        r.accumulate_samples(t, np.array([0, 1, 54]), acc, hits)
+    with pytest.raises(ConfigError, match="hits must be"):
+        r.accumulate_samples(t, np.array([0, 1, 2]), acc, np.zeros(53, np.int64))
