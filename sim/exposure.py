@@ -12,10 +12,10 @@ speed; the lines it can touch during a window come from the renderer's conservat
 camera moves every line: its image speed is the rotation rate times the focal length (corner-corrected)
 plus the translation speed over the camera's height (the nearest static surface assumed at that depth).
 
-``integrate`` costs what the plan asks and no more: pass j renders only the lines with a sample j
-(``Renderer.render_linear``), and only where an actor is, as differences from the static composite; lines
-nothing moves over stay the composite (shared, not copied), so a 192-pass frame of fast walkers costs its
-painted lines, not 192 frame copies.
+``integrate`` costs what the plan asks and no more: every (line, sample) pair is rendered in a few batched
+calls (``Renderer.accumulate_samples``), and only where an actor is, as differences from the static
+composite; lines nothing moves over stay the composite (shared, not copied), so a frame of fast walkers
+with up to 192 samples per line costs its painted line samples, not 192 frame renders and copies.
 """
 
 from __future__ import annotations
@@ -252,9 +252,9 @@ def integrate(renderer: Renderer, plan: SamplePlan, *, by_column: bool = False, 
               batch_samples: int = BATCH_SAMPLES) -> Integrated:
     """Average the scene's linear radiance over each line's window with the plan's samples.
 
-    Pass j renders only the lines that have a sample j, and of those only the ones a moving thing touches
-    (``Renderer.render_linear``), accumulating just the pixels under actors as differences from the static
-    composite; the mean is composite + sum / n. No pass copies a whole frame or even a whole line.
+    Every (line, sample) pair a moving thing touches is rendered (``Renderer.accumulate_samples``, whole
+    lines per batch), accumulating just the pixels under actors as differences from the static composite;
+    the mean is composite + sum / n. Nothing copies a whole frame or even a whole line.
     ``out`` (float32, render orientation: lines x pixels per line x 3) is a reusable accumulator; the result's
     ``radiance`` keeps it, so it must not be reused while that is in use. ``batch_samples`` bounds the
     (line, sample) pairs per render call (whole lines per call; the result does not depend on it).
