@@ -80,6 +80,7 @@ PART_CAPSULE, PART_QUAD, PART_NONE = 0, 1, -1
 SLOT_NONE, SLOT_LOCAL = -1, -2
 NEAR_M = 0.05
 BODY_LATERAL, BODY_FORWARD, BODY_TOP = 0.25, 0.40, 1.02  # walker bounds, fractions of height (see actor_bounds)
+PART_RADIUS_MAX = 0.1  # walker part radii, fraction of height x build (the largest in _body is 0.08)
 LUT_SIZE = 16384
 
 # ======================================================================================================
@@ -140,11 +141,13 @@ def actor_bounds(act, world, cam, rot, pos, t, dt, out, root, pc, uv):
     e = BODY_FORWARD * h
     n_behind = 0
     ey = e + abs(act[P_SPEED]) * dt  # walkers move along Y only, at most speed * dt either way
+    corners = np.empty((8, 3))
     for i in range(8):
         x = root[0] + (lat if i & 1 else -lat)
         y = root[1] + (ey if i & 2 else -ey)
         z = BODY_TOP * h if i & 4 else -0.02 * h  # feet dip a little below the ground plane
         to_camera(rot, pos, x, y, z, pc)
+        corners[i, 0], corners[i, 1], corners[i, 2] = pc[0], pc[1], pc[2]
         if pc[2] < NEAR_M:
             n_behind += 1
             continue
@@ -154,7 +157,23 @@ def actor_bounds(act, world, cam, rot, pos, t, dt, out, root, pc, uv):
     if n_behind == 8:
         out[0], out[1] = 1e30, -1e30
     elif n_behind > 0:
-        out[0], out[1], out[2], out[3] = -1e30, 1e30, -1e30, 1e30  # straddles the camera plane
+        # Straddles the camera plane. Parts are clipped at the near plane, so what can be drawn lies in the box
+        # cut there: a convex solid whose vertices are the corners in front (projected above) and the points
+        # where box edges cross the plane, and whose image is the hull of theirs. A part's pixel radius
+        # (fx * r / its mean depth, at least NEAR_M) can exceed that hull near the plane: pad by the largest.
+        for i in range(8):
+            for bit in (1, 2, 4):
+                j = i ^ bit
+                za, zb = corners[i, 2], corners[j, 2]
+                if j < i or (za < NEAR_M) == (zb < NEAR_M):
+                    continue
+                f = (NEAR_M - za) / (zb - za)
+                _project(cam, corners[i, 0] + f * (corners[j, 0] - corners[i, 0]),
+                         corners[i, 1] + f * (corners[j, 1] - corners[i, 1]), NEAR_M, uv)
+                out[2], out[3] = min(out[2], uv[0]), max(out[3], uv[0])
+                out[0], out[1] = min(out[0], uv[1]), max(out[1], uv[1])
+        pad = cam[C_FX] * PART_RADIUS_MAX * h * max(act[P_BUILD], 1.0) / NEAR_M
+        out[0], out[1], out[2], out[3] = out[0] - pad, out[1] + pad, out[2] - pad, out[3] + pad
 
 
 @njit(cache=True, inline="always")
