@@ -1,11 +1,14 @@
 """Costs of the sensor model: ``rollcam bench --sensor``.
 
-Two measurements on a seeded street of the study's "fast" pedestrians (20 walkers, static camera):
+Measurements on a seeded street of the study's pedestrians (20 walkers, static camera; "fast" unless said):
 
 - ``sensor_overhead``: on an IMX219 1920x1080 rolling-shutter stream, the time of one clean BGR3 frame
-  (``SyntheticCamera.frame``, the study's render), of the linear-radiance render the sensor path needs, and
-  of the sensor stages on it: EMVA noise with mosaic (one kernel), then CSI-2 RAW10 packing (pRAA).
+  (``SyntheticCamera.frame``, the study's render), of the linear-radiance render the sensor path needs
+  (``Renderer.render_linear``: painted lines over the cached composite), and of the sensor stages on it:
+  EMVA noise with mosaic (one kernel, reading the composite in place), then CSI-2 RAW10 packing (pRAA).
   Overhead = (noise + mosaic + packing) / RS frame time. Medians over frames at different indices.
+- ``raw_streams``: whole pRAA frames (``SyntheticCamera.frame``: truth, exposure integration, noise, packing)
+  on the study's "normal" and "fast" pedestrians, with motion blur at the default 0.5 px bound and off.
 - ``adaptive_blur``: on the study's camera (letsroll, 10 ms exposure), the adaptive plan (bound 0.5 px)
   against fixed dense sampling (every line at one sample per 0.05 px of the fastest motion): scene
   evaluations (line renders), wall time, and the error of the adaptive and of the mid-exposure point-sampled
@@ -53,20 +56,21 @@ def sensor_overhead(size: tuple[int, int] = (1920, 1080), frames: int = 5, seed:
     pipe = raw.pipeline
     assert pipe is not None
     frame_ms = _median_ms(lambda i: clean.frame(i), frames)
-    radiances = {}
-
-    def render(i: int) -> None:
-        radiances[i] = raw.renderer.render_lines(raw.line_times_ns(i), linear=True).linear
-
-    linear_ms = _median_ms(render, frames)
     exp_ns = raw.settings.exposure_ns
-    samples: dict[int, np.ndarray] = {}
-
-    def noise(i: int) -> None:
-        samples[i] = pipe.samples(radiances[i], exp_ns, i)
-
-    noise_ms = _median_ms(noise, frames)
-    pack_ms = _median_ms(lambda i: encode_raw(samples[i], "pRAA", 10), frames)
+    buf = np.empty((size[1], size[0], 3), np.float32)  # reused, as the stream does
+    stages: dict[str, list[float]] = {"render": [], "noise": [], "pack": []}
+    for i in range(frames + 1):  # the first round warms up
+        t0 = time.perf_counter()
+        radiance = raw.renderer.render_linear(raw.line_times_ns(i), out=buf).radiance
+        t1 = time.perf_counter()
+        dn = pipe.samples(radiance, exp_ns, i)
+        t2 = time.perf_counter()
+        encode_raw(dn, "pRAA", 10)
+        t3 = time.perf_counter()
+        if i:
+            for key, dt in (("render", t1 - t0), ("noise", t2 - t1), ("pack", t3 - t2)):
+                stages[key].append(dt)
+    linear_ms, noise_ms, pack_ms = (float(np.median(stages[k]) * 1e3) for k in ("render", "noise", "pack"))
     raw_frame_ms = _median_ms(lambda i: raw.frame(i), frames)
     return {"sensor": "imx219", "size": f"{size[0]}x{size[1]}", "format": "pRAA",
             "rs_frame_ms": round(frame_ms, 3), "linear_render_ms": round(linear_ms, 3),
@@ -74,6 +78,18 @@ def sensor_overhead(size: tuple[int, int] = (1920, 1080), frames: int = 5, seed:
             "raw_frame_ms": round(raw_frame_ms, 3),
             "overhead_vs_rs_frame": round((noise_ms + pack_ms) / frame_ms, 4),
             "overhead_vs_linear_render": round((noise_ms + pack_ms) / linear_ms, 4), "target": 0.25}
+
+
+def raw_streams(size: tuple[int, int] = (1920, 1080), frames: int = 3, seed: int = 0) -> dict[str, Any]:
+    """Median whole raw-frame times per walker speed, blur at the default bound and off (module docstring)."""
+    sensor = load_sensor("imx219")
+    out: dict[str, Any] = {"sensor": "imx219", "size": f"{size[0]}x{size[1]}", "format": "pRAA"}
+    for speed in ("normal", "fast"):
+        scene = make_street_scene(seed, speed=speed, width=size[0], height=size[1])
+        for key, blur in (("blur", DEFAULT_BOUND_PX), ("noblur", None)):
+            cam = SyntheticCamera(sensor, scene, size=size, pixel_format="pRAA", blur_px=blur)
+            out[f"{speed}_{key}_ms"] = round(_median_ms(lambda i, c=cam: c.frame(i + 2), frames), 3)
+    return out
 
 
 def adaptive_blur(size: tuple[int, int] = (1920, 1080), frame: int = 3, seed: int = 0,
@@ -114,9 +130,10 @@ def adaptive_blur(size: tuple[int, int] = (1920, 1080), frame: int = 3, seed: in
 
 
 def run_sensor_bench(quick: bool = False) -> dict[str, Any]:
-    """Both measurements; ``quick`` runs them at 480x270."""
+    """All three measurements; ``quick`` runs them at 480x270."""
     size = (480, 270) if quick else (1920, 1080)
-    return {"sensor_overhead": sensor_overhead(size), "adaptive_blur": adaptive_blur(size)}
+    return {"sensor_overhead": sensor_overhead(size), "raw_streams": raw_streams(size),
+            "adaptive_blur": adaptive_blur(size)}
 
 
 def format_sensor_bench(doc: dict[str, Any]) -> str:
@@ -128,6 +145,11 @@ def format_sensor_bench(doc: dict[str, Any]) -> str:
              f"raw frame {o['raw_frame_ms']} ms",
              f"  {verdict} overhead {o['overhead_vs_rs_frame']:.1%} of the RS frame (target <= {o['target']:.0%}); "
              f"{o['overhead_vs_linear_render']:.1%} of the linear render"]
+    r = doc.get("raw_streams")
+    if r:
+        lines.append(f"raw_streams {r['sensor']} {r['size']} {r['format']} frame: normal walkers "
+                     f"{r['normal_blur_ms']} ms (blur off {r['normal_noblur_ms']} ms), fast walkers "
+                     f"{r['fast_blur_ms']} ms (blur off {r['fast_noblur_ms']} ms), blur bound {DEFAULT_BOUND_PX} px")
     verdict = "PASS" if a["evaluation_ratio"] >= a["target_ratio"] else "MISS"
     lines += [f"adaptive_blur {a['sensor']} {a['size']} exposure {a['exposure_ns']} ns, fastest "
               f"{a['max_speed_px_s']} px/s, {a['lines_moving']} lines moving: adaptive {a['adaptive_evaluations']} "

@@ -80,6 +80,7 @@ PART_CAPSULE, PART_QUAD, PART_NONE = 0, 1, -1
 SLOT_NONE, SLOT_LOCAL = -1, -2
 NEAR_M = 0.05
 BODY_LATERAL, BODY_FORWARD, BODY_TOP = 0.25, 0.40, 1.02  # walker bounds, fractions of height (see actor_bounds)
+PART_RADIUS_MAX = 0.1  # walker part radii, fraction of height x build (the largest in _body is 0.08)
 LUT_SIZE = 16384
 
 # ======================================================================================================
@@ -140,11 +141,13 @@ def actor_bounds(act, world, cam, rot, pos, t, dt, out, root, pc, uv):
     e = BODY_FORWARD * h
     n_behind = 0
     ey = e + abs(act[P_SPEED]) * dt  # walkers move along Y only, at most speed * dt either way
+    corners = np.empty((8, 3))
     for i in range(8):
         x = root[0] + (lat if i & 1 else -lat)
         y = root[1] + (ey if i & 2 else -ey)
         z = BODY_TOP * h if i & 4 else -0.02 * h  # feet dip a little below the ground plane
         to_camera(rot, pos, x, y, z, pc)
+        corners[i, 0], corners[i, 1], corners[i, 2] = pc[0], pc[1], pc[2]
         if pc[2] < NEAR_M:
             n_behind += 1
             continue
@@ -154,7 +157,23 @@ def actor_bounds(act, world, cam, rot, pos, t, dt, out, root, pc, uv):
     if n_behind == 8:
         out[0], out[1] = 1e30, -1e30
     elif n_behind > 0:
-        out[0], out[1], out[2], out[3] = -1e30, 1e30, -1e30, 1e30  # straddles the camera plane
+        # Straddles the camera plane. Parts are clipped at the near plane, so what can be drawn lies in the box
+        # cut there: a convex solid whose vertices are the corners in front (projected above) and the points
+        # where box edges cross the plane, and whose image is the hull of theirs. A part's pixel radius
+        # (fx * r / its mean depth, at least NEAR_M) can exceed that hull near the plane: pad by the largest.
+        for i in range(8):
+            for bit in (1, 2, 4):
+                j = i ^ bit
+                za, zb = corners[i, 2], corners[j, 2]
+                if j < i or (za < NEAR_M) == (zb < NEAR_M):
+                    continue
+                f = (NEAR_M - za) / (zb - za)
+                _project(cam, corners[i, 0] + f * (corners[j, 0] - corners[i, 0]),
+                         corners[i, 1] + f * (corners[j, 1] - corners[i, 1]), NEAR_M, uv)
+                out[2], out[3] = min(out[2], uv[0]), max(out[3], uv[0])
+                out[0], out[1] = min(out[0], uv[1]), max(out[1], uv[1])
+        pad = cam[C_FX] * PART_RADIUS_MAX * h * max(act[P_BUILD], 1.0) / NEAR_M
+        out[0], out[1], out[2], out[3] = out[0] - pad, out[1] + pad, out[2] - pad, out[3] + pad
 
 
 @njit(cache=True, inline="always")
@@ -478,20 +497,55 @@ def actor_parts_all(actors, world, lut, bld, light, cam, rot_tab, pos_tab, times
                         parts_tab[s], scratch)
 
 
+@njit(cache=True)
+def _add_line(dst, lin, seed_lin, line, seed, ia, ib, n_runs, first):
+    """Accumulate one painted line into ``dst`` (that line of the accumulator).
+
+    Over a composite (``seed``) only what differs from it is kept: dst gets lin - composite inside the runs
+    (pixels outside them equal the composite), zeroed on the line's first hit. Without one (a moving camera,
+    whole lines painted) dst is the plain sum of the painted lines.
+    """
+    if seed:
+        if first:
+            dst[:, :] = 0.0
+        for r in range(n_runs):
+            for i in range(ia[r], ib[r]):
+                for c in range(3):
+                    dst[i, c] += lin[i, c] - seed_lin[line, i, c]
+        return
+    for r in range(n_runs):
+        for i in range(ia[r], ib[r]):
+            for c in range(3):
+                dst[i, c] = lin[i, c] if first else dst[i, c] + lin[i, c]
+
+
 @njit(cache=True, parallel=True)
 def render_lines_kernel(world, lut_b, bld, light, cam, rot_tab, pos_tab, actors, times, line_k, obj_line_k, slots,
-                        parts_tab, include, lines, w, bg_lin, out_u8, out_lin, gain, lut, gt_l, gt_r, gt_tot,
-                        gt_vis, gt_only, full_lines):
+                        parts_tab, include, lines, e_start, ents, w, bg_lin, out_u8, out_lin, gain, lut, gt_l, gt_r,
+                        gt_tot, gt_vis, gt_only, full_lines, seed_lin, acc_hits, line_hit):
     """Paint the given ``lines``; every other line already holds the cached composite (copied by the caller).
 
-    ``obj_line_k[o, line]`` is actor o's time slot on that line (-1 when not touching). With ``full_lines``
+    Line ``lines[j]`` is painted once per entry ``ents[e_start[j]:e_start[j + 1]]`` (one entry per line, the
+    line itself, for a frame; one per sample for exposure integration, which accumulates them), in order, by
+    one worker. ``obj_line_k[o, e]`` is actor o's time slot on entry e (-1 when not touching) and
+    ``line_k[e]`` the entry's own time slot; ground truth is indexed by line. With ``full_lines``
     (moving camera, or building the composite) each line is rendered whole, from the background rendered
     at the line's own pose when the camera moves, else from the cached ``bg_lin``; otherwise only the pixel
     runs under actor spans are redone over ``bg_lin``. Ground truth of painted lines is recomputed.
+
+    An empty ``out_u8`` skips the sRGB encoding (linear-only renders). A non-empty ``seed_lin`` (the cached
+    linear composite) is copied into each painted line of ``out_lin`` first, so ``out_lin`` may be a scratch
+    buffer whose other lines are never touched. A non-empty ``acc_hits`` (int64 per line) turns ``out_lin`` into
+    an accumulator of painted lines (see ``_add_line``), and each painted line's count goes up. In both modes
+    a line on which no actor has a span equals the composite and is left alone; ``line_hit`` (bool per line,
+    when non-empty) records which lines were written.
     """
     n_obj = actors.shape[0]
     moving_cam = cam[C_MOVING] != 0.0
     want_lin = out_lin.shape[0] > 0
+    want_u8 = out_u8.shape[0] > 0
+    seed = seed_lin.shape[0] > 0 and want_lin and not full_lines
+    accumulate = acc_hits.shape[0] > 0
     cap = max(n_obj * MAX_PARTS, 1)
     n = lines.shape[0]
     for ch in prange(N_CHUNKS):
@@ -510,33 +564,45 @@ def render_lines_kernel(world, lut_b, bld, light, cam, rot_tab, pos_tab, actors,
         scratch = parts_scratch()
         for j in range(ch, n, N_CHUNKS):
             line = lines[j]
-            ok = obj_line_k[:, line]
-            for o in range(n_obj):
-                gt_l[o, line], gt_r[o, line], gt_tot[o, line], gt_vis[o, line] = np.nan, np.nan, 0, 0
-                if include[o] and ok[o] >= 0 and slots[o, ok[o]] == SLOT_LOCAL:
-                    k = ok[o]
-                    actor_parts(actors[o], world, lut_b, bld, light, cam, rot_tab[k], pos_tab[k], times[k],
-                                local[o], scratch)
-            m = _collect_line(line, w, actors, ok, slots, parts_tab, local, include, gt_l, gt_r, gt_tot,
-                              depth, idx_o, idx_p, span_l, span_r, pa, pb)
-            if full_lines and not gt_only:
-                if moving_cam:
-                    k = line_k[line]
-                    background_line(world, lut_b, bld, light, cam, rot_tab[k], pos_tab[k], line, lin)
+            for q in range(e_start[j], e_start[j + 1]):
+                e = ents[q]
+                ok = obj_line_k[:, e]
+                for o in range(n_obj):
+                    gt_l[o, line], gt_r[o, line], gt_tot[o, line], gt_vis[o, line] = np.nan, np.nan, 0, 0
+                    if include[o] and ok[o] >= 0 and slots[o, ok[o]] == SLOT_LOCAL:
+                        k = ok[o]
+                        actor_parts(actors[o], world, lut_b, bld, light, cam, rot_tab[k], pos_tab[k], times[k],
+                                    local[o], scratch)
+                m = _collect_line(line, w, actors, ok, slots, parts_tab, local, include, gt_l, gt_r, gt_tot,
+                                  depth, idx_o, idx_p, span_l, span_r, pa, pb)
+                if full_lines and not gt_only:
+                    if moving_cam:
+                        k = line_k[e]
+                        background_line(world, lut_b, bld, light, cam, rot_tab[k], pos_tab[k], line, lin)
+                    else:
+                        lin[:, :] = bg_lin[line]
+                    ia[0], ib[0], n_runs = 0, w, 1
                 else:
-                    lin[:, :] = bg_lin[line]
-                ia[0], ib[0], n_runs = 0, w, 1
-            else:
-                n_runs = _span_runs(span_l, span_r, m, w, ia, ib)
-                if not gt_only:
+                    n_runs = _span_runs(span_l, span_r, m, w, ia, ib)
+                    if not gt_only:
+                        for r in range(n_runs):
+                            lin[ia[r]:ib[r]] = bg_lin[line, ia[r]:ib[r]]
+                if m > 0:
+                    _paint_spans(lin, line, m, ok, slots, parts_tab, local, gt_vis, depth, idx_o, idx_p, span_l,
+                                 span_r, owner, ia, ib, n_runs)
+                if seed and m == 0:
+                    continue  # no actor pixel on this line: it is the composite, nothing to write
+                if line_hit.shape[0] > 0:
+                    line_hit[line] = True
+                if accumulate and not gt_only:
+                    _add_line(out_lin[line], lin, seed_lin, line, seed, ia, ib, n_runs, acc_hits[line] == 0)
+                    acc_hits[line] += 1
+                elif not gt_only:
+                    if seed:
+                        out_lin[line, :, :] = seed_lin[line]
                     for r in range(n_runs):
-                        lin[ia[r]:ib[r]] = bg_lin[line, ia[r]:ib[r]]
-            if m > 0:
-                _paint_spans(lin, line, m, ok, slots, parts_tab, local, gt_vis, depth, idx_o, idx_p, span_l, span_r,
-                             owner, ia, ib, n_runs)
-            if not gt_only:
-                for r in range(n_runs):
-                    x0, x1 = ia[r], ib[r]
-                    if want_lin:
-                        out_lin[line, x0:x1, :] = lin[x0:x1]
-                    encode_line(lin[x0:x1], gain, lut, out_u8[line, x0:x1])
+                        x0, x1 = ia[r], ib[r]
+                        if want_lin:
+                            out_lin[line, x0:x1, :] = lin[x0:x1]
+                        if want_u8:
+                            encode_line(lin[x0:x1], gain, lut, out_u8[line, x0:x1])

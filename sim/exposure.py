@@ -11,23 +11,31 @@ edges) are evaluated at steps across the frame and the fastest displacement rate
 speed; the lines it can touch during a window come from the renderer's conservative swept bounds. A moving
 camera moves every line: its image speed is the rotation rate times the focal length (corner-corrected)
 plus the translation speed over the camera's height (the nearest static surface assumed at that depth).
+
+``integrate`` costs what the plan asks and no more: every (line, sample) pair is rendered in a few batched
+calls (``Renderer.accumulate_samples``), and only where an actor is, as differences from the static
+composite; lines nothing moves over stay the composite (shared, not copied), so a frame of fast walkers
+with up to 192 samples per line costs its painted line samples, not 192 frame renders and copies.
 """
 
 from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from functools import cached_property
+from itertools import pairwise
 
 import numpy as np
-from numba import njit
+from numba import njit, prange
 
 from . import _body as B
 from . import _kernels as K
 from . import _world as Wd
-from .render import Renderer
+from .render import LinearFrame, Renderer
 
 DEFAULT_BOUND_PX = 0.5
 MAX_SAMPLES = 512
+BATCH_SAMPLES = 32_768  # (line, sample) pairs per render call: bounds the per-call tables (actors x pairs)
 _SPEED_STEP_NS = 250_000  # actor speed sampling step; gait changes little within a quarter millisecond
 
 
@@ -201,44 +209,76 @@ def dense_plan(plan: SamplePlan, step_px: float = 0.05) -> SamplePlan:
     return SamplePlan(plan.starts_ns, plan.exposure_ns, np.full_like(plan.n, n), plan.speed_px_s, False)
 
 
+@njit(cache=True, parallel=True)
+def _finish(acc, static, hits, n):
+    """Mean of each painted line's n samples, from ``render_linear``'s accumulator.
+
+    Over a composite, acc holds the sum of (sample - composite) over painted samples (the others equal the
+    composite): mean = composite + acc / n. Without one (moving camera) every sample was painted: acc / n.
+    """
+    has_static = static.shape[0] > 0
+    for ln in prange(acc.shape[0]):
+        if hits[ln] == 0:
+            continue
+        inv = np.float32(1.0 / n[ln])
+        for i in range(acc.shape[1]):
+            for c in range(3):
+                if has_static:
+                    acc[ln, i, c] = static[ln, i, c] + acc[ln, i, c] * inv
+                else:
+                    acc[ln, i, c] *= inv
+
+
 @dataclass
 class Integrated:
-    """A frame integrated over its exposure windows: linear RGB radiance (time-averaged) and the cost."""
+    """A frame integrated over its exposure windows: linear RGB radiance (time-averaged) and the cost.
 
-    linear: np.ndarray
+    ``radiance`` holds the lines some sample painted and points at the renderer's static composite for the
+    rest (every sample of such a line is the composite); ``linear`` is the whole frame as one array.
+    """
+
+    radiance: LinearFrame
     evaluations: int
     lines_painted: int
     passes: int
 
+    @cached_property
+    def linear(self) -> np.ndarray:
+        """The integrated frame as a float32 ``(H, W, 3)`` array in image orientation."""
+        return self.radiance.full()
 
-def integrate(renderer: Renderer, plan: SamplePlan, *, by_column: bool = False) -> Integrated:
+
+def integrate(renderer: Renderer, plan: SamplePlan, *, by_column: bool = False, out: np.ndarray | None = None,
+              batch_samples: int = BATCH_SAMPLES) -> Integrated:
     """Average the scene's linear radiance over each line's window with the plan's samples.
 
-    Pass j renders every line at its sample j (lines with fewer samples repeat their last one, mostly
-    copied from the renderer's static cache) and adds it to the lines that have a sample j.
+    Every (line, sample) pair a moving thing touches is rendered (``Renderer.accumulate_samples``, whole
+    lines per batch), accumulating just the pixels under actors as differences from the static composite;
+    the mean is composite + sum / n. Nothing copies a whole frame or even a whole line.
+    ``out`` (float32, render orientation: lines x pixels per line x 3) is a reusable accumulator; the result's
+    ``radiance`` keeps it, so it must not be reused while that is in use. ``batch_samples`` bounds the
+    (line, sample) pairs per render call (whole lines per call; the result does not depend on it).
     """
+    n_lines = plan.n.shape[0]
+    n_along = renderer.camera.height if by_column else renderer.camera.width
+    shape = (n_lines, n_along, 3)
+    # Fresh np.empty pages are only faulted in where a line is written, so untouched lines cost nothing.
+    acc = np.empty(shape, np.float32) if out is None else out
+    hits = np.zeros(n_lines, np.int64)
     passes = int(plan.n.max())
-    acc: np.ndarray | None = None
+    # Every (line, sample) pair, a line's samples together, in batches of whole lines of bounded size.
+    n = plan.n.astype(np.int64)
+    line_of = np.repeat(np.arange(n_lines, dtype=np.int64), n)
+    first = np.cumsum(n) - n
+    k = np.arange(line_of.size, dtype=np.int64) - first[line_of]
+    # Midpoint rule on integer ns, as SamplePlan.times_ns: sample k of n at start + (2k + 1) exposure / (2n).
+    times = plan.starts_ns[line_of] + ((2 * k + 1) * plan.exposure_ns) // (2 * n[line_of])
     painted = 0
-    for j in range(passes):
-        res = renderer.render_lines(plan.times_ns(j), by_column=by_column, linear=True)
-        lin = res.linear
-        assert lin is not None
-        painted += res.lines_painted
-        if acc is None:
-            # Each render returns fresh arrays, so the first pass's can be the accumulator.
-            acc = lin if lin.flags.writeable and lin.dtype == np.float32 else lin.astype(np.float32)
-            continue
-        # Add the lines that have a sample j, as slices over runs of consecutive lines (no temporaries).
-        take = np.concatenate(([False], plan.n > j, [False]))
-        edges = np.flatnonzero(take[1:] != take[:-1])
-        for a, b in zip(edges[0::2], edges[1::2], strict=True):
-            if by_column:
-                acc[:, a:b] += lin[:, a:b]
-            else:
-                acc[a:b] += lin[a:b]
-    assert acc is not None
-    if passes > 1:
-        inv = (1.0 / plan.n).astype(np.float32)
-        acc *= inv[None, :, None] if by_column else inv[:, None, None]
-    return Integrated(acc, plan.evaluations, painted, passes)
+    static = None
+    bounds = np.searchsorted(first, np.arange(0, line_of.size, max(int(batch_samples), 1)), side="right") - 1
+    cuts = np.unique(np.append(first[bounds], line_of.size))
+    for a, b in pairwise(cuts.tolist()):
+        static, got = renderer.accumulate_samples(times[a:b], line_of[a:b], acc, hits, by_column=by_column)
+        painted += got
+    _finish(acc, static if static is not None else np.empty((0, n_along, 3), np.float32), hits, n)
+    return Integrated(LinearFrame(static, acc, hits > 0, by_column), plan.evaluations, painted, passes)

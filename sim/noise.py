@@ -22,6 +22,11 @@ noise are drawn as one Gaussian of summed variance (the same distribution, one d
 ``SensorModel``'s own, else the sensor YAML's ``noise.flux_photons_per_s``); by default, linear 1.0 fills
 the full well at the 10 ms reference exposure and unity gain, so a sensor-path frame at default settings is
 as bright as the clean render.
+
+``SensorModel.expose`` takes the radiance as an array or as a ``LinearFrame`` (the renderer's static
+composite plus painted lines), read in place; the composite is passed through the colour filter once and
+kept, so a frame reads one value per static pixel. Each row's mean electrons are computed in straight
+loops and only the random draws run pixel by pixel; the output is the same, bit for bit, either way.
 """
 
 from __future__ import annotations
@@ -35,6 +40,7 @@ from numba import njit, prange
 
 from .errors import ConfigError
 from .hwconfig import NoiseParams
+from .render import LinearFrame
 
 STAGES = ("shot", "dark", "read", "dsnu", "prnu", "saturation", "quantization")
 """Switchable stages of the model (all on by default; ``NoiseParams.ideal`` turns the random ones off)."""
@@ -111,32 +117,118 @@ def _fixed_patterns(fp_key, oy, ox, array_w, prnu, dsnu_e, table, gain_map, off_
             off_map[y, x] = dsnu_e * _normal(hf & mask32, table)
 
 
+@njit(cache=True, inline="always")
+def _radiance(lin, ln, al, mono, ch):
+    """Radiance a pixel's filter passes: channel ``ch`` of its Bayer colour, or luma for a mono sensor."""
+    if mono:
+        return 0.2126 * lin[ln, al, 0] + 0.7152 * lin[ln, al, 1] + 0.0722 * lin[ln, al, 2]
+    return lin[ln, al, ch]
+
+
+@njit(cache=True, parallel=True)
+def _mosaic(lin, by_col, cfa, mono, out):
+    """out[y, x] = the radiance pixel (y, x)'s filter passes, from ``lin`` in render orientation."""
+    h, w = out.shape
+    for y in prange(h):
+        for x in range(w):
+            ln, al = np.int64(y), np.int64(x)
+            if by_col:
+                ln, al = np.int64(x), np.int64(y)
+            out[y, x] = _radiance(lin, ln, al, mono, cfa[y & 1, x & 1])
+
+
+@njit(cache=True)
+def _row_radiance(lin, y, mono, cfa, out):
+    """out[x] = filtered radiance of row ``y`` from ``lin`` in row orientation (even/odd columns apart)."""
+    w = out.shape[0]
+    if mono:
+        for x in range(w):
+            out[x] = 0.2126 * lin[y, x, 0] + 0.7152 * lin[y, x, 1] + 0.0722 * lin[y, x, 2]
+        return
+    for dx in range(2):
+        ch = cfa[y & 1, dx]
+        for x in range(dx, w, 2):
+            out[x] = lin[y, x, ch]
+
+
+@njit(cache=True)
+def _col_radiance(lin, y, mono, cfa, out, x_from_over, over_flag):
+    """Like ``_row_radiance`` for column-major ``lin`` (line = x), only where use_over[x] == over_flag."""
+    for x in range(out.shape[0]):
+        if x_from_over[x] == over_flag:
+            out[x] = _radiance(lin, np.int64(x), np.int64(y), mono, cfa[y & 1, x & 1])
+
+
 @njit(cache=True, parallel=True, fastmath=True)
-def _expose(lin, cfa, mono, flux_s, qe, dark_e, read_e, full_well, k_dn, black, max_dn, frame_key, oy, ox, array_w,
-            on, table, gain_map, off_map, out_int, out_f, quantize):
-    """The per-pixel model; ``on`` = flags (shot, dark, read, dsnu, prnu, saturation)."""
+def _expose(base, mos, over, use_over, by_col, cfa, mono, flux_s, qe, dark_e, read_e, full_well, k_dn, black, max_dn,
+            frame_key, oy, ox, array_w, on, table, gain_map, off_map, out_int, out_f, quantize):
+    """The per-pixel model; ``on`` = flags (shot, dark, read, dsnu, prnu, saturation).
+
+    Radiance of line ``ln`` (row, or column when ``by_col``; arrays in render orientation) is read from
+    ``over`` where ``use_over[ln]``, else from ``base``: a frame held as a static composite plus painted lines.
+    A non-empty ``mos`` is ``base`` already through the colour filter (``_mosaic``), read instead of it: one
+    value per pixel rather than three. Each row's mean electrons are computed first in straight (vectorised)
+    loops; only the random draws run pixel by pixel.
+    """
+    has_mos = mos.shape[0] > 0
     h, w = out_int.shape if quantize else out_f.shape
     shot, dark, read, dsnu_on, prnu_on, sat = on[0], on[1], on[2], on[3], on[4], on[5]
+    draw = shot or read  # the per-pixel hash feeds only the temporal draws
+    var_read = read_e * read_e if read else 0.0
     mask32 = np.uint64(0xFFFFFFFF)
-    for y in prange(h):
-        row_idx = np.uint64((y + oy) * array_w + ox)
-        for x in range(w):
-            if mono:
-                rad = 0.2126 * lin[y, x, 0] + 0.7152 * lin[y, x, 1] + 0.0722 * lin[y, x, 2]
+    n_chunks = min(h, 64)
+    for chunk in prange(n_chunks):
+        mu_row, off_row, e_row = np.empty(w), np.empty(w), np.empty(w)
+        ht_row = np.empty(w, np.uint64)
+        for y in range(chunk, h, n_chunks):
+            # Mean electrons of the row: filtered radiance, PRNU, dark current.
+            if by_col:
+                _col_radiance(over, y, mono, cfa, mu_row, use_over, True)
+                if has_mos:
+                    for x in range(w):
+                        if not use_over[x]:
+                            mu_row[x] = mos[y, x]
+                else:
+                    _col_radiance(base, y, mono, cfa, mu_row, use_over, False)
+            elif use_over[y]:
+                _row_radiance(over, y, mono, cfa, mu_row)
+            elif has_mos:
+                for x in range(w):
+                    mu_row[x] = mos[y, x]
             else:
-                rad = lin[y, x, cfa[y & 1, x & 1]]
-            mu = qe * max(rad, 0.0) * flux_s
-            pix = row_idx + np.uint64(x)
+                _row_radiance(base, y, mono, cfa, mu_row)
+            for x in range(w):
+                mu_row[x] = qe * max(mu_row[x], 0.0) * flux_s
             if prnu_on:
-                mu *= gain_map[y, x]
-            mu += dark_e if dark else 0.0
-            ht = _mix(frame_key + pix * _GOLD)
-            off = off_map[y, x] if dsnu_on else 0.0
-            var_read = read_e * read_e if read else 0.0
-            if shot and mu >= POISSON_EXACT_BELOW_E and (not sat or mu + off + 6.0 * math.sqrt(mu) < full_well):
-                # Far from both ends shot and read noise are one Gaussian of summed variance: one draw.
-                e = mu + off + math.sqrt(mu + var_read) * _normal(ht >> np.uint64(32), table)
+                for x in range(w):
+                    mu_row[x] *= gain_map[y, x]
+            if dark:
+                for x in range(w):
+                    mu_row[x] += dark_e
+            row_idx = np.uint64((y + oy) * array_w + ox)
+            # The common case first, for every pixel in straight loops: shot and read noise as one Gaussian
+            # of summed variance (exact where mu >= POISSON_EXACT_BELOW_E and 6 sigma below the full well).
+            if draw:
+                for x in range(w):
+                    ht_row[x] = _mix(frame_key + (row_idx + np.uint64(x)) * _GOLD)
             else:
+                ht_row[:] = 0
+            if dsnu_on:
+                for x in range(w):
+                    off_row[x] = off_map[y, x]
+            else:
+                off_row[:] = 0.0
+            if shot:
+                for x in range(w):
+                    mu = mu_row[x]
+                    e_row[x] = mu + off_row[x] + math.sqrt(max(mu, 0.0) + var_read) * _normal(
+                        ht_row[x] >> np.uint64(32), table)
+            # Then the pixels outside it, one by one (dark ones: exact Poisson; near the full well: clipped).
+            for x in range(w):
+                mu, off, ht = mu_row[x], off_row[x], ht_row[x]
+                room = full_well - mu - off  # mu + off + 6 sqrt(mu) < full_well, without the square root
+                if shot and mu >= POISSON_EXACT_BELOW_E and (not sat or (room > 0.0 and 36.0 * mu < room * room)):
+                    continue
                 if shot and mu < POISSON_EXACT_BELOW_E:
                     e = _poisson(max(mu, 0.0), float(np.int64(ht >> np.uint64(32))) * (1.0 / 4294967296.0))
                 elif shot:
@@ -148,12 +240,14 @@ def _expose(lin, cfa, mono, flux_s, qe, dark_e, read_e, full_well, k_dn, black, 
                     e = min(max(e, 0.0), full_well)
                 if read:
                     e += read_e * _normal(ht & mask32, table)
-            dn = e * k_dn + black
+                e_row[x] = e
             if quantize:
-                v = math.floor(dn + 0.5)
-                out_int[y, x] = np.uint16(min(max(v, 0.0), max_dn))
+                for x in range(w):
+                    # Round half up, then clip: on the clipped (non-negative) value truncation is the floor.
+                    out_int[y, x] = np.uint16(np.int64(min(max(e_row[x] * k_dn + black + 0.5, 0.0), max_dn)))
             else:
-                out_f[y, x] = dn
+                for x in range(w):
+                    out_f[y, x] = e_row[x] * k_dn + black
 
 
 def _key(*parts: object) -> np.uint64:
@@ -176,6 +270,7 @@ class SensorModel:
     stages: frozenset[str] = field(default_factory=lambda: frozenset(STAGES))
     flux_photons_per_s: float | None = None
     _patterns: dict = field(default_factory=dict, init=False, repr=False, compare=False)
+    _mosaics: dict = field(default_factory=dict, init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
         unknown = set(self.stages) - set(STAGES)
@@ -223,22 +318,53 @@ class SensorModel:
             cache[key] = (gain_map, off_map)
         return cache[key]
 
-    def expose(self, radiance: np.ndarray, exposure_ns: int, frame_index: int, *, analog_gain: float = 1.0,
-               digital_gain: float = 1.0, origin: tuple[int, int] = (0, 0), array_width: int | None = None
-               ) -> np.ndarray:
+    def _static_mosaic(self, static: np.ndarray, by_col: bool, cfa: np.ndarray) -> np.ndarray:
+        """The filtered radiance of a shared, read-only static composite, computed once and kept.
+
+        Keyed by the array that owns the composite's memory (held, so the key cannot be reused); a renderer
+        never writes its composite after building it. Colour keeps float32 (exact); mono luma is float64.
+        """
+        owner = static if static.base is None else static.base
+        key = (id(owner), static.shape, static.strides, by_col, self.cfa)
+        hit = self._mosaics.get(key)
+        if hit is not None and hit[0] is owner:
+            return hit[1]
+        h, w = static.shape[1::-1] if by_col else static.shape[:2]
+        mos = np.empty((h, w), np.float64 if self.cfa == "mono" else np.float32)
+        _mosaic(static, by_col, cfa, self.cfa == "mono", mos)
+        if len(self._mosaics) >= 2:  # a stream has one composite; keep a spare, not every one ever seen
+            self._mosaics.pop(next(iter(self._mosaics)))
+        self._mosaics[key] = (owner, mos)
+        return mos
+
+    def expose(self, radiance: np.ndarray | LinearFrame, exposure_ns: int, frame_index: int, *,
+               analog_gain: float = 1.0, digital_gain: float = 1.0, origin: tuple[int, int] = (0, 0),
+               array_width: int | None = None) -> np.ndarray:
         """Linear RGB radiance ``(H, W, 3)`` over ``exposure_ns`` -> ADC samples ``uint16 (H, W)``.
+
+        ``radiance`` may be a ``LinearFrame`` (static composite plus painted lines), read in place.
 
         With the 'quantization' stage off, returns float64 DN before rounding and clipping (for analysis).
         ``origin`` (top, left) and ``array_width`` place the image on the pixel array, for the fixed patterns.
         """
-        if radiance.ndim != 3 or radiance.shape[2] != 3:
-            raise ConfigError(f"radiance must be (H, W, 3), got shape {radiance.shape}")
+        if isinstance(radiance, LinearFrame):
+            over, by_col, use_over = radiance.lines, radiance.by_column, radiance.painted
+            base = radiance.static if radiance.static is not None else over
+            if base.shape != over.shape or use_over.shape != over.shape[:1] or over.dtype != np.float32:
+                raise ConfigError(f"inconsistent LinearFrame: static {base.shape}, lines {over.shape} {over.dtype}, "
+                                  f"painted {use_over.shape}")
+            h, w = over.shape[1::-1] if by_col else over.shape[:2]
+        else:
+            if radiance.ndim != 3 or radiance.shape[2] != 3:
+                raise ConfigError(f"radiance must be (H, W, 3), got shape {radiance.shape}")
+            base = over = np.ascontiguousarray(radiance, dtype=np.float32)
+            by_col, use_over = False, np.zeros(radiance.shape[0], np.bool_)
+            h, w = radiance.shape[:2]
         if not isinstance(exposure_ns, (int, np.integer)) or exposure_ns < 0:
             raise ConfigError(f"exposure must be a whole number of ns >= 0, got {exposure_ns!r}")
         for name, g in (("analog_gain", analog_gain), ("digital_gain", digital_gain)):
             if not math.isfinite(g) or g <= 0:
                 raise ConfigError(f"{name} must be a finite number > 0, got {g!r}")
-        h, w = radiance.shape[:2]
         t_s = int(exposure_ns) * 1e-9
         n = self.noise
         s = self.stages
@@ -249,9 +375,11 @@ class SensorModel:
         quantize = "quantization" in s
         out_i = np.empty((h, w) if quantize else (0, 0), np.uint16)
         out_f = np.empty((0, 0) if quantize else (h, w), np.float64)
-        lin = np.ascontiguousarray(radiance, dtype=np.float32)
         gain_map, off_map = self.fixed_patterns(h, w, origin, int(array_width or w))
-        _expose(lin, cfa, self.cfa == "mono", self.flux * t_s, n.quantum_efficiency,
+        mos = np.empty((0, 0), np.float32)
+        if isinstance(radiance, LinearFrame) and radiance.static is not None and not radiance.static.flags.writeable:
+            mos = self._static_mosaic(radiance.static, bool(by_col), cfa)
+        _expose(base, mos, over, use_over, bool(by_col), cfa, self.cfa == "mono", self.flux * t_s, n.quantum_efficiency,
                 n.dark_current_e_per_s * t_s, n.dark_noise_e, n.full_well_e,
                 self.system_gain(analog_gain, digital_gain), n.black_level_dn, float(self.max_dn),
                 _key("frame", self.seed, int(frame_index)), int(origin[0]), int(origin[1]), int(array_width or w),

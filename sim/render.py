@@ -10,6 +10,10 @@ Work the scene does not need is skipped: the static world (and any actor that do
 once and cached; lines no moving actor touches at their own time are copied from that cache; each actor's
 pose is evaluated once per distinct time it is needed at, so a static scene costs one render and a GS frame
 one pose per actor.
+
+``render_linear`` is the sensor path's call: linear radiance only (no 8-bit image), of a chosen subset of
+lines, returned as a ``LinearFrame`` (the cached static composite, shared, plus the painted lines in a
+reusable buffer) or accumulated into one for exposure integration. Painted lines equal ``render_lines``'s.
 """
 
 from __future__ import annotations
@@ -90,6 +94,33 @@ class RenderResult:
     linear: np.ndarray | None
     truth: LineTruth
     lines_painted: int = 0  # lines rendered rather than copied from the static cache
+    radiance: LinearFrame | None = None  # render_linear's result (image and linear are then empty/None)
+
+
+@dataclass
+class LinearFrame:
+    """Linear RGB radiance of a frame, held as the renderer's static composite plus the lines painted over it.
+
+    ``static`` and ``lines`` are float32 ``(lines, pixels per line, 3)`` in render orientation (rows, or
+    columns when ``by_column``); line i of the frame is ``lines[i]`` where ``painted[i]``, else ``static[i]``.
+    ``static`` is the renderer's cache, shared and never written (None for a moving camera, when every line is
+    painted). This lets the sensor path read untouched lines in place instead of copying 25 MB per frame.
+    """
+
+    static: np.ndarray | None
+    lines: np.ndarray
+    painted: np.ndarray  # (lines,) bool
+    by_column: bool = False
+
+    def full(self) -> np.ndarray:
+        """The whole frame as one fresh float32 ``(H, W, 3)`` array in image orientation."""
+        if self.static is None:
+            out = self.lines.copy()
+        else:
+            out = self.static.copy()
+            idx = np.flatnonzero(self.painted)
+            out[idx] = self.lines[idx]
+        return out.transpose(1, 0, 2) if self.by_column else out
 
 
 class _Layer:
@@ -148,6 +179,60 @@ class Renderer:
         res = self._render(cam, times_s, line_k.astype(np.int64), n_lines, n_along, layer, linear, truth_only,
                            include=np.ones(self.n_actors, np.bool_), force_paint=False)
         return res
+
+    def render_linear(
+        self,
+        times_ns: np.ndarray,
+        *,
+        by_column: bool = False,
+        lines: np.ndarray | None = None,
+        out: np.ndarray | None = None,
+        hits: np.ndarray | None = None,
+    ) -> RenderResult:
+        """Linear radiance only, of the ``lines`` asked for (bool mask or indices; all when None).
+
+        No 8-bit image and no copy of the static composite: the result's ``radiance`` (a ``LinearFrame``)
+        holds the painted lines in ``out`` (a reusable float32 buffer in render orientation, or a fresh one)
+        and points at the cached composite for the rest. Lines not asked for are neither painted nor valid.
+        Painted lines equal ``render_lines(..., linear=True)``'s exactly, and so does ``truth`` on the lines
+        asked for (other lines hold the static composite's truth).
+
+        With ``hits`` (int64, one count per line) ``out`` accumulates instead, for exposure integration:
+        ``hits`` counts each line's painted renders and ``out`` holds the sum of (painted line - composite)
+        over them (zeroed on a line's first hit; only pixels under actors are touched after), or for a
+        moving camera (``radiance.static`` None) the sum of the painted lines.
+        """
+        n_lines, n_along = self._shape(by_column)
+        times_ns = self._check_times(times_ns, by_column)
+        subset = np.ones(n_lines, np.bool_)
+        if lines is not None:
+            lines = np.asarray(lines)
+            if lines.dtype == np.bool_:
+                if lines.shape != (n_lines,):
+                    raise ConfigError(f"line mask must have {n_lines} entries, got shape {lines.shape}")
+                subset = lines
+            else:
+                if lines.size and (lines.min() < 0 or lines.max() >= n_lines):
+                    raise ConfigError(f"line indices must be in 0..{n_lines - 1}")
+                subset = np.zeros(n_lines, np.bool_)
+                subset[lines.astype(np.int64)] = True
+        if out is None:
+            out = np.empty((n_lines, n_along, 3), np.float32)
+        elif out.shape != (n_lines, n_along, 3) or out.dtype != np.float32 or not out.flags.c_contiguous:
+            raise ConfigError(f"out must be a C-contiguous float32 array of shape {(n_lines, n_along, 3)}, "
+                              f"got {out.dtype} {out.shape}")
+        if hits is not None and (hits.shape != (n_lines,) or hits.dtype != np.int64):
+            raise ConfigError(f"hits must be an int64 array of {n_lines} counts, got {hits.dtype} {hits.shape}")
+        # Only the asked-for lines' times are posed and bounded (a pass of an exposure needs few lines).
+        sub_idx = np.flatnonzero(subset)
+        ut_ns, sub_k = np.unique(times_ns[sub_idx] if sub_idx.size else times_ns[:1], return_inverse=True)
+        line_k = np.zeros(n_lines, np.int64)
+        line_k[sub_idx] = sub_k
+        times_s = ut_ns.astype(np.float64) * 1e-9
+        layer = self._layer(by_column, float(times_ns.min()) * 1e-9)
+        return self._render(self._cams[by_column], times_s, line_k, n_lines, n_along, layer, True,
+                            False, include=np.ones(self.n_actors, np.bool_), force_paint=False, subset=subset,
+                            into=out, hits=hits)
 
     def reference_frame(self, t_ns: int, *, by_column: bool = False) -> RenderResult:
         """One full render with every line at ``t_ns`` and no shortcuts: every line painted over the bare
@@ -228,8 +313,11 @@ class Renderer:
         return self._parts[:n_slots]
 
     def _touch(self, cam, times_s, rot_tab, pos_tab, k_line, moving, include, n_lines, n_along,
-               obj_line_k) -> None:
+               obj_line_k, only=None, line_of=None) -> None:
         """Fill ``obj_line_k[o, line]`` with actor o's time slot on each line its bounds reach.
+
+        ``only`` (line indices) limits the lines looked at; the others keep -1. With ``line_of`` the columns
+        are samples, column e on line ``line_of[e]``.
 
         The bounds are conservative boxes over groups of consecutive times (one group per time when the
         camera moves, since each time then has its own pose); a static actor needs only its one time.
@@ -246,11 +334,99 @@ class Renderer:
         bounds = np.empty((n_obj, n_g, 4))
         K.actor_bounds_all(c.actors, c.world, cam, rot_tab, pos_tab, times_s[k_first], k_first,
                            times_s[k_last] - times_s[k_first], need, bounds)
-        centre = np.arange(n_lines) + 0.5
-        for o in np.flatnonzero(include):
-            b = bounds[o, group_of_k[k_line[o]]]
-            touch = (b[:, 0] <= centre) & (centre <= b[:, 1]) & (b[:, 2] < n_along) & (b[:, 3] > 0)
-            obj_line_k[o, touch] = k_line[o, touch]
+        idx = np.arange(n_lines) if only is None else only
+        centre = (idx if line_of is None else line_of[idx]) + 0.5
+        objs = np.flatnonzero(include)
+        # All included actors at once (one pass of an exposure is called often: Python loops add up).
+        k = k_line[objs[:, None], idx[None, :]]
+        b = bounds[objs[:, None], group_of_k[k]]
+        touch = (b[..., 0] <= centre) & (centre <= b[..., 1]) & (b[..., 2] < n_along) & (b[..., 3] > 0)
+        t_o, t_l = np.nonzero(touch)
+        obj_line_k[objs[t_o], idx[t_l]] = k[t_o, t_l]
+
+    def _shared_parts(self, cam, times_s, rot_tab, pos_tab, obj_line_k) -> tuple[np.ndarray, np.ndarray]:
+        """Slot table and parts table of a render.
+
+        Parts of an actor at an instant that several lines share (GS, bands, static actors) are computed once
+        into a table; those only one line needs (RS) are computed on that line, in cache (``SLOT_LOCAL``).
+        """
+        c = self._c
+        o_idx, l_idx = np.nonzero(obj_line_k >= 0)
+        uses = np.zeros((self.n_actors, times_s.shape[0]), np.int64)
+        np.add.at(uses, (o_idx, obj_line_k[o_idx, l_idx]), 1)
+        slots = np.where(uses == 1, K.SLOT_LOCAL, K.SLOT_NONE)
+        s_o, s_k = np.nonzero(uses > 1)
+        slots[s_o, s_k] = np.arange(s_o.size)
+        parts = self._parts_buffer(max(s_o.size, 1))
+        if s_o.size:
+            K.actor_parts_all(c.actors, c.world, c.building_lut, c.buildings, c.light, cam, rot_tab, pos_tab,
+                              times_s, s_o, s_k, parts)
+        return slots, parts
+
+    def accumulate_samples(self, times_ns: np.ndarray, line_of: np.ndarray, out: np.ndarray, hits: np.ndarray,
+                           *, by_column: bool = False) -> tuple[np.ndarray | None, int]:
+        """Render many (line, time) samples in one go and accumulate them, as ``render_linear(hits=...)`` does.
+
+        Sample e is line ``line_of[e]`` (non-decreasing: a line's samples together) at ``times_ns[e]``. Each
+        painted sample is added to ``out`` (render orientation) as its difference from the static composite
+        (or whole, for a moving camera) and counted in ``hits``; samples no actor pixel lands on are the
+        composite and skipped. One call instead of one per sample index saves the per-call set-up that
+        dominates many-pass exposures. Returns the shared composite (None for a moving camera) and the
+        number of samples painted. Ground truth is not produced.
+        """
+        n_lines, n_along = self._shape(by_column)
+        times_ns = np.asarray(times_ns, np.int64)
+        line_of = np.asarray(line_of, np.int64)
+        n_ent = times_ns.shape[0]
+        if line_of.shape != (n_ent,) or (n_ent and (line_of[0] < 0 or line_of[-1] >= n_lines
+                                                    or (np.diff(line_of) < 0).any())):
+            raise ConfigError(f"line_of must hold one non-decreasing line index in 0..{n_lines - 1} per sample")
+        if out.shape != (n_lines, n_along, 3) or out.dtype != np.float32 or not out.flags.c_contiguous:
+            raise ConfigError(f"out must be a C-contiguous float32 array of shape {(n_lines, n_along, 3)}, "
+                              f"got {out.dtype} {out.shape}")
+        if hits.shape != (n_lines,) or hits.dtype != np.int64:
+            raise ConfigError(f"hits must be an int64 array of {n_lines} counts, got {hits.dtype} {hits.shape}")
+        layer = self._layer(by_column, float(times_ns.min()) * 1e-9 if n_ent else 0.0)
+        shared = None
+        if not self.camera_moving:
+            assert layer.comp_lin is not None
+            shared = layer.comp_lin.view()
+            shared.flags.writeable = False
+        if n_ent == 0:
+            return shared, 0
+        c, cam, n_obj = self._c, self._cams[by_column], self.n_actors
+        ut_ns, ent_k = np.unique(times_ns, return_inverse=True)
+        ent_k = ent_k.astype(np.int64)
+        times_s = ut_ns.astype(np.float64) * 1e-9
+        n_t = times_s.shape[0]
+        static = c.actors[:, B.A_STATIC] != 0.0 if n_obj else np.zeros(0, np.bool_)
+        if self.camera_moving:
+            static = np.zeros_like(static)
+        k_line = np.where(static[:, None], 0, ent_k[None, :]) if n_obj else np.zeros((0, n_ent), np.int64)
+        rot_tab, pos_tab = np.empty((n_t, 3, 3)), np.empty((n_t, 3))
+        Wd.pose_table(cam, times_s, rot_tab, pos_tab)
+        include = np.ones(n_obj, np.bool_)
+        obj_line_k = np.full((n_obj, n_ent), -1, np.int64)
+        self._touch(cam, times_s, rot_tab, pos_tab, k_line, ~static, include, n_ent, n_along, obj_line_k,
+                    line_of=line_of)
+        slots, parts = self._shared_parts(cam, times_s, rot_tab, pos_tab, obj_line_k)
+        if self.camera_moving:
+            ents = np.arange(n_ent)
+            seed = np.empty((0, 0, 3), np.float32)
+        else:
+            ents = np.flatnonzero((obj_line_k[~static] >= 0).any(axis=0))
+            seed = layer.comp_lin
+        lines, first = np.unique(line_of[ents], return_index=True)
+        e_start = np.append(first, ents.size).astype(np.int64)
+        gt = LineTruth.empty(n_obj, n_lines, cam[Wd.C_TRANSPOSED] != 0.0)  # scratch for the kernel
+        bg = layer.bg_lin if layer.bg_lin is not None else np.empty((0, 0, 3), np.float32)
+        before = int(hits.sum())
+        K.render_lines_kernel(c.world, c.building_lut, c.buildings, c.light, cam, rot_tab, pos_tab, c.actors, times_s,
+                              ent_k, obj_line_k, slots, parts, include, lines.astype(np.int64), e_start, ents,
+                              n_along, bg, np.empty((0, n_along, 3), np.uint8), out, self.gain, _SRGB, gt.left,
+                              gt.right, gt.area, gt.visible, False, self.camera_moving, seed, hits,
+                              np.zeros(0, np.bool_))
+        return shared, int(hits.sum()) - before
 
     def _layer(self, by_column: bool, t0_s: float) -> _Layer:
         """Static layers for this orientation, built on first use (nothing to cache for a moving camera)."""
@@ -279,7 +455,8 @@ class Renderer:
         return layer
 
     def _render(self, cam, times_s, line_k, n_lines, n_along, layer: _Layer, linear, truth_only, include,
-                force_paint, exhaustive=False) -> RenderResult:
+                force_paint, exhaustive=False, subset=None, into=None, hits=None) -> RenderResult:
+        """Paint a frame; with ``into`` (render_linear), only the ``subset`` lines, linear only, into it."""
         c = self._c
         n_obj, n_t = self.n_actors, times_s.shape[0]
         static = c.actors[:, B.A_STATIC] != 0.0 if n_obj else np.zeros(0, np.bool_)
@@ -294,23 +471,27 @@ class Renderer:
         if exhaustive:  # the oracle: every included actor is tried on every line
             obj_line_k[include] = k_line[include]
         else:
+            # Lines not asked for are not looked at: no parts or truth work for them.
             self._touch(cam, times_s, rot_tab, pos_tab, k_line, include & ~static, include, n_lines, n_along,
-                        obj_line_k)
-        # Parts of an actor at an instant that several lines share (GS, bands, static actors) are computed
-        # once into a table; those only one line needs (RS) are computed on that line, in cache.
-        o_idx, l_idx = np.nonzero(obj_line_k >= 0)
-        uses = np.zeros((n_obj, n_t), np.int64)
-        np.add.at(uses, (o_idx, obj_line_k[o_idx, l_idx]), 1)
-        slots = np.where(uses == 1, K.SLOT_LOCAL, K.SLOT_NONE)
-        s_o, s_k = np.nonzero(uses > 1)
-        slots[s_o, s_k] = np.arange(s_o.size)
-        parts = self._parts_buffer(max(s_o.size, 1))
-        if s_o.size:
-            K.actor_parts_all(c.actors, c.world, c.building_lut, c.buildings, c.light, cam, rot_tab, pos_tab,
-                              times_s, s_o, s_k, parts)
+                        obj_line_k, None if subset is None else np.flatnonzero(subset))
+        slots, parts = self._shared_parts(cam, times_s, rot_tab, pos_tab, obj_line_k)
         gt = LineTruth.empty(n_obj, n_lines, cam[Wd.C_TRANSPOSED] != 0.0)
         full_lines = force_paint or self.camera_moving
-        if full_lines:
+        seed = np.empty((0, 0, 3), np.float32)
+        if into is not None:
+            # Linear-only subset render: paint the asked-for lines a moving actor touches (all of them for a
+            # moving camera) into the buffer, each seeded from the composite in the kernel; no 8-bit image.
+            out_u8, out_lin = np.empty((0, n_along, 3), np.uint8), into
+            if full_lines:
+                lines = np.flatnonzero(subset)
+            else:
+                assert layer.comp_gt is not None and layer.comp_lin is not None
+                moving = include & ~static
+                lines = np.flatnonzero((obj_line_k[moving] >= 0).any(axis=0) & subset)
+                seed = layer.comp_lin
+                gt.left[:], gt.right[:] = layer.comp_gt[0], layer.comp_gt[1]
+                gt.area[:], gt.visible[:] = layer.comp_gt[2], layer.comp_gt[3]
+        elif full_lines:
             lines = np.arange(n_lines)
             out_u8 = np.empty((n_lines, n_along, 3), np.uint8)
             out_lin = np.empty((n_lines, n_along, 3) if linear else (0, 0, 3), np.float32)
@@ -324,9 +505,19 @@ class Renderer:
             gt.left[:], gt.right[:] = layer.comp_gt[0], layer.comp_gt[1]
             gt.area[:], gt.visible[:] = layer.comp_gt[2], layer.comp_gt[3]
         bg = layer.bg_lin if layer.bg_lin is not None else np.empty((0, 0, 3), np.float32)
+        painted = np.zeros(n_lines if into is not None else 0, np.bool_)
         K.render_lines_kernel(c.world, c.building_lut, c.buildings, c.light, cam, rot_tab, pos_tab, c.actors, times_s,
-                              line_k, obj_line_k, slots, parts, include, lines, n_along, bg, out_u8, out_lin,
-                              self.gain, _SRGB, gt.left, gt.right, gt.area, gt.visible, truth_only, full_lines)
+                              line_k, obj_line_k, slots, parts, include, lines, np.arange(lines.size + 1), lines,
+                              n_along, bg, out_u8, out_lin,
+                              self.gain, _SRGB, gt.left, gt.right, gt.area, gt.visible, truth_only, full_lines, seed,
+                              hits if hits is not None else np.empty(0, np.int64), painted)
+        if into is not None:
+            shared = None
+            if not full_lines:
+                shared = seed.view()
+                shared.flags.writeable = False  # the renderer's cache: readers must not write through it
+            frame = LinearFrame(shared, into, painted, bool(cam[Wd.C_TRANSPOSED] != 0.0))
+            return RenderResult(np.empty((0, 0, 3), np.uint8), None, gt, int(painted.sum()), frame)
         if truth_only:
             return RenderResult(np.empty((0, 0, 3), np.uint8), None, gt, int(lines.size))
         image = out_u8.transpose(1, 0, 2) if cam[Wd.C_TRANSPOSED] != 0.0 else out_u8

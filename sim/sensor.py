@@ -18,6 +18,7 @@ from .formats import FORMATS, PixelFormat, encode_raw, pixel_format
 from .hwconfig import SensorConfig
 from .isp import IspParams, preview, to_processed
 from .noise import STAGES, SensorModel, split_gain
+from .render import LinearFrame
 
 
 @dataclass(frozen=True)
@@ -72,7 +73,7 @@ class SensorPipeline:
         """True when frames are the ADC output (no ISP)."""
         return pixel_format(self.fourcc).is_raw
 
-    def samples(self, radiance: np.ndarray, exposure_ns: int, frame_index: int) -> np.ndarray:
+    def samples(self, radiance: np.ndarray | LinearFrame, exposure_ns: int, frame_index: int) -> np.ndarray:
         """ADC samples ``uint16 (H, W)`` of one exposed frame, in output orientation (flips applied).
 
         ``radiance`` is in scene orientation; the array (its CFA and fixed patterns) is exposed as it sits and
@@ -82,7 +83,7 @@ class SensorPipeline:
                                digital_gain=self.digital_gain, origin=self.origin, array_width=self.array_width)
         return np.ascontiguousarray(flip(dn, self.hflip, self.vflip))
 
-    def deliver(self, radiance: np.ndarray, exposure_ns: int, frame_index: int) -> np.ndarray:
+    def deliver(self, radiance: np.ndarray | LinearFrame, exposure_ns: int, frame_index: int) -> np.ndarray:
         """Frame data in ``fourcc``'s layout (see ``rollcam.sim.formats``)."""
         dn = self.samples(radiance, exposure_ns, frame_index)
         if self.raw:

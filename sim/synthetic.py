@@ -184,6 +184,9 @@ class SyntheticCamera:
             raise ConfigError(f"pixel format {pixel_format!r} needs the sensor model (physics on)")
         self.blur_px = blur_px or None
         self.pipeline: SensorPipeline | None = None
+        # Radiance scratch of the sensor path, reused frame to frame: each frame is delivered (copied into its
+        # fourcc layout) before the next render, and a reused buffer's pages are already mapped.
+        self._radiance_buf: np.ndarray | None = None
         if self.physics:
             self.pipeline = SensorPipeline.for_sensor(sensor, self.pixel_format, gain=s.gain, serial=serial,
                                                       seed=noise_seed, stages=noise, origin=(crop.top, crop.left),
@@ -266,13 +269,17 @@ class SyntheticCamera:
         by_col = s.readout.by_column
         starts = mid_times - s.exposure_ns // 2
         extra: dict = pipe.info()
+        n_lines, n_along = (s.width, s.height) if by_col else (s.height, s.width)
+        if self._radiance_buf is None or self._radiance_buf.shape[:2] != (n_lines, n_along):
+            self._radiance_buf = np.empty((n_lines, n_along, 3), np.float32)
         if self.blur_px is None:
-            res = self.renderer.render_lines(mid_times, by_column=by_col, linear=True)
-            radiance = res.linear
+            # Linear only, static lines read in place from the renderer's cache (no frame-sized copies).
+            res = self.renderer.render_linear(mid_times, by_column=by_col, out=self._radiance_buf)
+            radiance = res.radiance
             extra["blur_samples_max"] = 1
         else:
             plan = plan_samples(self.renderer, starts, s.exposure_ns, by_column=by_col, bound_px=self.blur_px)
-            radiance = integrate(self.renderer, plan, by_column=by_col).linear
+            radiance = integrate(self.renderer, plan, by_column=by_col, out=self._radiance_buf).radiance
             res = self.renderer.render_lines(mid_times, by_column=by_col, truth_only=True)
             extra.update(blur_bound_px=self.blur_px, blur_samples_max=int(plan.n.max()),
                          blur_evaluations=plan.evaluations, blur_capped=plan.capped)

@@ -1,0 +1,204 @@
+"""The fast sensor path against the plain one: subset/linear-only renders, pass-skipping integration, in-place
+exposure of a composite-plus-lines frame. Each must equal (or, for float sums, match) the straightforward way."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from rollcam.sim.errors import ConfigError
+from rollcam.sim.exposure import SamplePlan, integrate, plan_samples
+from rollcam.sim.hwconfig import load_sensor
+from rollcam.sim.noise import SensorModel
+from rollcam.sim.render import LinearFrame, Renderer
+from rollcam.sim.scenegen import ego_preset, make_chart_scene, make_street_scene
+from rollcam.sim.synthetic import SyntheticCamera
+from rollcam.sim.timing import LineTiming, Readout, line_sample_times_ns
+
+TIMING = LineTiming(64_800_000, 2000, 1080)
+CASES = [  # (scene seed, speed, ego, readout)
+    (1, "fast", "none", "top_to_bottom"),
+    (2, "normal", "none", "left_to_right"),
+    (3, "fast", "pan", "top_to_bottom"),
+    (4, 50.0, "none", "bottom_to_top"),
+]
+
+
+def _renderer(seed, speed, ego) -> Renderer:
+    scene = make_street_scene(seed, speed=speed, width=96, height=54, ego=ego_preset(ego), n_pedestrians=12)
+    return Renderer(scene, 0)
+
+
+def _times(n: int, readout: str, t0: int = 40_000_000) -> np.ndarray:
+    return line_sample_times_ns(t0, n, TIMING, readout)
+
+
+@pytest.mark.parametrize(("seed", "speed", "ego", "readout"), CASES)
+def test_render_linear_equals_render_lines(seed, speed, ego, readout):
+    r = _renderer(seed, speed, ego)
+    by_col = Readout(readout).by_column
+    n = 96 if by_col else 54
+    times = _times(n, readout)
+    full = r.render_lines(times, by_column=by_col, linear=True)
+    fast = r.render_linear(times, by_column=by_col)
+    frame = fast.radiance
+    assert frame is not None and fast.image.size == 0
+    np.testing.assert_array_equal(frame.full(), full.linear)
+    for name in ("left", "right", "area", "visible"):
+        np.testing.assert_array_equal(getattr(fast.truth, name), getattr(full.truth, name))
+    if ego == "none":
+        assert frame.static is not None and not frame.static.flags.writeable
+        # Lines the culling visits but no actor pixel lands on are left as the composite, not rewritten.
+        assert fast.lines_painted == int(frame.painted.sum()) <= full.lines_painted
+    else:
+        assert frame.static is None and frame.painted.all()
+
+
+@pytest.mark.parametrize(("seed", "speed", "ego", "readout"), CASES)
+def test_render_linear_subset_paints_only_those_lines(seed, speed, ego, readout):
+    r = _renderer(seed, speed, ego)
+    by_col = Readout(readout).by_column
+    n = 96 if by_col else 54
+    times = _times(n, readout)
+    ref = r.render_lines(times, by_column=by_col, linear=True).linear
+    ref_lines = ref.transpose(1, 0, 2) if by_col else ref
+    want = np.zeros(n, np.bool_)
+    want[n // 4: 3 * n // 4] = True
+    buf = np.full((n, 54 if by_col else 96, 3), np.nan, np.float32)
+    for lines in (want, np.flatnonzero(want)):
+        buf[:] = np.nan
+        frame = r.render_linear(times, by_column=by_col, lines=lines, out=buf).radiance
+        assert frame is not None and frame.lines is buf
+        assert not (frame.painted & ~want).any()
+        assert np.isnan(buf[~frame.painted]).all()  # untouched lines of the buffer are never written
+        got = np.where(frame.painted[:, None, None], buf, frame.static if frame.static is not None else buf)
+        np.testing.assert_array_equal(got[want], ref_lines[want])
+
+
+def test_render_linear_rejects_bad_buffers_and_lines():
+    r = _renderer(0, "fast", "none")
+    times = _times(54, "top_to_bottom")
+    with pytest.raises(ConfigError, match="out must be"):
+        r.render_linear(times, out=np.empty((54, 96, 3), np.float64))
+    with pytest.raises(ConfigError, match="line mask"):
+        r.render_linear(times, lines=np.ones(10, np.bool_))
+    with pytest.raises(ConfigError, match="line indices"):
+        r.render_linear(times, lines=np.array([54]))
+
+
+def _dense_every_line(r: Renderer, plan: SamplePlan, by_col: bool) -> np.ndarray:
+    """The plain integration: every line rendered whole at every pass, float64 mean over each line's samples."""
+    acc = None
+    for j in range(int(plan.n.max())):
+        lin = r.render_lines(plan.times_ns(j), by_column=by_col, linear=True).linear.astype(np.float64)
+        lin = lin.transpose(1, 0, 2) if by_col else lin
+        take = (plan.n > j)[:, None, None]
+        acc = np.where(take, lin, 0.0) if acc is None else acc + np.where(take, lin, 0.0)
+    acc /= plan.n[:, None, None]
+    return acc.transpose(1, 0, 2) if by_col else acc
+
+
+@pytest.mark.parametrize(("seed", "speed", "ego", "readout"), CASES)
+def test_integrate_matches_rendering_every_line_every_pass(seed, speed, ego, readout):
+    r = _renderer(seed, speed, ego)
+    by_col = Readout(readout).by_column
+    n = 96 if by_col else 54
+    exposure = 20_000_000
+    plan = plan_samples(r, _times(n, readout) - exposure // 2, exposure, by_column=by_col, bound_px=0.1)
+    assert plan.n.max() > 1
+    got = integrate(r, plan, by_column=by_col)
+    ref = _dense_every_line(r, plan, by_col)
+    np.testing.assert_allclose(got.linear, ref, rtol=2e-6 * plan.n.max(), atol=1e-6)
+    # Lines no sample painted are the static composite itself, bit for bit.
+    frame = got.radiance
+    if frame.static is not None:
+        static_lines = ~frame.painted
+        full = got.linear.transpose(1, 0, 2) if by_col else got.linear
+        np.testing.assert_array_equal(full[static_lines], frame.static[static_lines])
+    assert got.lines_painted <= plan.evaluations
+
+
+def test_integrate_pass_j_paints_only_lines_with_sample_j():
+    scene = make_chart_scene(0, vx_px_s=3000.0, width=64, height=40)
+    r = Renderer(scene, 0)
+    starts = _times(40, "top_to_bottom")
+    n = np.where(np.arange(40) < 10, 6, 1).astype(np.int64)  # a quarter of the lines need 6 samples
+    plan = SamplePlan(starts, 2_000_000, n, np.zeros(40), False)
+    got = integrate(r, plan)
+    assert got.passes == 6 and got.evaluations == 10 * 6 + 30
+    assert got.lines_painted <= 40 + 10 * 5  # pass 0 may paint every line, passes 1..5 only the first ten
+
+
+@pytest.mark.parametrize("cfa", ["RGGB", "GBRG", "mono"])
+@pytest.mark.parametrize("by_col", [False, True])
+def test_expose_reads_a_linear_frame_in_place_exactly(cfa, by_col):
+    rng = np.random.default_rng(5)
+    n_lines, n_along = (12, 10) if by_col else (10, 12)
+    static = rng.uniform(0, 1, (n_lines, n_along, 3)).astype(np.float32)
+    lines = rng.uniform(0, 1, (n_lines, n_along, 3)).astype(np.float32)
+    painted = rng.uniform(size=n_lines) < 0.5
+    frame = LinearFrame(static, lines, painted, by_col)
+    model = SensorModel(load_sensor("imx219").noise, 10, cfa, serial="7", seed=3)
+    a = model.expose(frame, 10_000_000, 4, origin=(2, 6), array_width=64)
+    b = model.expose(frame.full(), 10_000_000, 4, origin=(2, 6), array_width=64)
+    assert a.shape == (10, 12)
+    np.testing.assert_array_equal(a, b)
+
+
+def test_raw_stream_frames_equal_the_full_frame_path():
+    """A raw stream (blur on and off) delivers what exposing the whole integrated frame would."""
+    sensor = load_sensor("imx219")
+    scene = make_street_scene(3, speed="fast", width=96, height=54, n_pedestrians=12)
+    for blur in (0.5, None):
+        cam = SyntheticCamera(sensor, scene, size=(96, 54), pixel_format="RG10", blur_px=blur)
+        s, pipe = cam.settings, cam.pipeline
+        mid = cam.line_times_ns(2)
+        if blur is None:
+            lin = cam.renderer.render_lines(mid, linear=True).linear
+        else:
+            plan = plan_samples(cam.renderer, mid - s.exposure_ns // 2, s.exposure_ns, bound_px=blur)
+            lin = integrate(cam.renderer, plan).linear
+        first = cam.frame(2).data
+        np.testing.assert_array_equal(first, pipe.deliver(lin, s.exposure_ns, 2))
+        cam.frame(5)  # the stream reuses its radiance buffer: nothing of frame 5 may leak into frame 2
+        np.testing.assert_array_equal(cam.frame(2).data, first)
+
+
+@pytest.mark.parametrize("ego", ["none", "pan"])
+def test_render_linear_accumulates_with_hits(ego):
+    r = _renderer(1, "fast", ego)
+    times = _times(54, "top_to_bottom")
+    one = r.render_linear(times).radiance
+    acc, hits = np.empty((54, 96, 3), np.float32), np.zeros(54, np.int64)
+    for _ in range(3):
+        got = r.render_linear(times, out=acc, hits=hits).radiance
+    assert got is not None and one is not None
+    np.testing.assert_array_equal(hits, 3 * one.painted)
+    p = one.painted
+    # Over a composite the accumulator holds the summed difference from it; without one, the plain sum.
+    want = 3 * (one.lines[p] - one.static[p]) if one.static is not None else 3 * one.lines[p]
+    np.testing.assert_allclose(acc[p], want, rtol=1e-6, atol=1e-6)
+    with pytest.raises(ConfigError, match="hits must be"):
+        r.render_linear(times, out=acc, hits=np.zeros(54, np.int32))
+
+
+def test_integrate_batches_do_not_change_the_result():
+    r = _renderer(4, 50.0, "none")
+    exposure = 20_000_000
+    plan = plan_samples(r, _times(54, "top_to_bottom") - exposure // 2, exposure, bound_px=0.1)
+    whole = integrate(r, plan)
+    for batch in (1, 7, 100):
+        got = integrate(r, plan, batch_samples=batch)
+        np.testing.assert_array_equal(got.linear, whole.linear)
+        assert got.lines_painted == whole.lines_painted
+
+
+def test_accumulate_samples_checks_its_inputs():
+    r = _renderer(0, "fast", "none")
+    acc, hits = np.empty((54, 96, 3), np.float32), np.zeros(54, np.int64)
+    t = np.full(3, 40_000_000, np.int64)
+    with pytest.raises(ConfigError, match="non-decreasing"):
+        r.accumulate_samples(t, np.array([2, 1, 3]), acc, hits)
+    with pytest.raises(ConfigError, match="non-decreasing"):
+        r.accumulate_samples(t, np.array([0, 1, 54]), acc, hits)
+    with pytest.raises(ConfigError, match="hits must be"):
+        r.accumulate_samples(t, np.array([0, 1, 2]), acc, np.zeros(53, np.int64))
