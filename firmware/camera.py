@@ -266,6 +266,17 @@ class FirmwareCamera:
         n_lines = s.mode.width if self.sensor.readout.by_column else s.mode.height
         return FrameSchedule(s.timing, epoch_ns, first_seq, exposure_ns, n_lines, s.shutter == "rolling")
 
+    def current_schedule(self) -> FrameSchedule | None:
+        """The schedule frames follow from the next one on (timing changes included), or None when idle."""
+        with self.lock:
+            if not self.state.streaming or self._schedule is None:
+                return None
+            sched = self._schedule
+            fresh = self._new_schedule(sched.start_ns(self._next_seq), self._next_seq)
+            if (fresh.timing, fresh.exposure_ns, fresh.rolling) != (sched.timing, sched.exposure_ns, sched.rolling):
+                sched = self._schedule = fresh
+            return sched
+
     def plan_next(self, now_ns: int | None = None) -> FramePlan | None:
         """The next frame to make, or None (not streaming, or waiting for a trigger).
 
@@ -281,11 +292,8 @@ class FirmwareCamera:
                     return None
                 sched = self._new_schedule(self._triggers.popleft(), seq)
             else:
-                sched = self._schedule
-                fresh = self._new_schedule(sched.start_ns(seq), seq)
-                if (fresh.timing, fresh.exposure_ns, fresh.rolling) != (sched.timing, sched.exposure_ns,
-                                                                       sched.rolling):
-                    sched = self._schedule = fresh
+                sched = self.current_schedule()
+                assert sched is not None
                 if now_ns is not None:
                     while sched.frame_due_ns(seq) < now_ns:
                         seq += 1

@@ -2,9 +2,11 @@
 
 One FirmwareCamera (``rollcam.firmware``) is streamed in real time by one FramePump and offered on every
 transport asked for: ``--http HOST:PORT`` (MJPEG for ``cv2.VideoCapture``, browsers, ffmpeg) and
-``--serial`` (the control protocol on a pseudo-terminal). With no transport option, HTTP on
-127.0.0.1:8080. A transport is one entry of ``TRANSPORTS``: its option and a starter that returns the
-running server (something with ``close()``) and the lines telling a user where to connect.
+``--serial`` (the control protocol on a pseudo-terminal) and ``--usbip HOST:PORT`` (a UVC camera that
+``usbip attach`` or rollcam's USB/IP client imports; the UVC host's commit programs the camera's mode and
+frame rate, as on a real device). With no transport option, HTTP on 127.0.0.1:8080. A transport is one
+entry of ``TRANSPORTS``: its option and a starter that returns the running server (something with
+``close()``) and the lines telling a user where to connect.
 """
 
 from __future__ import annotations
@@ -44,6 +46,7 @@ class Running:
     server: Any
     lines: list[str]
     info: dict[str, Any]
+    uses_pump: bool = True
 
 
 def _warn_if_wide(name: str, host: str) -> None:
@@ -84,6 +87,30 @@ def start_serial(args: argparse.Namespace, camera: Any, pump: Any) -> Running | 
                                       "send '*IDN?' or 'HELP')"], {"path": server.path})
 
 
+def start_usbip(args: argparse.Namespace, camera: Any, pump: Any) -> Running | None:
+    """The camera as a UVC device on a USB/IP server, when ``--usbip`` is given."""
+    if args.usbip is None:
+        return None
+    from rollcam.emu.usbip.server import USBIPServer
+    from rollcam.emu.uvc import DeviceIdentity, FirmwareProducer, UVCFunction
+
+    host, port = args.usbip
+    _warn_if_wide("USB/IP", host)
+    function = UVCFunction(FirmwareProducer(camera), transfer=args.usb_transfer, realtime=True,
+                           identity=DeviceIdentity(serial=camera.serial_number))
+    try:
+        server = USBIPServer([function], host, port)
+    except OSError as exc:
+        function.close()
+        raise OSError(f"cannot serve USB/IP on {host}:{port}: {exc.strerror or exc}") from None
+    addr_host, addr_port = server.address
+    busids = sorted(server.exports)
+    return Running("usbip", server, [f"USB/IP:        {addr_host}:{addr_port} busid {', '.join(busids)}   "
+                                     f"(usbip list -r {addr_host} --tcp-port {addr_port}; usbip attach -r "
+                                     f"{addr_host} -b {busids[0]})"],
+                   {"host": addr_host, "port": addr_port, "busids": busids}, uses_pump=False)
+
+
 def _http_option(g: argparse._ArgumentGroup) -> None:
     g.add_argument("--http", type=host_port, default=None, metavar="HOST:PORT",
                    help=f"serve MJPEG over HTTP (default when no transport is given: {DEFAULT_HTTP})")
@@ -94,10 +121,18 @@ def _serial_option(g: argparse._ArgumentGroup) -> None:
     g.add_argument("--serial", action="store_true", help="serve the control protocol on a pseudo-terminal")
 
 
+def _usbip_option(g: argparse._ArgumentGroup) -> None:
+    g.add_argument("--usbip", type=host_port, default=None, metavar="HOST:PORT",
+                   help="serve the camera as a UVC device over USB/IP (the usbip protocol port is 3240)")
+    g.add_argument("--usb-transfer", choices=("iso", "bulk"), default="iso",
+                   help="UVC streaming endpoint type for --usbip (default: iso)")
+
+
 Starter = Callable[[argparse.Namespace, Any, Any], "Running | None"]
 TRANSPORTS: list[tuple[str, Callable[[argparse._ArgumentGroup], None], Starter]] = [
     ("http", _http_option, start_http),
     ("serial", _serial_option, start_serial),
+    ("usbip", _usbip_option, start_usbip),
 ]
 """Transports in start order: (name = the option's dest, add its options, starter). A starter gets the parsed
 arguments, the FirmwareCamera and the shared FramePump, and returns None when its option was not given. A new
@@ -106,10 +141,10 @@ transport (``--usbip HOST:PORT``) is one entry here."""
 
 def register(sub: argparse._SubParsersAction) -> None:
     """Add the ``emulate`` command."""
-    p = sub.add_parser("emulate", help="serve an emulated camera over HTTP (MJPEG) and a serial pty",
+    p = sub.add_parser("emulate", help="serve an emulated camera over HTTP (MJPEG), a serial pty and USB/IP (UVC)",
                        description="Stream an emulated sensor in real time and serve it until Ctrl-C: MJPEG over "
-                                   "HTTP (--http, default 127.0.0.1:8080) and the serial control protocol on a "
-                                   "pseudo-terminal (--serial).",
+                                   "HTTP (--http, default 127.0.0.1:8080), the serial control protocol on a "
+                                   "pseudo-terminal (--serial) and a UVC camera over USB/IP (--usbip).",
                        epilog="Example: rollcam emulate imx219 --scene street --speed fast --http 127.0.0.1:8080 "
                               "--serial")
     p.add_argument("sensor", metavar="SENSOR", help="sensor name (see 'rollcam list') or a .yaml path")
@@ -167,7 +202,8 @@ def cmd_emulate(args: argparse.Namespace) -> int:
             if started is not None:
                 running.append(started)
         camera.stream_on()
-        pump.start()
+        if any(r.uses_pump for r in running):  # UVC paces its own frames; do not render for nobody
+            pump.start()
         if args.json:
             print(json.dumps({"sensor": camera.sensor.name, "identity": camera.identity(),
                               **{r.name: r.info for r in running}}), flush=True)

@@ -13,15 +13,36 @@ from __future__ import annotations
 
 from .descriptors import DescriptorSet, DeviceIdentity, FrameSize, StreamFormat, build_descriptors, parse_streaming
 from .device import Setup, UVCFunction
+from .firmware_producer import FirmwareProducer
 from .payload import ParsedFrame, PayloadBatch, PayloadPacker, PayloadParser, pack_header, parse_header
 from .probe import Probe
-from .producer import ControlRange, FrameProducer, SyntheticProducer
+from .producer import ControlRange, FrameProducer, SyntheticProducer, offered_intervals_ns
 from .requests import Stall
 from .stream import StreamStats, TransferOverflow, TransferTimeout
 
 __all__ = [
-    "ControlRange", "DescriptorSet", "DeviceIdentity", "FrameProducer", "FrameSize", "ParsedFrame", "PayloadBatch",
-    "PayloadPacker", "PayloadParser", "Probe", "Setup", "Stall", "StreamFormat", "StreamStats", "SyntheticProducer",
-    "TransferOverflow", "TransferTimeout", "UVCFunction", "build_descriptors", "pack_header", "parse_header",
+    "ControlRange",
+    "DescriptorSet",
+    "DeviceIdentity",
+    "FirmwareProducer",
+    "FrameProducer",
+    "FrameSize",
+    "ParsedFrame",
+    "PayloadBatch",
+    "PayloadPacker",
+    "PayloadParser",
+    "Probe",
+    "Setup",
+    "Stall",
+    "StreamFormat",
+    "StreamStats",
+    "SyntheticProducer",
+    "TransferOverflow",
+    "TransferTimeout",
+    "UVCFunction",
+    "build_descriptors",
+    "offered_intervals_ns",
+    "pack_header",
+    "parse_header",
     "parse_streaming",
 ]

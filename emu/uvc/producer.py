@@ -68,6 +68,22 @@ class FrameProducer(Protocol):
         """Set control ``name``; returns the value applied (clamped to the range as the sensor would)."""
 
 
+def offered_intervals_ns(sensor: SensorConfig, width: int, height: int, fps_choices: Sequence[float] = FPS_CHOICES,
+                         shutter: str | None = None) -> list[int]:
+    """Frame periods a camera offers at a size: the mode's own rate first, then the rates of ``fps_choices``
+    the sensor can read that size at."""
+    def period(fps: float | None) -> int | None:
+        try:
+            return resolve_settings(sensor, size=(width, height), fps=fps, shutter=shutter).timing.frame_period_ns
+        except ConfigError:
+            return None  # faster than the sensor reads this size
+
+    native = period(None)
+    assert native is not None
+    others = {p for p in map(period, fps_choices) if p is not None} - {native}
+    return [native, *sorted(others)]
+
+
 class SyntheticProducer:
     """``FrameProducer`` over a ``SyntheticCamera``: rebuilds the camera when size, rate, exposure or gain change."""
 
@@ -98,16 +114,7 @@ class SyntheticProducer:
         return list(self._sizes)
 
     def intervals_ns(self, width: int, height: int) -> list[int]:
-        native = resolve_settings(self.sensor, size=(width, height), shutter=self._shutter).timing
-        others = {p for p in (self._period_ns(width, height, f) for f in self._fps) if p} - {native.frame_period_ns}
-        return [native.frame_period_ns, *sorted(others)]  # the mode's own rate is the default
-
-    def _period_ns(self, width: int, height: int, fps: float) -> int | None:
-        try:
-            return resolve_settings(self.sensor, size=(width, height), fps=fps, shutter=self._shutter).timing \
-                .frame_period_ns
-        except ConfigError:
-            return None  # faster than the sensor reads this size
+        return offered_intervals_ns(self.sensor, width, height, self._fps, self._shutter)
 
     def configure(self, width: int, height: int, interval_ns: int) -> None:
         if (width, height) not in self._sizes:

@@ -1,0 +1,97 @@
+"""``FrameProducer`` over the firmware camera: the UVC function streams what ``FirmwareCamera`` schedules.
+
+This is how ``rollcam emulate --usbip`` and the pyusb backend expose the same device the serial line, the
+V4L2-like API and HTTP talk to: UVC's commit programs the firmware's mode and frame length and starts its
+stream; UVC exposure and gain requests write the firmware's controls (so its registers follow); frames are
+the firmware's frames by sequence number, due when the firmware's schedule reads out their last line.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+from rollcam.firmware.camera import FirmwareCamera, FramePlan
+from rollcam.firmware.scheduler import FrameSchedule
+from rollcam.sim.errors import DeviceError
+from rollcam.sim.frame import Frame
+
+from .producer import CONTROLS, FPS_CHOICES, ControlRange, offered_intervals_ns
+
+
+class FirmwareProducer:
+    """Adapts a ``FirmwareCamera`` to the UVC function's ``FrameProducer`` protocol.
+
+    UVC frame index ``i`` is firmware sequence ``base + i``, where ``base`` is the firmware's next sequence
+    number when the host committed (sequence numbers keep counting across streams, as the firmware's do).
+    """
+
+    def __init__(self, camera: FirmwareCamera, fps_choices: Sequence[float] = FPS_CHOICES) -> None:
+        self.camera = camera
+        self.name = camera.sensor.name
+        self._fps = tuple(fps_choices)
+        self._base = camera.next_seq
+
+    def __repr__(self) -> str:
+        return f"FirmwareProducer({self.camera!r})"
+
+    def sizes(self) -> list[tuple[int, int]]:
+        current = self.camera.size
+        return [current, *(s for s in self.camera.sizes() if s != current)]
+
+    def intervals_ns(self, width: int, height: int) -> list[int]:
+        return offered_intervals_ns(self.camera.sensor, width, height, self._fps, self.camera.state.shutter)
+
+    def configure(self, width: int, height: int, interval_ns: int) -> None:
+        cam = self.camera
+        cam.stream_off()
+        cam.set_size(width, height)
+        cam.set_frame_interval_ns(int(interval_ns))
+        self._base = cam.next_seq
+        cam.stream_on()
+
+    def _schedule(self) -> FrameSchedule:
+        sched = self.camera.current_schedule()
+        if sched is None:
+            raise DeviceError(f"{self.name}: the firmware camera is not streaming (no UVC commit yet, or stopped "
+                              "over another interface)")
+        return sched
+
+    def frame_due_ns(self, index: int) -> int:
+        return self._schedule().frame_due_ns(self._base + index)
+
+    def frame(self, index: int) -> Frame:
+        return self.camera.render(FramePlan(self._base + index, self._schedule()))
+
+    def now_ns(self) -> int:
+        return self.camera.clock_ns()
+
+    def _line_ns(self) -> int:
+        return max(int(self.camera.state.timing.line_offset_ns(1)), 1)
+
+    def control_range(self, name: str) -> ControlRange:
+        s = self.camera.state
+        if name == "exposure_ns":
+            lo, hi = s.exposure_range()
+            line = self._line_ns()
+            default = min(max(round(10_000_000 / line), lo), hi)  # the firmware's own default: 10 ms
+            return ControlRange(lo * line, hi * line, default * line, line)
+        if name == "gain":
+            lo, hi = (round(g * 100) for g in (s.sensor.gain.analog_min, s.sensor.gain.analog_max))
+            return ControlRange(lo, hi, max(lo, 100))
+        raise DeviceError(f"control {name!r} is not one of {CONTROLS}")
+
+    def get_control(self, name: str) -> int:
+        self.control_range(name)
+        s = self.camera.state
+        if name == "gain":
+            return round(s.traits.analog.to_gain(s.analog_code) * 100)
+        return s.exposure_lines * self._line_ns()
+
+    def set_control(self, name: str, value: int) -> int:
+        r = self.control_range(name)
+        value = min(max(int(value), r.minimum), r.maximum)
+        if name == "gain":
+            self.camera.set_control("analogue_gain", self.camera.state.traits.analog.to_code(value / 100))
+        else:
+            self.camera.set_control("exposure", round(value / self._line_ns()))
+        return self.get_control(name)

@@ -1,0 +1,62 @@
+"""The firmware camera behind UVC: ``FirmwareProducer`` through pyusb, and ``rollcam emulate --usbip``."""
+
+from __future__ import annotations
+
+import itertools
+import json
+import signal
+import socket
+import subprocess
+import sys
+
+import pytest
+
+pytest.importorskip("usb")
+
+from rollcam.firmware.camera import FirmwareCamera
+from rollcam.host.sources import open_camera
+
+
+def test_firmware_producer_programs_the_firmware_and_serves_its_frames():
+    from rollcam.emu.uvc import FirmwareProducer, FrameProducer
+
+    cam = FirmwareCamera("imx219", scene={"scene": "chart", "seed": 1})
+    p = FirmwareProducer(cam)
+    assert isinstance(p, FrameProducer)
+    assert p.sizes()[0] == cam.size
+    w, h = 640, 480
+    interval = p.intervals_ns(w, h)[0]
+    p.configure(w, h, interval)
+    assert cam.streaming and cam.size == (w, h)
+    first, second = p.frame(0), p.frame(1)
+    assert (first.width, first.height) == (w, h) and second.sequence == first.sequence + 1
+    assert second.timestamp_ns - first.timestamp_ns == pytest.approx(interval, abs=1)
+    assert p.frame_due_ns(0) > first.timestamp_ns
+    # UVC controls write the firmware's controls (and so its registers).
+    line = p.control_range("exposure_ns").step
+    assert p.set_control("exposure_ns", 5_000_000) == cam.get_control("exposure") * line
+    assert p.set_control("gain", 400) == pytest.approx(400, abs=2)
+    assert cam.state.gain == pytest.approx(4.0, rel=0.01)
+    assert p.set_control("gain", 10**6) == p.control_range("gain").maximum  # clamped as the sensor does
+
+
+def test_rollcam_emulate_usbip_streams_to_the_uvc_source():
+    cmd = [sys.executable, "-m", "rollcam.host.cli", "emulate", "imx219", "--size", "640x480", "--scene", "flat",
+           "--usbip", "127.0.0.1:0", "--usb-transfer", "bulk", "--json", "--duration", "120"]
+    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        info = json.loads(proc.stdout.readline())["usbip"]
+        uri = (f"uvc:1d6b:0102?backend=usbip&usbip=127.0.0.1:{info['port']}&busid={info['busids'][0]}"
+               "&size=640x480&sensor=imx219&frames=3")
+        with open_camera(uri) as src:
+            frames = list(src)
+        assert len(frames) == 3 and frames[0].data.shape == (480, 640, 3)
+        assert all(b.timestamp_ns > a.timestamp_ns for a, b in itertools.pairwise(frames))
+        proc.send_signal(signal.SIGINT)
+        _out, err = proc.communicate(timeout=30)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    assert proc.returncode == 0, err
+    with pytest.raises(OSError):
+        socket.create_connection(("127.0.0.1", info["port"]), timeout=2).close()
