@@ -45,6 +45,23 @@ def test_users_tests_run_on_the_fixtures(pytester):
             from rollcam.host import open_camera
             with open_camera(server.url) as src:
                 assert [f.shutter for f in src] == ["global", "global"]
+
+        def test_pyusb_finds_and_negotiates(rollcam_usb_backend):
+            import usb.core
+            backend = rollcam_usb_backend("imx219", cameras=2, scene="flat")
+            devs = list(usb.core.find(find_all=True, idVendor=0x1D6B, backend=backend))
+            assert sorted(d.idProduct for d in devs) == [0x0102, 0x0103]
+            dev = devs[0]
+            dev.set_configuration()
+            probe = dev.ctrl_transfer(0xA1, 0x87, 0x0100, 1, 34)  # GET_DEF of VS_PROBE_CONTROL
+            assert len(probe) == 34
+
+        def test_serial_port(rollcam_serial_port):
+            import serial
+            port = rollcam_serial_port("imx219", scene="flat")
+            with serial.Serial(port.path, timeout=5) as ser:
+                ser.write(b"*IDN?\\n")
+                assert ser.readline().startswith(b"rollcam,IMX219-EMU,")
     ''')
     result = pytester.runpytest_inprocess("-q", "-p", "no:cacheprovider")
-    result.assert_outcomes(passed=3)
+    result.assert_outcomes(passed=5)

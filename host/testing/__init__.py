@@ -6,6 +6,10 @@ Installed with rollcam (a ``pytest11`` entry point), so any project's tests can 
   (name or YAML path) and scene, closed after the test.
 - ``rollcam_mjpeg_server(frames)``: an MJPEG-over-HTTP server on 127.0.0.1 serving those Frames with
   rollcam's timing headers; its ``url`` opens as a source (``http://...``) or in ``cv2.VideoCapture``.
+- ``rollcam_usb_backend(sensor, **scene)``: a pyusb backend on which ``usb.core.find`` finds emulated UVC
+  cameras (the firmware camera behind a UVC 1.5 function).
+- ``rollcam_serial_port(sensor, **scene)``: a pseudo-terminal that ``serial.Serial(port.path)`` opens, speaking
+  the emulated firmware's control protocol.
 - ``mock_depthai``: a stand-in ``depthai`` module (``rollcam.host.testing.depthai_mock``) installed in
   ``sys.modules`` for the test, so an OAK capture script runs without hardware on emulated sensors.
 
@@ -75,6 +79,55 @@ def mock_depthai(monkeypatch: pytest.MonkeyPatch) -> Any:
     return mod
 
 
-# ---- Fixtures of the emulated device transports go here (kept with their emulators' code):
-#   rollcam_usb_backend : a pyusb backend that enumerates emulated UVC cameras (emu's pyusb backend)
-#   rollcam_serial_port : a pty serial port connected to the emulated firmware's control protocol
+@pytest.fixture
+def rollcam_usb_backend() -> Iterator[Callable[..., Any]]:
+    """Factory of pyusb backends with emulated UVC cameras on them.
+
+    ``backend = rollcam_usb_backend("imx219", scene="street", seed=1)`` returns a ``usb.backend.IBackend``;
+    ``usb.core.find(idVendor=0x1D6B, idProduct=0x0102, backend=backend)`` then finds the camera and ordinary
+    pyusb code negotiates (probe/commit) and streams from it. Each camera is a ``FirmwareCamera``; pass
+    ``cameras=N`` for several on one bus (product ids 0x0102, 0x0103, ...). Streams stop after the test.
+    """
+    from rollcam.emu.uvc import DeviceIdentity, FirmwareProducer, UVCFunction
+    from rollcam.emu.uvc.pyusb_backend import EmulatedBackend
+    from rollcam.firmware.camera import FirmwareCamera
+
+    functions: list[Any] = []
+
+    def make(sensor: str = "imx219", *, cameras: int = 1, transfer: str = "iso", realtime: bool = False,
+             **scene: Any) -> Any:
+        made = []
+        for k in range(cameras):
+            cam = FirmwareCamera(sensor, scene={"scene": "street", **scene}, serial_number=f"{k + 1:04d}")
+            made.append(UVCFunction(FirmwareProducer(cam), transfer=transfer, realtime=realtime,
+                                    identity=DeviceIdentity(product_id=0x0102 + k, serial=cam.serial_number)))
+        functions.extend(made)
+        return EmulatedBackend(made)
+
+    yield make
+    for f in functions:
+        f.close()
+
+
+@pytest.fixture
+def rollcam_serial_port() -> Iterator[Callable[..., Any]]:
+    """Factory of pseudo-terminal serial ports to an emulated camera's firmware (its control protocol).
+
+    ``port = rollcam_serial_port("imx219")`` gives an object with ``path`` (open it with
+    ``serial.Serial(port.path)``, as a real camera's port) and ``camera`` (the ``FirmwareCamera``); scene
+    options go as keywords. Ports are closed and their ptys freed after the test.
+    """
+    from rollcam.emu.serial_pty import PtySerialServer
+    from rollcam.firmware.camera import FirmwareCamera
+
+    servers: list[Any] = []
+
+    def make(sensor: str = "imx219", **scene: Any) -> Any:
+        server = PtySerialServer(FirmwareCamera(sensor, scene={"scene": "street", **scene}))
+        server.start()
+        servers.append(server)
+        return server
+
+    yield make
+    for server in servers:
+        server.close()
