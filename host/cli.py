@@ -1,8 +1,10 @@
-"""The ``rollcam`` command line: ``demo``, ``list``, ``capture``, ``detect``, ``bench``.
+"""The ``rollcam`` command line: demo, list, capture, detect, emulate, dataset, eval, bench.
 
-Exit codes: 0 success, 2 bad usage or input (argparse errors and every ``RollcamError``, reported as one
-``rollcam: error: ...`` line without a traceback), 1 any other failure, 130 after Ctrl-C. Subcommands import
-their work lazily, so ``rollcam --help`` starts fast and works whatever optional part is missing.
+Exit codes: 0 success, 2 bad usage or input (argparse errors, ``ConfigError`` and ``SourceError``), 1 any
+other failure (``DeviceError``, ``ProtocolError`` and other ``RollcamError``s, OS errors, bugs), 130 after
+Ctrl-C. ``RollcamError``s and OS errors are reported as one ``rollcam: error: ...`` line without a traceback.
+Subcommands import their work lazily, so ``rollcam --help`` starts fast and works whatever optional part is
+missing.
 """
 
 from __future__ import annotations
@@ -16,7 +18,7 @@ import traceback
 from collections.abc import Callable, Sequence
 from typing import Any
 
-from rollcam.sim.errors import RollcamError
+from rollcam.sim.errors import ConfigError, RollcamError, SourceError
 
 PROG = "rollcam"
 EXIT_OK, EXIT_FAILURE, EXIT_USAGE, EXIT_INTERRUPTED = 0, 1, 2, 130
@@ -246,9 +248,12 @@ def main(argv: Sequence[str] | None = None) -> int:
     except KeyboardInterrupt:
         print(f"\n{PROG}: interrupted", file=sys.stderr)
         return EXIT_INTERRUPTED
-    except RollcamError as exc:
+    except (ConfigError, SourceError) as exc:  # a bad option, value, config or source URI
         _err(str(exc))
         return EXIT_USAGE
+    except RollcamError as exc:  # the device, a protocol or the work itself failed
+        _err(str(exc))
+        return EXIT_FAILURE
     except BrokenPipeError:
         # Output piped into something that stopped reading (``rollcam list | head``): not a failure worth a trace.
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())

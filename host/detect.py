@@ -20,6 +20,7 @@ command exits with status 130.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import os
 import queue
@@ -110,8 +111,11 @@ class VideoSink:
         if self._writer is not None:
             self._writer.release()
             self._writer = None
-            os.replace(self.part, self.path)
+            if self.error is None:
+                os.replace(self.part, self.path)
         if self.error is not None:
+            with contextlib.suppress(FileNotFoundError):
+                os.unlink(self.part)  # a video cut short by a failed write is not kept under its final name
             err, self.error = self.error, None
             raise OSError(f"writing {self.path} failed: {err}")
 

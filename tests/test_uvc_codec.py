@@ -177,3 +177,15 @@ def test_a_reference_time_gives_the_first_pts_its_high_bits():
         assert (a.pts_ns, b.pts_ns) == (t, t + 33_333_333)
     (plain,) = PayloadParser(10**9).feed_many(packer.pack(b"z", t, t))
     assert plain.pts_ns == t % (1 << 32)
+
+
+def test_frames_finished_in_one_batch_get_their_own_index():
+    from rollcam.emu.uvc import PayloadPacker, PayloadParser
+
+    packer = PayloadPacker(payload_size=1024, clock_hz=1_000_000_000)
+    batches = [packer.pack(bytes([k]) * 300, 1_000_000 * (k + 1), 1_000_000 * (k + 1)) for k in range(3)]
+    stream = b"".join(bytes(b.buffer) for b in batches)
+    lengths = np.concatenate([b.lengths for b in batches])
+    frames = PayloadParser(clock_hz=1_000_000_000).feed_batch(stream, lengths)  # one read, three frames
+    assert [f.index for f in frames] == [0, 1, 2]
+    assert [f.data[:1] for f in frames] == [b"\x00", b"\x01", b"\x02"]

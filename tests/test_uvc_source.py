@@ -105,3 +105,12 @@ def test_emulated_timestamps_are_the_full_device_clock_after_a_wrap():
         frames = list(src)
     assert frames[0].timestamp_ns > 5 * (1 << 32)
     assert [f.timestamp_ns for f in frames] == [producer.frame(i).timestamp_ns for i in range(2)]
+
+
+def test_a_bad_option_found_while_negotiating_releases_the_camera(monkeypatch):
+    closed = []
+    original = UVCFunction.close
+    monkeypatch.setattr(UVCFunction, "close", lambda self: (closed.append(self), original(self)))
+    with pytest.raises(SourceError, match="h264"):
+        open_camera("uvc:1d6b:0102?backend=emu&format=h264&scene=flat")
+    assert len(closed) == 1

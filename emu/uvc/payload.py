@@ -166,7 +166,8 @@ class PayloadPacker:
 
 @dataclass
 class ParsedFrame:
-    """A frame recovered from payloads: bytes, its PTS (raw and unwrapped ns), and how it ended."""
+    """A frame recovered from payloads: bytes, its PTS (raw and unwrapped ns), how it ended, and ``index``: its
+    position among the frames this parser recovered (0, 1, ...; damaged ones count too)."""
 
     data: bytes
     fid: int
@@ -176,6 +177,7 @@ class ParsedFrame:
     error: bool
     complete: bool
     payloads: int
+    index: int = 0
 
     def __repr__(self) -> str:
         return (f"ParsedFrame({len(self.data)} B, fid={self.fid}, pts_ns={self.pts_ns}, "
@@ -350,7 +352,7 @@ class PayloadParser:
         full_pts = self._unwrap(self._pts)
         frame = ParsedFrame(data, self._fid, self._pts,
                             None if full_pts is None else ticks_to_ns(full_pts, self.clock_hz), self._scr,
-                            self._err, complete, self._n)
+                            self._err, complete, self._n, self.stats.frames)
         st = self.stats
         st.frames += 1
         st.complete += complete and not self._err

@@ -17,7 +17,7 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any, TextIO
 
-from rollcam.sim.errors import ConfigError
+from rollcam.sim.errors import ConfigError, RollcamError
 
 from ..capture import Progress, write_atomic
 from ..sources import open_camera
@@ -151,6 +151,6 @@ def build_dataset(
     records = {k: v for k, v in read_records(out).items() if k in planned}
     missing = planned - set(records)
     if missing:
-        raise ConfigError(f"{len(missing)} planned sample(s) have no record after the run, e.g. {sorted(missing)[0]}")
+        raise RollcamError(f"{len(missing)} planned sample(s) have no record after the run, e.g. {sorted(missing)[0]}")
     card = finalize(out, cfg, records, rollcam_version())
     return BuildResult(out, len(planned), rendered, len(done), clock() - start, ex.name, ex.workers, card)

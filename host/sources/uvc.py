@@ -210,6 +210,9 @@ class UVCSource(CameraSource):
         except (DeviceError, ProtocolError) as exc:
             self.close()
             raise SourceError(f"source {uri.uri!r}: negotiation failed: {exc}") from None
+        except BaseException:  # a bad option found while negotiating: release the device all the same
+            self.close()
+            raise
 
     def _negotiate(self, uri: SourceURI) -> None:
         s = self.stream
@@ -322,7 +325,7 @@ class UVCSource(CameraSource):
                                         self.readout)
             line_ns = self.timing.line_time_ns if rolling else 0
         meta = {"wire_format": fourcc, "pts": parsed.pts, "scr": parsed.scr, "payloads": parsed.payloads}
-        return Frame(data=data, format=fmt, sequence=self.parser.stats.frames - 1, timestamp_ns=int(t0),
+        return Frame(data=data, format=fmt, sequence=parsed.index, timestamp_ns=int(t0),
                      line_time_ns=line_ns, readout=self.readout, exposure_ns=self.exposure_ns, shutter=self.shutter,
                      row_times_ns=rows, meta=meta)
 
