@@ -45,7 +45,7 @@ def _positive_float(text: str) -> float:
 
 
 def _size(text: str) -> tuple[int, int]:
-    from .sources.emu import parse_size
+    from .sources.base import parse_size
 
     try:
         return parse_size(text)

@@ -26,16 +26,15 @@ DEFAULT_HTTP = "127.0.0.1:8080"
 
 
 def host_port(text: str) -> tuple[str, int]:
-    """``HOST:PORT``, ``:PORT`` or ``PORT`` -> (host, port); the host defaults to 127.0.0.1."""
-    host, sep, port = text.rpartition(":")
-    host = host.strip("[]") if sep else ""
+    """``HOST:PORT``, ``:PORT`` or ``PORT`` -> (host, port) for argparse; the host defaults to 127.0.0.1."""
+    from rollcam.sim.errors import ConfigError
+
+    from .sources.base import parse_host_port
+
     try:
-        number = int(port)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected HOST:PORT, got {text!r}") from None
-    if not 0 <= number <= 65535:
-        raise argparse.ArgumentTypeError(f"port {number} is not in 0..65535 (in {text!r})")
-    return host or "127.0.0.1", number
+        return parse_host_port(text)
+    except ConfigError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
 
 
 @dataclass
@@ -184,7 +183,7 @@ def cmd_emulate(args: argparse.Namespace) -> int:
     from rollcam.emu.pump import FramePump
     from rollcam.firmware.camera import FirmwareCamera
 
-    from .sources.emu import parse_size
+    from .sources.base import parse_size
 
     if not any(getattr(args, name, None) for name, _add, _start in TRANSPORTS):
         args.http = host_port(DEFAULT_HTTP)

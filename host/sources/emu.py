@@ -27,22 +27,11 @@ from rollcam.sim.noise import parse_stages
 from rollcam.sim.scenegen import ego_preset, make_scene
 from rollcam.sim.synthetic import SyntheticCamera
 
-from .base import CameraSource, SourceURI, finite_float, non_negative_int, positive_int
+from .base import CameraSource, SourceURI, finite_float, non_negative_int, parse_size, positive_int
 
 OPTIONS = {"scene", "seed", "speed", "camera", "time", "pedestrians", "ego", "vx", "level", "shutter", "readout",
            "exposure_us", "gain", "fps", "size", "start_ns", "frames", "format", "physics", "blur_px", "noise",
            "serial", "noise_seed", "hflip", "vflip"}
-
-
-def parse_size(text: str) -> tuple[int, int]:
-    """``'1920x1080'`` -> (1920, 1080)."""
-    try:
-        w, h = (int(v) for v in text.lower().split("x"))
-    except ValueError:
-        raise ConfigError(f"size {text!r} is not WIDTHxHEIGHT (e.g. 1920x1080)") from None
-    if w <= 0 or h <= 0:
-        raise ConfigError(f"size {text!r} must be positive")
-    return w, h
 
 
 def build_camera(sensor_name: str, opts: SourceURI) -> SyntheticCamera:

@@ -49,7 +49,7 @@ def _fourcc(text: str) -> str:
 
 
 def _size(text: str) -> tuple[int, int]:
-    from .emu import parse_size
+    from .base import parse_size
 
     return parse_size(text)
 

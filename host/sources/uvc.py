@@ -37,8 +37,15 @@ from rollcam.sim.scenegen import make_scene
 from rollcam.sim.synthetic import resolve_settings
 from rollcam.sim.timing import Readout, line_sample_times_ns
 
-from .base import CameraSource, SourceURI, finite_float, non_negative_int, positive_int
-from .emu import parse_size
+from .base import (
+    CameraSource,
+    SourceURI,
+    finite_float,
+    non_negative_int,
+    parse_host_port,
+    parse_size,
+    positive_int,
+)
 
 OPTIONS = {"backend", "usbip", "busid", "format", "size", "fps", "exposure_us", "gain", "sensor", "decode", "frames",
            "timeout_ms", "scene", "seed", "transfer", "realtime"}
@@ -140,9 +147,9 @@ def _open_link(uri: SourceURI, vid: int, pid: int, sensor: SensorConfig | None, 
     if backend != "emu" and extra:
         raise SourceError(f"source {uri.uri!r}: option(s) {sorted(extra)} need backend=emu")
     if backend == "usbip":
-        host, _, port = uri.get("usbip", str, "127.0.0.1:3240").rpartition(":")
+        host, port = uri.get("usbip", parse_host_port, ("127.0.0.1", 3240))
         try:
-            dev = ImportedDevice(host or "127.0.0.1", int(port), uri.get("busid", str, "1-1"))
+            dev = ImportedDevice(host, port, uri.get("busid", str, "1-1"))
         except (OSError, ValueError, DeviceError, ProtocolError) as exc:
             raise SourceError(f"source {uri.uri!r}: USB/IP import failed: {exc}") from None
         if (dev.info.idVendor, dev.info.idProduct) != (vid, pid):
