@@ -147,6 +147,8 @@ def test_serial_fmt_commands():
     assert handle_line(cam, "STREAM OFF") == "OK"
     assert handle_line(cam, "FMT RG12").startswith("ERR 102")
     assert handle_line(cam, "FMT pgaa") == "OK pgAA"
+    assert handle_line(cam, "REG ORIENTATION 2") == "OK 0x0002"  # the register flips as the controls do
+    assert handle_line(cam, "FMT?") == "pGAA"
 
 
 def test_http_serves_a_preview_of_a_raw_stream():
