@@ -157,3 +157,15 @@ def test_http_serves_a_preview_of_a_raw_stream():
                                                             timeout=10) as r:
         img = cv2.imdecode(np.frombuffer(r.read(), np.uint8), cv2.IMREAD_COLOR)
     assert img.shape == (480, 640, 3) and 20 < img.mean() < 235
+
+
+def test_streamon_refuses_buffers_too_small_for_a_format_changed_elsewhere():
+    with dev() as d:
+        d.set_format(640, 480, "RGGB")  # 1 byte per pixel
+        fn.request_buffers(d.driver, 2)
+        assert handle_line(d.driver.camera, "FMT RG10") == "OK RG10"  # over the serial line: 2 bytes per pixel
+        with pytest.raises(V4L2Error) as info:
+            fn.stream_on(d.driver)
+        assert info.value.errno == errno.EINVAL
+        fn.request_buffers(d.driver, 0)
+        assert next(d.stream(frames=1)).fourcc == "RG10"

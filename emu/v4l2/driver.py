@@ -314,6 +314,10 @@ def _dqbuf(d: EmuDriver, arg: dict[str, Any] | None) -> Slot:
 def _streamon(d: EmuDriver, _arg: Any) -> None:
     if d.queue.streaming:
         return
+    small = [s.info.length for s in d.queue.slots if s.info.length < d.fmt.sizeimage]
+    if small:  # the format grew after REQBUFS (over another interface): vb2 refuses too-small buffers
+        raise V4L2Error(errno.EINVAL, f"buffers of {small[0]} bytes cannot hold {d.fmt.pixelformat!r} frames of "
+                                      f"{d.fmt.sizeimage} bytes; REQBUFS again")
     d.queue.start()
     d.seq0 = d.camera.next_seq  # V4L2 sequence numbers count from 0 at each STREAMON
     d.camera.stream_on()
