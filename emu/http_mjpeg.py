@@ -19,7 +19,7 @@ from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
 from typing import Any, Generic, TypeVar
 
 from rollcam.firmware.camera import FirmwareCamera, FramePlan
-from rollcam.firmware.pixfmt import encode_jpeg
+from rollcam.firmware.pixfmt import encode_jpeg, to_bgr
 from rollcam.sim.frame import Frame
 
 from .pump import FramePump
@@ -155,7 +155,7 @@ class MjpegServer:
             f = self._latest.get(0.2)
             if f is None:
                 continue
-            part = Part(f.sequence, encode_jpeg(f.data, self.quality), (
+            part = Part(f.sequence, encode_jpeg(to_bgr(f, self.camera.sensor), self.quality), (
                 ("X-Sequence", str(f.sequence)), ("X-Timestamp-Ns", str(f.timestamp_ns)),
                 ("X-Line-Time-Ns", str(f.line_time_ns)), ("X-Exposure-Ns", str(f.exposure_ns)),
                 ("X-Readout", f.readout.value), ("X-Shutter", f.shutter)))

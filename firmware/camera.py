@@ -16,6 +16,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
+from rollcam.sim import formats as sf
 from rollcam.sim.errors import ConfigError, DeviceError
 from rollcam.sim.frame import Frame
 from rollcam.sim.hwconfig import SensorConfig, load_sensor
@@ -23,7 +24,7 @@ from rollcam.sim.synthetic import DEFAULT_EXPOSURE_NS, SHUTTERS
 
 from . import controls as ctl
 from .imaging import Imager
-from .pixfmt import FORMATS
+from .pixfmt import FORMATS, raw_formats
 from .registers import RegisterFile
 from .scene import build_scene
 from .scheduler import FrameSchedule
@@ -58,7 +59,7 @@ class FirmwareCamera:
     def __init__(self, sensor: SensorConfig | str, *, scene: dict[str, Any] | None = None,
                  size: tuple[int, int] | None = None, fps: float | None = None, shutter: str | None = None,
                  exposure_ns: int | None = None, gain: float = 1.0, clock: Clock | None = None,
-                 serial_number: str = "0001") -> None:
+                 serial_number: str = "0001", pixel_format: str | None = None, blur_px: float = 0.0) -> None:
         self.sensor = load_sensor(sensor) if isinstance(sensor, str) else sensor
         self.traits = traits_for(self.sensor.name)
         self.clock = clock or time.monotonic_ns
@@ -88,7 +89,10 @@ class FirmwareCamera:
         self._triggers: collections.deque[int] = collections.deque()
         self._schedule: FrameSchedule | None = None
         self._next_seq = 0
-        self.imager = Imager(self.sensor)
+        self.imager = Imager(self.sensor, serial=serial_number, blur_px=_blur(blur_px))
+        self._format = "YUYV"  # processed fourcc, or a raw one as the sensor lists it (before flips)
+        if pixel_format is not None:
+            self.set_format(pixel_format)
         self.stats = {"frames": 0, "skipped": 0, "triggers": 0}
         build_scene(self.scene_options, mode.width, mode.height)  # validate now, not at the first frame
 
@@ -122,8 +126,66 @@ class FirmwareCamera:
 
     @property
     def formats(self) -> list[str]:
-        """Fourccs the emulated ISP streams."""
-        return list(FORMATS)
+        """Fourccs the camera streams: the ISP's processed ones, then the sensor's raw ones in the Bayer order
+        the current flips give (as a Linux sensor driver enumerates them)."""
+        with self.lock:
+            return [*FORMATS, *(self._flipped(f) for f in raw_formats(self.sensor))]
+
+    @property
+    def pixel_format(self) -> str:
+        """The current format's fourcc; a raw one follows the flips (RG10 with HFLIP is BA10)."""
+        with self.lock:
+            return self._flipped(self._format)
+
+    def _flipped(self, fourcc: str) -> str:
+        f = sf.FORMATS.get(fourcc)
+        if fourcc in FORMATS or f is None or f.cfa == "mono":
+            return fourcc
+        return sf.bayer_fourcc(self.state.bayer_order, f.bits, f.packing == "csi2")
+
+    def _unflipped(self, fourcc: str) -> str:
+        """The processed or sensor-listed raw fourcc a request means (raw: either Bayer order's name)."""
+        want = fourcc.ljust(4) if len(fourcc) == 3 else fourcc
+        if want in FORMATS:
+            return want
+        for base in raw_formats(self.sensor):
+            if want in (base, self._flipped(base)):
+                return base
+        raise ConfigError(f"pixel format {fourcc!r} is not one of this {self.sensor.name} camera's "
+                          f"{self.formats}")
+
+    def resolve_format(self, fourcc: str) -> str:
+        """The fourcc ``set_format(fourcc)`` would give (a raw one in the current Bayer order); ConfigError if
+        the camera has no such format."""
+        with self.lock:
+            return self._flipped(self._unflipped(fourcc))
+
+    def set_format(self, fourcc: str) -> str:
+        """Select the output format (processed, or raw: sensor samples without the ISP); refused while
+        streaming, as a driver refuses S_FMT on a busy queue. Returns the fourcc in effect."""
+        with self.changed:
+            base = self._unflipped(fourcc)
+            if self.state.streaming and base != self._format:
+                raise DeviceError(f"cannot change the format to {fourcc!r} while streaming; stop first")
+            self._format = base
+            self.changed.notify_all()
+            return self._flipped(base)
+
+    @property
+    def raw(self) -> bool:
+        """True when the current format is raw sensor samples (frames carry them instead of a BGR render)."""
+        return self._format not in FORMATS
+
+    @property
+    def blur_px(self) -> float:
+        """Motion-blur bound of raw frames in pixels (0: each line sampled at mid-exposure, the real-time default)."""
+        return self.imager.blur_px
+
+    def set_blur_px(self, blur_px: float) -> None:
+        """Integrate raw frames over each line's exposure with this blur bound (px); 0 turns it off."""
+        with self.changed:
+            self.imager.blur_px = _blur(blur_px)
+            self.changed.notify_all()
 
     def set_size(self, width: int, height: int) -> None:
         """Switch to the mode of this output size (its default frame length); refused while streaming."""
@@ -224,7 +286,8 @@ class FirmwareCamera:
         """Start streaming: frame ``next seq`` starts exposing now (device clock). Idempotent."""
         with self.changed:
             if not self.state.streaming:
-                self.imager.camera(self.state, self.scene_options)  # built before the clock starts
+                # built before the clock starts
+                self.imager.camera(self.state, self.scene_options, self._format if self.raw else None)
                 self.state.streaming = True
                 self._schedule = self._new_schedule(self.clock_ns(), self._next_seq)
                 self.changed.notify_all()
@@ -315,7 +378,13 @@ class FirmwareCamera:
     def render(self, plan: FramePlan) -> Frame:
         """Make frame ``plan.seq``: the scene (or the test pattern) at its lines' device times, flips applied."""
         with self.lock:
-            cam = self.imager.camera(self.state, self.scene_options)
+            cam = self.imager.camera(self.state, self.scene_options, self._format if self.raw else None)
             look = (self.state.hflip, self.state.vflip, self.state.test_pattern, self.state.bayer_order)
             self.stats["frames"] += 1
         return self.imager.render(cam, plan, *look)
+
+
+def _blur(blur_px: float) -> float:
+    if not isinstance(blur_px, (int, float)) or not 0 <= blur_px < float("inf"):
+        raise ConfigError(f"blur_px must be a finite number >= 0 (0: no motion blur), got {blur_px!r}")
+    return float(blur_px)

@@ -3,6 +3,14 @@
 A vertical flip (a horizontal one for column readout) renders the opposite readout direction and mirrors
 the image, so the first line out of the sensor is still the first line read, as on the real part; the
 ground-truth boxes are mirrored with the pixels.
+
+Processed formats (YUYV, MJPG, ...) start from a plain BGR render. A raw format goes through the sensor
+model instead (``SyntheticCamera(pixel_format=...)``: EMVA noise on, fixed patterns keyed by the device's
+serial number, temporal noise by frame sequence, the ADC and the raw layout), read out with the flips so the
+Bayer order and fourcc follow them. Motion blur (integration over each line's exposure) costs several
+renders per line, so real-time devices default to ``blur_px=0`` (each line sampled at mid-exposure); a
+positive bound turns it on. A test pattern in a raw format is the BGR pattern sampled through the colour
+filter (``rollcam.sim.formats.mosaic``) at full scale of the format's bits, without noise or black level.
 """
 
 from __future__ import annotations
@@ -11,6 +19,7 @@ import dataclasses
 from typing import Any
 
 import numpy as np
+from rollcam.sim import formats as sf
 from rollcam.sim.frame import Frame, ObjectTruth
 from rollcam.sim.hwconfig import SensorConfig
 from rollcam.sim.synthetic import SyntheticCamera
@@ -28,24 +37,35 @@ _OPPOSITE = {Readout.TOP_TO_BOTTOM: Readout.BOTTOM_TO_TOP, Readout.BOTTOM_TO_TOP
 class Imager:
     """Makes a sensor's frames for a programmed state; rebuilds its SyntheticCamera only when that changes."""
 
-    def __init__(self, sensor: SensorConfig) -> None:
+    def __init__(self, sensor: SensorConfig, *, serial: str = "0", blur_px: float = 0.0) -> None:
         self.sensor = sensor
+        self.serial = serial
+        self.blur_px = blur_px
         self._cached: tuple[tuple, SyntheticCamera] | None = None
 
-    def camera(self, s: SensorState, scene_options: dict[str, Any]) -> SyntheticCamera:
-        """The SyntheticCamera for this programming (mode, frame/line length, exposure, gain, shutter, scene)."""
+    def camera(self, s: SensorState, scene_options: dict[str, Any], raw_fourcc: str | None = None
+               ) -> SyntheticCamera:
+        """The SyntheticCamera for this programming (mode, frame/line length, exposure, gain, shutter, scene,
+        and for a raw format, given unflipped as the sensor lists it, the format and the flips)."""
         readout = self.sensor.readout
         line_flip = s.vflip if not readout.by_column else s.hflip
+        flips = (s.hflip, s.vflip) if raw_fourcc else (line_flip,)
         key = (s.mode.name, s.frame_length_lines, s.line_length_pck, s.exposure_lines, s.gain, s.shutter,
-               line_flip, tuple(sorted(scene_options.items(), key=str)))
+               flips, raw_fourcc, self.blur_px, tuple(sorted(scene_options.items(), key=str)))
         if self._cached is None or self._cached[0] != key:
             mode = dataclasses.replace(s.mode, frame_length_lines=s.frame_length_lines,
                                        line_length_pck=s.line_length_pck)
             sensor = dataclasses.replace(self.sensor, modes=(mode,), default_mode=mode.name)
             scene = build_scene(scene_options, mode.width, mode.height)
-            cam = SyntheticCamera(sensor, scene, 0, size=(mode.width, mode.height), shutter=s.shutter,
-                                  readout=_OPPOSITE[readout] if line_flip else readout,
-                                  exposure_ns=int(s.timing.line_offset_ns(s.exposure_lines)), gain=s.gain)
+            common = {"size": (mode.width, mode.height), "shutter": s.shutter, "gain": s.gain,
+                      "exposure_ns": int(s.timing.line_offset_ns(s.exposure_lines))}
+            if raw_fourcc:  # the sensor model reads the array flipped itself
+                cam = SyntheticCamera(sensor, scene, 0, readout=readout, pixel_format=raw_fourcc,
+                                      blur_px=self.blur_px or None, serial=self.serial, hflip=s.hflip,
+                                      vflip=s.vflip, **common)
+            else:
+                cam = SyntheticCamera(sensor, scene, 0, readout=_OPPOSITE[readout] if line_flip else readout,
+                                      **common)
             self._cached = (key, cam)
         return self._cached[1]
 
@@ -53,6 +73,8 @@ class Imager:
                bayer_order: str) -> Frame:
         """Frame ``plan.seq`` (``plan``: a FramePlan) from ``cam``, with the test pattern and flips applied."""
         sched: FrameSchedule = plan.schedule
+        if cam.pipeline is not None:
+            return self._render_raw(cam, plan, pattern, bayer_order)
         cam.start_ns = sched.start_ns(plan.seq)  # frame 0 of a camera whose clock starts at this frame
         frame = cam.frame(0)
         meta = {**frame.meta, "bayer_order": bayer_order, "test_pattern": pattern}
@@ -71,6 +93,20 @@ class Imager:
             data = np.ascontiguousarray(data)
         return dataclasses.replace(frame, data=data, row_times_ns=rows, objects=objects, sequence=plan.seq,
                                    readout=self.sensor.readout, meta=meta)
+
+    def _render_raw(self, cam: SyntheticCamera, plan: Any, pattern: str, bayer_order: str) -> Frame:
+        """A raw frame through the sensor model (flips already in the readout), or a mosaicked test pattern."""
+        # Frame ``seq`` of a camera whose clock puts it at the schedule's start: temporal noise follows seq.
+        seq = plan.seq
+        cam.start_ns = plan.schedule.start_ns(seq) - cam.settings.timing.frame_start_ns(seq, 0)
+        frame = cam.frame(seq)
+        meta = {**frame.meta, "bayer_order": bayer_order, "test_pattern": pattern}
+        if pattern == "none":
+            return dataclasses.replace(frame, meta=meta)
+        bits = self.sensor.bit_depth
+        cfa = sf.mosaic(render_pattern(pattern, frame.width, frame.height), bayer_order)
+        dn = cfa.astype(np.uint16) << (bits - 8)  # hwconfig holds bit_depth to 8..16
+        return dataclasses.replace(frame, data=sf.encode_raw(dn, frame.format, bits), objects=(), meta=meta)
 
 
 def _flip_boxes(objects: tuple[ObjectTruth, ...] | None, width: int | None, height: int | None

@@ -61,6 +61,15 @@ def _size(cam: FirmwareCamera, text: str) -> str:
     return "OK"
 
 
+def _fmt(cam: FirmwareCamera, text: str) -> str:
+    """Select a format; fourccs are matched exactly, else case-insensitively (``rg10``), with a 3-letter
+    one's trailing space implied (``Y10``)."""
+    want = text.ljust(4) if len(text) == 3 else text
+    if want not in cam.formats:
+        want = next((f for f in cam.formats if f.upper() == want.upper()), text)
+    return f"OK {cam.set_format(want).strip()}"
+
+
 def _scene(cam: FirmwareCamera, key: str, value: str) -> str:
     cam.set_scene(**{key.lower(): value})
     return "OK"
@@ -109,6 +118,10 @@ COMMANDS: dict[str, Command] = {
     "INTERVAL?": Command((), lambda c: str(c.frame_interval_ns), "frame interval, ns"),
     "SIZE": Command(("WxH",), _size, "select the mode of this output size (not while streaming)"),
     "SIZE?": Command((), lambda c: "{}x{}".format(*c.size), "output size"),
+    "FMT": Command(("FOURCC",), _fmt, "select the pixel format (not while streaming); replies with the fourcc in "
+                   "effect (raw: in the Bayer order of the flips)"),
+    "FMT?": Command((), lambda c: c.pixel_format.strip(), "current pixel format (a raw one follows the flips)"),
+    "FMTS?": Command((), lambda c: " ".join(f.strip() for f in c.formats), "formats: processed, then raw"),
     "SCENE": Command(("KEY", "VALUE"), _scene, "scene control: scene, seed, and the kind's own options"),
     "SCENE?": Command((), _scene_query, "scene options"),
     "STATS?": Command((), _stats, "frames made, skipped, triggers"),

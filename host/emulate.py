@@ -162,6 +162,10 @@ def register(sub: argparse._SubParsersAction) -> None:
     g.add_argument("--shutter", choices=("rolling", "global"), default=None, help="sensors with both only")
     g.add_argument("--exposure-us", type=float, default=None, help="exposure in microseconds")
     g.add_argument("--gain", type=float, default=1.0, help="analog gain, linear (default: 1.0)")
+    g.add_argument("--format", default=None, metavar="FOURCC",
+                   help="pixel format: YUYV (default), MJPG, ... or one of the sensor's raw fourccs (RG10, pRAA)")
+    g.add_argument("--blur-px", type=float, default=0.0,
+                   help="raw formats: motion-blur bound in px (default 0: lines sampled at mid-exposure)")
     g = p.add_argument_group("transports")
     for _name, add_options, _start in TRANSPORTS:
         add_options(g)
@@ -190,7 +194,8 @@ def cmd_emulate(args: argparse.Namespace) -> int:
     size = parse_size(args.size) if args.size else None
     exposure_ns = None if args.exposure_us is None else round(args.exposure_us * 1000)
     camera = FirmwareCamera(args.sensor, scene=_scene_options(args), size=size, fps=args.fps, shutter=args.shutter,
-                            exposure_ns=exposure_ns, gain=args.gain)
+                            exposure_ns=exposure_ns, gain=args.gain, pixel_format=args.format,
+                            blur_px=args.blur_px)
     stop = threading.Event()
     previous = signal.signal(signal.SIGTERM, lambda *_: stop.set())
     running: list[Running] = []

@@ -3,14 +3,17 @@
 This is how ``rollcam emulate --usbip`` and the pyusb backend expose the same device the serial line, the
 V4L2-like API and HTTP talk to: UVC's commit programs the firmware's mode and frame length and starts its
 stream; UVC exposure and gain requests write the firmware's controls (so its registers follow); frames are
-the firmware's frames by sequence number, due when the firmware's schedule reads out their last line.
+the firmware's frames by sequence number, due when the firmware's schedule reads out their last line. UVC
+offers YUYV, NV12 and MJPEG only, so a firmware camera left in a raw format streams its preview-ISP picture.
 """
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Sequence
 
 from rollcam.firmware.camera import FirmwareCamera, FramePlan
+from rollcam.firmware.pixfmt import is_raw, to_bgr
 from rollcam.firmware.scheduler import FrameSchedule
 from rollcam.sim.errors import DeviceError
 from rollcam.sim.frame import Frame
@@ -60,7 +63,10 @@ class FirmwareProducer:
         return self._schedule().frame_due_ns(self._base + index)
 
     def frame(self, index: int) -> Frame:
-        return self.camera.render(FramePlan(self._base + index, self._schedule()))
+        frame = self.camera.render(FramePlan(self._base + index, self._schedule()))
+        if is_raw(frame.format):
+            frame = dataclasses.replace(frame, data=to_bgr(frame, self.camera.sensor), format="BGR3")
+        return frame
 
     def now_ns(self) -> int:
         return self.camera.clock_ns()

@@ -18,6 +18,10 @@ from typing import Any
 import cv2
 import numpy as np
 from rollcam.firmware.camera import Clock, FirmwareCamera
+from rollcam.firmware.pixfmt import is_raw
+from rollcam.sim import formats as sf
+from rollcam.sim.errors import ConfigError
+from rollcam.sim.isp import IspParams, preview
 
 from . import functions as fn
 from . import raw
@@ -42,9 +46,26 @@ class CapturedBuffer:
         """True when the driver flagged the buffer V4L2_BUF_FLAG_ERROR."""
         return bool(self.flags & raw.BufFlag.ERROR)
 
+    @property
+    def raw(self) -> bool:
+        """True when the buffer holds raw sensor samples (Bayer or mono, unpacked or CSI-2 packed)."""
+        return is_raw(self.fourcc)
+
+    def samples(self) -> np.ndarray:
+        """A raw buffer's samples as ``uint16 (H, W)`` at the format's bit depth (CSI-2 unpacked)."""
+        if not self.raw:
+            raise ConfigError(f"buffer format {self.fourcc!r} is not a raw sensor format")
+        f = sf.pixel_format(self.fourcc)
+        return sf.decode_raw(self.data.view(f.dtype).reshape(f.shape(self.width, self.height)), f.fourcc,
+                             self.width)
+
     def image(self) -> np.ndarray:
-        """The pixels as a BGR image (decoded from YUYV/MJPG; GREY stays single-channel)."""
+        """The pixels as a BGR image (decoded from YUYV/MJPG; GREY stays single-channel; a raw buffer is
+        demosaicked by the preview ISP at its full scale, without black-level subtraction)."""
         w, h, d = self.width, self.height, self.data
+        if self.raw:
+            f = sf.pixel_format(self.fourcc)
+            return preview(self.samples(), f.cfa or "mono", IspParams(white_level_dn=float((1 << f.bits) - 1)))
         decode = {"BGR3": lambda: d.reshape(h, w, 3), "RGB3": lambda: cv2.cvtColor(d.reshape(h, w, 3),
                                                                                     cv2.COLOR_RGB2BGR),
                   "YUYV": lambda: cv2.cvtColor(d.reshape(h, w, 2), cv2.COLOR_YUV2BGR_YUYV),

@@ -18,7 +18,7 @@ import numpy as np
 from rollcam.emu.pump import FramePump
 from rollcam.firmware.camera import FirmwareCamera, FramePlan
 from rollcam.firmware.controls import CONTROLS
-from rollcam.firmware.pixfmt import FORMATS, convert, pixel_format
+from rollcam.firmware.pixfmt import RawFormat, convert, pixel_format
 from rollcam.sim.errors import ConfigError, DeviceError
 from rollcam.sim.frame import Frame
 
@@ -59,12 +59,15 @@ class EmuDriver:
         self.faults = faults or Faults()
         self.rng = np.random.default_rng(self.faults.seed)
         self.queue = BufferQueue()
-        w, h = camera.size
-        self.fmt = _pix_format(w, h, "YUYV" if "YUYV" in FORMATS else next(iter(FORMATS)))
         self.pump: FramePump | None = None
         self.seq0 = 0
         self.stats = {"delivered": 0, "dropped_no_buffer": 0, "dropped_injected": 0, "errors_injected": 0}
         self._filling: tuple[int, Slot, np.ndarray] | None = None
+
+    @property
+    def fmt(self) -> raw.PixFormat:
+        """The current format (G_FMT): the camera's size and fourcc, so a flip's new Bayer order shows here."""
+        return _pix_format(*self.camera.size, self.camera.pixel_format)
 
     def ioctl(self, request: raw.Ioctl | str, arg: Any = None) -> Any:
         """Run one VIDIOC request; failures raise V4L2Error with the kernel's errno."""
@@ -129,8 +132,10 @@ class EmuDriver:
         self._deliver(slot, frame, payload.size)
 
     def _payload(self, frame: Frame) -> np.ndarray:
-        data = convert(frame.data, self.fmt.pixelformat)
-        return np.ascontiguousarray(data).reshape(-1)
+        fourcc = self.fmt.pixelformat
+        # A raw frame is already in its fourcc's layout (the sensor's samples); renders go through the ISP.
+        data = frame.data if frame.format == fourcc else convert(frame.data, fourcc)
+        return np.ascontiguousarray(data).reshape(-1).view(np.uint8)
 
     def _deliver(self, slot: Slot, frame: Frame, size: int) -> None:
         f = self.faults
@@ -165,8 +170,10 @@ class EmuDriver:
 
 def _pix_format(width: int, height: int, fourcc: str) -> raw.PixFormat:
     pf = pixel_format(fourcc)
+    space = raw.Colorspace.JPEG if pf.compressed else raw.Colorspace.RAW if isinstance(pf, RawFormat) else \
+        raw.Colorspace.SRGB
     return raw.PixFormat(width, height, fourcc, raw.Field.NONE, pf.bytesperline(width), pf.sizeimage(width, height),
-                         raw.Colorspace.JPEG if pf.compressed else raw.Colorspace.SRGB)
+                         space)
 
 
 # ------------------------------------------------------------------------------------------------ handlers
@@ -177,7 +184,7 @@ def _querycap(d: EmuDriver, _arg: Any) -> raw.Capability:
 
 
 def _enum_fmt(d: EmuDriver, arg: raw.FmtDesc) -> raw.FmtDesc:
-    formats = list(FORMATS.values())
+    formats = [pixel_format(f) for f in d.camera.formats]
     if not 0 <= arg.index < len(formats):
         raise V4L2Error(errno.EINVAL, f"format index {arg.index} out of range")
     pf = formats[arg.index]
@@ -185,10 +192,14 @@ def _enum_fmt(d: EmuDriver, arg: raw.FmtDesc) -> raw.FmtDesc:
 
 
 def _try_fmt(d: EmuDriver, arg: raw.PixFormat) -> raw.PixFormat:
-    """TRY_FMT: the nearest mode size (as v4l2_find_nearest_size) and a supported format (else the first)."""
+    """TRY_FMT: the nearest mode size (as v4l2_find_nearest_size) and a supported format (else the first); a raw
+    Bayer fourcc comes back in the order the current flips give, as Linux sensor drivers answer."""
     sizes = d.camera.sizes()
     w, h = min(sizes, key=lambda s: abs(s[0] - arg.width) + abs(s[1] - arg.height))
-    fourcc = arg.pixelformat if arg.pixelformat in FORMATS else next(iter(FORMATS))
+    try:
+        fourcc = d.camera.resolve_format(arg.pixelformat)
+    except ConfigError:
+        fourcc = d.camera.formats[0]
     return _pix_format(w, h, fourcc)
 
 
@@ -197,13 +208,13 @@ def _s_fmt(d: EmuDriver, arg: raw.PixFormat) -> raw.PixFormat:
     if d.queue.busy:
         raise V4L2Error(errno.EBUSY, "S_FMT while buffers are allocated (REQBUFS 0 first)")
     d.camera.set_size(fmt.width, fmt.height)
-    d.fmt = fmt
-    return fmt
+    d.camera.set_format(fmt.pixelformat)
+    return d.fmt
 
 
 def _enum_framesizes(d: EmuDriver, arg: raw.FrmSize) -> raw.FrmSize:
     sizes = d.camera.sizes()
-    if arg.pixel_format not in FORMATS or not 0 <= arg.index < len(sizes):
+    if arg.pixel_format not in d.camera.formats or not 0 <= arg.index < len(sizes):
         raise V4L2Error(errno.EINVAL, f"no frame size {arg.index} for format {arg.pixel_format!r}")
     return raw.FrmSize(arg.index, arg.pixel_format, raw.FrmSizeType.DISCRETE, *sizes[arg.index])
 
@@ -214,7 +225,8 @@ def _interval(d: EmuDriver, width: int, height: int) -> Fraction:
 
 
 def _enum_frameintervals(d: EmuDriver, arg: raw.FrmIval) -> raw.FrmIval:
-    if arg.index != 0 or (arg.width, arg.height) not in d.camera.sizes() or arg.pixel_format not in FORMATS:
+    if (arg.index != 0 or (arg.width, arg.height) not in d.camera.sizes()
+            or arg.pixel_format not in d.camera.formats):
         raise V4L2Error(errno.EINVAL, f"no frame interval {arg.index} for {arg.pixel_format!r} "
                                       f"{arg.width}x{arg.height}")
     ival = _interval(d, arg.width, arg.height)
@@ -302,6 +314,10 @@ def _dqbuf(d: EmuDriver, arg: dict[str, Any] | None) -> Slot:
 def _streamon(d: EmuDriver, _arg: Any) -> None:
     if d.queue.streaming:
         return
+    small = [s.info.length for s in d.queue.slots if s.info.length < d.fmt.sizeimage]
+    if small:  # the format grew after REQBUFS (over another interface): vb2 refuses too-small buffers
+        raise V4L2Error(errno.EINVAL, f"buffers of {small[0]} bytes cannot hold {d.fmt.pixelformat!r} frames of "
+                                      f"{d.fmt.sizeimage} bytes; REQBUFS again")
     d.queue.start()
     d.seq0 = d.camera.next_seq  # V4L2 sequence numbers count from 0 at each STREAMON
     d.camera.stream_on()

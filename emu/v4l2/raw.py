@@ -68,10 +68,11 @@ class BufFlag(enum.IntFlag):
 
 
 class Colorspace(enum.IntEnum):
-    """``enum v4l2_colorspace`` (the two used here)."""
+    """``enum v4l2_colorspace`` (the three used here)."""
 
     JPEG = 7
     SRGB = 8
+    RAW = 11
 
 
 class CtrlType(enum.IntEnum):
