@@ -358,9 +358,9 @@ class FirmwareCamera:
                 sched = self.current_schedule()
                 assert sched is not None
                 if now_ns is not None:
-                    while sched.frame_due_ns(seq) < now_ns:
-                        seq += 1
-                        self.stats["skipped"] += 1
+                    late = sched.first_due_from(seq, now_ns)
+                    self.stats["skipped"] += late - seq
+                    seq = late
             self._next_seq = seq + 1
             return FramePlan(seq, sched)
 
@@ -375,6 +375,12 @@ class FirmwareCamera:
             self.changed.wait(timeout_s)
 
     # ---------------------------------------------------------------------------------------- pixels
+    def note_made(self, seq: int) -> None:
+        """Record that frame ``seq`` was planned by a consumer that does not use ``plan_next`` (UVC), so the
+        next timing change re-anchors the schedule after it rather than at the stream's start."""
+        with self.lock:
+            self._next_seq = max(self._next_seq, seq + 1)
+
     def render(self, plan: FramePlan) -> Frame:
         """Make frame ``plan.seq``: the scene (or the test pattern) at its lines' device times, flips applied."""
         with self.lock:

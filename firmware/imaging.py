@@ -16,6 +16,7 @@ filter (``rollcam.sim.formats.mosaic``) at full scale of the format's bits, with
 from __future__ import annotations
 
 import dataclasses
+import threading
 from typing import Any
 
 import numpy as np
@@ -42,6 +43,9 @@ class Imager:
         self.serial = serial
         self.blur_px = blur_px
         self._cached: tuple[tuple, SyntheticCamera] | None = None
+        # One frame at a time: rendering sets the camera's clock for the frame and uses the renderer's scratch
+        # buffers, and two transports (HTTP's pump, UVC's render-ahead) may ask for frames at once.
+        self._render_lock = threading.Lock()
 
     def camera(self, s: SensorState, scene_options: dict[str, Any], raw_fourcc: str | None = None
                ) -> SyntheticCamera:
@@ -73,10 +77,11 @@ class Imager:
                bayer_order: str) -> Frame:
         """Frame ``plan.seq`` (``plan``: a FramePlan) from ``cam``, with the test pattern and flips applied."""
         sched: FrameSchedule = plan.schedule
-        if cam.pipeline is not None:
-            return self._render_raw(cam, plan, pattern, bayer_order)
-        cam.start_ns = sched.start_ns(plan.seq)  # frame 0 of a camera whose clock starts at this frame
-        frame = cam.frame(0)
+        with self._render_lock:
+            if cam.pipeline is not None:
+                return self._render_raw(cam, plan, pattern, bayer_order)
+            cam.start_ns = sched.start_ns(plan.seq)  # frame 0 of a camera whose clock starts at this frame
+            frame = cam.frame(0)
         meta = {**frame.meta, "bayer_order": bayer_order, "test_pattern": pattern}
         if pattern != "none":
             return dataclasses.replace(frame, data=render_pattern(pattern, frame.width, frame.height),

@@ -61,3 +61,12 @@ class FrameSchedule:
         while n > 0 and self.timing.frame_start_ns(n) > dt:
             n -= 1
         return self.first_seq + n
+
+    def first_due_from(self, seq: int, t_ns: int) -> int:
+        """The first frame at or after ``seq`` that is not yet read out at ``t_ns`` (due at or after it).
+
+        Closed form: a frame's due time is its start plus a constant (exposure and readout), so this is one
+        ``seq_started_by`` away, whatever the length of a stall.
+        """
+        due_after_start = self.frame_due_ns(self.first_seq) - self.start_ns(self.first_seq)
+        return max(seq, self.seq_started_by(t_ns - due_after_start - 1) + 1)

@@ -60,3 +60,54 @@ def test_rollcam_emulate_usbip_streams_to_the_uvc_source():
     assert proc.returncode == 0, err
     with pytest.raises(OSError):
         socket.create_connection(("127.0.0.1", info["port"]), timeout=2).close()
+
+
+def test_two_transports_rendering_at_once_get_their_own_frames():
+    import threading
+
+    from rollcam.firmware.camera import FramePlan
+
+    cam = FirmwareCamera("imx219", size=(640, 480), scene={"scene": "street", "seed": 2, "speed": "fast"})
+    cam.stream_on()
+    sched = cam.current_schedule()
+    wrong: list[int] = []
+
+    def run(first: int) -> None:
+        for seq in range(first, first + 15):
+            frame = cam.render(FramePlan(seq, sched))
+            if frame.timestamp_ns != sched.start_ns(seq) or frame.sequence != seq:
+                wrong.append(seq)
+
+    threads = [threading.Thread(target=run, args=(k,)) for k in (0, 100_000)]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join()
+    assert wrong == []
+
+
+def test_a_timing_change_during_a_uvc_only_stream_moves_only_later_frames():
+    from rollcam.emu.uvc import FirmwareProducer
+
+    cam = FirmwareCamera("imx219", scene={"scene": "flat"})
+    p = FirmwareProducer(cam)
+    p.configure(640, 480, p.intervals_ns(640, 480)[0])
+    for i in range(101):
+        p.frame_due_ns(i)
+    p.frame(100)
+    due_101 = p.frame_due_ns(101)
+    period = cam.frame_interval_ns
+    cam.set_control("vblank", cam.get_control("vblank") * 3)  # a longer frame, e.g. over the serial line
+    assert cam.frame_interval_ns > period
+    # Frame 101 starts one (new) period after frame 100, not three periods times 101 after the commit.
+    assert abs(p.frame_due_ns(101) - due_101) < cam.frame_interval_ns
+
+
+def test_late_frames_are_skipped_in_closed_form():
+    cam = FirmwareCamera("imx219", size=(640, 480), scene={"scene": "flat"}, clock=lambda: 0)
+    cam.stream_on()
+    sched = cam.current_schedule()
+    ten_days = 10 * 86_400 * 10**9
+    plan = cam.plan_next(now_ns=ten_days)
+    assert sched.frame_due_ns(plan.seq) >= ten_days > sched.frame_due_ns(plan.seq - 1)
+    assert cam.stats["skipped"] == plan.seq

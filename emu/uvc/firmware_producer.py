@@ -63,7 +63,10 @@ class FirmwareProducer:
         return self._schedule().frame_due_ns(self._base + index)
 
     def frame(self, index: int) -> Frame:
-        frame = self.camera.render(FramePlan(self._base + index, self._schedule()))
+        seq = self._base + index
+        plan = FramePlan(seq, self._schedule())
+        self.camera.note_made(seq)  # a later timing change re-anchors after this frame, not at the commit
+        frame = self.camera.render(plan)
         if is_raw(frame.format):
             frame = dataclasses.replace(frame, data=to_bgr(frame, self.camera.sensor), format="BGR3")
         return frame
