@@ -129,6 +129,42 @@ def test_oak_source_on_the_mock(mock_depthai):
         open_camera("oak:")
 
 
+def test_oak_frames_are_stamped_at_start_of_exposure(mock_depthai):
+    """depthai stamps an ImgFrame at the end of exposure; the Frame must carry the start, as emu: frames do."""
+    with open_camera("oak:?size=320x180&frames=3&exposure_us=8000") as src:
+        got = list(src)
+    dev = mock_depthai.devices[0]
+    with open_camera(f"emu:imx378?scene={dev.scene}&seed={dev.seed}&size=320x180&exposure_us=8000&gain=1.0"
+                     "&frames=3") as src:
+        sent = list(src)
+    assert [f.exposure_ns for f in got] == [f.exposure_ns // 1000 * 1000 for f in sent]  # depthai keeps us
+    assert got[0].exposure_ns == pytest.approx(8_000_000, rel=0.05)
+    assert [f.timestamp_ns for f in got] == [f.timestamp_ns // 1000 * 1000 for f in sent]
+    assert got[0].row_times_ns[0] - got[0].timestamp_ns == got[0].exposure_ns // 2  # first row: mid-exposure
+
+
+def test_oak_options_are_checked_before_the_device_opens(mock_depthai):
+    for bad in ("gain=abc", "exposure_us=abc", "exposure_us=0", "gain=-1", "exposure_us=0.2", "gain=0.001"):
+        with pytest.raises(SourceError, match=bad.split("=")[0]):
+            open_camera(f"oak:?size=320x180&{bad}")
+        assert not mock_depthai.devices[0].opened, bad
+    with open_camera("oak:?size=320x180") as src:  # the device is still free
+        assert src.read() is not None
+
+
+def test_oak_set_control_keeps_uri_exposure_and_gain(mock_depthai):
+    with open_camera("oak:?size=320x180&exposure_us=2000&gain=3") as src:
+        src.set_control("exposure_us", 4000)
+        assert src.read().meta["iso"] == 300
+        src.set_control("gain", 2)
+        f = src.read()
+        assert f.exposure_ns == pytest.approx(4_000_000, rel=0.05) and f.meta["iso"] == 200
+        with pytest.raises(SourceError, match="exposure_us=0"):
+            src.set_control("exposure_us", 0)
+    controls = [(c.exposure_us, c.iso) for c in mock_depthai.devices[0].controls]
+    assert controls == [(2000, 300), (4000, 300), (4000, 200)]
+
+
 def test_oak_with_real_depthai_and_no_device():
     dai = pytest.importorskip("depthai")
     if dai.Device.getAllAvailableDevices():
