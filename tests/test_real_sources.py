@@ -34,6 +34,48 @@ def test_http_mjpeg_carries_device_timing(emu_frames, rollcam_mjpeg_server):
         assert np.abs(mine.data.astype(int) - sent.data).mean() < 6  # JPEG round trip
 
 
+def test_http_header_line_time_keeps_the_sensors_exact_rows(emu_frames, rollcam_mjpeg_server):
+    # imx219's readout spread over 180 rows lasts 113,421.05 ns a line: X-Line-Time-Ns says 113421, so rows
+    # multiplied out from the header drift from the sensor's true ones (9 ns at the bottom row here).
+    server = rollcam_mjpeg_server(emu_frames)
+    with open_camera(server.url + "#sensor=imx219") as src:
+        got = list(src)
+    for mine, sent in zip(got, emu_frames, strict=True):
+        assert mine.line_time_ns == sent.line_time_ns
+        assert np.array_equal(mine.row_times_ns, sent.row_times_ns)  # exact, to the ns, bottom rows included
+    line = emu_frames[0].line_time_ns
+    with open_camera(server.url) as src:  # no sensor: the header's whole-ns line time is all there is
+        rows = src.read().row_times_ns
+    assert np.array_equal(rows - rows[0], np.arange(180) * line)
+    for headers, _ in server.parts:
+        headers["X-Line-Time-Ns"] = "20000"
+    with open_camera(server.url + "#sensor=imx219") as src:  # a line time that is not the sensor's wins
+        f = src.read()
+    assert f.line_time_ns == 20000 and np.array_equal(f.row_times_ns - f.row_times_ns[0], np.arange(180) * 20000)
+
+
+@pytest.mark.parametrize(("header", "value", "match"), [
+    ("X-Shutter", "sideways", "x-shutter='sideways'"),
+    ("X-Readout", "diagonal", "x-readout='diagonal'"),
+    ("X-Line-Time-Ns", "-5", "x-line-time-ns='-5'"),
+    ("X-Line-Time-Ns", "0", "X-Shutter: rolling with X-Line-Time-Ns: 0"),
+])
+def test_http_bad_timing_headers_name_the_header(emu_frames, rollcam_mjpeg_server, header, value, match):
+    server = rollcam_mjpeg_server(emu_frames[:1])
+    server.parts[0][0][header] = value
+    with open_camera(server.url) as src, pytest.raises(ProtocolError, match=match):
+        src.read()
+
+
+def test_http_global_shutter_header(emu_frames, rollcam_mjpeg_server):
+    server = rollcam_mjpeg_server(emu_frames[:1])
+    server.parts[0][0].update({"X-Shutter": "Global", "X-Line-Time-Ns": "0"})
+    with open_camera(server.url + "#sensor=imx219") as src:
+        f = src.read()
+    assert f.shutter == "global" and f.line_time_ns == 0
+    assert (f.row_times_ns == emu_frames[0].timestamp_ns + emu_frames[0].exposure_ns // 2).all()
+
+
 def test_http_without_headers_uses_host_clock_and_named_sensor(emu_frames, rollcam_mjpeg_server):
     server = rollcam_mjpeg_server(emu_frames, timing_headers=False, content_length=False)
     ticks = iter(range(1000, 10**6, 1000))
