@@ -13,9 +13,11 @@ an OAK's camera can take its frames from any rollcam source instead::
         while pipeline.isRunning():
             img = queue.get().getCvFrame()          # BGR888i, device sequence and timestamp set
 
-Each ImgFrame carries the source frame's sequence number and device timestamp (depthai keeps whole
-microseconds); ``cam.truth[sequence]`` holds the frame's ground-truth objects for synthetic sources (the
-newest ``TRUTH_KEPT`` frames, so an endless stream does not grow without bound). With
+Each ImgFrame carries the source frame's sequence number, exposure time and device timestamp (depthai keeps
+whole microseconds). As on an OAK, the timestamp is the end of exposure: ``getTimestampDevice()`` is the
+frame's start of exposure plus its exposure, ``getTimestampDevice(dai.CameraExposureOffset.START)`` its start.
+``cam.truth[sequence]`` holds the frame's ground-truth objects for synthetic sources (the newest
+``TRUTH_KEPT`` frames, so an endless stream does not grow without bound). With
 ``realtime=True`` frames are paced at the source's frame period; otherwise they come as fast as they render.
 After ``frames`` (or the end of a finite source) the node stops the pipeline, so ``isRunning()`` loops end.
 ``EmulatedCamera`` is built on first access, because depthai is an optional dependency (``rollcam[oak]``).
@@ -80,7 +82,13 @@ def _make_class(dai: Any) -> type:
                         msg = dai.ImgFrame()
                         msg.setCvFrame(frame_bgr(frame), dai.ImgFrame.Type.BGR888i)
                         msg.setSequenceNum(frame.sequence)
-                        stamp = datetime.timedelta(microseconds=frame.timestamp_ns // 1000)
+                        # depthai stamps an ImgFrame at the END of exposure (START = stamp - exposure), in
+                        # whole us: store start + exposure so getTimestampDevice(START) is the frame's start.
+                        exposure_us = frame.exposure_ns // 1000
+                        settings = msg.cam
+                        settings.exposureTimeUs = exposure_us
+                        msg.cam = settings
+                        stamp = datetime.timedelta(microseconds=frame.timestamp_ns // 1000 + exposure_us)
                         msg.setTimestampDevice(stamp)
                         msg.setTimestamp(stamp)
                         self.truth[frame.sequence] = frame.objects

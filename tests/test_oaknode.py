@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import datetime
+
 import pytest
 from rollcam.host import open_camera
 from rollcam.sim.errors import SourceError
@@ -23,11 +25,16 @@ def test_host_pipeline_receives_emulated_imgframes():
         pipeline.start()
         while len(got) < 3:
             msg = queue.get()
-            got.append((msg.getSequenceNum(), msg.getTimestampDevice(), msg.getCvFrame(), msg.getType()))
+            start = msg.getTimestampDevice(dai.CameraExposureOffset.START)
+            got.append((msg.getSequenceNum(), start, msg.getTimestampDevice(), msg.getExposureTime(),
+                        msg.getCvFrame(), msg.getType()))
     assert cam.error is None
-    for (seq, stamp, img, kind), frame in zip(got, expected, strict=True):
+    us = datetime.timedelta(microseconds=1)
+    for (seq, start, end, exposure, img, kind), frame in zip(got, expected, strict=True):
         assert seq == frame.sequence and kind == dai.ImgFrame.Type.BGR888i
-        assert stamp.total_seconds() * 1e9 == pytest.approx(frame.timestamp_ns, abs=1000)
+        # depthai's plain stamp is the end of exposure; START is the frame's start of exposure, in whole us
+        assert start // us == frame.timestamp_ns // 1000 and exposure // us == frame.exposure_ns // 1000 > 0
+        assert end - start == exposure
         assert (img == frame.data).all()
         assert cam.truth[seq] == frame.objects
 

@@ -34,6 +34,48 @@ def test_http_mjpeg_carries_device_timing(emu_frames, rollcam_mjpeg_server):
         assert np.abs(mine.data.astype(int) - sent.data).mean() < 6  # JPEG round trip
 
 
+def test_http_header_line_time_keeps_the_sensors_exact_rows(emu_frames, rollcam_mjpeg_server):
+    # imx219's readout spread over 180 rows lasts 113,421.05 ns a line: X-Line-Time-Ns says 113421, so rows
+    # multiplied out from the header drift from the sensor's true ones (9 ns at the bottom row here).
+    server = rollcam_mjpeg_server(emu_frames)
+    with open_camera(server.url + "#sensor=imx219") as src:
+        got = list(src)
+    for mine, sent in zip(got, emu_frames, strict=True):
+        assert mine.line_time_ns == sent.line_time_ns
+        assert np.array_equal(mine.row_times_ns, sent.row_times_ns)  # exact, to the ns, bottom rows included
+    line = emu_frames[0].line_time_ns
+    with open_camera(server.url) as src:  # no sensor: the header's whole-ns line time is all there is
+        rows = src.read().row_times_ns
+    assert np.array_equal(rows - rows[0], np.arange(180) * line)
+    for headers, _ in server.parts:
+        headers["X-Line-Time-Ns"] = "20000"
+    with open_camera(server.url + "#sensor=imx219") as src:  # a line time that is not the sensor's wins
+        f = src.read()
+    assert f.line_time_ns == 20000 and np.array_equal(f.row_times_ns - f.row_times_ns[0], np.arange(180) * 20000)
+
+
+@pytest.mark.parametrize(("header", "value", "match"), [
+    ("X-Shutter", "sideways", "x-shutter='sideways'"),
+    ("X-Readout", "diagonal", "x-readout='diagonal'"),
+    ("X-Line-Time-Ns", "-5", "x-line-time-ns='-5'"),
+    ("X-Line-Time-Ns", "0", "X-Shutter: rolling with X-Line-Time-Ns: 0"),
+])
+def test_http_bad_timing_headers_name_the_header(emu_frames, rollcam_mjpeg_server, header, value, match):
+    server = rollcam_mjpeg_server(emu_frames[:1])
+    server.parts[0][0][header] = value
+    with open_camera(server.url) as src, pytest.raises(ProtocolError, match=match):
+        src.read()
+
+
+def test_http_global_shutter_header(emu_frames, rollcam_mjpeg_server):
+    server = rollcam_mjpeg_server(emu_frames[:1])
+    server.parts[0][0].update({"X-Shutter": "Global", "X-Line-Time-Ns": "0"})
+    with open_camera(server.url + "#sensor=imx219") as src:
+        f = src.read()
+    assert f.shutter == "global" and f.line_time_ns == 0
+    assert (f.row_times_ns == emu_frames[0].timestamp_ns + emu_frames[0].exposure_ns // 2).all()
+
+
 def test_http_without_headers_uses_host_clock_and_named_sensor(emu_frames, rollcam_mjpeg_server):
     server = rollcam_mjpeg_server(emu_frames, timing_headers=False, content_length=False)
     ticks = iter(range(1000, 10**6, 1000))
@@ -127,6 +169,42 @@ def test_oak_source_on_the_mock(mock_depthai):
     mock_depthai.devices.clear()
     with pytest.raises(SourceError, match="no OAK device found; plug one in"):
         open_camera("oak:")
+
+
+def test_oak_frames_are_stamped_at_start_of_exposure(mock_depthai):
+    """depthai stamps an ImgFrame at the end of exposure; the Frame must carry the start, as emu: frames do."""
+    with open_camera("oak:?size=320x180&frames=3&exposure_us=8000") as src:
+        got = list(src)
+    dev = mock_depthai.devices[0]
+    with open_camera(f"emu:imx378?scene={dev.scene}&seed={dev.seed}&size=320x180&exposure_us=8000&gain=1.0"
+                     "&frames=3") as src:
+        sent = list(src)
+    assert [f.exposure_ns for f in got] == [f.exposure_ns // 1000 * 1000 for f in sent]  # depthai keeps us
+    assert got[0].exposure_ns == pytest.approx(8_000_000, rel=0.05)
+    assert [f.timestamp_ns for f in got] == [f.timestamp_ns // 1000 * 1000 for f in sent]
+    assert got[0].row_times_ns[0] - got[0].timestamp_ns == got[0].exposure_ns // 2  # first row: mid-exposure
+
+
+def test_oak_options_are_checked_before_the_device_opens(mock_depthai):
+    for bad in ("gain=abc", "exposure_us=abc", "exposure_us=0", "gain=-1", "exposure_us=0.2", "gain=0.001"):
+        with pytest.raises(SourceError, match=bad.split("=")[0]):
+            open_camera(f"oak:?size=320x180&{bad}")
+        assert not mock_depthai.devices[0].opened, bad
+    with open_camera("oak:?size=320x180") as src:  # the device is still free
+        assert src.read() is not None
+
+
+def test_oak_set_control_keeps_uri_exposure_and_gain(mock_depthai):
+    with open_camera("oak:?size=320x180&exposure_us=2000&gain=3") as src:
+        src.set_control("exposure_us", 4000)
+        assert src.read().meta["iso"] == 300
+        src.set_control("gain", 2)
+        f = src.read()
+        assert f.exposure_ns == pytest.approx(4_000_000, rel=0.05) and f.meta["iso"] == 200
+        with pytest.raises(SourceError, match="exposure_us=0"):
+            src.set_control("exposure_us", 0)
+    controls = [(c.exposure_us, c.iso) for c in mock_depthai.devices[0].controls]
+    assert controls == [(2000, 300), (4000, 300), (4000, 200)]
 
 
 def test_oak_with_real_depthai_and_no_device():

@@ -16,7 +16,11 @@ the Frame when the server sends them (the rollcam emulator does; mjpg-streamer s
 
 Without them: sequence counts parts received, the timestamp is the host's monotonic clock at arrival, and
 the row timing comes from ``sensor=NAME`` (or is unknown). A line time from the headers wins over the
-sensor's. Options: ``sensor``, ``timeout`` (seconds to connect and between parts, default 10), ``frames``,
+sensor's, except that when it equals the sensor's rounded line time the sensor's exact (sub-ns) row offsets
+are kept: ``X-Line-Time-Ns`` is whole ns, so rows built from it alone drift from the true ones (imx219's
+18,903.5 ns line by 0.5 ns a row). ``X-Shutter: rolling`` needs a line time (the header's or the sensor's);
+an unknown shutter or readout, or a negative line time or exposure, is a ProtocolError naming the header.
+Options: ``sensor``, ``timeout`` (seconds to connect and between parts, default 10), ``frames``,
 ``latest`` (1: a thread reads the stream and ``read()`` returns the newest part, dropping older ones, so a
 consumer slower than the stream, such as a detector, sees live frames instead of a growing backlog; the
 count dropped goes into ``meta["dropped"]``; default 0: every part, in order).
@@ -37,9 +41,9 @@ import cv2
 import numpy as np
 from rollcam.sim.errors import ProtocolError, SourceError
 from rollcam.sim.frame import Frame
-from rollcam.sim.timing import Readout, line_sample_times_ns
+from rollcam.sim.timing import NS_PER_S, LineTiming, Readout, line_sample_times_ns
 
-from .base import CameraSource, SourceURI, finite_float, positive_int
+from .base import CameraSource, SourceURI, finite_float, non_negative_int, positive_int
 from .rowtiming import FrameTimer
 
 OPTIONS = {"sensor", "timeout", "frames", "latest"}
@@ -51,14 +55,24 @@ def _seconds_to_ns(text: str) -> int:
     return int(Decimal(text) * 1_000_000_000)
 
 
+SHUTTERS = ("rolling", "global")
+
+
+def _shutter(text: str) -> str:
+    value = text.strip().lower()
+    if value not in SHUTTERS:
+        raise ValueError(f"not one of {list(SHUTTERS)}")
+    return value
+
+
 PART_HEADERS: dict[str, tuple[str, Callable[[str], Any]]] = {
     "x-sequence": ("sequence", int),
     "x-timestamp-ns": ("timestamp_ns", int),
     "x-timestamp": ("timestamp_s", _seconds_to_ns),
-    "x-exposure-ns": ("exposure_ns", int),
-    "x-line-time-ns": ("line_time_ns", int),
+    "x-exposure-ns": ("exposure_ns", non_negative_int),
+    "x-line-time-ns": ("line_time_ns", non_negative_int),
     "x-readout": ("readout", Readout.parse),
-    "x-shutter": ("shutter", str),
+    "x-shutter": ("shutter", _shutter),
 }
 """Part header (lower case) -> (field, parser). ``timestamp_s`` is used only without ``timestamp_ns``."""
 
@@ -254,20 +268,34 @@ class HttpMjpegSource(CameraSource):
         self.index += 1
         return frame
 
-    @staticmethod
-    def _with_header_timing(frame: Frame, fields: dict[str, Any]) -> Frame:
+    def _with_header_timing(self, frame: Frame, fields: dict[str, Any]) -> Frame:
+        """``frame`` re-timed by its part's X-Line-Time-Ns / X-Shutter / X-Readout headers."""
         from dataclasses import replace
 
-        line_ns = fields.get("line_time_ns", frame.line_time_ns)
-        shutter = fields.get("shutter", "rolling" if line_ns > 0 else "global")
+        header_line = fields.get("line_time_ns")
+        shutter = fields.get("shutter")
+        if shutter is None:
+            shutter = frame.shutter if header_line is None else "rolling" if header_line > 0 else "global"
         readout = fields.get("readout", frame.readout)
+        if shutter not in SHUTTERS:  # unknown row timing (no headers, no sensor=): only the readout is news
+            return replace(frame, readout=readout)
         n = frame.width if readout.by_column else frame.height
         t0 = frame.timestamp_ns + frame.exposure_ns // 2
-        order = np.arange(n, dtype=np.int64)
-        rows = (np.int64(t0) + (order[::-1] if readout.reversed else order) * np.int64(line_ns)
-                if shutter == "rolling" else line_sample_times_ns(t0, n, None, readout))
-        return replace(frame, line_time_ns=line_ns if shutter == "rolling" else 0, shutter=shutter, readout=readout,
-                       row_times_ns=rows)
+        timing = self._rolling_timing(header_line, n) if shutter == "rolling" else None
+        return replace(frame, line_time_ns=timing.line_time_ns if timing is not None else 0, shutter=shutter,
+                       readout=readout, row_times_ns=line_sample_times_ns(t0, n, timing, readout))
+
+    def _rolling_timing(self, header_line: int | None, n_lines: int) -> LineTiming:
+        """Line timing of a rolling-shutter part: the sensor's exact one when the header's whole-ns line time
+        is that timing rounded (or absent), else the header's line time on a 1 GHz clock (whole ns a line)."""
+        sensor = self.timer.timing.timing if self.timer.timing.shutter == "rolling" else None
+        if sensor is not None and header_line in (None, sensor.line_time_ns):
+            return sensor
+        if not header_line:
+            got = "X-Line-Time-Ns: 0" if header_line == 0 else "no X-Line-Time-Ns"
+            raise ProtocolError(f"source {self.uri!r}: part header X-Shutter: rolling with {got}; the server must "
+                                "send the line time, or name the sensor with #sensor=NAME")
+        return LineTiming(pixel_rate_hz=NS_PER_S, line_length_pck=header_line, frame_length_lines=n_lines)
 
     def close(self) -> None:
         """Close the connection; safe to call twice."""

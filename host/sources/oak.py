@@ -2,17 +2,21 @@
 
 Through depthai v3: a pipeline on the device (the first available, or the one whose device id / MXID is
 given) with a ``Camera`` node on ``socket`` and one ``requestOutput`` (BGR, ``size``, ``fps``) read from its
-output queue. Frames carry the device's sequence number, device timestamp (start of exposure; depthai keeps
-microseconds) and exposure time; ISO goes into ``meta``. Row timing: ``sensor=NAME``, else the socket's usual
-sensor (CAM_A: the IMX378 of OAK-1/OAK-D; CAM_B/CAM_C: the OV9282 mono pair, global shutter, for which the
-closest hw_config is ``ov9281``). ``exposure_us``/``gain`` switch the camera to manual exposure
-(``CameraControl.setManualExposure``; gain 1.0 = ISO 100); ``set_control`` changes them while streaming.
+output queue. Frames carry the device's sequence number, device timestamp and exposure time; ISO goes into
+``meta``. depthai stamps an ImgFrame at the end of its exposure, so the Frame's start-of-exposure timestamp is
+read with ``getTimestampDevice(CameraExposureOffset.START)`` (whole microseconds, as depthai keeps them).
+Row timing: ``sensor=NAME``, else the socket's usual sensor (CAM_A: the IMX378 of OAK-1/OAK-D; CAM_B/CAM_C:
+the OV9282 mono pair, global shutter, for which the closest hw_config is ``ov9281``). ``exposure_us``/``gain``
+switch the camera to manual exposure (``CameraControl.setManualExposure``; gain 1.0 = ISO 100; both must be
+positive, exposure at least 1 us); ``set_control`` changes either while streaming and keeps the other. Every
+option is checked before the device is opened.
 """
 
 from __future__ import annotations
 
 import datetime
 import importlib
+import math
 import os
 import sys
 from typing import Any
@@ -30,6 +34,8 @@ DEFAULT_SENSOR = {"CAM_A": "imx378", "CAM_B": "ov9281", "CAM_C": "ov9281"}
 DEFAULT_SIZE = (1920, 1080)
 ISO_PER_GAIN = 100
 INSTALL_HINT = "pip install 'rollcam[oak]' (depthai 3)"
+DEFAULT_EXPOSURE_US = 10_000.0
+"""Manual exposure used when only ``gain`` is given."""
 
 
 def _import_quietly(name: str) -> Any:
@@ -64,6 +70,14 @@ def timedelta_ns(value: datetime.timedelta) -> int:
     return ((value.days * 86_400 + value.seconds) * 1_000_000 + value.microseconds) * 1000
 
 
+def positive_float(text: str) -> float:
+    """Option parser: a finite float above zero (manual exposure and gain)."""
+    value = finite_float(text)
+    if value <= 0:
+        raise ValueError("must be greater than 0")
+    return value
+
+
 def device_ids(dai: Any) -> list[str]:
     """Ids (MXIDs) of the OAK devices depthai can see."""
     return [d.getDeviceId() for d in dai.Device.getAllAvailableDevices()]
@@ -86,6 +100,11 @@ class OakSource(CameraSource):
         self.limit = uri.get("frames", positive_int)
         self.timeout_s = uri.get("timeout", finite_float, 5.0)
         self.timer = FrameTimer(uri.get("sensor", str, DEFAULT_SENSOR.get(socket)), uri.uri)
+        exposure_us = uri.get("exposure_us", positive_float)
+        gain = uri.get("gain", positive_float)
+        self._manual: dict[str, float] | None = None  # last manual exposure/gain, kept by set_control
+        if exposure_us is not None or gain is not None:
+            self._check_manual(exposure_us or DEFAULT_EXPOSURE_US, gain or 1.0)
         self.index = 0
         self.closed = True  # until the pipeline runs
         self.device = self._open_device(uri)
@@ -100,10 +119,8 @@ class OakSource(CameraSource):
             self.device.close()
             raise SourceError(f"source {uri.uri!r}: the OAK pipeline failed to start ({exc})") from None
         self.closed = False
-        exposure_us = uri.get("exposure_us", finite_float)
-        gain = uri.get("gain", finite_float)
         if exposure_us is not None or gain is not None:
-            self.set_exposure(exposure_us or 10_000, gain or 1.0)
+            self.set_exposure(exposure_us or DEFAULT_EXPOSURE_US, gain or 1.0)
 
     def _open_device(self, uri: SourceURI) -> Any:
         dai = self.dai
@@ -125,11 +142,22 @@ class OakSource(CameraSource):
             raise SourceError(f"source {uri.uri!r}: cannot open OAK {info.getDeviceId()!r} ({exc}); is another "
                               "program using it?") from None
 
+    def _check_manual(self, exposure_us: float, gain: float) -> tuple[int, int]:
+        """The whole-us exposure and ISO that ``setManualExposure`` takes; a SourceError when out of range."""
+        exposure, iso = round(exposure_us), round(gain * ISO_PER_GAIN)
+        if not math.isfinite(exposure_us) or exposure < 1:
+            raise SourceError(f"source {self.uri!r}: exposure_us={exposure_us!r} is invalid (at least 1 us)")
+        if not math.isfinite(gain) or iso < 1:
+            raise SourceError(f"source {self.uri!r}: gain={gain!r} is invalid (at least {1 / ISO_PER_GAIN:g})")
+        return exposure, iso
+
     def set_exposure(self, exposure_us: float, gain: float = 1.0) -> None:
         """Manual exposure (us) and analogue gain (1.0 = ISO 100) through the camera's control input."""
+        exposure, iso = self._check_manual(float(exposure_us), float(gain))
         ctrl = self.dai.CameraControl()
-        ctrl.setManualExposure(round(exposure_us), round(gain * ISO_PER_GAIN))
+        ctrl.setManualExposure(exposure, iso)
         self.control_queue.send(ctrl)
+        self._manual = {"exposure_us": float(exposure_us), "gain": float(gain)}
 
     def set_control(self, name: str, value: float) -> bool:
         """``exposure_us`` or ``gain`` while streaming (the other keeps its last manual value); ``auto`` resumes AE."""
@@ -140,9 +168,8 @@ class OakSource(CameraSource):
             return True
         if name not in ("exposure_us", "gain"):
             raise SourceError(f"source {self.uri!r}: unknown control {name!r}; known: ['auto', 'exposure_us', 'gain']")
-        current = getattr(self, "_manual", {"exposure_us": 10_000.0, "gain": 1.0})
+        current = dict(self._manual or {"exposure_us": DEFAULT_EXPOSURE_US, "gain": 1.0})
         current[name] = float(value)
-        self._manual = current
         self.set_exposure(current["exposure_us"], current["gain"])
         return True
 
@@ -155,8 +182,10 @@ class OakSource(CameraSource):
         if msg is None:
             raise SourceError(f"source {self.uri!r}: no frame from the OAK within {self.timeout_s:g} s")
         image = np.asarray(msg.getCvFrame())
+        # The no-argument getter is the END of exposure; a Frame's timestamp is its start of exposure.
+        start = msg.getTimestampDevice(self.dai.CameraExposureOffset.START)
         frame = self.timer.frame(image, "BGR3" if image.ndim == 3 else "GREY", msg.getSequenceNum(),
-                                 timedelta_ns(msg.getTimestampDevice()), timedelta_ns(msg.getExposureTime()),
+                                 timedelta_ns(start), timedelta_ns(msg.getExposureTime()),
                                  meta={"iso": int(msg.getSensitivity())})
         self.index += 1
         return frame

@@ -5,11 +5,13 @@ It covers what a typical OAK capture script touches: ``Device.getAllAvailableDev
 ``isRunning``, ``stop``), ``node.Camera`` (``build(socket)``, ``requestOutput(size, type, fps=..)``,
 ``requestFullResolutionOutput``, ``inputControl.createInputQueue``), ``Output.createOutputQueue`` and
 ``MessageQueue`` (``get``, ``tryGet``, ``has``), ``ImgFrame`` (``getCvFrame``, ``getFrame``,
-``getSequenceNum``, ``getTimestamp(Device)``, ``getExposureTime``, ``getSensitivity``, ``getWidth``,
-``getHeight``, ``getType``) and ``CameraControl``
+``getSequenceNum``, ``getTimestamp(Device)`` with an optional ``CameraExposureOffset``, ``getExposureTime``,
+``getSensitivity``, ``getWidth``, ``getHeight``, ``getType``) and ``CameraControl``
 (``setManualExposure``, ``setAutoExposureEnable``). Frames are rendered on demand (no threads) by an
 ``emu:`` camera of each device's socket, so their timestamps, exposure and sequence numbers are the
-emulator's. ``MockDevice.frames`` ends the stream: the pipeline stops and ``get`` raises
+emulator's; as on a real OAK, an ImgFrame is stamped at the END of its exposure (whole microseconds of
+exposure, as depthai keeps them), and ``getTimestamp(Device)(CameraExposureOffset.START)`` gives the start
+(the emulator's ``timestamp_ns``). ``MockDevice.frames`` ends the stream: the pipeline stops and ``get`` raises
 ``QueueClosed``, as depthai's queues do when a pipeline ends. Anything outside this surface is absent, so a
 script that needs more fails loudly with AttributeError rather than silently getting a fake.
 """
@@ -36,6 +38,7 @@ class QueueClosed(RuntimeError):
 
 
 CameraBoardSocket = enum.Enum("CameraBoardSocket", [f"CAM_{c}" for c in "ABCDEFGH"] + ["AUTO"])
+CameraExposureOffset = enum.Enum("CameraExposureOffset", ["START", "MIDDLE", "END"])
 
 
 class _ImgType(enum.Enum):
@@ -89,14 +92,22 @@ class ImgFrame:
         return self._seq
 
     def setTimestampDevice(self, value: datetime.timedelta) -> None:
+        """Set the device timestamp, which (as in depthai) is the END of exposure."""
         self._ts_ns = int(value / datetime.timedelta(microseconds=1)) * 1000
 
-    def getTimestampDevice(self) -> datetime.timedelta:
-        return _td(self._ts_ns)
+    def _at(self, offset: CameraExposureOffset | None) -> datetime.timedelta:
+        # depthai-core: START = ts - exposure, MIDDLE = ts - exposure / 2, END (and no offset) = ts.
+        back = {None: 0, CameraExposureOffset.END: 0, CameraExposureOffset.MIDDLE: self._exp_ns // 2,
+                CameraExposureOffset.START: self._exp_ns}
+        return _td(self._ts_ns - back[offset])
 
-    def getTimestamp(self) -> datetime.timedelta:
+    def getTimestampDevice(self, offset: CameraExposureOffset | None = None) -> datetime.timedelta:
+        """Device-clock timestamp at ``offset`` of the exposure; without one, the end of exposure."""
+        return self._at(offset)
+
+    def getTimestamp(self, offset: CameraExposureOffset | None = None) -> datetime.timedelta:
         """Host-synced timestamp; the mock's host and device clocks are the same."""
-        return _td(self._ts_ns)
+        return self._at(offset)
 
     def getExposureTime(self) -> datetime.timedelta:
         return _td(self._exp_ns)
@@ -215,7 +226,9 @@ class _Output:
             img = img[..., ::-1]
         msg = ImgFrame()
         msg.setCvFrame(np.ascontiguousarray(img), self.type if self.type != _ImgType.NV12 else _ImgType.BGR888i)
-        msg._seq, msg._ts_ns, msg._exp_ns = frame.sequence, frame.timestamp_ns, frame.exposure_ns
+        # A real OAK stamps the frame at the end of exposure and keeps the exposure in whole microseconds.
+        msg._exp_ns = frame.exposure_ns // 1000 * 1000
+        msg._seq, msg._ts_ns = frame.sequence, frame.timestamp_ns + msg._exp_ns
         msg._iso = self.camera.iso
         return msg
 
@@ -353,6 +366,7 @@ def make_depthai(devices: Sequence[MockDevice] | None = None) -> types.ModuleTyp
     mod.__dict__.update(
         __version__=__version__, devices=registry, MockDevice=MockDevice, Device=device_cls, DeviceInfo=DeviceInfo,
         Pipeline=pipeline_cls, ImgFrame=ImgFrame, CameraControl=CameraControl, CameraBoardSocket=CameraBoardSocket,
+        CameraExposureOffset=CameraExposureOffset,
         MessageQueue=MessageQueue, QueueClosed=QueueClosed, node=types.SimpleNamespace(Camera=_Camera),
     )
     return mod
