@@ -18,7 +18,7 @@ import numpy as np
 from rollcam.emu.pump import FramePump
 from rollcam.firmware.camera import FirmwareCamera, FramePlan
 from rollcam.firmware.controls import CONTROLS
-from rollcam.firmware.pixfmt import RawFormat, convert, pixel_format
+from rollcam.firmware.pixfmt import convert, pixel_format
 from rollcam.sim.errors import ConfigError, DeviceError
 from rollcam.sim.frame import Frame
 
@@ -170,7 +170,7 @@ class EmuDriver:
 
 def _pix_format(width: int, height: int, fourcc: str) -> raw.PixFormat:
     pf = pixel_format(fourcc)
-    space = raw.Colorspace.JPEG if pf.compressed else raw.Colorspace.RAW if isinstance(pf, RawFormat) else \
+    space = raw.Colorspace.JPEG if pf.compressed else raw.Colorspace.RAW if pf.raw else \
         raw.Colorspace.SRGB
     return raw.PixFormat(width, height, fourcc, raw.Field.NONE, pf.bytesperline(width), pf.sizeimage(width, height),
                          space)
