@@ -3,7 +3,7 @@
 ``FORMATS`` are the processed formats: BGR renders converted by ``convert(image, fourcc)``, the conversion
 point of the V4L2 and HTTP transports (UVC's wire formats are in ``rollcam.emu.uvc.convert``). A sensor's raw
 fourccs (Bayer or mono samples, unpacked or CSI-2 packed, from its hw_config ``formats``) bypass the ISP, as
-on a near-sensor camera. ``pixel_format`` describes either kind to devices as a ``DeviceFormat`` (the V4L2
+on a near-sensor camera. ``device_format`` describes either kind to devices as a ``DeviceFormat`` (the V4L2
 description; layout, bytesperline and sizeimage are ``rollcam.sim.formats``'s, MJPG being the one compressed
 format), and ``to_bgr`` turns a raw frame into a preview image (``rollcam.sim.isp``) for transports that can
 only show pictures (HTTP MJPEG).
@@ -93,7 +93,7 @@ def raw_formats(sensor: SensorConfig) -> list[str]:
     return [f for f in sensor.formats if is_raw(f)]
 
 
-def pixel_format(fourcc: str) -> DeviceFormat:
+def device_format(fourcc: str) -> DeviceFormat:
     """The description of a processed or raw ``fourcc``; an unknown one is a ConfigError naming the known ones."""
     if fourcc in FORMATS:
         return FORMATS[fourcc]
