@@ -3,9 +3,10 @@
 ``FORMATS`` are the processed formats: BGR renders converted by ``convert(image, fourcc)``, the conversion
 point of the V4L2 and HTTP transports (UVC's wire formats are in ``rollcam.emu.uvc.convert``). A sensor's raw
 fourccs (Bayer or mono samples, unpacked or CSI-2 packed, from its hw_config ``formats``) bypass the ISP, as
-on a near-sensor camera: ``RawFormat`` describes them to devices and ``to_bgr`` turns a raw frame into a
-preview image (``rollcam.sim.isp``) for transports that can only show pictures (HTTP MJPEG). Pixel layouts
-are ``rollcam.sim.formats``'s.
+on a near-sensor camera. ``device_format`` describes either kind to devices as a ``DeviceFormat`` (the V4L2
+description; layout, bytesperline and sizeimage are ``rollcam.sim.formats``'s, MJPG being the one compressed
+format), and ``to_bgr`` turns a raw frame into a preview image (``rollcam.sim.isp``) for transports that can
+only show pictures (HTTP MJPEG).
 """
 
 from __future__ import annotations
@@ -21,68 +22,57 @@ from rollcam.sim.frame import Frame
 from rollcam.sim.hwconfig import SensorConfig
 from rollcam.sim.isp import IspParams, preview
 
+JPEG_QUALITY = 85
+
+_PROCESSED = (  # the emulated ISP's formats, in the order devices enumerate them, with V4L2's descriptions
+    ("YUYV", "YUYV 4:2:2"),
+    ("BGR3", "24-bit BGR 8-8-8"),
+    ("RGB3", "24-bit RGB 8-8-8"),
+    ("GREY", "8-bit Greyscale"),
+    ("MJPG", "Motion-JPEG"),
+)
+COMPRESSED = frozenset({"MJPG"})
+"""Processed fourccs whose frames vary in size; ``rollcam.sim.formats`` has no layout for them."""
+
+_JPEG_BOUND = sf.pixel_format("BGR3")  # a JPEG frame never needs more bytes than the BGR frame it encodes
+
 
 @dataclass(frozen=True)
-class PixelFormat:
-    """A streamable format: fourcc, description, bytes per pixel (0 = compressed), V4L2 compressed flag."""
+class DeviceFormat:
+    """A streamable fourcc as a device describes it: V4L2 description and whether it is raw sensor samples.
+
+    Layout and sizes are ``layout``'s (a ``rollcam.sim.formats`` entry); ``layout`` is None for MJPG, the one
+    compressed format.
+    """
 
     fourcc: str
     description: str
-    bytes_per_pixel: int
+    layout: sf.PixelFormat | None
+    raw: bool = False
 
     @property
     def compressed(self) -> bool:
         """True for formats whose frames vary in size (MJPG)."""
-        return self.bytes_per_pixel == 0
+        return self.layout is None
 
     def bytesperline(self, width: int) -> int:
-        """Bytes of one line (0 for compressed formats, as V4L2 reports them)."""
-        return width * self.bytes_per_pixel
+        """V4L2 ``bytesperline`` (CSI-2 packed: 5 bytes per 4 10-bit pixels; 0 for compressed formats)."""
+        return 0 if self.layout is None else self.layout.bytesperline(width)
 
     def sizeimage(self, width: int, height: int) -> int:
-        """Buffer size a frame needs (a generous bound for compressed formats)."""
-        return width * height * (self.bytes_per_pixel or 3)
+        """Buffer size a frame needs (for a compressed format a generous bound: the BGR frame's size)."""
+        return (self.layout or _JPEG_BOUND).sizeimage(width, height)
 
 
-FORMATS: dict[str, PixelFormat] = {f.fourcc: f for f in (
-    PixelFormat("YUYV", "YUYV 4:2:2", 2),
-    PixelFormat("BGR3", "24-bit BGR 8-8-8", 3),
-    PixelFormat("RGB3", "24-bit RGB 8-8-8", 3),
-    PixelFormat("GREY", "8-bit Greyscale", 1),
-    PixelFormat("MJPG", "Motion-JPEG", 0),
-)}
+FORMATS: dict[str, DeviceFormat] = {
+    f: DeviceFormat(f, d, None if f in COMPRESSED else sf.pixel_format(f)) for f, d in _PROCESSED}
 """Formats the emulated ISP produces, in the order devices enumerate them."""
 
-JPEG_QUALITY = 85
 
-
-@dataclass(frozen=True)
-class RawFormat:
-    """A raw sensor format (samples straight from the ADC, no ISP) as a device describes it to applications."""
-
-    fourcc: str
-
-    @property
-    def layout(self) -> sf.PixelFormat:
-        """Bits, packing and CFA of the format (``rollcam.sim.formats``)."""
-        return sf.pixel_format(self.fourcc)
-
-    @property
-    def description(self) -> str:
-        """The kernel's style of name: '10-bit Bayer RGRG/GBGB Packed', '10-bit Greyscale'."""
-        f = self.layout
-        kind = "Greyscale" if f.cfa == "mono" else f"Bayer {f.cfa[:2] * 2}/{f.cfa[2:] * 2}"
-        return f"{f.bits}-bit {kind}{' Packed' if f.packing == 'csi2' else ''}"
-
-    compressed = False
-
-    def bytesperline(self, width: int) -> int:
-        """Bytes of one line (CSI-2 packed: 5 bytes per 4 10-bit pixels, 3 per 2 12-bit pixels)."""
-        return self.layout.bytesperline(width)
-
-    def sizeimage(self, width: int, height: int) -> int:
-        """Bytes of a frame."""
-        return self.layout.sizeimage(width, height)
+def raw_description(layout: sf.PixelFormat) -> str:
+    """The kernel's style of name of a raw format: '10-bit Bayer RGRG/GBGB Packed', '10-bit Greyscale'."""
+    kind = "Greyscale" if layout.cfa == "mono" else f"Bayer {layout.cfa[:2] * 2}/{layout.cfa[2:] * 2}"
+    return f"{layout.bits}-bit {kind}{' Packed' if layout.packing == 'csi2' else ''}"
 
 
 def is_raw(fourcc: str) -> bool:
@@ -103,12 +93,13 @@ def raw_formats(sensor: SensorConfig) -> list[str]:
     return [f for f in sensor.formats if is_raw(f)]
 
 
-def pixel_format(fourcc: str) -> PixelFormat | RawFormat:
+def device_format(fourcc: str) -> DeviceFormat:
     """The description of a processed or raw ``fourcc``; an unknown one is a ConfigError naming the known ones."""
     if fourcc in FORMATS:
         return FORMATS[fourcc]
     if is_raw(fourcc):
-        return RawFormat(sf.pixel_format(fourcc).fourcc)
+        layout = sf.pixel_format(fourcc)
+        return DeviceFormat(layout.fourcc, raw_description(layout), layout, raw=True)
     raise ConfigError(f"pixel format {fourcc!r} is not one of {list(FORMATS)} or a raw sensor format")
 
 

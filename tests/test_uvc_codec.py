@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 from rollcam.emu.uvc import constants as C
-from rollcam.emu.uvc.convert import WIRE_FORMATS, decode, encode, frame_size
+from rollcam.emu.uvc.convert import WIRE_FORMATS, decode, encode, wire_layout
 from rollcam.emu.uvc.descriptors import (
     FrameSize,
     StreamFormat,
@@ -158,8 +158,9 @@ def test_pixel_formats_round_trip(fourcc):
     y, x = np.mgrid[0:48, 0:64]
     bgr = np.dstack([x * 3, y * 4, (x + y) * 2]).astype(np.uint8)
     raw = encode(bgr, fourcc)
-    if frame_size(fourcc, 64, 48) is not None:
-        assert raw.size == frame_size(fourcc, 64, 48)
+    layout = wire_layout(fourcc)
+    if layout is not None:
+        assert raw.size == layout.sizeimage(64, 48) == {"YUYV": 64 * 48 * 2, "NV12": 64 * 48 * 3 // 2}[fourcc]
     back = decode(raw.tobytes(), fourcc, 64, 48)
     assert back.shape == bgr.shape
     assert np.abs(back.astype(int) - bgr).mean() < 4
@@ -189,3 +190,12 @@ def test_frames_finished_in_one_batch_get_their_own_index():
     frames = PayloadParser(clock_hz=1_000_000_000).feed_batch(stream, lengths)  # one read, three frames
     assert [f.index for f in frames] == [0, 1, 2]
     assert [f.data[:1] for f in frames] == [b"\x00", b"\x01", b"\x02"]
+
+
+def test_wire_layouts_come_from_the_fourcc_table_and_unknown_formats_are_refused():
+    assert wire_layout("MJPG") is None
+    assert wire_layout("YUYV").shape(64, 48) == (48, 64, 2) and wire_layout("NV12").shape(64, 48) == (72, 64)
+    with pytest.raises(ProtocolError, match="H264"):
+        wire_layout("H264")
+    with pytest.raises(ProtocolError, match="H264"):
+        decode(b"\0" * 10, "H264", 4, 4)

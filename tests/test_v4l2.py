@@ -53,6 +53,19 @@ def test_try_fmt_rounds_to_a_supported_size_and_format():
         assert (f.width, f.height, f.bytesperline) == (640, 480, 1920)
 
 
+def test_processed_formats_enumerate_in_order_with_v4l2_descriptions_and_sizes():
+    with dev() as d:
+        descs = [(f.pixelformat, f.description, f.flags) for f in fn.enum_formats(d.driver)][:5]
+        assert descs == [("YUYV", "YUYV 4:2:2", 0), ("BGR3", "24-bit BGR 8-8-8", 0), ("RGB3", "24-bit RGB 8-8-8", 0),
+                         ("GREY", "8-bit Greyscale", 0), ("MJPG", "Motion-JPEG", 1)]  # V4L2_FMT_FLAG_COMPRESSED
+        for fourcc, bpl, space in (("YUYV", 1280, raw.Colorspace.SRGB), ("RGB3", 1920, raw.Colorspace.SRGB),
+                                   ("GREY", 640, raw.Colorspace.SRGB), ("MJPG", 0, raw.Colorspace.JPEG),
+                                   ("RG10", 1280, raw.Colorspace.RAW)):
+            f = fn.try_format(d.driver, 640, 480, fourcc)
+            size = 640 * 480 * 3 if fourcc == "MJPG" else bpl * 480  # MJPG: a generous bound, the BGR frame's
+            assert (f.pixelformat, f.bytesperline, f.sizeimage, f.colorspace) == (fourcc, bpl, size, space)
+
+
 def test_s_fmt_reqbufs_streamon_misuse_gives_kernel_errnos():
     with dev() as d:
         h = d.driver

@@ -1,7 +1,7 @@
 """Pixel conversion between the renderer's BGR frames and the UVC wire formats (YUYV, NV12, MJPEG).
 
 The one place the UVC code converts pixels: ``encode`` on the device side, ``decode`` on the host side;
-the layouts come from ``rollcam.sim.formats`` and JPEG from ``rollcam.firmware.pixfmt``.
+the layouts and sizes come from ``rollcam.sim.formats`` (``wire_layout``) and JPEG from ``rollcam.firmware.pixfmt``.
 """
 
 from __future__ import annotations
@@ -10,14 +10,17 @@ import cv2
 import numpy as np
 from rollcam.firmware.pixfmt import encode_jpeg
 from rollcam.sim.errors import ConfigError, ProtocolError
-from rollcam.sim.formats import bgr_to_nv12, bgr_to_yuyv, nv12_to_bgr, yuyv_to_bgr
+from rollcam.sim.formats import PixelFormat, bgr_to_nv12, bgr_to_yuyv, nv12_to_bgr, pixel_format, yuyv_to_bgr
 
 WIRE_FORMATS = ("YUYV", "NV12", "MJPG")
 
 
-def frame_size(fourcc: str, width: int, height: int) -> int | None:
-    """Bytes of one uncompressed frame (None for MJPEG, whose size varies)."""
-    return {"YUYV": width * height * 2, "NV12": width * height * 3 // 2}.get(fourcc)
+def wire_layout(fourcc: str) -> PixelFormat | None:
+    """The ``rollcam.sim.formats`` layout (sizeimage, shape) of an uncompressed wire format; None for MJPEG,
+    whose frames vary in size."""
+    if fourcc not in WIRE_FORMATS:
+        raise ProtocolError(f"wire format {fourcc!r} is not one of {WIRE_FORMATS}")
+    return None if fourcc == "MJPG" else pixel_format(fourcc)
 
 
 def encode(bgr: np.ndarray, fourcc: str, jpeg_quality: int = 85) -> np.ndarray:
@@ -38,19 +41,19 @@ def encode(bgr: np.ndarray, fourcc: str, jpeg_quality: int = 85) -> np.ndarray:
     raise ProtocolError(f"wire format {fourcc!r} is not one of {WIRE_FORMATS}")
 
 
+_TO_BGR = {"YUYV": yuyv_to_bgr, "NV12": nv12_to_bgr}
+
+
 def decode(data: bytes, fourcc: str, width: int, height: int) -> np.ndarray:
     """The bytes of one ``fourcc`` frame as a BGR image; wrong sizes and undecodable JPEG raise ProtocolError."""
     raw = np.frombuffer(data, np.uint8)
-    need = frame_size(fourcc, width, height)
-    if need is not None and raw.size != need:
-        raise ProtocolError(f"{fourcc} {width}x{height} frame needs {need} bytes, got {raw.size}")
-    if fourcc == "YUYV":
-        return yuyv_to_bgr(raw.reshape(height, width, 2))
-    if fourcc == "NV12":
-        return nv12_to_bgr(raw.reshape(height * 3 // 2, width))
-    if fourcc == "MJPG":
+    layout = wire_layout(fourcc)
+    if layout is None:
         img = cv2.imdecode(raw, cv2.IMREAD_COLOR) if raw.size else None
         if img is None:
             raise ProtocolError(f"MJPEG frame of {raw.size} bytes does not decode")
         return img
-    raise ProtocolError(f"wire format {fourcc!r} is not one of {WIRE_FORMATS}")
+    need = layout.sizeimage(width, height)
+    if raw.size != need:
+        raise ProtocolError(f"{fourcc} {width}x{height} frame needs {need} bytes, got {raw.size}")
+    return _TO_BGR[fourcc](raw.reshape(layout.shape(width, height)))

@@ -12,15 +12,17 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 from rollcam.sim.errors import DeviceError, ProtocolError
+from rollcam.sim.formats import pixel_format
 
 from . import constants as C
-from .convert import frame_size
+from .convert import wire_layout
 from .descriptors import HEADER_MAX, StreamFormat
 from .probe import Probe
 from .producer import FrameProducer
 
 EXPOSURE_UNIT_NS = 100_000  # CT_EXPOSURE_TIME_ABSOLUTE counts 100 us
 DEFAULT_QUALITY = 8500  # wCompQuality, 1..10000
+_MJPEG_BOUND = pixel_format("YUYV")  # dwMaxVideoFrameSize of MJPEG: an uncompressed 4:2:2 frame's size
 
 
 class Stall(DeviceError):
@@ -215,7 +217,7 @@ class VideoControls:
         units = probe.dwFrameInterval or offered[0][0]
         iv, ns = min(offered, key=lambda o: (abs(o[0] - units), o[0]))
         size = fmt.frames[ri - 1]
-        raw = frame_size(fmt.fourcc, size.width, size.height) or size.width * size.height * 2
+        raw = (wire_layout(fmt.fourcc) or _MJPEG_BOUND).sizeimage(size.width, size.height)
         quality = probe.wCompQuality if 1 <= probe.wCompQuality <= 10000 else DEFAULT_QUALITY
         return probe.with_(dwFrameInterval=iv, dwMaxVideoFrameSize=raw, wCompQuality=quality,
                            dwMaxPayloadTransferSize=self.payload_size(raw, ns), dwClockFrequency=self.clock_hz,

@@ -18,7 +18,7 @@ from typing import Any
 import cv2
 import numpy as np
 from rollcam.firmware.camera import Clock, FirmwareCamera
-from rollcam.firmware.pixfmt import is_raw
+from rollcam.firmware.pixfmt import COMPRESSED, is_raw
 from rollcam.sim import formats as sf
 from rollcam.sim.errors import ConfigError
 from rollcam.sim.isp import IspParams, preview
@@ -26,6 +26,9 @@ from rollcam.sim.isp import IspParams, preview
 from . import functions as fn
 from . import raw
 from .driver import CID_TO_CONTROL, EmuDriver, Faults
+
+_TO_BGR = {"RGB3": lambda a: cv2.cvtColor(a, cv2.COLOR_RGB2BGR), "YUYV": sf.yuyv_to_bgr}
+"""Pictures of processed formats (in their ``rollcam.sim.formats`` shape) that are not already BGR or grey."""
 
 
 @dataclass(frozen=True)
@@ -66,11 +69,10 @@ class CapturedBuffer:
         if self.raw:
             f = sf.pixel_format(self.fourcc)
             return preview(self.samples(), f.cfa or "mono", IspParams(white_level_dn=float((1 << f.bits) - 1)))
-        decode = {"BGR3": lambda: d.reshape(h, w, 3), "RGB3": lambda: cv2.cvtColor(d.reshape(h, w, 3),
-                                                                                    cv2.COLOR_RGB2BGR),
-                  "YUYV": lambda: cv2.cvtColor(d.reshape(h, w, 2), cv2.COLOR_YUV2BGR_YUYV),
-                  "GREY": lambda: d.reshape(h, w), "MJPG": lambda: cv2.imdecode(d, cv2.IMREAD_COLOR)}
-        return decode[self.fourcc]()
+        if self.fourcc in COMPRESSED:
+            return cv2.imdecode(d, cv2.IMREAD_COLOR)
+        pixels = d.reshape(sf.pixel_format(self.fourcc).shape(w, h))
+        return _TO_BGR.get(self.fourcc, lambda a: a)(pixels)
 
 
 class ControlHandle:

@@ -18,7 +18,7 @@ import numpy as np
 from rollcam.emu.pump import FramePump
 from rollcam.firmware.camera import FirmwareCamera, FramePlan
 from rollcam.firmware.controls import CONTROLS
-from rollcam.firmware.pixfmt import RawFormat, convert, pixel_format
+from rollcam.firmware.pixfmt import convert, device_format
 from rollcam.sim.errors import ConfigError, DeviceError
 from rollcam.sim.frame import Frame
 
@@ -169,8 +169,8 @@ class EmuDriver:
 
 
 def _pix_format(width: int, height: int, fourcc: str) -> raw.PixFormat:
-    pf = pixel_format(fourcc)
-    space = raw.Colorspace.JPEG if pf.compressed else raw.Colorspace.RAW if isinstance(pf, RawFormat) else \
+    pf = device_format(fourcc)
+    space = raw.Colorspace.JPEG if pf.compressed else raw.Colorspace.RAW if pf.raw else \
         raw.Colorspace.SRGB
     return raw.PixFormat(width, height, fourcc, raw.Field.NONE, pf.bytesperline(width), pf.sizeimage(width, height),
                          space)
@@ -184,7 +184,7 @@ def _querycap(d: EmuDriver, _arg: Any) -> raw.Capability:
 
 
 def _enum_fmt(d: EmuDriver, arg: raw.FmtDesc) -> raw.FmtDesc:
-    formats = [pixel_format(f) for f in d.camera.formats]
+    formats = [device_format(f) for f in d.camera.formats]
     if not 0 <= arg.index < len(formats):
         raise V4L2Error(errno.EINVAL, f"format index {arg.index} out of range")
     pf = formats[arg.index]

@@ -26,7 +26,7 @@ import numpy as np
 from rollcam.emu.usbip import ImportedDevice, UrbError
 from rollcam.emu.uvc import DeviceIdentity, SyntheticProducer, UVCFunction
 from rollcam.emu.uvc import constants as C
-from rollcam.emu.uvc.convert import decode, frame_size
+from rollcam.emu.uvc.convert import WIRE_FORMATS, decode, wire_layout
 from rollcam.emu.uvc.descriptors import parse_streaming
 from rollcam.emu.uvc.payload import PayloadParser
 from rollcam.emu.uvc.probe import Probe
@@ -267,7 +267,11 @@ class UVCSource(CameraSource):
         else:
             self.read_size = probe.dwMaxPayloadTransferSize
         self.clock_hz = probe.dwClockFrequency or s.clock_hz or 1_000_000_000
-        self.parser = PayloadParser(self.clock_hz, frame_size(self.fourcc, self.width, self.height))
+        # Sizes and shapes from rollcam.sim.formats; None (frames of any size complete, passed on flat) for MJPEG
+        # and formats of a real camera this source does not know.
+        self.layout = wire_layout(self.fourcc) if self.fourcc in WIRE_FORMATS else None
+        size = None if self.layout is None else self.layout.sizeimage(self.width, self.height)
+        self.parser = PayloadParser(self.clock_hz, size)
         self._timing()
 
     def _timing(self) -> None:
@@ -317,8 +321,7 @@ class UVCSource(CameraSource):
                 data, fmt = decode(parsed.data, fourcc, w, h), "BGR3"
             else:
                 raw = np.frombuffer(parsed.data, np.uint8)
-                data = {"YUYV": lambda: raw.reshape(h, w, 2), "NV12": lambda: raw.reshape(h * 3 // 2, w)}.get(
-                    fourcc, lambda: raw)()
+                data = raw if self.layout is None else raw.reshape(self.layout.shape(w, h))
                 fmt = fourcc
         except ProtocolError:
             self.parser.stats.errors += 1
