@@ -178,7 +178,7 @@ def _expose(base, mos, over, use_over, by_col, cfa, mono, flux_s, qe, dark_e, re
     mask32 = np.uint64(0xFFFFFFFF)
     n_chunks = min(h, 64)
     for chunk in prange(n_chunks):
-        mu_row, off_row = np.empty(w), np.empty(w)
+        mu_row, off_row, e_row = np.empty(w), np.empty(w), np.empty(w)
         ht_row = np.empty(w, np.uint64)
         for y in range(chunk, h, n_chunks):
             # Mean electrons of the row: filtered radiance, PRNU, dark current.
@@ -197,36 +197,36 @@ def _expose(base, mos, over, use_over, by_col, cfa, mono, flux_s, qe, dark_e, re
                     mu_row[x] = mos[y, x]
             else:
                 _row_radiance(base, y, mono, cfa, mu_row)
-            row_idx = np.uint64((y + oy) * array_w + ox)
-            # One pass over the row does the common case: mean electrons (PRNU, dark current), then shot and
-            # read noise as one Gaussian of summed variance (exact where mu >= POISSON_EXACT_BELOW_E and 6 sigma
-            # below the full well), written out at once. Pixels outside it are flagged for the pass below.
-            rest = not shot
             for x in range(w):
-                mu = qe * max(mu_row[x], 0.0) * flux_s
-                if prnu_on:
-                    mu *= gain_map[y, x]
-                if dark:
-                    mu += dark_e
-                off = off_map[y, x] if dsnu_on else 0.0
-                ht = _mix(frame_key + (row_idx + np.uint64(x)) * _GOLD) if draw else np.uint64(0)
-                mu_row[x], off_row[x], ht_row[x] = mu, off, ht
-                if shot:
-                    e = mu + off + math.sqrt(max(mu, 0.0) + var_read) * _normal(ht >> np.uint64(32), table)
-                    room = full_well - mu - off  # mu + off + 6 sqrt(mu) < full_well, without the square root
-                    if mu < POISSON_EXACT_BELOW_E or (sat and not (room > 0.0 and 36.0 * mu < room * room)):
-                        rest = True
-                    if quantize:
-                        # Round half up, then clip: on the clipped (non-negative) value truncation is the floor.
-                        out_int[y, x] = np.uint16(np.int64(min(max(e * k_dn + black + 0.5, 0.0), max_dn)))
-                    else:
-                        out_f[y, x] = e * k_dn + black
-            if not rest:
-                continue
+                mu_row[x] = qe * max(mu_row[x], 0.0) * flux_s
+            if prnu_on:
+                for x in range(w):
+                    mu_row[x] *= gain_map[y, x]
+            if dark:
+                for x in range(w):
+                    mu_row[x] += dark_e
+            row_idx = np.uint64((y + oy) * array_w + ox)
+            # The common case first, for every pixel in straight loops: shot and read noise as one Gaussian
+            # of summed variance (exact where mu >= POISSON_EXACT_BELOW_E and 6 sigma below the full well).
+            if draw:
+                for x in range(w):
+                    ht_row[x] = _mix(frame_key + (row_idx + np.uint64(x)) * _GOLD)
+            else:
+                ht_row[:] = 0
+            if dsnu_on:
+                for x in range(w):
+                    off_row[x] = off_map[y, x]
+            else:
+                off_row[:] = 0.0
+            if shot:
+                for x in range(w):
+                    mu = mu_row[x]
+                    e_row[x] = mu + off_row[x] + math.sqrt(max(mu, 0.0) + var_read) * _normal(
+                        ht_row[x] >> np.uint64(32), table)
             # Then the pixels outside it, one by one (dark ones: exact Poisson; near the full well: clipped).
             for x in range(w):
                 mu, off, ht = mu_row[x], off_row[x], ht_row[x]
-                room = full_well - mu - off
+                room = full_well - mu - off  # mu + off + 6 sqrt(mu) < full_well, without the square root
                 if shot and mu >= POISSON_EXACT_BELOW_E and (not sat or (room > 0.0 and 36.0 * mu < room * room)):
                     continue
                 if shot and mu < POISSON_EXACT_BELOW_E:
@@ -240,10 +240,14 @@ def _expose(base, mos, over, use_over, by_col, cfa, mono, flux_s, qe, dark_e, re
                     e = min(max(e, 0.0), full_well)
                 if read:
                     e += read_e * _normal(ht & mask32, table)
-                if quantize:
-                    out_int[y, x] = np.uint16(np.int64(min(max(e * k_dn + black + 0.5, 0.0), max_dn)))
-                else:
-                    out_f[y, x] = e * k_dn + black
+                e_row[x] = e
+            if quantize:
+                for x in range(w):
+                    # Round half up, then clip: on the clipped (non-negative) value truncation is the floor.
+                    out_int[y, x] = np.uint16(np.int64(min(max(e_row[x] * k_dn + black + 0.5, 0.0), max_dn)))
+            else:
+                for x in range(w):
+                    out_f[y, x] = e_row[x] * k_dn + black
 
 
 def _key(*parts: object) -> np.uint64:
