@@ -178,7 +178,7 @@ def _expose(base, mos, over, use_over, by_col, cfa, mono, flux_s, qe, dark_e, re
     mask32 = np.uint64(0xFFFFFFFF)
     n_chunks = min(h, 64)
     for chunk in prange(n_chunks):
-        mu_row, off_row, e_row = np.empty(w), np.empty(w), np.empty(w)
+        mu_row, off_row, e_row, nrm_row = np.empty(w), np.empty(w), np.empty(w), np.empty(w)
         ht_row = np.empty(w, np.uint64)
         for y in range(chunk, h, n_chunks):
             # Mean electrons of the row: filtered radiance, PRNU, dark current.
@@ -207,7 +207,8 @@ def _expose(base, mos, over, use_over, by_col, cfa, mono, flux_s, qe, dark_e, re
                     mu_row[x] += dark_e
             row_idx = np.uint64((y + oy) * array_w + ox)
             # The common case first, for every pixel in straight loops: shot and read noise as one Gaussian
-            # of summed variance (exact where mu >= POISSON_EXACT_BELOW_E and 6 sigma below the full well).
+            # of summed variance (exact where mu >= POISSON_EXACT_BELOW_E and 6 sigma below the full well),
+            # written out at once.
             if draw:
                 for x in range(w):
                     ht_row[x] = _mix(frame_key + (row_idx + np.uint64(x)) * _GOLD)
@@ -218,15 +219,25 @@ def _expose(base, mos, over, use_over, by_col, cfa, mono, flux_s, qe, dark_e, re
                     off_row[x] = off_map[y, x]
             else:
                 off_row[:] = 0.0
+            # Then the pixels outside it, one by one (dark ones: exact Poisson; near the full well: clipped),
+            # when the row has any: counted in the straight loop, so most rows skip this pass.
+            n_rest = w
             if shot:
+                for x in range(w):  # the table gathers apart, so the loop below vectorises
+                    nrm_row[x] = _normal(ht_row[x] >> np.uint64(32), table)
+                n_rest = 0
                 for x in range(w):
-                    mu = mu_row[x]
-                    e_row[x] = mu + off_row[x] + math.sqrt(max(mu, 0.0) + var_read) * _normal(
-                        ht_row[x] >> np.uint64(32), table)
-            # Then the pixels outside it, one by one (dark ones: exact Poisson; near the full well: clipped).
+                    mu, off = mu_row[x], off_row[x]
+                    e = mu + off + math.sqrt(max(mu, 0.0) + var_read) * nrm_row[x]
+                    room = full_well - mu - off  # mu + off + 6 sqrt(mu) < full_well, without the square root
+                    n_rest += (mu < POISSON_EXACT_BELOW_E) | (sat & ((room <= 0.0) | (36.0 * mu >= room * room)))
+                    e_row[x] = e
+                _write_row(e_row, y, k_dn, black, max_dn, quantize, out_int, out_f)
+            if n_rest == 0:
+                continue
             for x in range(w):
                 mu, off, ht = mu_row[x], off_row[x], ht_row[x]
-                room = full_well - mu - off  # mu + off + 6 sqrt(mu) < full_well, without the square root
+                room = full_well - mu - off
                 if shot and mu >= POISSON_EXACT_BELOW_E and (not sat or (room > 0.0 and 36.0 * mu < room * room)):
                     continue
                 if shot and mu < POISSON_EXACT_BELOW_E:
@@ -240,14 +251,27 @@ def _expose(base, mos, over, use_over, by_col, cfa, mono, flux_s, qe, dark_e, re
                     e = min(max(e, 0.0), full_well)
                 if read:
                     e += read_e * _normal(ht & mask32, table)
-                e_row[x] = e
-            if quantize:
-                for x in range(w):
-                    # Round half up, then clip: on the clipped (non-negative) value truncation is the floor.
-                    out_int[y, x] = np.uint16(np.int64(min(max(e_row[x] * k_dn + black + 0.5, 0.0), max_dn)))
-            else:
-                for x in range(w):
-                    out_f[y, x] = e_row[x] * k_dn + black
+                if quantize:
+                    out_int[y, x] = _dn(e, k_dn, black, max_dn)
+                else:
+                    out_f[y, x] = e * k_dn + black
+
+
+@njit(cache=True, inline="always")
+def _dn(e, k_dn, black, max_dn):
+    """Electrons -> ADC sample: round half up, then clip (on the clipped, non-negative value truncation floors)."""
+    return np.uint16(np.int64(min(max(e * k_dn + black + 0.5, 0.0), max_dn)))
+
+
+@njit(cache=True, inline="always")
+def _write_row(e_row, y, k_dn, black, max_dn, quantize, out_int, out_f):
+    """Row ``y`` of the output from its electrons: ADC samples, or float DN before rounding."""
+    if quantize:
+        for x in range(e_row.shape[0]):
+            out_int[y, x] = _dn(e_row[x], k_dn, black, max_dn)
+    else:
+        for x in range(e_row.shape[0]):
+            out_f[y, x] = e_row[x] * k_dn + black
 
 
 def _key(*parts: object) -> np.uint64:
