@@ -177,8 +177,10 @@ def _expose(base, mos, over, use_over, by_col, cfa, mono, flux_s, qe, dark_e, re
     var_read = read_e * read_e if read else 0.0
     mask32 = np.uint64(0xFFFFFFFF)
     n_chunks = min(h, 64)
+    ones, zeros = np.ones(w, np.float32), np.zeros(w, np.float32)
+    dark_add = dark_e if dark else 0.0
     for chunk in prange(n_chunks):
-        mu_row, off_row, e_row, nrm_row = np.empty(w), np.empty(w), np.empty(w), np.empty(w)
+        mu_row, nrm_row = np.empty(w), np.empty(w)
         ht_row = np.empty(w, np.uint64)
         for y in range(chunk, h, n_chunks):
             # Mean electrons of the row: filtered radiance, PRNU, dark current.
@@ -197,14 +199,9 @@ def _expose(base, mos, over, use_over, by_col, cfa, mono, flux_s, qe, dark_e, re
                     mu_row[x] = mos[y, x]
             else:
                 _row_radiance(base, y, mono, cfa, mu_row)
-            for x in range(w):
-                mu_row[x] = qe * max(mu_row[x], 0.0) * flux_s
-            if prnu_on:
-                for x in range(w):
-                    mu_row[x] *= gain_map[y, x]
-            if dark:
-                for x in range(w):
-                    mu_row[x] += dark_e
+            gain_row = gain_map[y] if prnu_on else ones
+            for x in range(w):  # x * 1.0 and x + 0.0 are exact: the same values as separate optional steps
+                mu_row[x] = qe * max(mu_row[x], 0.0) * flux_s * gain_row[x] + dark_add
             row_idx = np.uint64((y + oy) * array_w + ox)
             # The common case first, for every pixel in straight loops: shot and read noise as one Gaussian
             # of summed variance (exact where mu >= POISSON_EXACT_BELOW_E and 6 sigma below the full well),
@@ -214,13 +211,7 @@ def _expose(base, mos, over, use_over, by_col, cfa, mono, flux_s, qe, dark_e, re
                     ht_row[x] = _mix(frame_key + (row_idx + np.uint64(x)) * _GOLD)
             else:
                 ht_row[:] = 0
-            if dsnu_on:
-                for x in range(w):
-                    off_row[x] = off_map[y, x]
-            else:
-                off_row[:] = 0.0
-            # Then the pixels outside it, one by one (dark ones: exact Poisson; near the full well: clipped),
-            # when the row has any: counted in the straight loop, so most rows skip this pass.
+            off_row = off_map[y] if dsnu_on else zeros
             n_rest = w
             if shot:
                 for x in range(w):  # the table gathers apart, so the loop below vectorises
@@ -231,8 +222,12 @@ def _expose(base, mos, over, use_over, by_col, cfa, mono, flux_s, qe, dark_e, re
                     e = mu + off + math.sqrt(max(mu, 0.0) + var_read) * nrm_row[x]
                     room = full_well - mu - off  # mu + off + 6 sqrt(mu) < full_well, without the square root
                     n_rest += (mu < POISSON_EXACT_BELOW_E) | (sat & ((room <= 0.0) | (36.0 * mu >= room * room)))
-                    e_row[x] = e
-                _write_row(e_row, y, k_dn, black, max_dn, quantize, out_int, out_f)
+                    if quantize:
+                        out_int[y, x] = _dn(e, k_dn, black, max_dn)
+                    else:
+                        out_f[y, x] = e * k_dn + black
+            # Then the pixels outside it, one by one (dark ones: exact Poisson; near the full well: clipped),
+            # when the row has any: counted in the straight loop, so most rows skip this pass.
             if n_rest == 0:
                 continue
             for x in range(w):
@@ -261,17 +256,6 @@ def _expose(base, mos, over, use_over, by_col, cfa, mono, flux_s, qe, dark_e, re
 def _dn(e, k_dn, black, max_dn):
     """Electrons -> ADC sample: round half up, then clip (on the clipped, non-negative value truncation floors)."""
     return np.uint16(np.int64(min(max(e * k_dn + black + 0.5, 0.0), max_dn)))
-
-
-@njit(cache=True, inline="always")
-def _write_row(e_row, y, k_dn, black, max_dn, quantize, out_int, out_f):
-    """Row ``y`` of the output from its electrons: ADC samples, or float DN before rounding."""
-    if quantize:
-        for x in range(e_row.shape[0]):
-            out_int[y, x] = _dn(e_row[x], k_dn, black, max_dn)
-    else:
-        for x in range(e_row.shape[0]):
-            out_f[y, x] = e_row[x] * k_dn + black
 
 
 def _key(*parts: object) -> np.uint64:
