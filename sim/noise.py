@@ -25,8 +25,11 @@ as bright as the clean render.
 
 ``SensorModel.expose`` takes the radiance as an array or as a ``LinearFrame`` (the renderer's static
 composite plus painted lines), read in place; the composite is passed through the colour filter once and
-kept, so a frame reads one value per static pixel. Each row's mean electrons are computed in straight
-loops and only the random draws run pixel by pixel; the output is the same, bit for bit, either way.
+kept, so a frame reads one value per static pixel; the output is the same, bit for bit, either way. Each
+row runs in straight (vectorisable) loops: its mean electrons in one, the hash in one, the table lookups
+apart in one (gathers would stop the rest vectorising), then shot plus read noise, rounding and the write
+in one, which also counts the row's pixels outside the common case (dark or near the full well); only rows
+with any take the per-pixel pass for them.
 """
 
 from __future__ import annotations
@@ -167,8 +170,8 @@ def _expose(base, mos, over, use_over, by_col, cfa, mono, flux_s, qe, dark_e, re
     Radiance of line ``ln`` (row, or column when ``by_col``; arrays in render orientation) is read from
     ``over`` where ``use_over[ln]``, else from ``base``: a frame held as a static composite plus painted lines.
     A non-empty ``mos`` is ``base`` already through the colour filter (``_mosaic``), read instead of it: one
-    value per pixel rather than three. Each row's mean electrons are computed first in straight (vectorised)
-    loops; only the random draws run pixel by pixel.
+    value per pixel rather than three. Straight loops per row; the per-pixel pass (exact Poisson, clipping)
+    runs only on rows that have pixels needing it.
     """
     has_mos = mos.shape[0] > 0
     h, w = out_int.shape if quantize else out_f.shape
