@@ -25,8 +25,11 @@ as bright as the clean render.
 
 ``SensorModel.expose`` takes the radiance as an array or as a ``LinearFrame`` (the renderer's static
 composite plus painted lines), read in place; the composite is passed through the colour filter once and
-kept, so a frame reads one value per static pixel. Each row's mean electrons are computed in straight
-loops and only the random draws run pixel by pixel; the output is the same, bit for bit, either way.
+kept, so a frame reads one value per static pixel; the output is the same, bit for bit, either way. Each
+row runs in straight (vectorisable) loops: its mean electrons in one, the hash in one, the table lookups
+apart in one (gathers would stop the rest vectorising), then shot plus read noise, rounding and the write
+in one, which also counts the row's pixels outside the common case (dark or near the full well); only rows
+with any take the per-pixel pass for them.
 """
 
 from __future__ import annotations
@@ -167,8 +170,8 @@ def _expose(base, mos, over, use_over, by_col, cfa, mono, flux_s, qe, dark_e, re
     Radiance of line ``ln`` (row, or column when ``by_col``; arrays in render orientation) is read from
     ``over`` where ``use_over[ln]``, else from ``base``: a frame held as a static composite plus painted lines.
     A non-empty ``mos`` is ``base`` already through the colour filter (``_mosaic``), read instead of it: one
-    value per pixel rather than three. Each row's mean electrons are computed first in straight (vectorised)
-    loops; only the random draws run pixel by pixel.
+    value per pixel rather than three. Straight loops per row; the per-pixel pass (exact Poisson, clipping)
+    runs only on rows that have pixels needing it.
     """
     has_mos = mos.shape[0] > 0
     h, w = out_int.shape if quantize else out_f.shape
@@ -177,8 +180,10 @@ def _expose(base, mos, over, use_over, by_col, cfa, mono, flux_s, qe, dark_e, re
     var_read = read_e * read_e if read else 0.0
     mask32 = np.uint64(0xFFFFFFFF)
     n_chunks = min(h, 64)
+    ones, zeros = np.ones(w, np.float32), np.zeros(w, np.float32)
+    dark_add = dark_e if dark else 0.0
     for chunk in prange(n_chunks):
-        mu_row, off_row, e_row = np.empty(w), np.empty(w), np.empty(w)
+        mu_row, nrm_row = np.empty(w), np.empty(w)
         ht_row = np.empty(w, np.uint64)
         for y in range(chunk, h, n_chunks):
             # Mean electrons of the row: filtered radiance, PRNU, dark current.
@@ -197,36 +202,40 @@ def _expose(base, mos, over, use_over, by_col, cfa, mono, flux_s, qe, dark_e, re
                     mu_row[x] = mos[y, x]
             else:
                 _row_radiance(base, y, mono, cfa, mu_row)
-            for x in range(w):
-                mu_row[x] = qe * max(mu_row[x], 0.0) * flux_s
-            if prnu_on:
-                for x in range(w):
-                    mu_row[x] *= gain_map[y, x]
-            if dark:
-                for x in range(w):
-                    mu_row[x] += dark_e
+            gain_row = gain_map[y] if prnu_on else ones
+            for x in range(w):  # x * 1.0 and x + 0.0 are exact: the same values as separate optional steps
+                mu_row[x] = qe * max(mu_row[x], 0.0) * flux_s * gain_row[x] + dark_add
             row_idx = np.uint64((y + oy) * array_w + ox)
             # The common case first, for every pixel in straight loops: shot and read noise as one Gaussian
-            # of summed variance (exact where mu >= POISSON_EXACT_BELOW_E and 6 sigma below the full well).
+            # of summed variance (exact where mu >= POISSON_EXACT_BELOW_E and 6 sigma below the full well),
+            # written out at once.
             if draw:
                 for x in range(w):
                     ht_row[x] = _mix(frame_key + (row_idx + np.uint64(x)) * _GOLD)
             else:
                 ht_row[:] = 0
-            if dsnu_on:
-                for x in range(w):
-                    off_row[x] = off_map[y, x]
-            else:
-                off_row[:] = 0.0
+            off_row = off_map[y] if dsnu_on else zeros
+            n_rest = w
             if shot:
+                for x in range(w):  # the table gathers apart, so the loop below vectorises
+                    nrm_row[x] = _normal(ht_row[x] >> np.uint64(32), table)
+                n_rest = 0
                 for x in range(w):
-                    mu = mu_row[x]
-                    e_row[x] = mu + off_row[x] + math.sqrt(max(mu, 0.0) + var_read) * _normal(
-                        ht_row[x] >> np.uint64(32), table)
-            # Then the pixels outside it, one by one (dark ones: exact Poisson; near the full well: clipped).
+                    mu, off = mu_row[x], off_row[x]
+                    e = mu + off + math.sqrt(max(mu, 0.0) + var_read) * nrm_row[x]
+                    room = full_well - mu - off  # mu + off + 6 sqrt(mu) < full_well, without the square root
+                    n_rest += (mu < POISSON_EXACT_BELOW_E) | (sat & ((room <= 0.0) | (36.0 * mu >= room * room)))
+                    if quantize:
+                        out_int[y, x] = _dn(e, k_dn, black, max_dn)
+                    else:
+                        out_f[y, x] = e * k_dn + black
+            # Then the pixels outside it, one by one (dark ones: exact Poisson; near the full well: clipped),
+            # when the row has any: counted in the straight loop, so most rows skip this pass.
+            if n_rest == 0:
+                continue
             for x in range(w):
                 mu, off, ht = mu_row[x], off_row[x], ht_row[x]
-                room = full_well - mu - off  # mu + off + 6 sqrt(mu) < full_well, without the square root
+                room = full_well - mu - off
                 if shot and mu >= POISSON_EXACT_BELOW_E and (not sat or (room > 0.0 and 36.0 * mu < room * room)):
                     continue
                 if shot and mu < POISSON_EXACT_BELOW_E:
@@ -240,14 +249,16 @@ def _expose(base, mos, over, use_over, by_col, cfa, mono, flux_s, qe, dark_e, re
                     e = min(max(e, 0.0), full_well)
                 if read:
                     e += read_e * _normal(ht & mask32, table)
-                e_row[x] = e
-            if quantize:
-                for x in range(w):
-                    # Round half up, then clip: on the clipped (non-negative) value truncation is the floor.
-                    out_int[y, x] = np.uint16(np.int64(min(max(e_row[x] * k_dn + black + 0.5, 0.0), max_dn)))
-            else:
-                for x in range(w):
-                    out_f[y, x] = e_row[x] * k_dn + black
+                if quantize:
+                    out_int[y, x] = _dn(e, k_dn, black, max_dn)
+                else:
+                    out_f[y, x] = e * k_dn + black
+
+
+@njit(cache=True, inline="always")
+def _dn(e, k_dn, black, max_dn):
+    """Electrons -> ADC sample: round half up, then clip (on the clipped, non-negative value truncation floors)."""
+    return np.uint16(np.int64(min(max(e * k_dn + black + 0.5, 0.0), max_dn)))
 
 
 def _key(*parts: object) -> np.uint64:
