@@ -156,76 +156,67 @@ def test_times_must_match_lines():
         r.render_lines(np.zeros(31, np.int64))
 
 
+def _bounds_and_parts(cases, n_times):
+    """(bounds box, parts table, live-part mask) of every walker of every camera of ``cases`` (seed, speed,
+    ego) at ``n_times`` instants over 40 s: the actor bounds and the parts the kernels would draw."""
+    from rollcam.sim import _kernels as K
+    from rollcam.sim import _world as Wd
+
+    for seed, speed, ego in cases:
+        scene = make_street_scene(seed, speed=speed, width=320, height=180, n_pedestrians=25, ego=ego_preset(ego))
+        for cam_i in range(5):
+            r = Renderer(scene, cam_i)
+            c, cam = r._c, r._cams[False]
+            rot, pos = np.empty((3, 3)), np.empty(3)
+            parts = np.empty((K.MAX_PARTS, K.PART_COLS))
+            scratch = K.parts_scratch()
+            box = np.empty(4)
+            for t in np.linspace(0.0, 40.0, n_times):
+                Wd.camera_pose(cam, t, rot, pos)
+                for act in c.actors:
+                    K.actor_bounds(act, c.world, cam, rot, pos, t, 0.0, box, np.empty(4), np.empty(3), np.empty(2))
+                    K.actor_parts(act, c.world, c.building_lut, c.buildings, c.light, cam, rot, pos, t, parts,
+                                  scratch)
+                    yield box, parts, parts[:, K.Q_KIND] != K.PART_NONE
+
+
+def _assert_parts_inside(box, parts, live):
+    from rollcam.sim import _kernels as K
+
+    geo = parts[live, K.Q_GEO : K.Q_GEO + 5]
+    x_lo = np.minimum(geo[:, 0], geo[:, 2]) - geo[:, 4]
+    x_hi = np.maximum(geo[:, 0], geo[:, 2]) + geo[:, 4]
+    assert box[0] <= parts[live, K.Q_YMIN].min() + 1e-9
+    assert parts[live, K.Q_YMAX].max() <= box[1] + 1e-9
+    assert box[2] <= x_lo.min() + 1e-9 and x_hi.max() <= box[3] + 1e-9
+
+
 def test_actor_bounds_contain_every_part():
     """The touched-line test is only as good as the bounds: every part of every walker lies inside them.
 
     (The fast path and the oracle share the bounds, so their equality cannot catch bounds that are too
     tight; this checks the bounds against the parts directly, over gait phases, speeds, cameras and times.)
     """
-    from rollcam.sim import _kernels as K
-    from rollcam.sim import _world as Wd
-
-    for seed, speed, ego in ((0, "normal", "none"), (1, "fast", "none"), (2, 0.3, "drone"), (3, "fast", "vehicle")):
-        scene = make_street_scene(seed, speed=speed, width=320, height=180, n_pedestrians=25, ego=ego_preset(ego))
-        for cam_i in range(5):
-            r = Renderer(scene, cam_i)
-            c, cam = r._c, r._cams[False]
-            rot, pos = np.empty((3, 3)), np.empty(3)
-            parts = np.empty((K.MAX_PARTS, K.PART_COLS))
-            scratch = K.parts_scratch()
-            box = np.empty(4)
-            for t in np.linspace(0.0, 40.0, 57):
-                Wd.camera_pose(cam, t, rot, pos)
-                for act in c.actors:
-                    K.actor_bounds(act, c.world, cam, rot, pos, t, 0.0, box, np.empty(4), np.empty(3), np.empty(2))
-                    K.actor_parts(act, c.world, c.building_lut, c.buildings, c.light, cam, rot, pos, t, parts,
-                                  scratch)
-                    live = parts[:, K.Q_KIND] != K.PART_NONE
-                    if box[0] > box[1]:  # wholly behind the camera: no part may be drawn
-                        assert not live.any()
-                        continue
-                    if not live.any():
-                        continue
-                    geo = parts[live, K.Q_GEO : K.Q_GEO + 5]
-                    x_lo = np.minimum(geo[:, 0], geo[:, 2]) - geo[:, 4]
-                    x_hi = np.maximum(geo[:, 0], geo[:, 2]) + geo[:, 4]
-                    assert box[0] <= parts[live, K.Q_YMIN].min() + 1e-9
-                    assert parts[live, K.Q_YMAX].max() <= box[1] + 1e-9
-                    assert box[2] <= x_lo.min() + 1e-9 and x_hi.max() <= box[3] + 1e-9
+    cases = ((0, "normal", "none"), (1, "fast", "none"), (2, 0.3, "drone"), (3, "fast", "vehicle"))
+    for box, parts, live in _bounds_and_parts(cases, 57):
+        if box[0] > box[1]:  # wholly behind the camera: no part may be drawn
+            assert not live.any()
+            continue
+        if live.any():
+            _assert_parts_inside(box, parts, live)
 
 
 def test_bounds_of_walkers_straddling_the_camera_plane_are_finite_and_contain_every_part():
     """A walker partly behind the camera is bounded by its box cut at the near plane (plus the largest part
     radius there), not by the whole image; every part it draws must still lie inside."""
     from rollcam.sim import _kernels as K
-    from rollcam.sim import _world as Wd
 
     near_cases = 0
-    for seed, speed, ego in ((1, "fast", "none"), (3, "fast", "vehicle"), (6, "normal", "pan")):
-        scene = make_street_scene(seed, speed=speed, width=320, height=180, n_pedestrians=25, ego=ego_preset(ego))
-        for cam_i in range(5):
-            r = Renderer(scene, cam_i)
-            c, cam = r._c, r._cams[False]
-            rot, pos = np.empty((3, 3)), np.empty(3)
-            parts = np.empty((K.MAX_PARTS, K.PART_COLS))
-            scratch = K.parts_scratch()
-            box = np.empty(4)
-            for t in np.linspace(0.0, 40.0, 81):
-                Wd.camera_pose(cam, t, rot, pos)
-                for act in c.actors:
-                    K.actor_bounds(act, c.world, cam, rot, pos, t, 0.0, box, np.empty(4), np.empty(3), np.empty(2))
-                    K.actor_parts(act, c.world, c.building_lut, c.buildings, c.light, cam, rot, pos, t, parts,
-                                  scratch)
-                    live = parts[:, K.Q_KIND] != K.PART_NONE
-                    if box[0] > box[1] or not live.any():
-                        continue
-                    assert np.isfinite(box).all() and np.abs(box).max() < 1e29
-                    if parts[live, K.Q_DEPTH].min() < 0.5:
-                        near_cases += 1
-                    geo = parts[live, K.Q_GEO : K.Q_GEO + 5]
-                    x_lo = np.minimum(geo[:, 0], geo[:, 2]) - geo[:, 4]
-                    x_hi = np.maximum(geo[:, 0], geo[:, 2]) + geo[:, 4]
-                    assert box[0] <= parts[live, K.Q_YMIN].min() + 1e-9
-                    assert parts[live, K.Q_YMAX].max() <= box[1] + 1e-9
-                    assert box[2] <= x_lo.min() + 1e-9 and x_hi.max() <= box[3] + 1e-9
+    for box, parts, live in _bounds_and_parts(((1, "fast", "none"), (3, "fast", "vehicle"), (6, "normal", "pan")), 81):
+        if box[0] > box[1] or not live.any():
+            continue
+        assert np.isfinite(box).all() and np.abs(box).max() < 1e29
+        if parts[live, K.Q_DEPTH].min() < 0.5:
+            near_cases += 1
+        _assert_parts_inside(box, parts, live)
     assert near_cases > 50  # the cases this is about occur

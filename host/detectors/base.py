@@ -4,10 +4,11 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from typing import Any, Literal, Protocol, runtime_checkable
-from urllib.parse import parse_qsl
 
 import numpy as np
 from rollcam.sim.errors import ConfigError
+
+from ..options import convert_option, parse_query, reject_unknown
 
 PERSON = 0
 """Class id of a person (the COCO/YOLO convention: class 0 of the 80 COCO classes)."""
@@ -83,19 +84,11 @@ class DetectorSpec:
 
     def check(self, allowed: set[str]) -> None:
         """Reject options this detector does not know, naming them and the ones it does."""
-        unknown = set(self.options) - allowed
-        if unknown:
-            raise ConfigError(f"detector {self.spec!r}: unknown option(s) {sorted(unknown)}; known: {sorted(allowed)}")
+        reject_unknown(self.options, allowed, f"detector {self.spec!r}", ConfigError)
 
     def get(self, key: str, kind: Any, default: Any = None) -> Any:
         """Option ``key`` converted by ``kind``, or ``default``; a bad value names the option."""
-        if key not in self.options:
-            return default
-        raw = self.options[key]
-        try:
-            return kind(raw)
-        except (TypeError, ValueError, ConfigError) as exc:
-            raise ConfigError(f"detector {self.spec!r}: option {key}={raw!r} is invalid ({exc})") from None
+        return convert_option(self.options, key, kind, default, f"detector {self.spec!r}", ConfigError)
 
 
 def parse_spec(spec: str) -> DetectorSpec:
@@ -104,11 +97,5 @@ def parse_spec(spec: str) -> DetectorSpec:
         raise ConfigError(f"detector spec {spec!r} is empty; expected e.g. 'hog' or 'onnx:model.onnx'")
     head, _, query = spec.partition("?")
     name, _, target = head.partition(":")
-    options: dict[str, str] = {}
-    for key, value in parse_qsl(query, keep_blank_values=True):
-        if not key:
-            raise ConfigError(f"detector {spec!r}: empty option name in {query!r}")
-        if key in options:
-            raise ConfigError(f"detector {spec!r}: option {key!r} given twice")
-        options[key] = value
+    options = parse_query(query, f"detector {spec!r}", ConfigError)
     return DetectorSpec(spec, name.strip().lower(), target, options)

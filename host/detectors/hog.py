@@ -14,32 +14,10 @@ from typing import ClassVar, Literal
 import cv2
 import numpy as np
 
+from ..options import finite_float, non_negative_int, positive_float, positive_int
 from .base import PERSON, Detections, DetectorSpec
 
 SHRINK_W, SHRINK_H = 0.15, 0.05
-
-
-def _positive(kind: type):
-    def parse(text: str):
-        value = kind(text)
-        if not value > 0 or value != value:
-            raise ValueError("must be > 0")
-        return value
-    return parse
-
-
-def _non_negative_int(text: str) -> int:
-    value = int(text)
-    if value < 0:
-        raise ValueError("must be >= 0")
-    return value
-
-
-def _finite(text: str) -> float:
-    value = float(text)
-    if not np.isfinite(value):
-        raise ValueError("must be finite")
-    return value
 
 
 class HogDetector:
@@ -91,9 +69,10 @@ def open_detector(spec: DetectorSpec) -> HogDetector:
 
     if spec.target:
         raise ConfigError(f"detector {spec.spec!r}: hog takes no target (got {spec.target!r})")
-    scale = spec.get("scale", _positive(float), 1.05)
+    scale = spec.get("scale", positive_float, 1.05)
     if not scale > 1.0:
         raise ConfigError(f"detector {spec.spec!r}: option scale={scale!r} is invalid (must be > 1)")
-    return HogDetector(scale=scale, stride_px=spec.get("stride", _positive(int), 8),
-                       padding_px=spec.get("padding", _non_negative_int, 16),
-                       hit_threshold=spec.get("hit", _finite, 0.0), upscale=spec.get("upscale", _positive(float), 1.0))
+    return HogDetector(scale=scale, stride_px=spec.get("stride", positive_int, 8),
+                       padding_px=spec.get("padding", non_negative_int, 16),
+                       hit_threshold=spec.get("hit", finite_float, 0.0),
+                       upscale=spec.get("upscale", positive_float, 1.0))

@@ -32,6 +32,7 @@ from typing import Any, Literal
 import numpy as np
 from rollcam.sim.errors import ConfigError
 
+from ..options import positive_int
 from .base import Detections, DetectorSpec
 from .ops import Placement, letterbox, nms, stretch, tile_windows
 
@@ -93,13 +94,6 @@ def _pair(text: str) -> tuple[int, int]:
     if a <= 0 or b <= 0:
         raise ValueError("both numbers must be positive")
     return a, b
-
-
-def _positive_int(text: str) -> int:
-    value = int(text)
-    if value < 1:
-        raise ValueError("must be >= 1")
-    return value
 
 
 def _int_list(text: str) -> tuple[int, ...]:
@@ -300,13 +294,13 @@ def detector_options(spec: DetectorSpec) -> dict[str, Any]:
         "conf": spec.get("conf", _fraction, 0.25), "iou": spec.get("iou", _fraction, 0.45),
         "classes": spec.get("classes", _int_list), "class_offset": spec.get("class_offset", int, 0),
         "size": spec.get("size", _pair), "letterbox_input": spec.get("letterbox", _bool),
-        "bgr": spec.get("bgr", _bool, False), "max_det": spec.get("max_det", _positive_int, 300),
-        "threads": spec.get("threads", _positive_int), "tiles": spec.get("tiles", _pair),
+        "bgr": spec.get("bgr", _bool, False), "max_det": spec.get("max_det", positive_int, 300),
+        "threads": spec.get("threads", positive_int), "tiles": spec.get("tiles", _pair),
         "overlap": spec.get("overlap", _overlap, 0.2), "full": spec.get("full", _bool, True),
         "layout": spec.get("layout", _choice(*LAYOUTS), "auto"),
         "box": spec.get("box", _choice("yxyx", "xyxy"), "yxyx"),
         "norm": spec.get("norm", _bool), "input": spec.get("input", _choice("bgr", "raw"), "bgr"),
-        "bits": spec.get("bits", _positive_int), "device": spec.get("device", _choice("cpu", "cuda"), "cpu"),
+        "bits": spec.get("bits", positive_int), "device": spec.get("device", _choice("cpu", "cuda"), "cpu"),
     }
     return kw
 

@@ -7,10 +7,10 @@ a new backend is one new module plus its name in ``SCHEMES``. Nothing else in ``
 from __future__ import annotations
 
 import importlib
-from urllib.parse import parse_qsl
 
 from rollcam.sim.errors import SourceError
 
+from ..options import parse_query
 from .base import CameraSource, SourceURI
 
 SCHEMES = {"emu": "emu", "file": "file", "http": "http", "https": "http", "opencv": "opencv", "v4l2": "v4l2",
@@ -27,13 +27,7 @@ def parse_uri(uri: str) -> SourceURI:
     if scheme in ("http", "https"):
         return SourceURI(uri, scheme, uri, {})
     target, _, query = rest.partition("?")
-    options: dict[str, str] = {}
-    for key, value in parse_qsl(query, keep_blank_values=True):
-        if not key:
-            raise SourceError(f"source {uri!r}: empty option name in query {query!r}")
-        if key in options:
-            raise SourceError(f"source {uri!r}: option {key!r} given twice")
-        options[key] = value
+    options = parse_query(query, f"source {uri!r}", SourceError)
     return SourceURI(uri, scheme, target, options)
 
 

@@ -2,14 +2,23 @@
 
 from __future__ import annotations
 
-import math
 from abc import ABC, abstractmethod
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from typing import Any
 
 from rollcam.sim.errors import ConfigError, SourceError
 from rollcam.sim.frame import Frame
+
+from ..options import (  # noqa: F401  (the value parsers are re-exported for the source modules)
+    convert_option,
+    finite_float,
+    non_negative_float,
+    non_negative_int,
+    positive_float,
+    positive_int,
+    reject_unknown,
+)
 
 
 @dataclass(frozen=True)
@@ -23,44 +32,12 @@ class SourceURI:
 
     def take(self, used: set[str], allowed: set[str]) -> None:
         """Reject options this scheme does not know, naming them and the ones it does."""
-        unknown = set(self.options) - allowed
-        if unknown:
-            raise SourceError(f"source {self.uri!r}: unknown option(s) {sorted(unknown)}; known: {sorted(allowed)}")
+        reject_unknown(self.options, allowed, f"source {self.uri!r}", SourceError)
         used.update(self.options)
 
-    def get(self, key: str, kind: type, default: Any = None) -> Any:
-        """Option ``key`` converted to ``kind``, or ``default`` when absent; bad values name the option."""
-        if key not in self.options:
-            return default
-        raw = self.options[key]
-        try:
-            return kind(raw)
-        except (TypeError, ValueError, ConfigError) as exc:
-            raise SourceError(f"source {self.uri!r}: option {key}={raw!r} is invalid ({exc})") from None
-
-
-def finite_float(text: str) -> float:
-    """Option parser: a finite float (``nan`` and ``inf`` are refused)."""
-    value = float(text)
-    if not math.isfinite(value):
-        raise ValueError("must be a finite number")
-    return value
-
-
-def positive_int(text: str) -> int:
-    """Option parser: an integer >= 1."""
-    value = int(text)
-    if value < 1:
-        raise ValueError("must be an integer >= 1")
-    return value
-
-
-def non_negative_int(text: str) -> int:
-    """Option parser: an integer >= 0."""
-    value = int(text)
-    if value < 0:
-        raise ValueError("must be an integer >= 0")
-    return value
+    def get(self, key: str, kind: Callable[[str], Any], default: Any = None) -> Any:
+        """Option ``key`` converted by ``kind``, or ``default`` when absent; bad values name the option."""
+        return convert_option(self.options, key, kind, default, f"source {self.uri!r}", SourceError)
 
 
 def parse_size(text: str) -> tuple[int, int]:

@@ -27,7 +27,15 @@ from rollcam.sim.noise import parse_stages
 from rollcam.sim.scenegen import ego_preset, make_scene
 from rollcam.sim.synthetic import SyntheticCamera
 
-from .base import CameraSource, SourceURI, finite_float, non_negative_int, parse_size, positive_int
+from .base import (
+    CameraSource,
+    SourceURI,
+    finite_float,
+    non_negative_float,
+    non_negative_int,
+    parse_size,
+    positive_int,
+)
 
 OPTIONS = {"scene", "seed", "speed", "camera", "time", "pedestrians", "ego", "vx", "level", "shutter", "readout",
            "exposure_us", "gain", "fps", "size", "start_ns", "frames", "format", "physics", "blur_px", "noise",
@@ -75,7 +83,7 @@ def build_camera(sensor_name: str, opts: SourceURI) -> SyntheticCamera:
             gain=opts.get("gain", finite_float, 1.0),
             pixel_format=opts.get("format", str, "BGR3"),
             physics=opts.get("physics", _on_off),
-            blur_px=opts.get("blur_px", _non_negative_float, 0.5),
+            blur_px=opts.get("blur_px", non_negative_float, 0.5),
             noise=parse_stages(opts.get("noise", str)),
             serial=opts.get("serial", str, "0"),
             noise_seed=opts.get("noise_seed", non_negative_int, 0),
@@ -91,13 +99,6 @@ def _on_off(text: str) -> bool:
     if text.lower() not in table:
         raise ConfigError(f"expected on or off, got {text!r}")
     return table[text.lower()]
-
-
-def _non_negative_float(text: str) -> float:
-    value = finite_float(text)
-    if value < 0:
-        raise ConfigError(f"expected a number >= 0, got {text!r}")
-    return value
 
 
 class EmuSource(CameraSource):

@@ -25,7 +25,7 @@ import numpy as np
 from rollcam.sim.errors import SourceError
 from rollcam.sim.frame import Frame
 
-from .base import CameraSource, SourceURI, finite_float, positive_int
+from .base import CameraSource, SourceURI, finite_float, positive_float, positive_int
 from .rowtiming import FrameTimer
 
 OPTIONS = {"socket", "size", "fps", "exposure_us", "gain", "sensor", "frames", "timeout"}
@@ -68,14 +68,6 @@ def import_depthai() -> Any:
 def timedelta_ns(value: datetime.timedelta) -> int:
     """A timedelta as whole ns (exact: timedelta holds days, seconds and microseconds as integers)."""
     return ((value.days * 86_400 + value.seconds) * 1_000_000 + value.microseconds) * 1000
-
-
-def positive_float(text: str) -> float:
-    """Option parser: a finite float above zero (manual exposure and gain)."""
-    value = finite_float(text)
-    if value <= 0:
-        raise ValueError("must be greater than 0")
-    return value
 
 
 def device_ids(dai: Any) -> list[str]:
