@@ -46,8 +46,8 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from rollcam.common.errors import ConfigError, RollcamError
 from rollcam.sim.compose import METHODS, compose_rs, composition_error
-from rollcam.sim.errors import ConfigError, RollcamError
 from rollcam.sim.footage import Footage
 from rollcam.sim.hwconfig import load_sensor
 from rollcam.sim.render import LineTruth, Renderer

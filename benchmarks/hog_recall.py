@@ -24,8 +24,8 @@ import time
 from collections.abc import Callable, Sequence
 
 import numpy as np
+from rollcam.common.errors import ConfigError
 from rollcam.host.detectors.hog import SHRINK_H, SHRINK_W, HogDetector
-from rollcam.sim.errors import ConfigError
 from rollcam.sim.render import Renderer
 from rollcam.sim.scenegen import DAYLIGHT, make_street_scene
 

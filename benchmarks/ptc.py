@@ -27,7 +27,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from rollcam.sim.errors import ConfigError
+from rollcam.common.errors import ConfigError
 from rollcam.sim.formats import bayer_fourcc, decode_raw, pixel_format
 from rollcam.sim.hwconfig import load_sensor
 from rollcam.sim.noise import REFERENCE_EXPOSURE_S

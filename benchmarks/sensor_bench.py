@@ -167,7 +167,7 @@ def run_sensor_cli(args: Any) -> int:
     import sys
     from pathlib import Path
 
-    from rollcam.sim.errors import RollcamError
+    from rollcam.common.errors import RollcamError
 
     from .ptc import format_ptc, run_ptc
 

@@ -19,13 +19,13 @@ from typing import Any
 try:
     from serial.serialutil import PortNotOpenError, SerialBase, SerialException
 except ImportError as exc:  # pyserial is an optional extra
-    from rollcam.sim.errors import RollcamError
+    from rollcam.common.errors import RollcamError
 
     raise RollcamError("the rollcam:// serial URL handler needs pyserial: pip install 'rollcam[serial]'") from exc
 
+from rollcam.common.errors import RollcamError
 from rollcam.firmware.camera import FirmwareCamera
 from rollcam.firmware.protocol import ProtocolSession
-from rollcam.sim.errors import RollcamError
 
 CAMERAS: dict[str, FirmwareCamera] = {}
 """Cameras reachable as ``rollcam://NAME`` (see ``register_camera``)."""

@@ -14,9 +14,9 @@ import select
 import threading
 import tty
 
+from rollcam.common.errors import DeviceError
 from rollcam.firmware.camera import FirmwareCamera
 from rollcam.firmware.protocol import ProtocolSession
-from rollcam.sim.errors import DeviceError
 
 
 class PtySerialServer:

@@ -16,8 +16,8 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
+from rollcam.common.errors import ConfigError, DeviceError
 from rollcam.sim import formats as sf
-from rollcam.sim.errors import ConfigError, DeviceError
 from rollcam.sim.frame import Frame
 from rollcam.sim.hwconfig import SensorConfig, load_sensor
 from rollcam.sim.synthetic import DEFAULT_EXPOSURE_NS, SHUTTERS

@@ -11,7 +11,7 @@ from __future__ import annotations
 from collections.abc import Callable
 from dataclasses import dataclass
 
-from rollcam.sim.errors import ConfigError, DeviceError
+from rollcam.common.errors import ConfigError, DeviceError
 from rollcam.sim.hwconfig import SensorConfig, SensorMode
 from rollcam.sim.timing import LineTiming
 

@@ -8,7 +8,7 @@ from __future__ import annotations
 import functools
 
 import numpy as np
-from rollcam.sim.errors import ConfigError
+from rollcam.common.errors import ConfigError
 
 _BARS_BGR = np.array([[255, 255, 255], [0, 255, 255], [255, 255, 0], [0, 255, 0],
                       [255, 0, 255], [0, 0, 255], [255, 0, 0], [0, 0, 0]], dtype=np.uint8)

@@ -15,8 +15,8 @@ from dataclasses import dataclass
 
 import cv2
 import numpy as np
+from rollcam.common.errors import ConfigError
 from rollcam.sim import formats as sf
-from rollcam.sim.errors import ConfigError
 from rollcam.sim.formats import bgr_to_yuyv
 from rollcam.sim.frame import Frame
 from rollcam.sim.hwconfig import SensorConfig

@@ -11,7 +11,8 @@ from __future__ import annotations
 from collections.abc import Callable
 from dataclasses import dataclass
 
-from rollcam.sim.errors import ConfigError, DeviceError, ProtocolError
+from rollcam.common.errors import ConfigError, DeviceError, ProtocolError
+from rollcam.common.values import parse_bool
 
 from .camera import FirmwareCamera
 
@@ -41,10 +42,10 @@ def _reg_key(text: str) -> int | str:
 
 
 def _on_off(text: str) -> bool:
-    word = text.upper()
-    if word not in ("ON", "OFF", "1", "0"):
-        raise CommandError(102, f"expected ON or OFF, got {text!r}")
-    return word in ("ON", "1")
+    try:
+        return parse_bool(text)
+    except ValueError as exc:
+        raise CommandError(102, str(exc)) from None
 
 
 def _ctrl_line(cam: FirmwareCamera) -> str:

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 
-from rollcam.sim.errors import ConfigError, DeviceError
+from rollcam.common.errors import ConfigError, DeviceError
 from rollcam.sim.hwconfig import Register
 
 from .controls import SensorState, set_control

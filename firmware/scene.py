@@ -5,7 +5,7 @@ from __future__ import annotations
 from collections.abc import Callable
 from typing import Any
 
-from rollcam.sim.errors import ConfigError
+from rollcam.common.errors import ConfigError
 from rollcam.sim.scene import Scene
 from rollcam.sim.scenegen import ego_preset, make_scene
 

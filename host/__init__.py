@@ -1,7 +1,7 @@
 """Host side: camera sources, detectors, CLI. ``from rollcam.host import open_camera`` opens any source URI;
 ``VideoCapture`` is a drop-in for ``cv2.VideoCapture`` that also takes those URIs."""
 
-from rollcam.sim.errors import ConfigError, DeviceError, ProtocolError, RollcamError, SourceError
+from rollcam.common.errors import ConfigError, DeviceError, ProtocolError, RollcamError, SourceError
 
 from .sources import open_camera
 

@@ -21,7 +21,7 @@ from pathlib import Path
 from typing import Any, TextIO
 
 import numpy as np
-from rollcam.sim.errors import ConfigError, SourceError
+from rollcam.common.errors import ConfigError, SourceError
 from rollcam.sim.formats import FORMATS
 from rollcam.sim.frame import Frame
 

@@ -18,7 +18,7 @@ import traceback
 from collections.abc import Callable, Sequence
 from typing import Any
 
-from rollcam.sim.errors import ConfigError, RollcamError, SourceError
+from rollcam.common.errors import ConfigError, RollcamError, SourceError
 
 PROG = "rollcam"
 EXIT_OK, EXIT_FAILURE, EXIT_USAGE, EXIT_INTERRUPTED = 0, 1, 2, 130

@@ -18,7 +18,7 @@ from pathlib import Path
 from typing import Any, TextIO
 
 import numpy as np
-from rollcam.sim.errors import ConfigError, RollcamError
+from rollcam.common.errors import ConfigError, RollcamError
 from rollcam.sim.frame import Frame
 from rollcam.sim.hwconfig import load_sensor
 

@@ -31,7 +31,7 @@ def v4l2_devices(dev: Path = Path("/dev"), sysfs: Path = Path("/sys/class/video4
 def oak_devices(dai: Any = None) -> tuple[Rows, str]:
     """OAK cameras depthai can see."""
     if dai is None:
-        from rollcam.sim.errors import SourceError
+        from rollcam.common.errors import SourceError
 
         from .sources.oak import import_depthai
 

@@ -27,7 +27,7 @@ DEFAULT_HTTP = "127.0.0.1:8080"
 
 def host_port(text: str) -> tuple[str, int]:
     """``HOST:PORT``, ``:PORT`` or ``PORT`` -> (host, port) for argparse; the host defaults to 127.0.0.1."""
-    from rollcam.sim.errors import ConfigError
+    from rollcam.common.errors import ConfigError
 
     from .sources.base import parse_host_port
 

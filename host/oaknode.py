@@ -32,7 +32,7 @@ import sys
 import time
 from typing import Any
 
-from rollcam.sim.errors import SourceError
+from rollcam.common.errors import SourceError
 
 from .sources.oak import import_depthai
 

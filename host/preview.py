@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import cv2
 import numpy as np
-from rollcam.sim.errors import ConfigError, SourceError
+from rollcam.common.errors import ConfigError, SourceError
 from rollcam.sim.formats import decode_raw, nv12_to_bgr, pixel_format, yu12_to_bgr, yuyv_to_bgr
 from rollcam.sim.frame import Frame
 from rollcam.sim.isp import demosaic

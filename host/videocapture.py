@@ -22,7 +22,7 @@ from urllib.parse import urlencode
 
 import cv2
 import numpy as np
-from rollcam.sim.errors import RollcamError
+from rollcam.common.errors import RollcamError
 
 from .preview import frame_bgr
 from .sources import SCHEMES, open_camera, parse_uri

@@ -18,8 +18,8 @@ from typing import NamedTuple
 
 import cv2
 import numpy as np
+from rollcam.common.errors import ConfigError, SourceError
 
-from .errors import ConfigError, SourceError
 from .footage import Footage, FpsLike, as_fps
 from .timing import NS_PER_S, LineTiming, Readout, line_sample_times_ns
 

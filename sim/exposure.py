@@ -168,7 +168,7 @@ def plan_samples(renderer: Renderer, starts_ns: np.ndarray, exposure_ns: int, *,
     starts = np.asarray(starts_ns, np.int64)
     n_lines = starts.shape[0]
     if not bound_px > 0 or not math.isfinite(bound_px):
-        from .errors import ConfigError
+        from rollcam.common.errors import ConfigError
 
         raise ConfigError(f"blur bound must be a finite number of pixels > 0, got {bound_px!r}")
     speed = np.zeros(n_lines)

@@ -16,8 +16,8 @@ from pathlib import Path
 
 import cv2
 import numpy as np
+from rollcam.common.errors import ConfigError, SourceError
 
-from .errors import ConfigError, SourceError
 from .timing import NS_PER_S
 
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".tif", ".tiff", ".bmp", ".npy")

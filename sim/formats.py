@@ -22,8 +22,7 @@ from dataclasses import dataclass
 
 import numpy as np
 from numba import njit
-
-from .errors import ConfigError
+from rollcam.common.errors import ConfigError
 
 BAYER_ORDERS = ("RGGB", "BGGR", "GRBG", "GBRG")
 _BAYER_FOURCCS = {  # order -> fourcc of 8, 10, 10 packed, 12, 12 packed, 16 bits (V4L2_PIX_FMT_S*)

@@ -24,8 +24,8 @@ from pathlib import Path
 from typing import Any, ClassVar, NamedTuple
 
 import yaml
+from rollcam.common.errors import ConfigError
 
-from .errors import ConfigError
 from .formats import FORMATS
 from .timing import LineTiming, Readout
 

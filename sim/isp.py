@@ -10,8 +10,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from rollcam.common.errors import ConfigError
 
-from .errors import ConfigError
 from .formats import bgr_to_nv12, bgr_to_yu12, bgr_to_yuyv, pixel_format
 
 _DEMOSAIC = {  # Bayer order -> OpenCV code (OpenCV names the tile by its second row: RGGB is 'BayerBG')

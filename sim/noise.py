@@ -40,8 +40,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 from numba import njit, prange
+from rollcam.common.errors import ConfigError
 
-from .errors import ConfigError
 from .hwconfig import NoiseParams
 from .render import LinearFrame
 

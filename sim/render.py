@@ -21,12 +21,12 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from rollcam.common.errors import ConfigError
 
 from . import _body as B
 from . import _kernels as K
 from . import _world as Wd
 from .compile import compile_camera, compile_scene
-from .errors import ConfigError
 from .frame import Box, ObjectTruth
 from .scene import Camera, Scene
 

@@ -200,7 +200,7 @@ class Scene:
 
     def camera(self, index_or_name: int | str = 0) -> Camera:
         """A camera by index or name."""
-        from .errors import ConfigError
+        from rollcam.common.errors import ConfigError
 
         if isinstance(index_or_name, str) and not index_or_name.isdigit():
             for cam in self.cameras:

@@ -10,8 +10,8 @@ import math
 from typing import Any
 
 import numpy as np
+from rollcam.common.errors import ConfigError
 
-from .errors import ConfigError
 from .scene import (
     Building,
     Camera,

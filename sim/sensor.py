@@ -12,8 +12,8 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
+from rollcam.common.errors import ConfigError
 
-from .errors import ConfigError
 from .formats import FORMATS, PixelFormat, encode_raw, pixel_format
 from .hwconfig import SensorConfig
 from .isp import IspParams, preview, to_processed

@@ -22,8 +22,8 @@ from collections.abc import Iterator
 from dataclasses import dataclass
 
 import numpy as np
+from rollcam.common.errors import ConfigError
 
-from .errors import ConfigError
 from .exposure import DEFAULT_BOUND_PX, integrate, plan_samples
 from .formats import pixel_format as fourcc_of
 from .frame import Box, Frame, ObjectTruth

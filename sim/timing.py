@@ -44,7 +44,7 @@ class Readout(str, Enum):
         try:
             return cls(key)
         except ValueError:
-            from .errors import ConfigError
+            from rollcam.common.errors import ConfigError
 
             raise ConfigError(
                 f"readout {value!r} is not one of {[r.value for r in cls]} (or tb, bt, lr, rl)"
@@ -71,7 +71,7 @@ class LineTiming:
             if name == "frame_pck" and value is None:
                 continue
             if not isinstance(value, (int, np.integer)) or value <= 0:
-                from .errors import ConfigError
+                from rollcam.common.errors import ConfigError
 
                 raise ConfigError(f"LineTiming.{name} must be a positive integer, got {value!r}")
 
@@ -124,7 +124,7 @@ def line_sample_times_ns(
     """
     readout = Readout.parse(readout)
     if n_lines <= 0:
-        from .errors import ConfigError
+        from rollcam.common.errors import ConfigError
 
         raise ConfigError(f"n_lines must be positive, got {n_lines!r}")
     if timing is None:

@@ -9,7 +9,7 @@ import json
 import numpy as np
 import pytest
 from rollcam.benchmarks import bench
-from rollcam.sim.errors import ConfigError
+from rollcam.common.errors import ConfigError
 
 ROW_KEYS = {"method", "scene", "ms_per_frame", "mean_abs_err_dn", "max_abs_err_dn", "max_box_err_px", "x_memcpy",
             "speedup_vs_reference", "kind", "n_timed", "note"}

@@ -12,8 +12,8 @@ from pathlib import Path
 import cv2
 import numpy as np
 import pytest
+from rollcam.common.errors import ConfigError, SourceError
 from rollcam.sim.compose import Composer, compose_rs, compose_stream, composition_error
-from rollcam.sim.errors import ConfigError, SourceError
 from rollcam.sim.footage import Footage
 from rollcam.sim.timing import NS_PER_S, LineTiming
 

@@ -6,11 +6,11 @@ import json
 from pathlib import Path
 
 import pytest
+from rollcam.common.errors import ConfigError
 from rollcam.host.cli import main
 from rollcam.host.datasets import DatasetConfig, build_dataset, make_plan
 from rollcam.host.datasets.plan import LabelPolicy
 from rollcam.host.sources import open_camera
-from rollcam.sim.errors import ConfigError
 
 SMALL = DatasetConfig(size=(192, 108), scenes=3, frames=6, pedestrians=12, seed=7)
 

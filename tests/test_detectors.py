@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from rollcam.common.errors import ConfigError
 from rollcam.host.detectors import PERSON, Detections, Detector, load_detector, parse_spec
-from rollcam.sim.errors import ConfigError
 
 
 def test_parse_spec_splits_name_target_options():

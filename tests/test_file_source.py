@@ -8,9 +8,9 @@ from pathlib import Path
 import cv2
 import numpy as np
 import pytest
+from rollcam.common.errors import SourceError
 from rollcam.host.sources import open_camera
 from rollcam.sim.compose import compose_rs, compose_stream
-from rollcam.sim.errors import SourceError
 from rollcam.sim.footage import Footage
 from rollcam.sim.hwconfig import load_sensor
 from rollcam.sim.synthetic import resolve_settings

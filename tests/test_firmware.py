@@ -4,10 +4,10 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from rollcam.common.errors import ConfigError, DeviceError
 from rollcam.firmware.camera import FirmwareCamera
 from rollcam.firmware.patterns import render_pattern
 from rollcam.firmware.scheduler import FrameSchedule
-from rollcam.sim.errors import ConfigError, DeviceError
 from rollcam.sim.hwconfig import list_sensors, load_sensor
 from rollcam.sim.timing import NS_PER_S, LineTiming
 

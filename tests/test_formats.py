@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
+from rollcam.common.errors import ConfigError
 from rollcam.sim import formats as F
-from rollcam.sim.errors import ConfigError
 from rollcam.sim.hwconfig import FOURCCS
 from rollcam.sim.isp import IspParams, demosaic, preview, to_processed
 

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import pytest
 from rollcam.benchmarks.hog_recall import hog_recall, iou, match_frame
-from rollcam.sim.errors import ConfigError
+from rollcam.common.errors import ConfigError
 
 
 def test_iou_and_greedy_matching():

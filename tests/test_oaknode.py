@@ -5,8 +5,8 @@ from __future__ import annotations
 import datetime
 
 import pytest
+from rollcam.common.errors import SourceError
 from rollcam.host import open_camera
-from rollcam.sim.errors import SourceError
 
 dai = pytest.importorskip("depthai")
 

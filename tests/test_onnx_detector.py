@@ -4,9 +4,9 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from rollcam.common.errors import ConfigError
 from rollcam.host.detectors import load_detector
 from rollcam.host.detectors.ops import iou_matrix, letterbox, nms, tile_windows
-from rollcam.sim.errors import ConfigError
 
 onnx = pytest.importorskip("onnx")
 pytest.importorskip("onnxruntime")

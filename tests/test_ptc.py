@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import pytest
 from rollcam.benchmarks.ptc import format_ptc, measure_ptc, plot_ptc
-from rollcam.sim.errors import ConfigError
+from rollcam.common.errors import ConfigError
 from rollcam.sim.hwconfig import load_sensor
 
 

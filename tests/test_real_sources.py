@@ -7,10 +7,10 @@ import sys
 import cv2
 import numpy as np
 import pytest
+from rollcam.common.errors import ProtocolError, SourceError
 from rollcam.host import open_camera
 from rollcam.host.sources import SourceURI
 from rollcam.host.sources.http import HttpMjpegSource, MjpegParser, boundary_of
-from rollcam.sim.errors import ProtocolError, SourceError
 
 SMALL = {"size": "320x180", "seed": 2, "pedestrians": 6}
 

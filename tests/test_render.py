@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
-from rollcam.sim.errors import ConfigError
+from rollcam.common.errors import ConfigError
 from rollcam.sim.render import Renderer, srgb_lut
 from rollcam.sim.scenegen import ego_preset, make_chart_scene, make_street_scene
 from rollcam.sim.timing import LineTiming, Readout, line_sample_times_ns

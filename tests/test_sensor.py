@@ -8,9 +8,9 @@ import math
 
 import numpy as np
 import pytest
+from rollcam.common.errors import ConfigError
 from rollcam.host import SourceError, open_camera
 from rollcam.host.capture import capture
-from rollcam.sim.errors import ConfigError
 from rollcam.sim.exposure import dense_plan, integrate, plan_samples
 from rollcam.sim.formats import decode_raw
 from rollcam.sim.hwconfig import load_sensor

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from rollcam.sim.errors import ConfigError
+from rollcam.common.errors import ConfigError
 from rollcam.sim.exposure import SamplePlan, integrate, plan_samples
 from rollcam.sim.hwconfig import load_sensor
 from rollcam.sim.noise import SensorModel

@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
-from rollcam.sim.errors import ConfigError
+from rollcam.common.errors import ConfigError
 from rollcam.sim.exposure import integrate, plan_samples
 from rollcam.sim.formats import FORMATS, decode_raw, encode_raw
 from rollcam.sim.hwconfig import load_sensor

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from hypothesis import given
 from hypothesis import strategies as st
-from rollcam.sim.errors import ConfigError
+from rollcam.common.errors import ConfigError
 from rollcam.sim.hwconfig import load_sensor
 from rollcam.sim.scenegen import make_chart_scene
 from rollcam.sim.synthetic import SyntheticCamera, resolve_settings

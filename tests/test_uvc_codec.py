@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from rollcam.common.errors import ProtocolError
 from rollcam.emu.uvc import constants as C
 from rollcam.emu.uvc.convert import WIRE_FORMATS, decode, encode, wire_layout
 from rollcam.emu.uvc.descriptors import (
@@ -23,7 +24,6 @@ from rollcam.emu.uvc.payload import (
     ticks_to_ns,
 )
 from rollcam.emu.uvc.probe import Probe
-from rollcam.sim.errors import ProtocolError
 
 FORMATS = (StreamFormat("YUYV", (FrameSize(640, 480, (333333, 666667), 666667), FrameSize(320, 240, (333333,)))),
            StreamFormat("NV12", (FrameSize(640, 480, (333333,)),)),

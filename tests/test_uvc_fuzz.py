@@ -12,11 +12,11 @@ import socket
 import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
+from rollcam.common.errors import ProtocolError
 from rollcam.emu.usbip import USBIPServer, list_devices
 from rollcam.emu.usbip import protocol as P
 from rollcam.emu.uvc import PayloadPacker, PayloadParser, Probe, Setup, Stall, UVCFunction
 from rollcam.emu.uvc import constants as C
-from rollcam.sim.errors import ProtocolError
 from uvc_fakes import FakeProducer
 
 FUZZ = settings(max_examples=1000, deadline=None, derandomize=True,

@@ -3,8 +3,8 @@
 from __future__ import annotations
 
 import pytest
+from rollcam.common.errors import DeviceError
 from rollcam.emu.uvc import FrameProducer, SyntheticProducer
-from rollcam.sim.errors import DeviceError
 from rollcam.sim.hwconfig import load_sensor
 from rollcam.sim.scenegen import make_scene
 from rollcam.sim.synthetic import resolve_settings

@@ -11,9 +11,9 @@ import numpy as np
 import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
+from rollcam.common.errors import DeviceError
 from rollcam.emu.v4l2 import Device, Faults, V4L2Error, raw
 from rollcam.emu.v4l2 import functions as fn
-from rollcam.sim.errors import DeviceError
 
 
 def dev(**kw) -> Device:

@@ -8,13 +8,13 @@ import urllib.request
 import cv2
 import numpy as np
 import pytest
+from rollcam.common.errors import ConfigError, DeviceError
 from rollcam.emu.http_mjpeg import MjpegServer
 from rollcam.emu.v4l2 import Device, V4L2Error, raw
 from rollcam.emu.v4l2 import functions as fn
 from rollcam.firmware.camera import FirmwareCamera
 from rollcam.firmware.protocol import handle_line
 from rollcam.sim import formats as sf
-from rollcam.sim.errors import ConfigError, DeviceError
 
 
 def dev(sensor: str = "imx219", size: tuple[int, int] = (640, 480), **kw) -> Device:

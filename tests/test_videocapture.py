@@ -5,9 +5,9 @@ from __future__ import annotations
 import cv2
 import numpy as np
 import pytest
+from rollcam.common.errors import SourceError
 from rollcam.host import VideoCapture
 from rollcam.host.preview import to_bgr
-from rollcam.sim.errors import SourceError
 
 
 def opencv_script(capture_class, source, size=None):

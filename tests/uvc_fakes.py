@@ -3,8 +3,8 @@
 from __future__ import annotations
 
 import numpy as np
+from rollcam.common.errors import DeviceError
 from rollcam.emu.uvc.producer import ControlRange
-from rollcam.sim.errors import DeviceError
 from rollcam.sim.frame import Frame
 from rollcam.sim.timing import Readout
 

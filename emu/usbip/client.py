@@ -13,7 +13,7 @@ import itertools
 import socket
 import struct
 
-from rollcam.sim.errors import DeviceError, ProtocolError
+from rollcam.common.errors import DeviceError, ProtocolError
 
 from . import protocol as P
 from .server import DEFAULT_PORT, _recv_exact

@@ -13,7 +13,7 @@ import struct
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 
-from rollcam.sim.errors import ProtocolError
+from rollcam.common.errors import ProtocolError
 
 VERSION = 0x0111
 OP_REQ_DEVLIST = 0x8005

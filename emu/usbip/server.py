@@ -19,12 +19,12 @@ from collections import deque
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 
+from rollcam.common.errors import DeviceError, ProtocolError
 from rollcam.emu.uvc import constants as C
 from rollcam.emu.uvc.descriptors import split_descriptors
 from rollcam.emu.uvc.device import Setup, UVCFunction
 from rollcam.emu.uvc.requests import Stall
 from rollcam.emu.uvc.stream import TransferOverflow, TransferTimeout
-from rollcam.sim.errors import DeviceError, ProtocolError
 
 from . import protocol as P
 

@@ -15,7 +15,7 @@ from collections.abc import Callable
 from typing import Any
 
 import numpy as np
-from rollcam.sim.errors import DeviceError
+from rollcam.common.errors import DeviceError
 from rollcam.sim.frame import Frame
 
 from .producer import FrameProducer

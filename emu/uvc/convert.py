@@ -8,8 +8,8 @@ from __future__ import annotations
 
 import cv2
 import numpy as np
+from rollcam.common.errors import ConfigError, ProtocolError
 from rollcam.firmware.pixfmt import encode_jpeg
-from rollcam.sim.errors import ConfigError, ProtocolError
 from rollcam.sim.formats import PixelFormat, bgr_to_nv12, bgr_to_yuyv, nv12_to_bgr, pixel_format, yuyv_to_bgr
 
 WIRE_FORMATS = ("YUYV", "NV12", "MJPG")

@@ -14,7 +14,7 @@ import struct
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 
-from rollcam.sim.errors import ProtocolError
+from rollcam.common.errors import ProtocolError
 
 from . import constants as C
 

@@ -12,10 +12,10 @@ from __future__ import annotations
 import dataclasses
 from collections.abc import Sequence
 
+from rollcam.common.errors import DeviceError
 from rollcam.firmware.camera import FirmwareCamera, FramePlan
 from rollcam.firmware.pixfmt import is_raw, to_bgr
 from rollcam.firmware.scheduler import FrameSchedule
-from rollcam.sim.errors import DeviceError
 from rollcam.sim.frame import Frame
 
 from .producer import CONTROLS, FPS_CHOICES, ControlRange, offered_intervals_ns

@@ -18,7 +18,7 @@ from collections.abc import Iterator
 from dataclasses import dataclass, field
 
 import numpy as np
-from rollcam.sim.errors import ProtocolError
+from rollcam.common.errors import ProtocolError
 
 from .constants import BH_EOF, BH_EOH, BH_ERR, BH_FID, BH_PTS, BH_SCR
 

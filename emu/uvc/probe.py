@@ -5,7 +5,7 @@ from __future__ import annotations
 import struct
 from dataclasses import astuple, dataclass, replace
 
-from rollcam.sim.errors import ProtocolError
+from rollcam.common.errors import ProtocolError
 
 from .constants import PROBE_LEN_10, PROBE_LEN_11, PROBE_LEN_15, PROBE_LENGTHS
 

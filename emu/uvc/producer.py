@@ -12,7 +12,7 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Protocol, runtime_checkable
 
-from rollcam.sim.errors import ConfigError, DeviceError
+from rollcam.common.errors import ConfigError, DeviceError
 from rollcam.sim.frame import Frame
 from rollcam.sim.hwconfig import SensorConfig
 from rollcam.sim.scene import Scene

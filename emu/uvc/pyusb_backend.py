@@ -15,7 +15,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass, field
 from types import SimpleNamespace
 
-from rollcam.sim.errors import SourceError
+from rollcam.common.errors import SourceError
 
 from . import constants as C
 from .descriptors import split_descriptors

@@ -11,7 +11,7 @@ from __future__ import annotations
 from collections.abc import Callable
 from dataclasses import dataclass
 
-from rollcam.sim.errors import DeviceError, ProtocolError
+from rollcam.common.errors import DeviceError, ProtocolError
 from rollcam.sim.formats import pixel_format
 
 from . import constants as C

@@ -13,7 +13,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
-from rollcam.sim.errors import DeviceError
+from rollcam.common.errors import DeviceError
 
 from .ahead import RenderAhead, newest_due
 from .convert import encode

@@ -17,10 +17,10 @@ from typing import Any
 
 import cv2
 import numpy as np
+from rollcam.common.errors import ConfigError
 from rollcam.firmware.camera import Clock, FirmwareCamera
 from rollcam.firmware.pixfmt import COMPRESSED, is_raw
 from rollcam.sim import formats as sf
-from rollcam.sim.errors import ConfigError
 from rollcam.sim.isp import IspParams, preview
 
 from . import functions as fn

@@ -15,11 +15,11 @@ from fractions import Fraction
 from typing import Any
 
 import numpy as np
+from rollcam.common.errors import ConfigError, DeviceError
 from rollcam.emu.pump import FramePump
 from rollcam.firmware.camera import FirmwareCamera, FramePlan
 from rollcam.firmware.controls import CONTROLS
 from rollcam.firmware.pixfmt import convert, device_format
-from rollcam.sim.errors import ConfigError, DeviceError
 from rollcam.sim.frame import Frame
 
 from . import raw

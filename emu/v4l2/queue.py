@@ -9,7 +9,7 @@ import time
 from dataclasses import dataclass, field
 
 import numpy as np
-from rollcam.sim.errors import DeviceError
+from rollcam.common.errors import DeviceError
 
 from .raw import VIDEO_MAX_FRAME, Buffer, BufFlag, Memory
 

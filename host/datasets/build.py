@@ -17,7 +17,7 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any, TextIO
 
-from rollcam.sim.errors import ConfigError, RollcamError
+from rollcam.common.errors import ConfigError, RollcamError
 
 from ..capture import Progress, write_atomic
 from ..sources import open_camera

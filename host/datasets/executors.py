@@ -15,7 +15,7 @@ from collections.abc import Callable, Iterable, Iterator
 from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from typing import Any
 
-from rollcam.sim.errors import ConfigError, RollcamError
+from rollcam.common.errors import ConfigError, RollcamError
 
 from .plan import Task
 

@@ -15,7 +15,7 @@ from dataclasses import asdict, dataclass, field
 from typing import Any
 
 import numpy as np
-from rollcam.sim.errors import ConfigError
+from rollcam.common.errors import ConfigError
 from rollcam.sim.scenegen import SPEED_PRESETS, TIMES_OF_DAY, parse_speed
 
 SPLITS = ("train", "val", "test")

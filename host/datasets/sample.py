@@ -13,7 +13,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from rollcam.sim.errors import SourceError
+from rollcam.common.errors import SourceError
 from rollcam.sim.frame import Frame
 
 from ..capture import encode_image, write_atomic

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import importlib
 
-from rollcam.sim.errors import ConfigError
+from rollcam.common.errors import ConfigError
 
 from .base import PERSON, Detections, Detector, DetectorSpec, parse_spec
 

@@ -6,9 +6,8 @@ from dataclasses import dataclass, field
 from typing import Any, Literal, Protocol, runtime_checkable
 
 import numpy as np
-from rollcam.sim.errors import ConfigError
-
-from ..options import convert_option, parse_query, reject_unknown
+from rollcam.common.errors import ConfigError
+from rollcam.common.values import convert_option, parse_query, reject_unknown
 
 PERSON = 0
 """Class id of a person (the COCO/YOLO convention: class 0 of the 80 COCO classes)."""

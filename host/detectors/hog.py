@@ -13,8 +13,8 @@ from typing import ClassVar, Literal
 
 import cv2
 import numpy as np
+from rollcam.common.values import finite_float, non_negative_int, positive_float, positive_int
 
-from ..options import finite_float, non_negative_int, positive_float, positive_int
 from .base import PERSON, Detections, DetectorSpec
 
 SHRINK_W, SHRINK_H = 0.15, 0.05
@@ -65,7 +65,7 @@ class HogDetector:
 def open_detector(spec: DetectorSpec) -> HogDetector:
     """Build a HOG detector from ``hog?scale=..&stride=..&padding=..&hit=..&upscale=..``."""
     spec.check({"scale", "stride", "padding", "hit", "upscale"})
-    from rollcam.sim.errors import ConfigError
+    from rollcam.common.errors import ConfigError
 
     if spec.target:
         raise ConfigError(f"detector {spec.spec!r}: hog takes no target (got {spec.target!r})")

@@ -30,9 +30,9 @@ from pathlib import Path
 from typing import Any, Literal
 
 import numpy as np
-from rollcam.sim.errors import ConfigError
+from rollcam.common.errors import ConfigError
+from rollcam.common.values import parse_bool, positive_int
 
-from ..options import positive_int
 from .base import Detections, DetectorSpec
 from .ops import Placement, letterbox, nms, stretch, tile_windows
 
@@ -65,14 +65,6 @@ def import_onnxruntime() -> Any:
         raise ConfigError("the onnx detectors need onnxruntime: pip install 'rollcam[onnx]' "
                           "(or pip install onnxruntime)") from None
     return onnxruntime
-
-
-def _bool(text: str) -> bool:
-    if text.lower() in ("1", "true", "yes", "on"):
-        return True
-    if text.lower() in ("0", "false", "no", "off"):
-        return False
-    raise ValueError("expected 1/0, true/false, yes/no or on/off")
 
 
 def _fraction(text: str) -> float:
@@ -293,13 +285,13 @@ def detector_options(spec: DetectorSpec) -> dict[str, Any]:
     kw: dict[str, Any] = {
         "conf": spec.get("conf", _fraction, 0.25), "iou": spec.get("iou", _fraction, 0.45),
         "classes": spec.get("classes", _int_list), "class_offset": spec.get("class_offset", int, 0),
-        "size": spec.get("size", _pair), "letterbox_input": spec.get("letterbox", _bool),
-        "bgr": spec.get("bgr", _bool, False), "max_det": spec.get("max_det", positive_int, 300),
+        "size": spec.get("size", _pair), "letterbox_input": spec.get("letterbox", parse_bool),
+        "bgr": spec.get("bgr", parse_bool, False), "max_det": spec.get("max_det", positive_int, 300),
         "threads": spec.get("threads", positive_int), "tiles": spec.get("tiles", _pair),
-        "overlap": spec.get("overlap", _overlap, 0.2), "full": spec.get("full", _bool, True),
+        "overlap": spec.get("overlap", _overlap, 0.2), "full": spec.get("full", parse_bool, True),
         "layout": spec.get("layout", _choice(*LAYOUTS), "auto"),
         "box": spec.get("box", _choice("yxyx", "xyxy"), "yxyx"),
-        "norm": spec.get("norm", _bool), "input": spec.get("input", _choice("bgr", "raw"), "bgr"),
+        "norm": spec.get("norm", parse_bool), "input": spec.get("input", _choice("bgr", "raw"), "bgr"),
         "bits": spec.get("bits", positive_int), "device": spec.get("device", _choice("cpu", "cuda"), "cpu"),
     }
     return kw

@@ -12,7 +12,7 @@ from __future__ import annotations
 from importlib import resources
 from pathlib import Path
 
-from rollcam.sim.errors import ConfigError
+from rollcam.common.errors import ConfigError
 
 from .base import PERSON, DetectorSpec
 from .onnx import OnnxDetector, detector_options

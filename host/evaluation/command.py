@@ -8,7 +8,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from rollcam.sim.errors import ConfigError
+from rollcam.common.errors import ConfigError
 
 DESCRIPTION = """\
 Evaluate a detector on the GS and RS images of a rollcam dataset (or on an Ultralytics data.yaml or a COCO

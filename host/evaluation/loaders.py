@@ -18,7 +18,7 @@ from typing import Any
 
 import numpy as np
 import yaml
-from rollcam.sim.errors import ConfigError
+from rollcam.common.errors import ConfigError
 
 from .metrics import Dets, Truth
 

@@ -15,7 +15,7 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-from rollcam.sim.errors import RollcamError
+from rollcam.common.errors import RollcamError
 
 EPS = 1e-16
 

@@ -7,7 +7,7 @@ import time
 from pathlib import Path
 from typing import Any
 
-from rollcam.sim.errors import ConfigError
+from rollcam.common.errors import ConfigError
 
 from .loaders import EvalSet, load_detections, load_sets, run_detector
 from .metrics import Dets, evaluate

@@ -8,9 +8,9 @@ from __future__ import annotations
 
 import importlib
 
-from rollcam.sim.errors import SourceError
+from rollcam.common.errors import SourceError
+from rollcam.common.values import parse_query
 
-from ..options import parse_query
 from .base import CameraSource, SourceURI
 
 SCHEMES = {"emu": "emu", "file": "file", "http": "http", "https": "http", "opencv": "opencv", "v4l2": "v4l2",

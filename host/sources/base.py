@@ -7,10 +7,8 @@ from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from typing import Any
 
-from rollcam.sim.errors import ConfigError, SourceError
-from rollcam.sim.frame import Frame
-
-from ..options import (  # noqa: F401  (the value parsers are re-exported for the source modules)
+from rollcam.common.errors import ConfigError, SourceError
+from rollcam.common.values import (  # noqa: F401  (the value parsers are re-exported for the source modules)
     convert_option,
     finite_float,
     non_negative_float,
@@ -19,6 +17,7 @@ from ..options import (  # noqa: F401  (the value parsers are re-exported for th
     positive_int,
     reject_unknown,
 )
+from rollcam.sim.frame import Frame
 
 
 @dataclass(frozen=True)

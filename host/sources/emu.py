@@ -20,7 +20,8 @@ from __future__ import annotations
 
 from typing import Any
 
-from rollcam.sim.errors import ConfigError, SourceError
+from rollcam.common.errors import ConfigError, SourceError
+from rollcam.common.values import parse_bool
 from rollcam.sim.frame import Frame
 from rollcam.sim.hwconfig import load_sensor
 from rollcam.sim.noise import parse_stages
@@ -82,23 +83,16 @@ def build_camera(sensor_name: str, opts: SourceURI) -> SyntheticCamera:
             exposure_ns=None if exposure_us is None else round(exposure_us * 1000),
             gain=opts.get("gain", finite_float, 1.0),
             pixel_format=opts.get("format", str, "BGR3"),
-            physics=opts.get("physics", _on_off),
+            physics=opts.get("physics", parse_bool),
             blur_px=opts.get("blur_px", non_negative_float, 0.5),
             noise=parse_stages(opts.get("noise", str)),
             serial=opts.get("serial", str, "0"),
             noise_seed=opts.get("noise_seed", non_negative_int, 0),
-            hflip=opts.get("hflip", _on_off, False),
-            vflip=opts.get("vflip", _on_off, False),
+            hflip=opts.get("hflip", parse_bool, False),
+            vflip=opts.get("vflip", parse_bool, False),
         )
     except ConfigError as exc:
         raise SourceError(f"source {opts.uri!r}: {exc}") from None
-
-
-def _on_off(text: str) -> bool:
-    table = {"on": True, "1": True, "true": True, "off": False, "0": False, "false": False}
-    if text.lower() not in table:
-        raise ConfigError(f"expected on or off, got {text!r}")
-    return table[text.lower()]
 
 
 class EmuSource(CameraSource):

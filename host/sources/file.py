@@ -23,8 +23,8 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from rollcam.common.errors import ConfigError, SourceError
 from rollcam.sim.compose import METHODS, ComposedFrame, compose_stream
-from rollcam.sim.errors import ConfigError, SourceError
 from rollcam.sim.footage import Footage, as_fps
 from rollcam.sim.frame import Frame
 from rollcam.sim.hwconfig import load_sensor

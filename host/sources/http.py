@@ -39,7 +39,7 @@ from urllib.request import Request, urlopen
 
 import cv2
 import numpy as np
-from rollcam.sim.errors import ProtocolError, SourceError
+from rollcam.common.errors import ProtocolError, SourceError
 from rollcam.sim.frame import Frame
 from rollcam.sim.timing import NS_PER_S, LineTiming, Readout, line_sample_times_ns
 

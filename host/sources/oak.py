@@ -22,7 +22,7 @@ import sys
 from typing import Any
 
 import numpy as np
-from rollcam.sim.errors import SourceError
+from rollcam.common.errors import SourceError
 from rollcam.sim.frame import Frame
 
 from .base import CameraSource, SourceURI, finite_float, positive_float, positive_int

@@ -19,7 +19,7 @@ from typing import Any
 
 import cv2
 import numpy as np
-from rollcam.sim.errors import SourceError
+from rollcam.common.errors import SourceError
 from rollcam.sim.frame import Frame
 
 from .base import CameraSource, SourceURI, finite_float, positive_int

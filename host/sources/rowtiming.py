@@ -13,7 +13,7 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-from rollcam.sim.errors import ConfigError, SourceError
+from rollcam.common.errors import ConfigError, SourceError
 from rollcam.sim.frame import Frame
 from rollcam.sim.hwconfig import load_sensor
 from rollcam.sim.synthetic import resolve_settings

@@ -23,6 +23,7 @@ from collections import deque
 from typing import Any
 
 import numpy as np
+from rollcam.common.errors import ConfigError, DeviceError, ProtocolError, SourceError
 from rollcam.emu.usbip import ImportedDevice, UrbError
 from rollcam.emu.uvc import DeviceIdentity, SyntheticProducer, UVCFunction
 from rollcam.emu.uvc import constants as C
@@ -30,7 +31,6 @@ from rollcam.emu.uvc.convert import WIRE_FORMATS, decode, wire_layout
 from rollcam.emu.uvc.descriptors import parse_streaming
 from rollcam.emu.uvc.payload import PayloadParser
 from rollcam.emu.uvc.probe import Probe
-from rollcam.sim.errors import ConfigError, DeviceError, ProtocolError, SourceError
 from rollcam.sim.frame import Frame
 from rollcam.sim.hwconfig import SensorConfig, load_sensor
 from rollcam.sim.scenegen import make_scene

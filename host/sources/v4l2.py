@@ -10,7 +10,7 @@ import os
 import sys
 
 import cv2
-from rollcam.sim.errors import SourceError
+from rollcam.common.errors import SourceError
 
 from .base import SourceURI
 from .opencv import OpenCVSource

@@ -11,7 +11,7 @@ from collections.abc import Callable
 from typing import Any
 from urllib.parse import parse_qsl
 
-from rollcam.sim.errors import ConfigError, RollcamError
+from .errors import ConfigError, RollcamError
 
 
 def parse_query(query: str, owner: str, error: type[RollcamError]) -> dict[str, str]:
@@ -83,3 +83,17 @@ def non_negative_int(text: str) -> int:
     if value < 0:
         raise ValueError("must be an integer >= 0")
     return value
+
+
+TRUE_WORDS = ("1", "on", "true", "yes")
+FALSE_WORDS = ("0", "off", "false", "no")
+
+
+def parse_bool(text: str) -> bool:
+    """Option parser: the one boolean vocabulary (1/on/true/yes, 0/off/false/no; any case)."""
+    word = str(text).strip().lower()
+    if word in TRUE_WORDS:
+        return True
+    if word in FALSE_WORDS:
+        return False
+    raise ValueError(f"expected one of {'/'.join(TRUE_WORDS)} or {'/'.join(FALSE_WORDS)}, got {text!r}")
