@@ -10,6 +10,7 @@ requests get an HTTP error; the server keeps serving the others.
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import sys
 import threading
@@ -170,7 +171,7 @@ class MjpegServer:
         with self._lock:
             clients = {str(k): {"sent": b.sent, "dropped": b.dropped} for k, b in self.clients.items()}
         return {**self.stats, "clients": clients, "pump": dict(self.pump.stats),
-                "camera": {k: int(v) for k, v in self.camera.stats.items()}}
+                "camera": dataclasses.asdict(self.camera.stats)}
 
     def _join(self) -> tuple[int, Mailbox[Part]] | None:
         with self._lock:

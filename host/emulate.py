@@ -225,5 +225,5 @@ def cmd_emulate(args: argparse.Namespace) -> int:
             r.server.close()
         camera.stream_off()
         signal.signal(signal.SIGTERM, previous)
-    print(f"stopped; {camera.stats['frames']} frames made, {camera.stats['skipped']} skipped", file=sys.stderr)
+    print(f"stopped; {camera.stats.frames} frames made, {camera.stats.skipped} skipped", file=sys.stderr)
     return 0

@@ -110,4 +110,4 @@ def test_late_frames_are_skipped_in_closed_form():
     ten_days = 10 * 86_400 * 10**9
     plan = cam.plan_next(now_ns=ten_days)
     assert sched.frame_due_ns(plan.seq) >= ten_days > sched.frame_due_ns(plan.seq - 1)
-    assert cam.stats["skipped"] == plan.seq
+    assert cam.stats.skipped == plan.seq
