@@ -5,7 +5,8 @@
     port = serial.serial_for_url("rollcam://imx219?scene=flat", timeout=1)
     port.write(b"*IDN?\\n"); port.readline()   # b'rollcam,IMX219-EMU,0001,1.0.0\\r\\n'
 
-``rollcam://SENSOR?scene=..&seed=..`` makes a new FirmwareCamera; ``rollcam://NAME`` where NAME was given to
+``rollcam://SENSOR?scene=..&seed=..`` makes a new FirmwareCamera from the emulated camera's option table (the
+``emu:`` URI's options; a repeated or unknown option is refused); ``rollcam://NAME`` where NAME was given to
 ``register_camera`` talks to that camera (so one test can drive a V4L2 device and its serial port).
 """
 
@@ -23,8 +24,10 @@ except ImportError as exc:  # pyserial is an optional extra
 
     raise RollcamError("the rollcam:// serial URL handler needs pyserial: pip install 'rollcam[serial]'") from exc
 
-from rollcam.common.errors import RollcamError
+from rollcam.common.errors import ConfigError, RollcamError
+from rollcam.common.values import parse_query
 from rollcam.firmware.camera import FirmwareCamera
+from rollcam.firmware.spec import CameraSpec
 from rollcam.firmware.protocol import ProtocolSession
 
 CAMERAS: dict[str, FirmwareCamera] = {}
@@ -61,13 +64,16 @@ class Serial(SerialBase):
         parts = urllib.parse.urlsplit(url)
         if parts.scheme != "rollcam" or not parts.netloc:
             raise SerialException(f"expected rollcam://SENSOR[?scene=..&seed=..] or rollcam://NAME, got {url!r}")
-        if parts.netloc in CAMERAS:
-            return CAMERAS[parts.netloc]
-        scene = dict(urllib.parse.parse_qsl(parts.query))
         try:
-            return FirmwareCamera(parts.netloc, scene=scene or None)
+            options = parse_query(parts.query, f"URL {url!r}", ConfigError)
+            if parts.netloc in CAMERAS:
+                if options:
+                    raise ConfigError(f"URL {url!r}: rollcam://{parts.netloc} names a registered camera; it takes "
+                                      "no options")
+                return CAMERAS[parts.netloc]
+            return FirmwareCamera(CameraSpec.from_options(parts.netloc, options, f"URL {url!r}"))
         except RollcamError as exc:
-            raise SerialException(f"{url!r}: {exc}") from None
+            raise SerialException(str(exc)) from None
 
     def close(self) -> None:
         """Close the port (the camera keeps running). Idempotent."""

@@ -139,12 +139,7 @@ def parse_options(options: Mapping[str, Any], owner: str, error: type[RollcamErr
     another scene kind raise ``error`` naming ``owner`` and the option. Values that are not text are first
     written as text, so every door goes through the same parser."""
     reject_unknown(dict(options), set(OPTIONS) if allowed is None else allowed, owner, error)
-    out: dict[str, Any] = {}
-    for name, raw in options.items():
-        try:
-            out[name] = OPTIONS[name].parse(raw if isinstance(raw, str) else as_text(raw))
-        except (TypeError, ValueError, ConfigError) as exc:
-            raise error(f"{owner}: option {name}={raw!r} is invalid ({exc})") from None
+    out = {name: _parse(name, raw, owner, error) for name, raw in options.items()}
     kind = out.get("scene", OPTIONS["scene"].default)
     misplaced = sorted(n for n in out if OPTIONS[n].scenes is not None and kind not in OPTIONS[n].scenes)
     if misplaced:
@@ -152,6 +147,13 @@ def parse_options(options: Mapping[str, Any], owner: str, error: type[RollcamErr
         raise error(f"{owner}: {what} not apply to scene={kind!r} (its options: "
                     f"{sorted(n for n, o in SCENE_OPTIONS.items() if kind in o.scenes)})")
     return out
+
+
+def _parse(name: str, raw: Any, owner: str, error: type[RollcamError]) -> Any:
+    try:
+        return OPTIONS[name].parse(raw if isinstance(raw, str) else as_text(raw))
+    except (TypeError, ValueError, ConfigError) as exc:
+        raise error(f"{owner}: option {name}={raw!r} is invalid ({exc})") from None
 
 
 def as_text(value: Any) -> str:

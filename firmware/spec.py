@@ -30,9 +30,8 @@ from rollcam.sim.scene import Scene
 from rollcam.sim.scenegen import ego_preset, make_scene
 from rollcam.sim.sensor import flipped_cfa
 from rollcam.sim.synthetic import StreamSettings, resolve_settings
-from rollcam.sim.timing import Readout
 
-from .options import OPTIONS, SHUTTERS, parse_options
+from .options import OPTIONS, parse_options
 from .pixfmt import FORMATS
 from .traits import traits_for
 
@@ -187,8 +186,8 @@ class CameraSpec:
         scene.update(scene=self.scene, seed=self.seed, camera=self.camera, **dict(self.scene_options))
         return {**scene, "size": self.size, "fps": s.timing.fps, "shutter": s.shutter, "readout": s.readout.value,
                 "exposure_us": s.exposure_ns / 1000, "gain": self.gain, "format": self.output_format,
-                "physics": self.uses_physics, "blur_px": self.blur_px,
-                "noise": (parse_stages(None) if self.noise is None else self.noise) - {"quantization"}, "serial": self.serial,
+                "physics": self.uses_physics, "blur_px": self.blur_px, "serial": self.serial,
+                "noise": (parse_stages(None) if self.noise is None else self.noise) - {"quantization"},
                 "noise_seed": self.noise_seed, "hflip": self.hflip, "vflip": self.vflip,
                 "test_pattern": self.test_pattern}
 
@@ -206,7 +205,8 @@ class CameraSpec:
             f = sf.pixel_format(sf.bayer_fourcc(cfa, f.bits, f.packing == "csi2"))
         if f.cfa != cfa:
             need = "a mono format (GREY, Y10 , ...)" if cfa == "mono" else f"one of Bayer order {cfa!r}"
-            raise ConfigError(f"format {fourcc!r} samples CFA {f.cfa!r}; sensor {self.sensor.name!r} delivers {need}")
+            raise ConfigError(f"format {fourcc!r} samples CFA {f.cfa!r}; sensor {self.sensor.name!r} delivers "
+                              f"{need}")
         if f.bits > self.sensor.bit_depth:
             raise ConfigError(f"format {fourcc!r} holds {f.bits} bits, more than sensor {self.sensor.name!r}'s "
                               f"{self.sensor.bit_depth}-bit ADC")
@@ -256,4 +256,3 @@ def _build_scene(kind: str, seed: int, options: tuple[tuple[str, Any], ...], wid
     return make_scene(kind, seed, **kwargs)
 
 
-__all__ = ["CameraSpec", "SHUTTERS", "Readout", "scene_of"]
