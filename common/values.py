@@ -85,6 +85,17 @@ def non_negative_int(text: str) -> int:
     return value
 
 
+def parse_size(text: str) -> tuple[int, int]:
+    """Option parser: ``'1920x1080'`` -> (1920, 1080), both positive."""
+    try:
+        w, h = (int(v) for v in str(text).lower().split("x"))
+    except ValueError:
+        raise ConfigError(f"size {text!r} is not WIDTHxHEIGHT (e.g. 1920x1080)") from None
+    if w <= 0 or h <= 0:
+        raise ConfigError(f"size {text!r} must be positive")
+    return w, h
+
+
 TRUE_WORDS = ("1", "on", "true", "yes")
 FALSE_WORDS = ("0", "off", "false", "no")
 

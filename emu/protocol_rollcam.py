@@ -27,8 +27,8 @@ except ImportError as exc:  # pyserial is an optional extra
 from rollcam.common.errors import ConfigError, RollcamError
 from rollcam.common.values import parse_query
 from rollcam.firmware.camera import FirmwareCamera
-from rollcam.firmware.spec import CameraSpec
 from rollcam.firmware.protocol import ProtocolSession
+from rollcam.firmware.spec import CameraSpec
 
 CAMERAS: dict[str, FirmwareCamera] = {}
 """Cameras reachable as ``rollcam://NAME`` (see ``register_camera``)."""

@@ -19,6 +19,7 @@ from rollcam.common.values import (
     non_negative_float,
     non_negative_int,
     parse_bool,
+    parse_size,
     positive_float,
     reject_unknown,
 )
@@ -37,17 +38,6 @@ def _choice(*allowed: str) -> Callable[[str], str]:
             raise ValueError(f"expected one of {'/'.join(allowed)}")
         return word
     return parse
-
-
-def parse_size(text: str) -> tuple[int, int]:
-    """``'1920x1080'`` -> (1920, 1080)."""
-    try:
-        w, h = (int(v) for v in str(text).lower().split("x"))
-    except ValueError:
-        raise ConfigError(f"size {text!r} is not WIDTHxHEIGHT (e.g. 1920x1080)") from None
-    if w <= 0 or h <= 0:
-        raise ConfigError(f"size {text!r} must be positive")
-    return w, h
 
 
 def _speed(text: str) -> str:
