@@ -52,9 +52,9 @@ class Imager:
     def camera(self, spec: CameraSpec) -> SyntheticCamera:
         """The SyntheticCamera for ``spec``."""
         cached = self._cached
-        if cached is not None and (cached[0] is spec or _same_pixels(cached[0], spec)):
+        if cached is not None and cached[0] is spec:
             return cached[1]
-        cam = synthetic_camera(spec)
+        cam = cached[1] if cached is not None and _same_pixels(cached[0], spec) else synthetic_camera(spec)
         self._cached = (spec, cam)
         return cam
 
