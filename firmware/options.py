@@ -25,10 +25,10 @@ from rollcam.common.values import (
 )
 from rollcam.sim.noise import parse_stages
 from rollcam.sim.scenegen import SPEED_PRESETS, ego_preset, parse_speed
+from rollcam.sim.synthetic import SHUTTERS
 from rollcam.sim.timing import Readout
 
 SCENE_KINDS = ("street", "chart", "flat")
-SHUTTERS = ("rolling", "global")
 
 
 def _choice(*allowed: str) -> Callable[[str], str]:
