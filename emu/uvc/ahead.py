@@ -9,6 +9,7 @@ replaced by it, and a renderer that falls behind skips to the newest frame due; 
 
 from __future__ import annotations
 
+import contextlib
 import threading
 import time
 from collections.abc import Callable
@@ -35,7 +36,8 @@ class RenderAhead:
         self._slot: tuple[int, Frame, np.ndarray] | None = None
         self._next_due = producer.frame_due_ns(0)
         self._stopped = False
-        self._worker = Worker(self._run, name="uvc-render-ahead", wrap=DeviceError).start()
+        self._worker = Worker(self._run, name="uvc-render-ahead", wrap=DeviceError)
+        self._worker.start()
 
     def take(self) -> tuple[int, Frame, np.ndarray] | int:
         """The newest completed frame (index, frame, encoded bytes), or the ns to wait before asking again."""
@@ -52,10 +54,8 @@ class RenderAhead:
         with self._cond:
             self._stopped = True
             self._cond.notify_all()
-        try:
+        with contextlib.suppress(DeviceError):  # take() reports it to a host still reading; this one stopped
             self._worker.close()
-        except DeviceError:
-            pass  # reported by take() to a host still reading; a host that stopped no longer asks
 
     def _wait_until(self, t_ns: int) -> bool:
         while not self._stopped:
