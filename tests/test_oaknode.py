@@ -73,6 +73,6 @@ def test_a_failing_node_raises_its_error_from_get():
         cam.uri = "emu:nope"  # fails in the node's thread, after build() accepted the URI
         queue = cam.out.createOutputQueue()
         pipeline.start()
-        with pytest.raises(SourceError, match="EmulatedCamera.*nope"):
+        with pytest.raises(SourceError, match=r"EmulatedCamera.*nope"):
             while pipeline.isRunning():
                 queue.get()

@@ -55,6 +55,13 @@ class _Export:
     owner: object | None = None
 
 
+def usbip_commands(host: str, port: int, busid: str) -> tuple[str, str]:
+    """The Linux ``usbip`` command lines that list a server's devices and attach ``busid`` (``--tcp-port`` is
+    an option of ``usbip`` itself, so it goes before the subcommand; attaching needs root and vhci-hcd)."""
+    return (f"usbip --tcp-port {port} list -r {host}",
+            f"sudo usbip --tcp-port {port} attach -r {host} -b {busid}")
+
+
 def describe(function: UVCFunction, busnum: int, devnum: int) -> P.ExportedDevice:
     """The device record a USB/IP device list shows for ``function``."""
     dev = struct.unpack("<BBHBBBBHHHBBBB", function.descriptors.device)
