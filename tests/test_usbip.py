@@ -104,9 +104,9 @@ def test_one_importer_at_a_time_and_release_on_disconnect(server):
     _commit(dev)
     dev.control(0x01, C.REQ_SET_INTERFACE, 1, 1, b"")
     dev.iso_read(0x81, 2, 512)  # part of a frame, then the client vanishes
-    with pytest.raises(Exception, match="refused.*device busy"):
+    with pytest.raises(Exception, match=r"refused.*device busy"):
         ImportedDevice(*server.address, "1-1")
-    with pytest.raises(Exception, match="refused.*device not found"):
+    with pytest.raises(Exception, match=r"refused.*device not found"):
         ImportedDevice(*server.address, "9-9")
     dev.close()
     _wait_for(lambda: server.exports["1-1"].owner is None)
