@@ -21,7 +21,7 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 
 from rollcam.common.errors import DeviceError, ProtocolError
-from rollcam.common.lifecycle import Closeable, Stats
+from rollcam.common.lifecycle import Closeable, Stats, Worker
 from rollcam.emu.uvc import constants as C
 from rollcam.emu.uvc.descriptors import split_descriptors
 from rollcam.emu.uvc.device import Setup, UVCFunction
@@ -101,7 +101,7 @@ class USBIPServer(Closeable):
         self._threads: list[threading.Thread] = []
         self._sock = socket.create_server((host, port), reuse_port=False)
         self.address: tuple[str, int] = self._sock.getsockname()[:2]
-        self._accept = threading.Thread(target=self._accept_loop, name="usbip-accept", daemon=True)
+        self._accept = Worker(self._accept_loop, name="usbip-accept", wrap=DeviceError, join_timeout_s=2)
         self._accept.start()
 
     def __repr__(self) -> str:
@@ -117,9 +117,9 @@ class USBIPServer(Closeable):
         for c in conns:
             with contextlib.suppress(OSError):
                 c.shutdown(socket.SHUT_RDWR)
-        self._accept.join(timeout=2)
         for t in list(self._threads):
             t.join(timeout=2)
+        self._accept.close()  # re-raises what stopped accepting early, if anything did
 
     def _accept_loop(self) -> None:
         while not self.closed:
