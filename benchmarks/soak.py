@@ -76,8 +76,8 @@ def run_soak(minutes: float = 10.0, *, sensor: str = "imx219", size: tuple[int, 
                 next_say += 10
         if reader_rt and reader_rt.startswith("SCHED_FIFO"):
             os.sched_setscheduler(0, os.SCHED_OTHER, os.sched_param(0))
-        pump_stats = dict(d.pump.stats) if d.pump else {}
-        driver_stats = dict(d.stats)
+        pump_stats = d.pump.stats.to_json() if d.pump else {}
+        driver_stats = d.stats.to_json()
         camera_stats = dict(cam.stats)
         exposure_ns = int(timing.line_offset_ns(cam.state.exposure_lines))
         readout_ns = int(timing.line_offset_ns(size[1]))

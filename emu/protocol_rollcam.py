@@ -12,7 +12,6 @@
 from __future__ import annotations
 
 import threading
-import time
 import urllib.parse
 from typing import Any
 
@@ -24,6 +23,7 @@ except ImportError as exc:  # pyserial is an optional extra
     raise RollcamError("the rollcam:// serial URL handler needs pyserial: pip install 'rollcam[serial]'") from exc
 
 from rollcam.common.errors import RollcamError
+from rollcam.common.lifecycle import Deadline
 from rollcam.firmware.camera import FirmwareCamera
 from rollcam.firmware.protocol import ProtocolSession
 
@@ -104,13 +104,10 @@ class Serial(SerialBase):
         """Up to ``size`` reply bytes, waiting at most ``timeout`` seconds (forever when None)."""
         if not self.is_open:
             raise PortNotOpenError()
-        deadline = None if self._timeout is None else time.monotonic() + self._timeout
+        deadline = Deadline(self._timeout)
         with self._cond:
-            while len(self._rx) < size and self.is_open:
-                left = None if deadline is None else deadline - time.monotonic()
-                if left is not None and left <= 0:
-                    break
-                self._cond.wait(left)
+            while len(self._rx) < size and self.is_open and not deadline.expired:
+                self._cond.wait(deadline.remaining())
             out = bytes(self._rx[:size])
             del self._rx[:size]
             return out

@@ -15,10 +15,11 @@ import os
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, TextIO
+from typing import TextIO
 
 import numpy as np
 from rollcam.common.errors import ConfigError, RollcamError
+from rollcam.common.lifecycle import Stats
 from rollcam.sim.frame import Frame
 from rollcam.sim.hwconfig import load_sensor
 
@@ -41,6 +42,14 @@ BAND_BGR = (30, 30, 30)
 MIN_BOX_HEIGHT_PX = 6  # boxes of walkers far down the street would only clutter the picture
 
 
+@dataclass(frozen=True)
+class DemoStats(Stats):
+    """The demo's extra figures: the largest RS-GS box-centre shift, and the frame size streamed."""
+
+    max_shift_px: float = 0.0
+    size: tuple[int, int] = (0, 0)
+
+
 @dataclass
 class DemoResult:
     """Where the demo wrote its files and what it saw."""
@@ -53,7 +62,7 @@ class DemoResult:
     line_time_ns: int
     pedestrians: int
     mean_shift_px: float
-    stats: dict[str, Any] = field(default_factory=dict)
+    stats: DemoStats = field(default_factory=DemoStats)
 
     def summary(self) -> str:
         """The one-line summary the CLI prints."""
@@ -222,4 +231,4 @@ def run_demo(
     write_atomic(sheet, png.tobytes())
     return DemoResult(video, sheet, uri, n, fps, int(info["line_time_ns"]), len(seen),
                       float(np.mean(shifts)) if shifts else 0.0,
-                      {"max_shift_px": float(np.max(shifts)) if shifts else 0.0, "size": list(size)})
+                      DemoStats(float(np.max(shifts)) if shifts else 0.0, (int(size[0]), int(size[1]))))

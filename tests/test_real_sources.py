@@ -247,7 +247,7 @@ def test_source_uri_unchanged_for_http():
 def test_http_latest_mode_skips_to_the_newest_frame(emu_frames, rollcam_mjpeg_server):
     server = rollcam_mjpeg_server(emu_frames)
     with open_camera(server.url + "#latest=1") as src:
-        src._latest._thread.join(timeout=30)  # the whole (finite) stream has arrived
+        src._latest._worker.join(30)  # the whole (finite) stream has arrived
         newest = src.read()
         assert src.read() is None
     assert newest.sequence == emu_frames[-1].sequence and newest.meta["dropped"] == len(emu_frames) - 1

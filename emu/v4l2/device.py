@@ -18,6 +18,7 @@ from typing import Any
 import cv2
 import numpy as np
 from rollcam.common.errors import ConfigError
+from rollcam.common.lifecycle import Closeable
 from rollcam.firmware.camera import Clock, FirmwareCamera
 from rollcam.firmware.pixfmt import COMPRESSED, is_raw
 from rollcam.sim import formats as sf
@@ -100,13 +101,12 @@ class ControlHandle:
         return f"<control {i.name!r} = {self.value} [{i.minimum}..{i.maximum}]>"
 
 
-class Device:
+class Device(Closeable):
     """An open emulated /dev/videoN: format, controls, buffers and streaming; a context manager."""
 
     def __init__(self, driver: EmuDriver) -> None:
         self.driver = driver
         self.controls = {name: ControlHandle(self, int(cid)) for cid, name in CID_TO_CONTROL.items()}
-        self.closed = False
 
     @classmethod
     def open(cls, sensor: str, *, scene: dict[str, Any] | None = None, realtime: bool = True, bands: int = 8,
@@ -117,22 +117,14 @@ class Device:
         camera = FirmwareCamera(sensor, scene=scene, clock=clock, **camera_options)
         return cls(EmuDriver(camera, realtime=realtime, bands=bands, faults=faults, rt_priority=rt_priority))
 
-    def __enter__(self) -> Device:
-        return self
-
-    def __exit__(self, *exc: object) -> None:
-        self.close()
-
     def __repr__(self) -> str:
         f = self.driver.fmt
         return (f"<emulated V4L2 device {self.driver.camera.sensor.name} {f.width}x{f.height} {f.pixelformat}"
                 f"{' streaming' if self.driver.queue.streaming else ''}{' closed' if self.closed else ''}>")
 
-    def close(self) -> None:
-        """Stop streaming and free the buffers. Idempotent."""
-        if not self.closed:
-            self.closed = True
-            self.driver.close()
+    def _close(self) -> None:
+        """Stop streaming and free the buffers."""
+        self.driver.close()
 
     @property
     def info(self) -> raw.Capability:

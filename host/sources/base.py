@@ -8,6 +8,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from rollcam.common.errors import ConfigError, SourceError
+from rollcam.common.lifecycle import Closeable
 from rollcam.common.values import (  # noqa: F401  (the value parsers are re-exported for the source modules)
     convert_option,
     finite_float,
@@ -64,19 +65,19 @@ def parse_host_port(text: str, default_host: str = "127.0.0.1") -> tuple[str, in
     return host or default_host, number
 
 
-class CameraSource(ABC):
-    """A stream of Frames. Iterate it, or call ``read()``; ``close()`` is idempotent; use ``with``."""
+class CameraSource(Closeable, ABC):
+    """A stream of Frames. Iterate it, or call ``read()``; ``close()`` is idempotent; use ``with``.
+
+    Sources release their device in ``_close()`` (run once, by the first ``close()``); ``read()`` on a
+    closed source raises SourceError (``_check_open()``).
+    """
 
     uri: str = ""
-    closed: bool = False
+    closed_error = SourceError
 
     @abstractmethod
     def read(self) -> Frame | None:
         """The next frame, or None at the end of a finite source."""
-
-    def close(self) -> None:
-        """Release the device; safe to call twice."""
-        self.closed = True
 
     def info(self) -> dict[str, Any]:
         """What the source is (sensor, size, timing) as plain data."""
@@ -105,12 +106,5 @@ class CameraSource(ABC):
                 return
             yield frame
 
-    def __enter__(self) -> CameraSource:
-        return self
-
-    def __exit__(self, *exc: object) -> None:
-        self.close()
-
-    def _check_open(self) -> None:
-        if self.closed:
-            raise SourceError(f"source {self.uri!r} is closed")
+    def _describe(self) -> str:
+        return f"source {self.uri!r}"

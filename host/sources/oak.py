@@ -98,7 +98,6 @@ class OakSource(CameraSource):
         if exposure_us is not None or gain is not None:
             self._check_manual(exposure_us or DEFAULT_EXPOSURE_US, gain or 1.0)
         self.index = 0
-        self.closed = True  # until the pipeline runs
         self.device = self._open_device(uri)
         try:
             self.pipeline = dai.Pipeline(self.device)
@@ -110,7 +109,6 @@ class OakSource(CameraSource):
         except Exception as exc:  # depthai raises RuntimeError subclasses for device-side failures
             self.device.close()
             raise SourceError(f"source {uri.uri!r}: the OAK pipeline failed to start ({exc})") from None
-        self.closed = False
         if exposure_us is not None or gain is not None:
             self.set_exposure(exposure_us or DEFAULT_EXPOSURE_US, gain or 1.0)
 
@@ -182,14 +180,12 @@ class OakSource(CameraSource):
         self.index += 1
         return frame
 
-    def close(self) -> None:
-        """Stop the pipeline and release the device; safe to call twice."""
-        if not self.closed:
-            self.closed = True
-            try:
-                self.pipeline.stop()
-            finally:
-                self.device.close()
+    def _close(self) -> None:
+        """Stop the pipeline and release the device."""
+        try:
+            self.pipeline.stop()
+        finally:
+            self.device.close()
 
     def info(self) -> dict[str, Any]:
         """Device id, size, fps and row timing."""

@@ -71,7 +71,6 @@ class OpenCVSource(CameraSource):
             self.cap.release()
             raise SourceError(f"source {uri.uri!r}: OpenCV cannot open {target!r}{hint}")
         self.index = 0
-        self.closed = False
         try:
             self._apply_options(uri)
         except SourceError:
@@ -129,11 +128,9 @@ class OpenCVSource(CameraSource):
         self.index += 1
         return frame
 
-    def close(self) -> None:
-        """Release the capture; safe to call twice."""
-        if not self.closed:
-            self.closed = True
-            self.cap.release()
+    def _close(self) -> None:
+        """Release the capture."""
+        self.cap.release()
 
     def info(self) -> dict[str, Any]:
         """Target, backend, size, fps and row timing."""

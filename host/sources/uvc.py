@@ -24,6 +24,7 @@ from typing import Any
 
 import numpy as np
 from rollcam.common.errors import ConfigError, DeviceError, ProtocolError, SourceError
+from rollcam.common.lifecycle import Deadline
 from rollcam.emu.usbip import ImportedDevice, UrbError
 from rollcam.emu.uvc import DeviceIdentity, SyntheticProducer, UVCFunction
 from rollcam.emu.uvc import constants as C
@@ -295,7 +296,7 @@ class UVCSource(CameraSource):
         self._check_open()
         if self.limit is not None and self.index >= self.limit:
             return None
-        deadline = time.monotonic() + self.timeout_ms / 1000
+        deadline = Deadline(self.timeout_ms / 1000)  # restarted whenever data comes
         while True:
             while self._pending:
                 parsed = self._pending.popleft()
@@ -310,8 +311,8 @@ class UVCSource(CameraSource):
             parsed, got = self.link.read_into(self.parser, self.stream.endpoint, self.read_size, self.stream.transfer)
             self._pending.extend(parsed)
             if got:
-                deadline = time.monotonic() + self.timeout_ms / 1000
-            elif time.monotonic() > deadline:
+                deadline.restart()
+            elif deadline.expired:
                 raise SourceError(f"source {self.uri!r}: no data from the camera for {self.timeout_ms} ms")
 
     def _frame(self, parsed: Any) -> Frame | None:
@@ -348,13 +349,14 @@ class UVCSource(CameraSource):
                 "exposure_ns": self.exposure_ns, "frames_parsed": st.frames, "frames_damaged": st.frames - st.complete,
                 "bad_headers": st.bad_headers}
 
-    def close(self) -> None:
-        """Release the device; safe to call twice."""
-        if not self.closed and getattr(self, "link", None) is not None:
-            self.link.close()
-            if self.function is not None:
-                self.function.close()  # the emulated camera belongs to this source
-        self.closed = True
+    def _close(self) -> None:
+        """Release the device."""
+        if getattr(self, "link", None) is not None:
+            try:
+                self.link.close()
+            finally:
+                if self.function is not None:
+                    self.function.close()  # the emulated camera belongs to this source
 
 
 def open_source(uri: SourceURI) -> UVCSource:
