@@ -19,7 +19,7 @@ from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
 from typing import Any, Generic, TypeVar
 
 from rollcam.firmware.camera import FirmwareCamera, FramePlan
-from rollcam.firmware.pixfmt import encode_jpeg, to_bgr
+from rollcam.sim.codecs import JPEG_QUALITY, Levels, transcode
 from rollcam.sim.frame import Frame
 
 from .pump import FramePump
@@ -79,7 +79,7 @@ class MjpegServer:
     """An HTTP server streaming one camera as MJPEG to any number of clients; a context manager."""
 
     def __init__(self, camera: FirmwareCamera, host: str = "127.0.0.1", port: int = 0, *,
-                 pump: FramePump | None = None, quality: int = 85, max_clients: int = 32) -> None:
+                 pump: FramePump | None = None, quality: int = JPEG_QUALITY, max_clients: int = 32) -> None:
         self.camera = camera
         self.quality = quality
         self.max_clients = max_clients
@@ -155,7 +155,8 @@ class MjpegServer:
             f = self._latest.get(0.2)
             if f is None:
                 continue
-            part = Part(f.sequence, encode_jpeg(to_bgr(f, self.camera.sensor), self.quality), (
+            jpeg = transcode(f, "MJPG", Levels.of_sensor(self.camera.sensor), self.quality).tobytes()
+            part = Part(f.sequence, jpeg, (
                 ("X-Sequence", str(f.sequence)), ("X-Timestamp-Ns", str(f.timestamp_ns)),
                 ("X-Line-Time-Ns", str(f.line_time_ns)), ("X-Exposure-Ns", str(f.exposure_ns)),
                 ("X-Readout", f.readout.value), ("X-Shutter", f.shutter)))
