@@ -19,7 +19,7 @@ from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
 from typing import Any, Generic, TypeVar
 
 from rollcam.firmware.camera import FirmwareCamera, FramePlan
-from rollcam.sim.codecs import JPEG_QUALITY, Levels, transcode
+from rollcam.sim.codecs import JPEG_QUALITY, Levels, jpeg_quality, transcode
 from rollcam.sim.frame import Frame
 
 from .pump import FramePump
@@ -81,7 +81,7 @@ class MjpegServer:
     def __init__(self, camera: FirmwareCamera, host: str = "127.0.0.1", port: int = 0, *,
                  pump: FramePump | None = None, quality: int = JPEG_QUALITY, max_clients: int = 32) -> None:
         self.camera = camera
-        self.quality = quality
+        self.quality = jpeg_quality(quality)  # refused here, not in the encoder thread
         self.max_clients = max_clients
         self._own_pump = pump is None
         self.pump = pump or FramePump(camera, bands=1, name="rollcam-http-pump")

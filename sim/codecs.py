@@ -68,6 +68,13 @@ class Levels:
         return IspParams(black_level_dn=min(black, white - 1), white_level_dn=white)
 
 
+def jpeg_quality(quality: int) -> int:
+    """``quality`` checked to be a JPEG quality, 1..100 (ConfigError naming it otherwise)."""
+    if isinstance(quality, bool) or not isinstance(quality, (int, np.integer)) or not 1 <= quality <= 100:
+        raise ConfigError(f"JPEG quality {quality!r} is not an integer in 1..100")
+    return int(quality)
+
+
 def _cv2() -> Any:
     import cv2
 
@@ -209,10 +216,8 @@ class _Jpeg(Codec):
         a = np.asarray(image)
         if a.dtype != np.uint8 or not (a.ndim == 2 or (a.ndim == 3 and a.shape[2] == 3)):
             raise ConfigError(f"MJPG encodes an 8-bit BGR or grey image, got shape {a.shape} {a.dtype}")
-        if not 1 <= int(quality) <= 100:
-            raise ConfigError(f"JPEG quality {quality!r} is not in 1..100")
         cv2 = _cv2()
-        ok, buf = cv2.imencode(".jpg", a, [cv2.IMWRITE_JPEG_QUALITY, int(quality)])
+        ok, buf = cv2.imencode(".jpg", a, [cv2.IMWRITE_JPEG_QUALITY, jpeg_quality(quality)])
         if not ok:
             raise ConfigError(f"JPEG encoding failed for an image of shape {a.shape!r}")
         return buf.reshape(-1)

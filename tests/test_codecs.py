@@ -101,8 +101,9 @@ def test_mjpg_is_one_encoder_with_one_quality_default():
     assert np.array_equal(c.encode(BLOCKY), c.encode(BLOCKY, quality=JPEG_QUALITY))
     assert c.encode(BLOCKY, quality=20).size < c.encode(BLOCKY, quality=95).size
     assert c.decode(c.encode(BLOCKY[..., 1])).shape == (H, W, 3)  # a grey JPEG decodes to BGR too
-    with pytest.raises(ConfigError, match="quality 0"):
-        c.encode(BLOCKY, quality=0)
+    for bad in (0, 101, 8.5, True):
+        with pytest.raises(ConfigError, match=f"JPEG quality {bad!r} is not an integer in 1..100"):
+            c.encode(BLOCKY, quality=bad)
     for bad in (b"", b"not a jpeg"):
         with pytest.raises(ProtocolError, match="does not decode"):
             c.decode(bad)
