@@ -28,7 +28,8 @@ from typing import Any
 
 import numpy as np
 from rollcam.common.errors import ConfigError
-from rollcam.sim.formats import bayer_fourcc, decode_raw, pixel_format
+from rollcam.sim.codecs import codec
+from rollcam.sim.formats import bayer_fourcc, pixel_format
 from rollcam.sim.hwconfig import load_sensor
 from rollcam.sim.noise import REFERENCE_EXPOSURE_S
 
@@ -84,8 +85,8 @@ def _pair(uri: str, width: int) -> tuple[np.ndarray, np.ndarray, int, float]:
     with open_camera(uri) as cam:
         a, b = cam.read(), cam.read()
     assert a is not None and b is not None
-    fa = decode_raw(a.data, a.format, width).astype(np.float64)
-    fb = decode_raw(b.data, b.format, width).astype(np.float64)
+    fa = codec(a.format).decode(a.data, width, a.height).astype(np.float64)
+    fb = codec(b.format).decode(b.data, width, b.height).astype(np.float64)
     return fa, fb, int(a.exposure_ns), float(a.meta["analog_gain"] * a.meta["digital_gain"])
 
 

@@ -22,8 +22,8 @@ from collections.abc import Callable
 from typing import Any
 
 import numpy as np
+from rollcam.sim.codecs import codec
 from rollcam.sim.exposure import DEFAULT_BOUND_PX, dense_plan, integrate, plan_samples
-from rollcam.sim.formats import encode_raw
 from rollcam.sim.hwconfig import load_sensor
 from rollcam.sim.render import srgb_lut
 from rollcam.sim.scenegen import make_street_scene
@@ -65,7 +65,7 @@ def sensor_overhead(size: tuple[int, int] = (1920, 1080), frames: int = 5, seed:
         t1 = time.perf_counter()
         dn = pipe.samples(radiance, exp_ns, i)
         t2 = time.perf_counter()
-        encode_raw(dn, "pRAA", 10)
+        codec("pRAA").encode(dn, sample_bits=10)
         t3 = time.perf_counter()
         if i:
             for key, dt in (("render", t1 - t0), ("noise", t2 - t1), ("pack", t3 - t2)):

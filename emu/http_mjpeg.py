@@ -21,7 +21,7 @@ from typing import Any, Generic, TypeVar
 from rollcam.common.errors import DeviceError
 from rollcam.common.lifecycle import Closeable, Stats, Worker
 from rollcam.firmware.camera import FirmwareCamera, FramePlan
-from rollcam.firmware.pixfmt import encode_jpeg, to_bgr
+from rollcam.sim.codecs import JPEG_QUALITY, Levels, jpeg_quality, transcode
 from rollcam.sim.frame import Frame
 
 from .pump import FramePump
@@ -92,9 +92,9 @@ class MjpegServer(Closeable):
     starts it)."""
 
     def __init__(self, camera: FirmwareCamera, host: str = "127.0.0.1", port: int = 0, *,
-                 pump: FramePump | None = None, quality: int = 85, max_clients: int = 32) -> None:
+                 pump: FramePump | None = None, quality: int = JPEG_QUALITY, max_clients: int = 32) -> None:
         self.camera = camera
-        self.quality = quality
+        self.quality = jpeg_quality(quality)  # refused here, not in the encoder thread
         self.max_clients = max_clients
         self._own_pump = pump is None
         self.pump = pump or FramePump(camera, bands=1, name="rollcam-http-pump")
@@ -162,7 +162,8 @@ class MjpegServer(Closeable):
             f = self._latest.get(0.2)
             if f is None:
                 continue
-            part = Part(f.sequence, encode_jpeg(to_bgr(f, self.camera.sensor), self.quality), (
+            jpeg = transcode(f, "MJPG", Levels.of_sensor(self.camera.sensor), self.quality).tobytes()
+            part = Part(f.sequence, jpeg, (
                 ("X-Sequence", str(f.sequence)), ("X-Timestamp-Ns", str(f.timestamp_ns)),
                 ("X-Line-Time-Ns", str(f.line_time_ns)), ("X-Exposure-Ns", str(f.exposure_ns)),
                 ("X-Readout", f.readout.value), ("X-Shutter", f.shutter)))

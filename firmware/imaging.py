@@ -21,6 +21,7 @@ from typing import Any
 
 import numpy as np
 from rollcam.sim import formats as sf
+from rollcam.sim.codecs import codec
 from rollcam.sim.frame import Frame, ObjectTruth
 from rollcam.sim.hwconfig import SensorConfig
 from rollcam.sim.synthetic import SyntheticCamera
@@ -111,7 +112,8 @@ class Imager:
         bits = self.sensor.bit_depth
         cfa = sf.mosaic(render_pattern(pattern, frame.width, frame.height), bayer_order)
         dn = cfa.astype(np.uint16) << (bits - 8)  # hwconfig holds bit_depth to 8..16
-        return dataclasses.replace(frame, data=sf.encode_raw(dn, frame.format, bits), objects=(), meta=meta)
+        return dataclasses.replace(frame, data=codec(frame.format).encode(dn, sample_bits=bits), objects=(),
+                                   meta=meta)
 
 
 def _flip_boxes(objects: tuple[ObjectTruth, ...] | None, width: int | None, height: int | None

@@ -22,6 +22,7 @@ from typing import Any, TextIO
 
 import numpy as np
 from rollcam.common.errors import ConfigError, SourceError
+from rollcam.sim.codecs import codec
 from rollcam.sim.formats import FORMATS
 from rollcam.sim.frame import Frame
 
@@ -131,7 +132,7 @@ def image_array(frame: Frame, fmt: str) -> np.ndarray:
     data = frame.data
     if frame.format in _PICTURES or frame.format not in FORMATS:
         if data.ndim == 3 and data.shape[2] == 3:
-            img = data[..., ::-1] if frame.format == "RGB3" else data
+            img = codec("RGB3").decode(data, frame.width, frame.height) if frame.format == "RGB3" else data
         elif data.ndim == 2 or (data.ndim == 3 and data.shape[2] == 1):
             img = data
         else:

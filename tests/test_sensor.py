@@ -11,8 +11,8 @@ import pytest
 from rollcam.common.errors import ConfigError
 from rollcam.host import SourceError, open_camera
 from rollcam.host.capture import capture
+from rollcam.sim.codecs import codec
 from rollcam.sim.exposure import dense_plan, integrate, plan_samples
-from rollcam.sim.formats import decode_raw
 from rollcam.sim.hwconfig import load_sensor
 from rollcam.sim.noise import STAGES, SensorModel, parse_stages, split_gain
 from rollcam.sim.scenegen import make_chart_scene, make_flat_scene
@@ -219,7 +219,8 @@ def test_capture_writes_raw_frames_losslessly(tmp_path):
     png = cv2.imread(str(tmp_path / "png" / recs[0]["file"]), cv2.IMREAD_UNCHANGED)
     npy = np.load(tmp_path / "npy" / "000000_rs.npy")
     assert np.array_equal(png, first.data) and np.array_equal(npy, first.data)
-    assert np.array_equal(decode_raw(png, "pRAA", 64), decode_raw(first.data, "pRAA", 64))
+    raa = codec("pRAA")
+    assert np.array_equal(raa.decode(png, 64, png.shape[0]), raa.decode(first.data, 64, first.height))
     with open_camera(uri) as src, pytest.raises(ConfigError, match="jpg"):
         capture(src, tmp_path / "jpg", 1, fmt="jpg", progress=False)
 
@@ -243,7 +244,8 @@ def test_flips_mirror_the_image_the_truth_and_the_bayer_order():
         fa, fb = a.read(), b.read()
     assert fb.format == "pGAA"  # the flipped order's fourcc may be asked for directly
     # The fixed pattern belongs to the pixel: a vertical flip reads the same array bottom-up.
-    assert np.array_equal(decode_raw(fb.data, "pGAA", 64), decode_raw(fa.data, "pRAA", 64)[::-1])
+    flipped, plain = codec("pGAA").decode(fb.data, 64, fb.height), codec("pRAA").decode(fa.data, 64, fa.height)
+    assert np.array_equal(flipped, plain[::-1])
 
 
 def test_vflip_scans_the_scene_bottom_up():

@@ -1,4 +1,4 @@
-"""The ``cv2.VideoCapture`` drop-in, driven by an unmodified OpenCV-style loop, and the preview conversions."""
+"""The ``cv2.VideoCapture`` drop-in, driven by an unmodified OpenCV-style loop (previews: test_codecs.py)."""
 
 from __future__ import annotations
 
@@ -7,7 +7,6 @@ import numpy as np
 import pytest
 from rollcam.common.errors import SourceError
 from rollcam.host import VideoCapture
-from rollcam.host.preview import to_bgr
 
 
 def opencv_script(capture_class, source, size=None):
@@ -69,25 +68,6 @@ def test_unopenable_uri_reports_like_opencv():
     cap = VideoCapture("emu:no_such_sensor")
     assert not cap.isOpened() and isinstance(cap.error, SourceError)
     assert cap.read() == (False, None)
-
-
-def test_demosaic_table_matches_bayer_orders():
-    red = np.zeros((4, 4), np.uint8)
-    red[0::2, 0::2] = 200  # red sites of an RGGB mosaic
-    assert to_bgr(red, "RGGB")[1, 1].tolist() == [0, 0, 200]
-    assert to_bgr(red.astype(np.uint16) * 4, "RG10")[1, 1].tolist() == [0, 0, 200]
-    blue = np.zeros((4, 4), np.uint8)
-    blue[0::2, 0::2] = 200  # blue sites of a BGGR mosaic
-    assert to_bgr(blue, "BA81")[1, 1].tolist() == [200, 0, 0]
-    assert to_bgr(np.full((2, 2), 4095, np.uint16), "Y12 ").shape == (2, 2, 3)
-    from rollcam.sim.formats import pack_csi2
-
-    packed = pack_csi2(red.astype(np.uint16) * 4, 10)
-    assert to_bgr(packed, "pRAA", width=4)[1, 1].tolist() == [0, 0, 200]
-    with pytest.raises(SourceError, match="bit-packed"):
-        to_bgr(np.zeros(10, np.uint8), "pRAA")
-    with pytest.raises(SourceError, match="no BGR preview"):
-        to_bgr(np.zeros((2, 2), np.uint8), "ZZZZ")
 
 
 def test_http_mjpeg_through_the_drop_in(rollcam_camera, rollcam_mjpeg_server):

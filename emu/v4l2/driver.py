@@ -20,7 +20,8 @@ from rollcam.common.lifecycle import Stats
 from rollcam.emu.pump import FramePump
 from rollcam.firmware.camera import FirmwareCamera, FramePlan
 from rollcam.firmware.controls import CONTROLS
-from rollcam.firmware.pixfmt import convert, device_format
+from rollcam.firmware.pixfmt import device_format
+from rollcam.sim.codecs import transcode
 from rollcam.sim.frame import Frame
 
 from . import raw
@@ -152,8 +153,8 @@ class EmuDriver:
 
     def _payload(self, frame: Frame) -> np.ndarray:
         fourcc = self.fmt.pixelformat
-        # A raw frame is already in its fourcc's layout (the sensor's samples); renders go through the ISP.
-        data = frame.data if frame.format == fourcc else convert(frame.data, fourcc)
+        # A raw frame is already in its fourcc's layout (the sensor's samples); renders are encoded.
+        data = transcode(frame, fourcc)
         return np.ascontiguousarray(data).reshape(-1).view(np.uint8)
 
     def _deliver(self, slot: Slot, frame: Frame, size: int) -> None:

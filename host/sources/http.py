@@ -1,7 +1,7 @@
 """``http://HOST:PORT/PATH[#sensor=..&timeout=..&frames=..]`` -- an MJPEG stream (multipart/x-mixed-replace).
 
 The URL (query included) goes to the server untouched; rollcam's own options ride in the fragment, which
-HTTP clients never send. Each part's JPEG is decoded to BGR3 (or GREY for a grey JPEG). Part headers fill
+HTTP clients never send. Each part's JPEG is decoded to BGR3 (the codec table's MJPEG decoder). Part headers fill
 the Frame when the server sends them (the rollcam emulator does; mjpg-streamer sends ``X-Timestamp``):
 
 | Part header | Frame field | Form |
@@ -43,15 +43,16 @@ from urllib.error import URLError
 from urllib.parse import parse_qsl, urldefrag
 from urllib.request import Request, urlopen
 
-import cv2
-import numpy as np
 from rollcam.common.errors import ProtocolError, SourceError
 from rollcam.common.lifecycle import Closeable, Worker
+from rollcam.sim.codecs import codec
 from rollcam.sim.frame import Frame
 from rollcam.sim.timing import NS_PER_S, LineTiming, Readout, line_sample_times_ns
 
 from .base import CameraSource, SourceURI, finite_float, non_negative_int, positive_int
 from .rowtiming import FrameTimer
+
+_JPEG = codec("MJPG")
 
 OPTIONS = {"sensor", "timeout", "frames", "latest"}
 UNSTATED_FPS = 25.0  # what FFmpeg (so cv2.VideoCapture) reports for an MJPEG stream without a rate
@@ -287,11 +288,13 @@ class HttpMjpegSource(CameraSource):
         if part is None:
             return None
         headers, body = part
-        image = cv2.imdecode(np.frombuffer(body, np.uint8), cv2.IMREAD_UNCHANGED)
-        if image is None:
-            raise ProtocolError(f"source {self.uri!r}: part {self._parts} is not a decodable JPEG ({len(body)} bytes)")
+        try:
+            image = _JPEG.decode(body)
+        except ProtocolError:
+            raise ProtocolError(f"source {self.uri!r}: part {self._parts} is not a decodable JPEG ({len(body)} bytes)"
+                                ) from None
         fields = part_fields(headers, self.uri)
-        fmt = "GREY" if image.ndim == 2 else "BGR3"
+        fmt = "BGR3"
         seq = fields.get("sequence", self._parts)
         self._stamped = "timestamp_ns" in fields  # a device timestamp from the server, not the arrival time
         ts = fields.get("timestamp_ns", arrival_ns)

@@ -336,7 +336,7 @@ class UVCSource(CameraSource):
                                         self.readout)
             line_ns = self.timing.line_time_ns if rolling else 0
         meta = {"wire_format": fourcc, "pts": parsed.pts, "scr": parsed.scr, "payloads": parsed.payloads}
-        return Frame(data=data, format=fmt, sequence=parsed.index, timestamp_ns=int(t0),
+        return Frame(data=data, format=fmt, size=(w, h), sequence=parsed.index, timestamp_ns=int(t0),
                      line_time_ns=line_ns, readout=self.readout, exposure_ns=self.exposure_ns, shutter=self.shutter,
                      row_times_ns=rows, meta=meta)
 

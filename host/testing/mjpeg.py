@@ -12,20 +12,17 @@ from __future__ import annotations
 from collections.abc import Callable, Iterable, Sequence
 from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
 
-import cv2
 import numpy as np
 from rollcam.common.lifecycle import Closeable, Worker
+from rollcam.sim.codecs import JPEG_QUALITY, codec
 from rollcam.sim.frame import Frame
 
 BOUNDARY = "rollcamframe"
 
 
-def jpeg_bytes(image: np.ndarray, quality: int = 90) -> bytes:
-    """``image`` (BGR or grey) as JPEG bytes."""
-    ok, buf = cv2.imencode(".jpg", image, [cv2.IMWRITE_JPEG_QUALITY, quality])
-    if not ok:
-        raise ValueError(f"cannot encode an image of shape {image.shape} as JPEG")
-    return buf.tobytes()
+def jpeg_bytes(image: np.ndarray, quality: int = JPEG_QUALITY) -> bytes:
+    """``image`` (BGR or grey) as JPEG bytes (the codec table's MJPG row)."""
+    return codec("MJPG").encode(image, quality=quality).tobytes()
 
 
 def frame_headers(frame: Frame) -> dict[str, str]:
@@ -39,7 +36,7 @@ class MjpegTestServer(Closeable):
     """Serves ``frames`` (Frames or bare images) at ``url`` as an MJPEG stream, then ends the response."""
 
     def __init__(self, frames: Iterable[Frame | np.ndarray], *, path: str = "/stream.mjpg",
-                 timing_headers: bool = True, content_length: bool = True, quality: int = 90) -> None:
+                 timing_headers: bool = True, content_length: bool = True, quality: int = JPEG_QUALITY) -> None:
         parts: list[tuple[dict[str, str], bytes]] = []
         for f in frames:
             image = f.data if isinstance(f, Frame) else np.asarray(f)
