@@ -263,8 +263,8 @@ def _write_summary(out_dir: Path, result: DetectResult, source: CameraSource, de
 
 
 class StatusLine:
-    """The live status on the one progress line: frames, fps, capture and detector latency, detections, and
-    running P/R with truth. Off when stderr is not a terminal unless ``enabled``."""
+    """The live status on the one progress line: frames and their rate, capture and detector latency (mean of
+    the last 30), detections, and running P/R with truth. Off when stderr is not a terminal unless ``enabled``."""
 
     def __init__(self, total: int | None = None, *, enabled: bool | None = None, stream: TextIO | None = None) -> None:
         from .progress import Progress
@@ -275,8 +275,8 @@ class StatusLine:
         if not self.bar.enabled:
             return
         recent = slice(-30, None)
-        line = (f"{result.fps:6.2f} fps  capture {np.mean(result.capture_ms[recent]):7.1f} ms  detect "
-                f"{np.mean(result.detect_ms[recent]):7.1f} ms  dets {len(dets):3d}")
+        capture_ms, detect_ms = np.mean(result.capture_ms[recent]), np.mean(result.detect_ms[recent])
+        line = f"capture {capture_ms:6.1f} ms  detect {detect_ms:6.1f} ms  dets {len(dets):3d}"
         if result.truth is not None and result.truth.frames:
             line += "  " + result.truth.summary()
         self.bar.status(line, refresh=False)

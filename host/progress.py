@@ -31,7 +31,7 @@ class Progress:
         # The bar format has no bar glyphs: it is read in logs as often as on terminals.
         fmt = ("{desc} {n_fmt}/{total_fmt}  {rate_fmt}  ETA {remaining}{postfix}" if total is not None
                else "{desc} [{elapsed}]{postfix}")
-        self._bar = tqdm(total=total, desc=label, file=self.stream, disable=not self.enabled, unit=unit,
+        self._bar = tqdm(total=total, desc=label, file=self.stream, disable=not self.enabled, unit=f" {unit}",
                          mininterval=min_interval_s, bar_format=fmt, dynamic_ncols=True, leave=True)
 
     def update(self, done: int) -> None:

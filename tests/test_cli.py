@@ -163,6 +163,7 @@ def test_list_json():
         assert data[key]["devices"] or data[key]["note"]
     table = run("list")
     assert table.returncode == 0 and "letsroll" in table.stdout and "OAK devices" in table.stdout
+    assert res.stderr == table.stderr == ""  # depthai's and OpenCV's own log lines are silenced
 
 
 def test_bench_lists_one_subcommand_per_study_each_with_json_and_check(capsys):
