@@ -135,7 +135,8 @@ def test_every_study_reads_its_targets_in_one_shape(tiny) -> None:
     ptc = STUDIES["ptc"].targets({"errors": {"gain": 0.01, "read_noise": -0.2}})
     assert ptc["gain_error"]["pass"] is True and ptc["read_noise_error"]["pass"] is False
     assert missed(ptc) == ["read_noise_error (-0.2 |x| <= 0.05 failed)"]
-    assert STUDIES["hog"].targets({}) == {}
+    assert STUDIES["hog"].targets({"recall": 0.4})["recall"]["pass"] is False
+    assert STUDIES["hog"].targets({"recall": None})["recall"]["pass"] is None  # no walker to find: n/a
 
 
 def test_soak_refuses_a_non_positive_duration() -> None:
