@@ -249,7 +249,7 @@ def test_a_missing_optional_package_is_one_line_and_exit_1(monkeypatch, capsys, 
     monkeypatch.setitem(sys.modules, "usb.core", None)
     assert main(["capture", "uvc:1d6b:0102?backend=emu", "--frames", "1", "--out", str(tmp_path / "x")]) == 1
     err = capsys.readouterr().err
-    assert err == "rollcam: error: uvc: sources needs pyusb (pip install 'rollcam[usb]')\n"
+    assert err == "rollcam: error: the uvc: source needs pyusb (pip install 'rollcam[usb]')\n"
     assert main(["bench", "uvc", "--out", str(tmp_path / "b")]) == 1
     assert capsys.readouterr().err == "rollcam: error: rollcam bench uvc needs pyusb (pip install 'rollcam[usb]')\n"
     assert not (tmp_path / "b").exists()

@@ -59,7 +59,7 @@ COCO_NAMES = (
 
 def import_onnxruntime() -> Any:
     """onnxruntime, or a MissingDependencyError naming the extra to install."""
-    return require("onnxruntime", "onnxruntime", "onnx", "the onnx detectors")
+    return require("onnxruntime", "onnxruntime", "onnx", "the onnx detector")
 
 
 def _fraction(text: str) -> float:

@@ -54,7 +54,7 @@ FORMAT_NAMES = {"yuyv": "YUYV", "nv12": "NV12", "mjpeg": "MJPG", "mjpg": "MJPG"}
 
 
 def _usb():
-    require("usb.core", "pyusb", "usb", "uvc: sources")
+    require("usb.core", "pyusb", "usb", "the uvc: source")
     import usb.core
 
     return usb
