@@ -15,17 +15,14 @@ import threading
 import urllib.parse
 from typing import Any
 
-try:
-    from serial.serialutil import PortNotOpenError, SerialBase, SerialException
-except ImportError as exc:  # pyserial is an optional extra
-    from rollcam.common.errors import RollcamError
-
-    raise RollcamError("the rollcam:// serial URL handler needs pyserial: pip install 'rollcam[serial]'") from exc
-
-from rollcam.common.errors import RollcamError
+from rollcam.common.errors import RollcamError, require
 from rollcam.common.lifecycle import Deadline
 from rollcam.firmware.camera import FirmwareCamera
 from rollcam.firmware.protocol import ProtocolSession
+
+_serialutil = require("serial.serialutil", "pyserial", "serial", "the rollcam:// serial URL handler")
+PortNotOpenError, SerialBase, SerialException = (_serialutil.PortNotOpenError, _serialutil.SerialBase,
+                                                 _serialutil.SerialException)
 
 CAMERAS: dict[str, FirmwareCamera] = {}
 """Cameras reachable as ``rollcam://NAME`` (see ``register_camera``)."""

@@ -7,13 +7,15 @@ from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from typing import Any
 
-from rollcam.common.errors import ConfigError, SourceError
+from rollcam.common.errors import SourceError
 from rollcam.common.lifecycle import Closeable
 from rollcam.common.values import (  # noqa: F401  (the value parsers are re-exported for the source modules)
     convert_option,
     finite_float,
     non_negative_float,
     non_negative_int,
+    parse_host_port,
+    parse_size,
     positive_float,
     positive_int,
     reject_unknown,
@@ -38,31 +40,6 @@ class SourceURI:
     def get(self, key: str, kind: Callable[[str], Any], default: Any = None) -> Any:
         """Option ``key`` converted by ``kind``, or ``default`` when absent; bad values name the option."""
         return convert_option(self.options, key, kind, default, f"source {self.uri!r}", SourceError)
-
-
-def parse_size(text: str) -> tuple[int, int]:
-    """``'1920x1080'`` -> (1920, 1080)."""
-    try:
-        w, h = (int(v) for v in text.lower().split("x"))
-    except ValueError:
-        raise ConfigError(f"size {text!r} is not WIDTHxHEIGHT (e.g. 1920x1080)") from None
-    if w <= 0 or h <= 0:
-        raise ConfigError(f"size {text!r} must be positive")
-    return w, h
-
-
-
-def parse_host_port(text: str, default_host: str = "127.0.0.1") -> tuple[str, int]:
-    """``HOST:PORT``, ``[IPv6]:PORT``, ``:PORT`` or ``PORT`` -> (host, port); the host defaults to 127.0.0.1."""
-    host, sep, port = text.rpartition(":")
-    host = host.strip("[]") if sep else ""
-    try:
-        number = int(port)
-    except ValueError:
-        raise ConfigError(f"expected HOST:PORT, got {text!r}") from None
-    if not 0 <= number <= 65535:
-        raise ConfigError(f"port {number} is not in 0..65535 (in {text!r})")
-    return host or default_host, number
 
 
 class CameraSource(Closeable, ABC):

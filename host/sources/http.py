@@ -21,9 +21,10 @@ are kept: ``X-Line-Time-Ns`` is whole ns, so rows built from it alone drift from
 18,903.5 ns line by 0.5 ns a row). ``X-Shutter: rolling`` needs a line time (the header's or the sensor's);
 an unknown shutter or readout, or a negative line time or exposure, is a ProtocolError naming the header.
 Options: ``sensor``, ``timeout`` (seconds to connect and between parts, default 10), ``frames``,
-``latest`` (1: a thread reads the stream and ``read()`` returns the newest part, dropping older ones, so a
-consumer slower than the stream, such as a detector, sees live frames instead of a growing backlog; the
-count dropped goes into ``meta["dropped"]``; default 0: every part, in order).
+``latest`` (a boolean, 1/on/true/yes: a thread reads the stream and ``read()`` returns the newest part,
+dropping older ones, so a consumer slower than the stream, such as a detector, sees live frames instead of a
+growing backlog; the count dropped goes into ``meta["dropped"]``; default off: every part, in order). An
+option given twice in the fragment is refused, as in any query.
 
 ``probe()`` reads the first two frames ahead (``read()`` still returns them, in order) so that ``info()`` can
 tell the size and the frame rate before the first read, as OpenCV's FFmpeg backend does when it opens a stream;
@@ -43,13 +44,14 @@ from urllib.error import URLError
 from urllib.parse import parse_qsl, urldefrag
 from urllib.request import Request, urlopen
 
-from rollcam.common.errors import ProtocolError, SourceError
+from rollcam.common.errors import DeviceError, DeviceNotFoundError, ProtocolError, SourceError
 from rollcam.common.lifecycle import Closeable, Worker
+from rollcam.common.values import parse_bool, parse_query
 from rollcam.sim.codecs import codec
 from rollcam.sim.frame import Frame
 from rollcam.sim.timing import NS_PER_S, LineTiming, Readout, line_sample_times_ns
 
-from .base import CameraSource, SourceURI, finite_float, non_negative_int, positive_int
+from .base import CameraSource, SourceURI, non_negative_int, positive_float, positive_int
 from .rowtiming import FrameTimer
 
 _JPEG = codec("MJPG")
@@ -223,12 +225,13 @@ class HttpMjpegSource(CameraSource):
     def __init__(self, uri: SourceURI, clock: Callable[[], int] = time.monotonic_ns) -> None:
         self.uri = uri.uri
         url, fragment = urldefrag(uri.uri)
-        opts = SourceURI(uri.uri, uri.scheme, url, dict(parse_qsl(fragment, keep_blank_values=True)))
+        opts = SourceURI(uri.uri, uri.scheme, url, parse_query(fragment, f"source {uri.uri!r}", SourceError))
         opts.take(set(), OPTIONS)
         self.url, self.clock = url, clock
-        self.timeout_s = opts.get("timeout", finite_float, 10.0)
+        self.timeout_s = opts.get("timeout", positive_float, 10.0)
         self.limit = opts.get("frames", positive_int)
         self.timer = FrameTimer(opts.get("sensor", str), uri.uri)
+        latest = opts.get("latest", parse_bool, False)  # every option is checked before connecting
         self.index = 0  # frames returned by read()
         self._parts = 0  # parts decoded (read ahead by probe() included)
         self._ahead: deque[Frame] = deque()
@@ -237,14 +240,13 @@ class HttpMjpegSource(CameraSource):
         try:
             self._response = urlopen(Request(url, headers={"User-Agent": "rollcam"}), timeout=self.timeout_s)
         except (URLError, OSError) as exc:
-            raise SourceError(f"source {uri.uri!r}: cannot connect ({getattr(exc, 'reason', exc)}); is the "
-                              "stream running (e.g. 'rollcam emulate')?") from None
+            raise DeviceNotFoundError(f"source {uri.uri!r}: cannot connect ({getattr(exc, 'reason', exc)}); is "
+                                      "the stream running (e.g. 'rollcam emulate')?") from None
         try:
             self._parser = MjpegParser(self._response, boundary_of(self._response.headers.get("Content-Type", "")))
         except ProtocolError as exc:
             self._response.close()
             raise SourceError(f"source {uri.uri!r}: {exc}") from None
-        latest = opts.get("latest", int, 0)
         self._latest = LatestPart(self._parser.next_part, clock) if latest else None
 
     def read(self) -> Frame | None:
@@ -282,9 +284,9 @@ class HttpMjpegSource(CameraSource):
                 part = self._parser.next_part()
                 arrival_ns = self.clock()
         except TimeoutError:
-            raise SourceError(f"source {self.uri!r}: no frame within {self.timeout_s:g} s") from None
+            raise DeviceError(f"source {self.uri!r}: no frame within {self.timeout_s:g} s") from None
         except OSError as exc:
-            raise SourceError(f"source {self.uri!r}: connection lost ({exc})") from None
+            raise DeviceError(f"source {self.uri!r}: connection lost ({exc})") from None
         if part is None:
             return None
         headers, body = part

@@ -23,7 +23,7 @@ from collections import deque
 from typing import Any
 
 import numpy as np
-from rollcam.common.errors import ConfigError, DeviceError, ProtocolError, SourceError
+from rollcam.common.errors import ConfigError, DeviceError, DeviceNotFoundError, ProtocolError, SourceError, require
 from rollcam.common.lifecycle import Deadline
 from rollcam.emu.usbip import ImportedDevice, UrbError
 from rollcam.emu.uvc import DeviceIdentity, SyntheticProducer, UVCFunction
@@ -55,10 +55,9 @@ FORMAT_NAMES = {"yuyv": "YUYV", "nv12": "NV12", "mjpeg": "MJPG", "mjpg": "MJPG"}
 
 
 def _usb():
-    try:
-        import usb.core
-    except ImportError:
-        raise SourceError("uvc: sources need pyusb (and libusb for real cameras): pip install 'rollcam[usb]'") from None
+    require("usb.core", "pyusb", "usb", "the uvc: source")
+    import usb.core
+
     return usb
 
 
@@ -100,7 +99,7 @@ class _PyUSBLink:
         except self.usb.core.USBTimeoutError:
             return [], False
         except self.usb.core.USBError as exc:
-            raise SourceError(f"reading endpoint {ep:#04x} failed: {exc}") from None
+            raise DeviceError(f"reading endpoint {ep:#04x} failed: {exc}") from None
         return parser.feed(payload), bool(payload)
 
     def close(self) -> None:
@@ -152,10 +151,11 @@ def _open_link(uri: SourceURI, vid: int, pid: int, sensor: SensorConfig | None, 
         try:
             dev = ImportedDevice(host, port, uri.get("busid", str, "1-1"))
         except (OSError, ValueError, DeviceError, ProtocolError) as exc:
-            raise SourceError(f"source {uri.uri!r}: USB/IP import failed: {exc}") from None
+            raise DeviceNotFoundError(f"source {uri.uri!r}: USB/IP import failed: {exc}") from None
         if (dev.info.idVendor, dev.info.idProduct) != (vid, pid):
             dev.close()
-            raise SourceError(f"source {uri.uri!r}: USB/IP device is {dev.info.idVendor:04x}:{dev.info.idProduct:04x}")
+            raise DeviceNotFoundError(f"source {uri.uri!r}: the USB/IP device is {dev.info.idVendor:04x}:"
+                                      f"{dev.info.idProduct:04x}")
         return _USBIPLink(dev), None
     usb = _usb()
     function = None
@@ -166,11 +166,11 @@ def _open_link(uri: SourceURI, vid: int, pid: int, sensor: SensorConfig | None, 
 
         be = usb.backend.libusb1.get_backend()
         if be is None:
-            raise SourceError(f"source {uri.uri!r}: libusb-1.0 was not found (install libusb, e.g. apt install "
+            raise DeviceError(f"source {uri.uri!r}: libusb-1.0 was not found (install libusb, e.g. apt install "
                               "libusb-1.0-0, or use backend=emu / backend=usbip)")
     dev = usb.core.find(idVendor=vid, idProduct=pid, backend=be)
     if dev is None:
-        raise SourceError(f"source {uri.uri!r}: no USB device {vid:04x}:{pid:04x} found")
+        raise DeviceNotFoundError(f"source {uri.uri!r}: no USB device {vid:04x}:{pid:04x} found")
     return _PyUSBLink(dev, timeout_ms), function
 
 
@@ -313,7 +313,7 @@ class UVCSource(CameraSource):
             if got:
                 deadline.restart()
             elif deadline.expired:
-                raise SourceError(f"source {self.uri!r}: no data from the camera for {self.timeout_ms} ms")
+                raise DeviceError(f"source {self.uri!r}: no data from the camera for {self.timeout_ms} ms")
 
     def _frame(self, parsed: Any) -> Frame | None:
         w, h, fourcc = self.width, self.height, self.fourcc
