@@ -5,6 +5,7 @@ from __future__ import annotations
 import dataclasses
 import json
 import math
+from statistics import NormalDist
 
 import numpy as np
 import pytest
@@ -86,6 +87,27 @@ def test_dark_current_grows_with_exposure_and_poisson_at_low_signal():
         assert e_el.mean() == pytest.approx(N.dark_current_e_per_s * t_s, rel=0.05, abs=0.02)
     # Exact Poisson at 0.1 e-: most pixels hold no electron at all.
     assert np.mean(m.expose(flat(0.0, 128, 128), 10_000_000, 0) == 64) == pytest.approx(math.exp(-0.1), abs=0.01)
+
+
+def test_dark_frames_keep_negative_dsnu_offsets_above_the_adc_floor():
+    """Regression: charge was clipped at 0 e- after the DSNU offset, so every negative offset was lost (a
+    dark frame's DSNU read 0.6 e- for 1 e- configured). Only the well and the ADC clip."""
+    for stages in (("dsnu", "saturation"), ("dsnu", "dark", "shot", "saturation")):
+        dn = model(stages).expose(flat(0.0, 256, 256), 10_000_000, 0, array_width=256)  # float DN, no rounding
+        e = (dn - N.black_level_dn) / N.system_gain_dn_per_e - N.dark_current_e_per_s * 0.01 * ("dark" in stages)
+        assert np.mean(e < 0) == pytest.approx(0.5, abs=0.03 if "shot" not in stages else 0.1)
+        assert e.std() == pytest.approx(math.hypot(N.dsnu_e, math.sqrt(0.1) * ("shot" in stages)), rel=0.02)
+    # Quantised, the black level keeps them in the output (mean at the black level, not above it); with no
+    # black level the ADC clips them at 0 DN. DSNU at 8x gain spans 1.7 DN, so rounding moves the fractions.
+    k8 = 8.0 * N.system_gain_dn_per_e
+    below = NormalDist(0.0, N.dsnu_e * k8).cdf(-0.5)
+    q = model(("dsnu", "saturation", "quantization")).expose(flat(0.0, 256, 256), 0, 0, analog_gain=8.0)
+    assert q.mean() == pytest.approx(N.black_level_dn, abs=0.03)
+    assert np.mean(q < N.black_level_dn) == pytest.approx(below, abs=0.01)
+    no_black = SensorModel(dataclasses.replace(N, black_level_dn=0), 10, "RGGB", serial="A",
+                           stages=frozenset(("dsnu", "saturation", "quantization")))
+    z = no_black.expose(flat(0.0, 256, 256), 0, 0, analog_gain=8.0)
+    assert np.mean(z == 0) == pytest.approx(1 - below, abs=0.01)
 
 
 def test_quantization_off_gives_float_dn():
