@@ -21,7 +21,7 @@ test: venv
 	$(BIN)/python -m pytest -q
 
 bench: venv
-	$(BIN)/rollcam bench --quick
+	$(BIN)/rollcam bench render --quick
 
 clean:
 	rm -rf $(VENV) build *.egg-info rollcam_out

@@ -1,4 +1,4 @@
-"""Speed versus error of the ways to make a rolling-shutter frame: ``rollcam bench``.
+"""Speed versus error of the ways to make a rolling-shutter frame: ``rollcam bench render``.
 
 On the study's camera (``letsroll``: 1920x1080, line time 1/32,400 s, 30 fps) and seeded streets with 20
 pedestrians (static camera or ``vehicle`` ego-motion, normal or fast walkers), each method makes the RS frame
@@ -23,21 +23,19 @@ exact RS boxes (composed frames use the ground truth of the footage frame each r
 rows have none, so linear and flow report null). The floor is one plain copy of a frame (``np.copyto``
 into a preallocated array, median of many); every row reports its cost as a multiple of it.
 
-``--quick`` (under a minute once numba's cache is warm; a cold cache adds ~30 s of compiling) runs two
-scenes and fewer methods and frames. Its reference is timed on every 27th line's full render (every 108th
-with ego-motion) and scaled to all lines, and its error baseline is the exact per-line image: that the
-exact path equals the reference is checked on the full image of each scene at 192x108 and on the sampled
-lines at full size.
+``rollcam bench render --quick`` (under a minute once numba's cache is warm; a cold cache adds ~30 s of
+compiling) runs two scenes and fewer methods and frames. Its reference is timed on every 27th line's full
+render (every 108th with ego-motion) and scaled to all lines, and its error baseline is the exact per-line
+image: that the exact path equals the reference is checked on the full image of each scene at 192x108 and on
+the sampled lines at full size.
 """
 
 from __future__ import annotations
 
-import argparse
 import dataclasses
 import json
 import os
 import platform
-import sys
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
@@ -46,7 +44,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from rollcam.common.errors import ConfigError, RollcamError
+from rollcam.common.errors import ConfigError
 from rollcam.sim.compose import METHODS, compose_rs, composition_error
 from rollcam.sim.footage import Footage
 from rollcam.sim.hwconfig import load_sensor
@@ -67,7 +65,6 @@ LINE_RATE = "line"
 """Footage rate meaning "one frame per line time" (32,400 fps on the study's camera)."""
 
 _FIELDS = ("left", "right", "area", "visible")
-_ZERO_ERR_PLOT = 1e-3  # where zero error sits on the plot's log axis when no error is above zero
 
 
 @dataclass(frozen=True)
@@ -452,11 +449,6 @@ def _machine() -> dict[str, Any]:
             "numba_threads": numba.config.NUMBA_NUM_THREADS, "opencv": cv2.__version__}
 
 
-def _stderr_progress() -> Callable[[str], None]:
-    t0 = time.perf_counter()
-    return lambda msg: print(f"[bench {time.perf_counter() - t0:6.1f}s] {msg}", file=sys.stderr, flush=True)
-
-
 def run_bench(width: int = 1920, height: int = 1080, quick: bool = False, out_dir: str | Path | None = None,
               progress: Callable[[str], None] | None = None, **overrides: Any) -> dict[str, Any]:
     """Run the bench and return its JSON document; with ``out_dir`` also write bench.json and bench.png."""
@@ -495,11 +487,15 @@ def run_bench(width: int = 1920, height: int = 1080, quick: bool = False, out_di
         "notes": _notes(cfg),
     }
     if out_dir is not None:
+        from rollcam.host.capture import write_atomic
+
+        from .render_report import plot
+
         out = Path(out_dir)
         out.mkdir(parents=True, exist_ok=True)
-        (out / "bench.json").write_text(json.dumps(doc, indent=1) + "\n")
-        plot(rows, out / "bench.png", floor["ms"])
         doc["files"] = [str(out / "bench.json"), str(out / "bench.png")]
+        write_atomic(out / "bench.json", (json.dumps(doc, indent=1) + "\n").encode())
+        plot(rows, out / "bench.png", floor["ms"])
     return doc
 
 
@@ -511,159 +507,3 @@ def _notes(cfg: BenchConfig) -> list[str]:
     if LINE_RATE not in cfg.footage_fps:
         notes.append("line-rate footage (32,400 fps at 1080 lines) skipped: rendering it costs a full reference")
     return notes
-
-
-def plot(rows: list[dict[str, Any]], path: Path, floor_ms: float) -> None:
-    """Mean abs error (log) against ms per frame (log), one panel per scene, one labelled marker per method."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    scenes = list(dict.fromkeys(r["scene"] for r in rows))
-    fig, axes = plt.subplots(1, len(scenes), figsize=(6.5 * len(scenes), 5.5), squeeze=False)
-    marks = {"reference": "s", "render": "o", "compose": "^"}
-    for ax, scene in zip(axes[0], scenes, strict=True):
-        mine = [r for r in rows if r["scene"] == scene]
-        nonzero = [r["mean_abs_err_dn"] for r in mine if r["mean_abs_err_dn"] > 0]
-        # Zero error sits a decade below the smallest nonzero one (log axis).
-        zero = 10 ** (np.floor(np.log10(min(nonzero))) - 1) if nonzero else _ZERO_ERR_PLOT
-        for r in mine:
-            y = max(r["mean_abs_err_dn"], zero)
-            ax.scatter(r["ms_per_frame"], y, marker=marks.get(r["kind"], "o"))
-            label = r["method"] + (" (0)" if r["mean_abs_err_dn"] == 0 else "")
-            ax.annotate(label, (r["ms_per_frame"], y), fontsize=7, xytext=(3, 3), textcoords="offset points")
-        ax.axvline(floor_ms, color="grey", lw=0.8, ls="--")
-        ax.set(xscale="log", yscale="log", title=scene, xlabel="ms per frame (dashed: one frame copy)",
-               ylabel=f"mean abs error, DN (0 drawn at {zero:g})")
-        ax.grid(True, which="both", alpha=0.3)
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-
-
-def format_table(doc: dict[str, Any]) -> str:
-    """The rows, the floor and the targets as plain text."""
-    head = f"{'scene':<11}{'method':<24}{'ms/frame':>11}{'x_memcpy':>10}{'vs_ref':>9}{'mean_err':>10}" \
-           f"{'max_err':>8}{'box_px':>8}  note"
-    lines = [head, "-" * len(head)]
-    for r in doc["rows"]:
-        box = "-" if r["max_box_err_px"] is None else f"{r['max_box_err_px']:.2f}"
-        lines.append(f"{r['scene']:<11}{r['method']:<24}{r['ms_per_frame']:>11.2f}{r['x_memcpy']:>10.1f}"
-                     f"{r['speedup_vs_reference']:>9.1f}{r['mean_abs_err_dn']:>10.4f}{r['max_abs_err_dn']:>8.0f}"
-                     f"{box:>8}  {r['note']}")
-    f = doc["floor"]
-    lines += ["", f"floor: {f['what']}: {f['ms']:.3f} ms ({f['gb_per_s']:.1f} GB/s; cache-cold {f['cold_ms']:.3f} ms)",
-              f"baseline: {doc['baseline']}", "", "targets:"]
-    for name, t in doc["targets"].items():
-        verdict = {True: "PASS", False: "FAIL", None: "n/a"}[t["pass"]]
-        lines.append(f"  {verdict:<5}{name}: {t['value']} {t['op']} {t['limit']} {t['unit']}  {t['per_scene']}")
-    for s in doc["skipped"]:
-        lines.append(f"skipped: {s['scene']} {s['method']}: {s['why']}")
-    lines += [f"note: {n}" for n in doc["notes"]]
-    return "\n".join(lines)
-
-
-# ------------------------------------------------------------------------------------------------ CLI
-def add_arguments(parser: argparse.ArgumentParser) -> None:
-    """Options of ``rollcam bench``."""
-    parser.add_argument("--quick", action="store_true", help="two scenes, fewer methods and frames (< 1 min)")
-    parser.add_argument("--json", action="store_true", help="print one JSON document instead of the table")
-    parser.add_argument("--out", default="rollcam_out/bench", help="folder for bench.json and bench.png")
-    parser.add_argument("--size", default=None, help="WIDTHxHEIGHT instead of the study's 1920x1080")
-    parser.add_argument("--scenes", default=None, help=f"comma-separated subset of {','.join(SCENES)}")
-    parser.add_argument("--dataset", action="store_true",
-                        help="time dataset generation (vs render+encode, 1 vs 2 workers) and eval metrics instead")
-    parser.add_argument("--soak", action="store_true",
-                        help="stream an emulated 1080p30 RS V4L2 device in real time; report drops and jitter")
-    parser.add_argument("--minutes", type=float, default=10.0, help="--soak duration (default: 10)")
-    parser.add_argument("--soak-scene", default="street", choices=("street", "chart", "flat"),
-                        help="--soak scene (default: street; flat isolates pacing from rendering cost)")
-    parser.add_argument("--rt-priority", type=int, default=None, metavar="N",
-                        help="--soak: run the pump's waits and the reader under SCHED_FIFO priority N")
-    parser.add_argument("--hog", action="store_true",
-                        help="run the HOG people-detector recall study on the synthetic walkers instead (~1 min)")
-    parser.add_argument("--detect", action="store_true",
-                        help="time the detect loop's overhead and each built-in detector instead")
-    parser.add_argument("--onnx", action="append", metavar="MODEL", help="with --detect: also time onnx:MODEL")
-    parser.add_argument("--ptc", nargs="?", const="imx219", default=None, metavar="SENSOR",
-                        help="measure the photon transfer curve of emu:SENSOR (default imx219) instead: ptc.png")
-    parser.add_argument("--sensor", action="store_true",
-                        help="time the sensor model (noise, mosaic, packing) and adaptive motion-blur sampling")
-    parser.add_argument("--uvc", action="store_true",
-                        help="run the UVC payload packing/parsing throughput bench instead (a few seconds)")
-
-
-def run(args: argparse.Namespace) -> int:
-    """Entry point of ``rollcam bench``: 0 done, 2 bad options."""
-    overrides: dict[str, Any] = {}
-    if getattr(args, "detect", False):
-        from .detect import run_detect_bench
-
-        return run_detect_bench(args)
-    if getattr(args, "ptc", None) or getattr(args, "sensor", False):
-        from .sensor_bench import run_sensor_cli
-
-        return run_sensor_cli(args)
-    if getattr(args, "dataset", False):
-        from .dataset import bench_dataset, format_report
-
-        size = tuple(int(v) for v in args.size.lower().split("x")) if args.size else (1920, 1080)
-        doc = bench_dataset(size, say=_stderr_progress())
-        Path(args.out).mkdir(parents=True, exist_ok=True)
-        (Path(args.out) / "dataset_bench.json").write_text(json.dumps(doc, indent=1))
-        print(json.dumps(doc, indent=1) if args.json else format_report(doc))
-    if getattr(args, "uvc", False):
-        from .uvc import format_uvc, run_uvc_bench
-
-        doc = run_uvc_bench()
-        Path(args.out).mkdir(parents=True, exist_ok=True)
-        (Path(args.out) / "uvc.json").write_text(json.dumps(doc, indent=1))
-        print(json.dumps(doc, indent=1) if args.json else format_uvc(doc))
-        return 0
-    if getattr(args, "soak", False):
-        from .soak import run_from_args
-
-        return run_from_args(args)
-    if getattr(args, "hog", False):
-        from .hog_recall import hog_recall
-
-        say = _stderr_progress()
-        result = hog_recall(progress=lambda done, total: say(f"hog recall: frame {done}/{total}"))
-        Path(args.out).mkdir(parents=True, exist_ok=True)
-        (Path(args.out) / "hog_recall.json").write_text(json.dumps(result, indent=1))
-        if args.json:
-            print(json.dumps(result, indent=1))
-        else:
-            print(f"HOG recall {result['recall']:.3f}, precision {result['precision']:.3f} on "
-                  f"{result['n_pedestrians']} unoccluded pedestrians >= 128 px in daylight GS frames")
-            for name, row in result["recall_by_height_px"].items():
-                print(f"  {name:>8} px: recall {row['recall']:.3f} (n={row['n']})")
-        return 0
-    try:
-        if getattr(args, "scenes", None):
-            overrides["scenes"] = tuple(s.strip() for s in args.scenes.split(",") if s.strip())
-        width, height = 1920, 1080
-        if getattr(args, "size", None):
-            try:
-                width, height = (int(v) for v in args.size.lower().split("x"))
-            except ValueError:
-                raise ConfigError(f"--size {args.size!r} is not WIDTHxHEIGHT") from None
-        doc = run_bench(width, height, quick=args.quick, out_dir=args.out, progress=_stderr_progress(),
-                        **overrides)
-    except RollcamError as exc:
-        print(f"rollcam: error: {exc}", file=sys.stderr)
-        return 2
-    print(json.dumps(doc, indent=1) if args.json else format_table(doc))
-    return 0
-
-
-def main(argv: list[str] | None = None) -> int:
-    """``python -m rollcam.benchmarks.bench``: the same as ``rollcam bench``."""
-    parser = argparse.ArgumentParser(prog="rollcam bench", description=__doc__.split("\n\n")[0])
-    add_arguments(parser)
-    return run(parser.parse_args(argv))
-
-
-if __name__ == "__main__":
-    sys.exit(main())

@@ -1,4 +1,4 @@
-"""Dataset generation and evaluation speed: ``rollcam bench --dataset``.
+"""Dataset generation and evaluation speed: ``rollcam bench dataset``.
 
 Three measurements, each in the same run and on the same samples:
 
@@ -79,7 +79,7 @@ def synthetic_eval_inputs(n_images: int = 1000, seed: int = 0) -> tuple[list[Tru
 
 def bench_dataset(size: tuple[int, int] = (1920, 1080), pairs: int = 6, scale_pairs: int = 40, rounds: int = 5,
                   say: Callable[[str], None] = lambda _m: None) -> dict[str, Any]:
-    """Run the three measurements; returns the JSON document of ``rollcam bench --dataset``."""
+    """Run the three measurements; returns the JSON document of ``rollcam bench dataset``."""
     say("warm-up (compiles or loads the renderer)")
     _bare(DatasetConfig(size=size, frames=6, seed=99))
     # Short alternating rounds, the ratio taken within each round and its median kept: on a shared machine

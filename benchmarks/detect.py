@@ -1,4 +1,4 @@
-"""``rollcam bench --detect``: what ``rollcam detect`` costs besides the detector, and what each detector costs.
+"""``rollcam bench detect``: what ``rollcam detect`` costs besides the detector, and what each detector costs.
 
 1. Loop overhead on ``emu:imx219`` at 1920x1080: ``run_detect`` with a detector that finds nothing, writing
    ``detections.jsonl`` and the annotated MP4 as the CLI does. Per frame it reports the capture time (the
@@ -12,12 +12,11 @@
 
 from __future__ import annotations
 
-import argparse
-import json
 import os
 import platform
 import tempfile
 import time
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -80,25 +79,26 @@ def detector_times(specs: tuple[str, ...] = DETECTORS, sizes: tuple[tuple[int, i
     return rows
 
 
-def run_detect_bench(args: argparse.Namespace) -> int:
-    """Entry point for ``rollcam bench --detect``: print a table (or JSON) and write detect_bench.json."""
-    specs = DETECTORS + tuple(f"onnx:{m}" for m in args.onnx or ())
+def detect_bench(quick: bool = False, onnx: tuple[str, ...] | list[str] = (),
+                 say: Callable[[str], None] = lambda _msg: None) -> dict[str, Any]:
+    """``rollcam bench detect``: the loop overhead and each detector's time, as one JSON document."""
+    specs = DETECTORS + tuple(f"onnx:{m}" for m in onnx)
     machine = {"cpu_count": os.cpu_count(), "platform": platform.platform(), "python": platform.python_version()}
-    doc = {"machine": machine,
-           "loop_overhead": loop_overhead(frames=5 if args.quick else 20),
-           "detectors": detector_times(specs, repeats=2 if args.quick else 5)}
-    out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
-    (out / "detect_bench.json").write_text(json.dumps(doc, indent=1) + "\n")
-    if args.json:
-        print(json.dumps(doc, indent=1))
-        return 0
+    say("detect loop overhead")
+    overhead = loop_overhead(frames=5 if quick else 20)
+    say(f"detectors {', '.join(specs)}")
+    times = detector_times(specs, repeats=2 if quick else 5)
+    return {"machine": machine, "loop_overhead": overhead, "detectors": times}
+
+
+def format_detect_bench(doc: dict[str, Any]) -> str:
+    """The detect bench as plain text."""
     o = doc["loop_overhead"]
-    print(f"detect loop on {o['uri']} ({o['frames']} frames, with MP4): capture {o['capture_ms_median']:.1f} ms/frame "
-          f"(the emulator rendering), bookkeeping {o['bookkeeping_ms_median']:.2f} ms/frame median, "
-          f"p95 {o['bookkeeping_ms_p95']:.2f} (target <= {TARGET_BOOKKEEPING_MS:g}: "
-          f"{'met' if o['meets_target'] else 'NOT met'})")
-    print(f"{'detector':24} {'size':>10} {'ms/frame':>9} {'dets':>5}")
-    for r in doc["detectors"]:
-        print(f"{r['detector']:24} {r['width']:>5}x{r['height']:<4} {r['ms_median']:9.1f} {r['detections']:5d}")
-    return 0
+    lines = [f"detect loop on {o['uri']} ({o['frames']} frames, with MP4): capture {o['capture_ms_median']:.1f} "
+             f"ms/frame (the emulator rendering), bookkeeping {o['bookkeeping_ms_median']:.2f} ms/frame median, "
+             f"p95 {o['bookkeeping_ms_p95']:.2f} (target <= {TARGET_BOOKKEEPING_MS:g}: "
+             f"{'met' if o['meets_target'] else 'NOT met'})",
+             f"{'detector':24} {'size':>10} {'ms/frame':>9} {'dets':>5}"]
+    lines += [f"{r['detector']:24} {r['width']:>5}x{r['height']:<4} {r['ms_median']:9.1f} {r['detections']:5d}"
+              for r in doc["detectors"]]
+    return "\n".join(lines)

@@ -18,8 +18,6 @@ credited nor charged, as with the "ignore" boxes of the Caltech pedestrian bench
 
 from __future__ import annotations
 
-import argparse
-import json
 import time
 from collections.abc import Callable, Sequence
 
@@ -182,21 +180,3 @@ def hog_recall(
             "iou_min": IOU_MIN,
         },
     }
-
-
-def main(argv: Sequence[str] | None = None) -> None:
-    """Run the study and print its result as JSON."""
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--scenes", type=int, default=10)
-    ap.add_argument("--seed", type=int, default=0)
-    ap.add_argument("--frames-per-camera", type=int, default=2)
-    ap.add_argument("--hit-threshold", type=float, default=0.0)
-    ap.add_argument("--scale", type=float, default=1.05)
-    args = ap.parse_args(argv)
-    result = hog_recall(args.scenes, args.seed, frames_per_camera=args.frames_per_camera,
-                        hit_threshold=args.hit_threshold, scale=args.scale)
-    print(json.dumps(result, indent=2))
-
-
-if __name__ == "__main__":
-    main()

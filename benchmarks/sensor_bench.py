@@ -1,4 +1,4 @@
-"""Costs of the sensor model: ``rollcam bench --sensor``.
+"""Costs of the sensor model: ``rollcam bench sensor``.
 
 Measurements on a seeded street of the study's pedestrians (20 walkers, static camera; "fast" unless said):
 
@@ -22,8 +22,8 @@ from collections.abc import Callable
 from typing import Any
 
 import numpy as np
+from rollcam.sim.codecs import codec
 from rollcam.sim.exposure import DEFAULT_BOUND_PX, dense_plan, integrate, plan_samples
-from rollcam.sim.formats import encode_raw
 from rollcam.sim.hwconfig import load_sensor
 from rollcam.sim.render import srgb_lut
 from rollcam.sim.scenegen import make_street_scene
@@ -65,7 +65,7 @@ def sensor_overhead(size: tuple[int, int] = (1920, 1080), frames: int = 5, seed:
         t1 = time.perf_counter()
         dn = pipe.samples(radiance, exp_ns, i)
         t2 = time.perf_counter()
-        encode_raw(dn, "pRAA", 10)
+        codec("pRAA").encode(dn, sample_bits=10)
         t3 = time.perf_counter()
         if i:
             for key, dt in (("render", t1 - t0), ("noise", t2 - t1), ("pack", t3 - t2)):
@@ -137,7 +137,7 @@ def run_sensor_bench(quick: bool = False) -> dict[str, Any]:
 
 
 def format_sensor_bench(doc: dict[str, Any]) -> str:
-    """The rows ``rollcam bench --sensor`` prints."""
+    """The rows ``rollcam bench sensor`` prints."""
     o, a = doc["sensor_overhead"], doc["adaptive_blur"]
     verdict = "PASS" if o["overhead_vs_rs_frame"] <= o["target"] else "MISS"
     lines = [f"sensor_overhead {o['sensor']} {o['size']} {o['format']}: RS frame {o['rs_frame_ms']} ms, linear render "
@@ -159,36 +159,3 @@ def format_sensor_bench(doc: dict[str, Any]) -> str:
               f"dense: mean {a['mean_abs_err_dn']} DN, max {a['max_abs_err_dn']} DN (point-sampled: mean "
               f"{a['point_sampled_mean_abs_err_dn']}, max {a['point_sampled_max_abs_err_dn']} DN)"]
     return "\n".join(lines)
-
-
-def run_sensor_cli(args: Any) -> int:
-    """``rollcam bench --ptc [SENSOR]`` / ``--sensor``: print the rows, write JSON (and ptc.png) under --out."""
-    import json
-    import sys
-    from pathlib import Path
-
-    from rollcam.common.errors import RollcamError
-
-    from .ptc import format_ptc, run_ptc
-
-    out = Path(args.out)
-    try:
-        doc: dict[str, Any] = {}
-        if args.ptc:
-            result = run_ptc(args.ptc, out)
-            doc["ptc"] = result.to_json()
-            if not args.json:
-                print(format_ptc(result))
-                print(f"wrote {out / 'ptc.png'}")
-        if args.sensor:
-            doc.update(run_sensor_bench(quick=args.quick))
-            out.mkdir(parents=True, exist_ok=True)
-            (out / "sensor_bench.json").write_text(json.dumps(doc, indent=1))
-            if not args.json:
-                print(format_sensor_bench(doc))
-    except RollcamError as exc:
-        print(f"rollcam: error: {exc}", file=sys.stderr)
-        return 2
-    if args.json:
-        print(json.dumps(doc, indent=1))
-    return 0

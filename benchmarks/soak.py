@@ -1,6 +1,6 @@
 """Soak benchmark: an emulated 1920x1080 30 fps rolling-shutter V4L2 device streamed in real time for minutes.
 
-``rollcam bench --soak [--minutes M]`` opens ``rollcam.emu.v4l2.Device`` on imx219 (1080p mode, frame
+``rollcam bench soak [--minutes M]`` opens ``rollcam.emu.v4l2.Device`` on imx219 (1080p mode, frame
 length for 30 fps, YUYV, street scene) in real-time mode, dequeues and re-queues buffers as an application
 would, and reports:
 
@@ -16,15 +16,12 @@ machine's load; ``machine.loadavg`` is recorded with them.
 
 from __future__ import annotations
 
-import argparse
-import json
 import os
-import sys
 import time
-from pathlib import Path
 from typing import Any
 
 import numpy as np
+from rollcam.common.errors import ConfigError
 from rollcam.emu.v4l2 import Device
 from rollcam.emu.v4l2 import functions as fn
 
@@ -43,6 +40,8 @@ def run_soak(minutes: float = 10.0, *, sensor: str = "imx219", size: tuple[int, 
     ``rt_priority`` runs the device's pump waits and this reader's dequeue loop under SCHED_FIFO (as a
     real-time capture application would); None keeps the normal policy.
     """
+    if not minutes > 0:
+        raise ConfigError(f"soak minutes must be a positive number, got {minutes!r}")
     say = progress or (lambda _msg: None)
     arrivals, seqs, stamps = [], [], []
     reader_rt = None
@@ -76,8 +75,8 @@ def run_soak(minutes: float = 10.0, *, sensor: str = "imx219", size: tuple[int, 
                 next_say += 10
         if reader_rt and reader_rt.startswith("SCHED_FIFO"):
             os.sched_setscheduler(0, os.SCHED_OTHER, os.sched_param(0))
-        pump_stats = dict(d.pump.stats) if d.pump else {}
-        driver_stats = dict(d.stats)
+        pump_stats = d.pump.stats.to_json() if d.pump else {}
+        driver_stats = d.stats.to_json()
         camera_stats = dict(cam.stats)
         exposure_ns = int(timing.line_offset_ns(cam.state.exposure_lines))
         readout_ns = int(timing.line_offset_ns(size[1]))
@@ -99,8 +98,8 @@ def run_soak(minutes: float = 10.0, *, sensor: str = "imx219", size: tuple[int, 
         "dropped": dropped,
         "jitter_ms": {"p50": _pct(jitter_ms, 50), "p99": p99, "max": _pct(jitter_ms, 100)},
         "latency_ms": {"p50": _pct(latency_ms, 50), "p99": _pct(latency_ms, 99), "max": _pct(latency_ms, 100)},
-        "targets": {"dropped": {"limit": 0, "value": dropped, "pass": dropped == 0},
-                    "jitter_p99_ms": {"limit": TARGET_JITTER_P99_MS, "value": p99,
+        "targets": {"dropped": {"op": "==", "limit": 0, "value": dropped, "pass": dropped == 0},
+                    "jitter_p99_ms": {"op": "<=", "limit": TARGET_JITTER_P99_MS, "value": p99,
                                       "pass": p99 is not None and p99 <= TARGET_JITTER_P99_MS}},
         "pump": pump_stats, "driver": driver_stats, "camera": camera_stats,
         "machine": {"cpu_count": os.cpu_count(), "loadavg": list(os.getloadavg())},
@@ -131,19 +130,3 @@ def format_report(doc: dict[str, Any]) -> str:
         f"{verdict[t['dropped']['pass']]} dropped == 0; {verdict[t['jitter_p99_ms']['pass']]} jitter p99 <= "
         f"{TARGET_JITTER_P99_MS} ms   (loadavg {doc['machine']['loadavg']})",
     ])
-
-
-def run_from_args(args: argparse.Namespace) -> int:
-    """``rollcam bench --soak``: run, write soak.json into ``--out``, print the report (or JSON)."""
-    t0 = time.perf_counter()
-    say = lambda msg: print(f"[soak {time.perf_counter() - t0:6.1f}s] {msg}", file=sys.stderr, flush=True)  # noqa: E731
-    doc = run_soak(args.minutes, scene=getattr(args, "soak_scene", "street"),
-                   rt_priority=getattr(args, "rt_priority", None), progress=say)
-    out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
-    name = f"soak_{doc['config']['scene']}{'_rt' if doc['config']['rt_priority'] is not None else ''}.json"
-    tmp = out / f"{name}.tmp"
-    tmp.write_text(json.dumps(doc, indent=1) + "\n")
-    tmp.replace(out / name)
-    print(json.dumps(doc, indent=1) if args.json else format_report(doc))
-    return 0

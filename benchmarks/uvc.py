@@ -1,4 +1,4 @@
-"""UVC payload throughput: ``rollcam bench --uvc``.
+"""UVC payload throughput: ``rollcam bench uvc``.
 
 Packs 1920x1080 YUYV frames into UVC payloads (full 12-byte headers: FID, EOF, PTS, SCR) and parses them back
 into frames with the host-side parser, for isochronous packets of 1024 and 3072 bytes and 512 KiB bulk

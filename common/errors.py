@@ -2,8 +2,9 @@
 
 It lives in ``rollcam.common`` because every layer (sim, firmware, emu, host) shares it. ``rollcam.host``
 re-exports the classes. Exit statuses follow one rule (``exit_code``): 0 success, 2 bad usage or input
-(``ConfigError``, ``SourceError``: a bad URI, option, value or file), 1 any other failure (a device or protocol
-error, a missing optional package, an I/O error), 130 interrupted.
+(``ConfigError``, ``SourceError``: a bad URI, option, value or file), 1 any other failure (a device that is not
+there or failed, a protocol error, a missing optional package, an I/O error), 130 interrupted. A camera that is
+not plugged in is a ``DeviceNotFoundError`` (exit 1), not bad input: the same command works once it is there.
 """
 
 from __future__ import annotations
@@ -22,7 +23,11 @@ class SourceError(RollcamError):
 
 
 class DeviceError(RollcamError):
-    """An emulated or real device refused an operation."""
+    """An emulated or real device refused or failed an operation (no data, lost connection, busy)."""
+
+
+class DeviceNotFoundError(DeviceError):
+    """The device a well-formed source names is not there (unplugged, no such index or id, stream not running)."""
 
 
 class ProtocolError(RollcamError):

@@ -1,7 +1,9 @@
-"""``key=value&...`` options of source URIs and detector specs: one query parser and one set of value parsers.
+"""``key=value&...`` options and their values: one query parser and one set of value parsers.
 
-Sources (``emu:imx219?size=640x480``) and detectors (``hog?scale=1.1``) take options the same way; both parse
-their query here and convert values with the parsers below, so a bad option reads the same everywhere.
+Sources (``emu:imx219?size=640x480``), the ``#fragment`` of ``http://`` sources and detectors (``hog?scale=1.1``)
+take options the same way; they parse their query here and convert values with the parsers below, and the CLI
+turns the same parsers into argparse types (``rollcam.host.commands.value_type``), so a bad value reads the same
+everywhere. A value parser takes the text and returns the value or raises ``ValueError`` saying what it must be.
 """
 
 from __future__ import annotations
@@ -85,17 +87,6 @@ def non_negative_int(text: str) -> int:
     return value
 
 
-def parse_size(text: str) -> tuple[int, int]:
-    """Option parser: ``'1920x1080'`` -> (1920, 1080), both positive."""
-    try:
-        w, h = (int(v) for v in str(text).lower().split("x"))
-    except ValueError:
-        raise ConfigError(f"size {text!r} is not WIDTHxHEIGHT (e.g. 1920x1080)") from None
-    if w <= 0 or h <= 0:
-        raise ConfigError(f"size {text!r} must be positive")
-    return w, h
-
-
 TRUE_WORDS = ("1", "on", "true", "yes")
 FALSE_WORDS = ("0", "off", "false", "no")
 
@@ -108,3 +99,67 @@ def parse_bool(text: str) -> bool:
     if word in FALSE_WORDS:
         return False
     raise ValueError(f"expected one of {'/'.join(TRUE_WORDS)} or {'/'.join(FALSE_WORDS)}, got {text!r}")
+
+
+def fraction(text: str) -> float:
+    """Option parser: a number in [0, 1] (a share: visible fraction, overlap)."""
+    value = finite_float(text)
+    if not 0.0 <= value <= 1.0:
+        raise ValueError("must be a number in [0, 1]")
+    return value
+
+
+def positive_fraction(text: str) -> float:
+    """Option parser: a number in (0, 1] (an IoU threshold: 0 would match anything)."""
+    value = finite_float(text)
+    if not 0.0 < value <= 1.0:
+        raise ValueError("must be a number in (0, 1]")
+    return value
+
+
+def name_list(text: str) -> tuple[str, ...]:
+    """Option parser: ``a,b,c`` -> ('a', 'b', 'c'); blanks around names are dropped, an empty list refused."""
+    items = tuple(t.strip() for t in text.split(",") if t.strip())
+    if not items:
+        raise ValueError("must be a comma-separated list of names")
+    return items
+
+
+def _pair(text: str, kind: Callable[[str], Any], what: str) -> tuple[Any, Any]:
+    parts = text.lower().split("x")
+    if len(parts) != 2:
+        raise ConfigError(f"size {text!r} is not {what}")
+    try:
+        return kind(parts[0]), kind(parts[1])
+    except ValueError:
+        raise ConfigError(f"size {text!r} is not {what}") from None
+
+
+def parse_size(text: str) -> tuple[int, int]:
+    """Option parser: ``'1920x1080'`` -> (1920, 1080), both sides positive integers."""
+    w, h = _pair(text, int, "WIDTHxHEIGHT (e.g. 1920x1080)")
+    if w <= 0 or h <= 0:
+        raise ConfigError(f"size {text!r} must be positive")
+    return w, h
+
+
+def box_size(text: str) -> tuple[float, float]:
+    """Option parser: ``'6x16'`` -> (6.0, 16.0), a box's width and height in pixels, both >= 0."""
+    w, h = _pair(text, finite_float, "WIDTHxHEIGHT in pixels (e.g. 6x16)")
+    if w < 0 or h < 0:
+        raise ConfigError(f"size {text!r} must not be negative")
+    return w, h
+
+
+def parse_host_port(text: str, default_host: str = "127.0.0.1") -> tuple[str, int]:
+    """Option parser: ``HOST:PORT``, ``[IPv6]:PORT``, ``:PORT`` or ``PORT`` -> (host, port); host defaults to
+    127.0.0.1."""
+    host, sep, port = text.rpartition(":")
+    host = host.strip("[]") if sep else ""
+    try:
+        number = int(port)
+    except ValueError:
+        raise ConfigError(f"expected HOST:PORT, got {text!r}") from None
+    if not 0 <= number <= 65535:
+        raise ConfigError(f"port {number} is not in 0..65535 (in {text!r})")
+    return host or default_host, number

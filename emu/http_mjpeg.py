@@ -10,7 +10,6 @@ requests get an HTTP error; the server keeps serving the others.
 
 from __future__ import annotations
 
-import dataclasses
 import json
 import sys
 import threading
@@ -19,8 +18,10 @@ from http import HTTPStatus
 from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
 from typing import Any, Generic, TypeVar
 
+from rollcam.common.errors import DeviceError
+from rollcam.common.lifecycle import Closeable, Stats, Worker
 from rollcam.firmware.camera import FirmwareCamera, FramePlan
-from rollcam.firmware.pixfmt import encode_jpeg, to_bgr
+from rollcam.sim.codecs import JPEG_QUALITY, Levels, jpeg_quality, transcode
 from rollcam.sim.frame import Frame
 
 from .pump import FramePump
@@ -76,25 +77,35 @@ class Mailbox(Generic[T]):
             self.cond.notify_all()
 
 
-class MjpegServer:
-    """An HTTP server streaming one camera as MJPEG to any number of clients; a context manager."""
+@dataclass
+class ServerStats(Stats):
+    """What the HTTP server did: frames encoded, clients served, parts dropped for slow clients, bad requests."""
+
+    frames_encoded: int = 0
+    clients_served: int = 0
+    dropped_total: int = 0
+    bad_requests: int = 0
+
+
+class MjpegServer(Closeable):
+    """An HTTP server streaming one camera as MJPEG to any number of clients; a context manager (``with``
+    starts it)."""
 
     def __init__(self, camera: FirmwareCamera, host: str = "127.0.0.1", port: int = 0, *,
-                 pump: FramePump | None = None, quality: int = 85, max_clients: int = 32) -> None:
+                 pump: FramePump | None = None, quality: int = JPEG_QUALITY, max_clients: int = 32) -> None:
         self.camera = camera
-        self.quality = quality
+        self.quality = jpeg_quality(quality)  # refused here, not in the encoder thread
         self.max_clients = max_clients
         self._own_pump = pump is None
         self.pump = pump or FramePump(camera, bands=1, name="rollcam-http-pump")
         self.clients: dict[int, Mailbox[Part]] = {}
         self._lock = threading.Lock()
         self._latest: Mailbox[Frame] = Mailbox()  # the frame waiting for the encoder (newest only)
-        self._stop = threading.Event()
-        self.stats = {"frames_encoded": 0, "clients_served": 0, "dropped_total": 0, "bad_requests": 0}
+        self.stats = ServerStats()
         self.httpd = _Server((host, port), _handler_class(self))
-        self._threads = [threading.Thread(target=self.httpd.serve_forever, name="rollcam-http", daemon=True),
-                         threading.Thread(target=self._encode_loop, name="rollcam-http-jpeg", daemon=True)]
-        self.closed = False
+        self._encoder = Worker(self._encode_loop, name="rollcam-http-jpeg", wrap=DeviceError)
+        self._stop = self._encoder.stop_event
+        self._workers = (Worker(self.httpd.serve_forever, name="rollcam-http", wrap=DeviceError), self._encoder)
 
     @property
     def address(self) -> tuple[str, int]:
@@ -108,39 +119,34 @@ class MjpegServer:
         host, port = self.address
         return f"http://{host}:{port}/stream.mjpg"
 
-    def __enter__(self) -> MjpegServer:
-        self.start()
-        return self
-
-    def __exit__(self, *exc: object) -> None:
-        self.close()
-
     def start(self) -> None:
         """Start serving (and streaming the camera)."""
+        self._check_open()
         self.pump.add_sink(self)
-        for t in self._threads:
-            t.start()
+        for w in self._workers:
+            w.start()
         self.camera.stream_on()
         self.pump.start()
 
-    def close(self) -> None:
-        """Stop serving, disconnect clients, free the port. Idempotent."""
-        if self.closed:
-            return
-        self.closed = True
-        self._stop.set()
+    _on_enter = start
+
+    def _close(self) -> None:
+        """Stop serving, disconnect clients, free the port; re-raises what stopped a thread early, if anything."""
+        self._encoder.stop()
         self.pump.remove_sink(self)
-        if self._own_pump:
-            self.pump.close()
-        self._latest.close()
-        with self._lock:
-            for box in self.clients.values():
-                box.close()
-        self.httpd.shutdown()
-        self.httpd.server_close()
-        for t in self._threads:
-            if t.is_alive():
-                t.join(timeout=5)
+        try:
+            if self._own_pump:
+                self.pump.close()
+        finally:
+            self._latest.close()
+            with self._lock:
+                for box in self.clients.values():
+                    box.close()
+            if self._workers[0].alive:
+                self.httpd.shutdown()
+            self.httpd.server_close()
+            for w in self._workers:
+                w.close()
 
     # --------------------------------------------------------------------------------- pump sink, encoder
     def on_band(self, frame: Frame, plan: FramePlan, band: int, n_bands: int) -> None:
@@ -156,11 +162,12 @@ class MjpegServer:
             f = self._latest.get(0.2)
             if f is None:
                 continue
-            part = Part(f.sequence, encode_jpeg(to_bgr(f, self.camera.sensor), self.quality), (
+            jpeg = transcode(f, "MJPG", Levels.of_sensor(self.camera.sensor), self.quality).tobytes()
+            part = Part(f.sequence, jpeg, (
                 ("X-Sequence", str(f.sequence)), ("X-Timestamp-Ns", str(f.timestamp_ns)),
                 ("X-Line-Time-Ns", str(f.line_time_ns)), ("X-Exposure-Ns", str(f.exposure_ns)),
                 ("X-Readout", f.readout.value), ("X-Shutter", f.shutter)))
-            self.stats["frames_encoded"] += 1
+            self.stats.frames_encoded += 1
             with self._lock:
                 boxes = list(self.clients.values())
             for box in boxes:
@@ -170,15 +177,15 @@ class MjpegServer:
         """Counters: frames encoded, clients now and served, per-client sent and dropped parts."""
         with self._lock:
             clients = {str(k): {"sent": b.sent, "dropped": b.dropped} for k, b in self.clients.items()}
-        return {**self.stats, "clients": clients, "pump": dict(self.pump.stats),
-                "camera": dataclasses.asdict(self.camera.stats)}
+        return {**self.stats.to_json(), "clients": clients, "pump": self.pump.stats.to_json(),
+                "camera": self.camera.stats.to_json()}
 
     def _join(self) -> tuple[int, Mailbox[Part]] | None:
         with self._lock:
             if len(self.clients) >= self.max_clients:
                 return None
-            key = self.stats["clients_served"]
-            self.stats["clients_served"] += 1
+            key = self.stats.clients_served
+            self.stats.clients_served += 1
             box = self.clients[key] = Mailbox()
             return key, box
 
@@ -186,7 +193,7 @@ class MjpegServer:
         with self._lock:
             box = self.clients.pop(key, None)
             if box is not None:
-                self.stats["dropped_total"] += box.dropped
+                self.stats.dropped_total += box.dropped
 
 
 class _Server(ThreadingHTTPServer):
@@ -220,7 +227,7 @@ class _Handler(BaseHTTPRequestHandler):
 
     def send_error(self, code: int, message: str | None = None, explain: str | None = None) -> None:
         """Count every error reply (malformed request lines and headers included)."""
-        self.owner.stats["bad_requests"] += 1
+        self.owner.stats.bad_requests += 1
         super().send_error(code, message, explain)
 
     def do_GET(self) -> None:

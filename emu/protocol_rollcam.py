@@ -13,22 +13,19 @@
 from __future__ import annotations
 
 import threading
-import time
 import urllib.parse
 from typing import Any
 
-try:
-    from serial.serialutil import PortNotOpenError, SerialBase, SerialException
-except ImportError as exc:  # pyserial is an optional extra
-    from rollcam.common.errors import RollcamError
-
-    raise RollcamError("the rollcam:// serial URL handler needs pyserial: pip install 'rollcam[serial]'") from exc
-
-from rollcam.common.errors import ConfigError, RollcamError
+from rollcam.common.errors import ConfigError, RollcamError, require
+from rollcam.common.lifecycle import Deadline
 from rollcam.common.values import parse_query
 from rollcam.firmware.camera import FirmwareCamera
 from rollcam.firmware.protocol import ProtocolSession
 from rollcam.firmware.spec import CameraSpec
+
+_serialutil = require("serial.serialutil", "pyserial", "serial", "the rollcam:// serial URL handler")
+PortNotOpenError, SerialBase, SerialException = (_serialutil.PortNotOpenError, _serialutil.SerialBase,
+                                                 _serialutil.SerialException)
 
 CAMERAS: dict[str, FirmwareCamera] = {}
 """Cameras reachable as ``rollcam://NAME`` (see ``register_camera``)."""
@@ -110,13 +107,10 @@ class Serial(SerialBase):
         """Up to ``size`` reply bytes, waiting at most ``timeout`` seconds (forever when None)."""
         if not self.is_open:
             raise PortNotOpenError()
-        deadline = None if self._timeout is None else time.monotonic() + self._timeout
+        deadline = Deadline(self._timeout)
         with self._cond:
-            while len(self._rx) < size and self.is_open:
-                left = None if deadline is None else deadline - time.monotonic()
-                if left is not None and left <= 0:
-                    break
-                self._cond.wait(left)
+            while len(self._rx) < size and self.is_open and not deadline.expired:
+                self._cond.wait(deadline.remaining())
             out = bytes(self._rx[:size])
             del self._rx[:size]
             return out

@@ -2,7 +2,7 @@
 
 The server owns both ends of a pty (the slave in raw mode: no echo, no line editing), so clients may open
 and close the port as often as they like. Replies a client does not read are dropped once the pty's buffer
-is full (counted in ``stats['dropped_bytes']``), so a stalled client costs no memory.
+is full (counted in ``stats.dropped_bytes``), so a stalled client costs no memory.
 """
 
 from __future__ import annotations
@@ -11,16 +11,26 @@ import errno
 import fcntl
 import os
 import select
-import threading
 import tty
+from dataclasses import dataclass
 
 from rollcam.common.errors import DeviceError
+from rollcam.common.lifecycle import Closeable, Stats, Worker
 from rollcam.firmware.camera import FirmwareCamera
 from rollcam.firmware.protocol import ProtocolSession
 
 
-class PtySerialServer:
-    """Serves ``firmware.protocol`` for one camera on a new pseudo-terminal; a context manager."""
+@dataclass
+class SerialStats(Stats):
+    """Command lines answered, and reply bytes dropped because the client did not read them."""
+
+    lines: int = 0
+    dropped_bytes: int = 0
+
+
+class PtySerialServer(Closeable):
+    """Serves ``firmware.protocol`` for one camera on a new pseudo-terminal; a context manager (``with``
+    starts it)."""
 
     def __init__(self, camera: FirmwareCamera) -> None:
         self.camera = camera
@@ -33,35 +43,27 @@ class PtySerialServer:
         flags = fcntl.fcntl(self._master, fcntl.F_GETFL)
         fcntl.fcntl(self._master, fcntl.F_SETFL, flags | os.O_NONBLOCK)
         self.path = os.ttyname(self._slave)
-        self.stats = {"lines": 0, "dropped_bytes": 0}
-        self._stop = threading.Event()
-        self._thread = threading.Thread(target=self._run, name="rollcam-serial", daemon=True)
-        self.closed = False
-
-    def __enter__(self) -> PtySerialServer:
-        self.start()
-        return self
-
-    def __exit__(self, *exc: object) -> None:
-        self.close()
+        self.stats = SerialStats()
+        self._worker = Worker(self._run, name="rollcam-serial", wrap=DeviceError)
+        self._stop = self._worker.stop_event
 
     def __repr__(self) -> str:
         return f"<PtySerialServer {self.path} for {self.camera.sensor.name}{' closed' if self.closed else ''}>"
 
     def start(self) -> None:
         """Start answering commands."""
-        self._thread.start()
+        self._check_open()
+        self._worker.start()
 
-    def close(self) -> None:
-        """Stop and free the pty. Idempotent."""
-        if self.closed:
-            return
-        self.closed = True
-        self._stop.set()
-        if self._thread.is_alive():
-            self._thread.join(timeout=5)
-        for fd in (self._master, self._slave):
-            os.close(fd)
+    _on_enter = start
+
+    def _close(self) -> None:
+        """Stop and free the pty (re-raising what stopped the server early, if anything did)."""
+        try:
+            self._worker.close()
+        finally:
+            for fd in (self._master, self._slave):
+                os.close(fd)
 
     def _run(self) -> None:
         while not self._stop.is_set():
@@ -77,7 +79,7 @@ class PtySerialServer:
                     continue
                 raise
             reply = self.session.feed(data)
-            self.stats["lines"] = self.session.lines
+            self.stats.lines = self.session.lines
             if reply:
                 self._send(reply)
 
@@ -86,4 +88,4 @@ class PtySerialServer:
             sent = os.write(self._master, data)
         except BlockingIOError:
             sent = 0
-        self.stats["dropped_bytes"] += len(data) - sent
+        self.stats.dropped_bytes += len(data) - sent

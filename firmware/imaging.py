@@ -20,12 +20,11 @@ import threading
 
 import numpy as np
 from rollcam.sim import formats as sf
+from rollcam.sim.codecs import codec
 from rollcam.sim.frame import Frame
-from rollcam.sim.isp import to_processed
 from rollcam.sim.synthetic import SyntheticCamera
 
 from .patterns import render_pattern
-from .pixfmt import convert
 from .spec import CameraSpec, scene_of
 
 _PATTERN_ONLY = ("test_pattern",)  # spec fields that change frames without a new SyntheticCamera
@@ -72,7 +71,8 @@ class Imager:
         if spec.raw:
             bits = spec.sensor.bit_depth
             dn = sf.mosaic(image, spec.bayer_order).astype(np.uint16) << (bits - 8)  # hwconfig: 8..16 bits
-            return dataclasses.replace(frame, data=sf.encode_raw(dn, frame.format, bits), objects=(), meta=meta)
+            data = codec(frame.format).encode(dn, sample_bits=bits)
+            return dataclasses.replace(frame, data=data, objects=(), meta=meta)
         return dataclasses.replace(frame, data=image, objects=(), meta=meta)
 
 
@@ -81,9 +81,7 @@ def encode(frame: Frame, spec: CameraSpec) -> Frame:
     fourcc = spec.pixel_format
     if spec.raw or frame.format == fourcc:
         return frame
-    if fourcc == "MJPG":
-        return dataclasses.replace(frame, data=convert(frame.data, fourcc), format=fourcc)
-    return dataclasses.replace(frame, data=to_processed(frame.data, fourcc), format=fourcc)
+    return dataclasses.replace(frame, data=codec(fourcc).encode(frame.data), format=fourcc)
 
 
 def _same_pixels(a: CameraSpec, b: CameraSpec) -> bool:

@@ -1,28 +1,19 @@
 """The firmware camera's output formats: the emulated ISP's processed ones and the sensor's raw ones.
 
-``FORMATS`` are the processed formats: BGR renders converted by ``convert(image, fourcc)``, the conversion
-point of the V4L2 and HTTP transports (UVC's wire formats are in ``rollcam.emu.uvc.convert``). A sensor's raw
-fourccs (Bayer or mono samples, unpacked or CSI-2 packed, from its hw_config ``formats``) bypass the ISP, as
-on a near-sensor camera. ``device_format`` describes either kind to devices as a ``DeviceFormat`` (the V4L2
-description; layout, bytesperline and sizeimage are ``rollcam.sim.formats``'s, MJPG being the one compressed
-format), and ``to_bgr`` turns a raw frame into a preview image (``rollcam.sim.isp``) for transports that can
-only show pictures (HTTP MJPEG).
+``FORMATS`` are the processed formats, made from BGR renders by the codec table (``rollcam.sim.codecs``,
+which every transport converts pixels with). A sensor's raw fourccs (Bayer or mono samples, unpacked or
+CSI-2 packed, from its hw_config ``formats``) bypass the ISP, as on a near-sensor camera. ``device_format``
+describes either kind to devices as a ``DeviceFormat`` (the V4L2 description; layout, bytesperline and
+sizeimage are ``rollcam.sim.formats``'s, MJPG being the one compressed format).
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
 
-import cv2
-import numpy as np
 from rollcam.common.errors import ConfigError
 from rollcam.sim import formats as sf
-from rollcam.sim.formats import bgr_to_yuyv
-from rollcam.sim.frame import Frame
 from rollcam.sim.hwconfig import SensorConfig
-from rollcam.sim.isp import IspParams, preview
-
-JPEG_QUALITY = 85
 
 _PROCESSED = (  # the emulated ISP's formats, in the order devices enumerate them, with V4L2's descriptions
     ("YUYV", "YUYV 4:2:2"),
@@ -101,38 +92,3 @@ def device_format(fourcc: str) -> DeviceFormat:
         layout = sf.pixel_format(fourcc)
         return DeviceFormat(layout.fourcc, raw_description(layout), layout, raw=True)
     raise ConfigError(f"pixel format {fourcc!r} is not one of {list(FORMATS)} or a raw sensor format")
-
-
-def to_bgr(frame: Frame, sensor: SensorConfig) -> np.ndarray:
-    """A frame's picture as 8-bit BGR: the render itself, or a raw frame through the preview ISP."""
-    if not is_raw(frame.format):
-        return frame.data
-    f = sf.pixel_format(frame.format)
-    samples = sf.decode_raw(frame.data, f.fourcc, frame.width)
-    shift = sensor.bit_depth - f.bits  # a narrower format keeps the ADC's high bits
-    black = sensor.noise.black_level_dn / (1 << shift)
-    white = float((1 << f.bits) - 1)
-    return preview(samples, f.cfa or "mono", IspParams(black_level_dn=min(black, white - 1), white_level_dn=white))
-
-
-def encode_jpeg(image_bgr: np.ndarray, quality: int = JPEG_QUALITY) -> bytes:
-    """A baseline JPEG of a BGR (or grey) image."""
-    ok, buf = cv2.imencode(".jpg", image_bgr, [cv2.IMWRITE_JPEG_QUALITY, int(quality)])
-    if not ok:
-        raise ConfigError(f"JPEG encoding failed for an image of shape {image_bgr.shape!r}")
-    return buf.tobytes()
-
-
-def convert(image_bgr: np.ndarray, fourcc: str, quality: int = JPEG_QUALITY) -> np.ndarray:
-    """A BGR8 image as ``fourcc`` data: (h, w, c) arrays for raw formats, a 1-D uint8 array for MJPG."""
-    if fourcc == "BGR3":
-        return image_bgr
-    if fourcc == "YUYV":
-        return bgr_to_yuyv(image_bgr)
-    if fourcc == "RGB3":
-        return cv2.cvtColor(image_bgr, cv2.COLOR_BGR2RGB)
-    if fourcc == "GREY":
-        return cv2.cvtColor(image_bgr, cv2.COLOR_BGR2GRAY)
-    if fourcc == "MJPG":
-        return np.frombuffer(encode_jpeg(image_bgr, quality), dtype=np.uint8)
-    raise ConfigError(f"pixel format {fourcc!r} is not one of {list(FORMATS)}")

@@ -15,6 +15,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 from rollcam.common.errors import ConfigError, DeviceError
+from rollcam.common.lifecycle import Stats
 
 from .scheduler import FrameSchedule
 from .spec import CameraSpec
@@ -24,7 +25,7 @@ Clock = Callable[[], int]
 
 
 @dataclass
-class CameraStats:
+class CameraStats(Stats):
     """What a device has done: frames made, frames skipped because they were late, external triggers."""
 
     frames: int = 0

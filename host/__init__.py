@@ -1,13 +1,24 @@
 """Host side: camera sources, detectors, CLI. ``from rollcam.host import open_camera`` opens any source URI;
 ``VideoCapture`` is a drop-in for ``cv2.VideoCapture`` that also takes those URIs."""
 
-from rollcam.common.errors import ConfigError, DeviceError, ProtocolError, RollcamError, SourceError
-
-from .sources import open_camera
+from rollcam.common.errors import (
+    ConfigError,
+    DeviceError,
+    DeviceNotFoundError,
+    MissingDependencyError,
+    ProtocolError,
+    RollcamError,
+    SourceError,
+)
 
 
 def __getattr__(name: str) -> object:
-    # VideoCapture imports OpenCV; load it on first use so ``import rollcam.host`` stays light.
+    # open_camera imports numpy and VideoCapture OpenCV; load them on first use so ``import rollcam.host``
+    # (and with it ``rollcam --help``) stays light.
+    if name == "open_camera":
+        from .sources import open_camera
+
+        return open_camera
     if name == "VideoCapture":
         from .videocapture import VideoCapture
 
@@ -15,5 +26,5 @@ def __getattr__(name: str) -> object:
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
-__all__ = ["ConfigError", "DeviceError", "ProtocolError", "RollcamError", "SourceError", "VideoCapture",
-           "open_camera"]
+__all__ = ["ConfigError", "DeviceError", "DeviceNotFoundError", "MissingDependencyError", "ProtocolError",
+           "RollcamError", "SourceError", "VideoCapture", "open_camera"]

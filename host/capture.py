@@ -4,7 +4,12 @@ Each image is written under a temporary name and moved into place with ``os.repl
 record is appended (and flushed) only once the image is there, and the two frames of a GS/RS pair go in as
 one write. However a capture stops (Ctrl-C, an error, a finite source running out), ``frames.jsonl`` holds
 complete records of images that exist, and no temporary file is left behind. ``capture.json`` beside it
-records the source's ``info()``, the command line and whether the capture completed.
+records the source's ``info()``, the command line and whether the capture completed. Nothing is written
+(not even the folder) before the options are accepted and the first frames are known to fit the image format,
+so a refused capture leaves nothing that would refuse the corrected command.
+
+Images are named by instant and shutter: ``NNNNNN_rs.png`` / ``NNNNNN_gs.png``, or ``NNNNNN.png`` for a camera
+whose shutter is unknown (a webcam through ``opencv:`` without ``sensor=``).
 """
 
 from __future__ import annotations
@@ -12,7 +17,6 @@ from __future__ import annotations
 import json
 import os
 import re
-import sys
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
@@ -22,19 +26,22 @@ from typing import Any, TextIO
 
 import numpy as np
 from rollcam.common.errors import ConfigError, SourceError
+from rollcam.sim.codecs import codec
 from rollcam.sim.formats import FORMATS
 from rollcam.sim.frame import Frame
 
+from .progress import Progress
 from .sources import CameraSource
 
 FRAMES_LOG = "frames.jsonl"
 CAPTURE_INFO = "capture.json"
 IMAGE_FORMATS = ("png", "jpg", "npy")
 SHUTTER_CHOICES = ("rolling", "global", "both")
-SUFFIX = {"rolling": "rs", "global": "gs"}
+SUFFIX = {"rolling": "_rs", "global": "_gs"}
+"""File-name suffix of each shutter; any other (``unknown``) gets none."""
 _TMP_SUFFIX = ".part"
 # Files a capture writes; --overwrite removes only these, never anything else the folder holds.
-_CAPTURE_FILE = re.compile(r"\d{6,}_(rs|gs)\.(png|jpg|npy)(\.part)?|\.?(frames\.jsonl|capture\.json)(\.part)?")
+_CAPTURE_FILE = re.compile(r"\d{6,}(_rs|_gs)?\.(png|jpg|npy)(\.part)?|\.?(frames\.jsonl|capture\.json)(\.part)?")
 
 
 @dataclass
@@ -60,49 +67,6 @@ class CaptureInterrupted(KeyboardInterrupt):
     def __init__(self, result: CaptureResult) -> None:
         super().__init__(f"capture interrupted after {result.frames} frame(s)")
         self.result = result
-
-
-class Progress:
-    """A one-line ``\\r``-refreshed counter with rate and ETA on a text stream (no-op when disabled)."""
-
-    def __init__(self, total: int, *, label: str, stream: TextIO | None = None, enabled: bool | None = None,
-                 clock: Callable[[], float] = time.monotonic, min_interval_s: float = 0.1, unit: str = "fps") -> None:
-        self.total, self.label, self.unit = total, label, unit
-        self.stream = sys.stderr if stream is None else stream
-        self.enabled = _isatty(self.stream) if enabled is None else enabled
-        self.clock, self.min_interval_s = clock, min_interval_s
-        self.start = clock()
-        self._last = -float("inf")
-        self._shown = False
-
-    def update(self, done: int) -> None:
-        """Show ``done`` of ``total`` (refreshed at most every ``min_interval_s``, and always at the end)."""
-        if not self.enabled:
-            return
-        now = self.clock()
-        if done < self.total and now - self._last < self.min_interval_s:
-            return
-        self._last = now
-        elapsed = max(now - self.start, 1e-9)
-        rate = done / elapsed
-        eta = f"ETA {(self.total - done) / rate:5.0f} s" if rate > 0 and done < self.total else f"{elapsed:5.1f} s"
-        self.stream.write(f"\r{self.label} {done}/{self.total}  {rate:6.1f} {self.unit}  {eta}  ")
-        self.stream.flush()
-        self._shown = True
-
-    def close(self) -> None:
-        """End the progress line so later output starts on a fresh line."""
-        if self._shown:
-            self.stream.write("\n")
-            self.stream.flush()
-            self._shown = False
-
-
-def _isatty(stream: TextIO) -> bool:
-    try:
-        return stream.isatty()
-    except (AttributeError, ValueError):
-        return False
 
 
 def write_atomic(path: Path, data: bytes) -> None:
@@ -131,7 +95,7 @@ def image_array(frame: Frame, fmt: str) -> np.ndarray:
     data = frame.data
     if frame.format in _PICTURES or frame.format not in FORMATS:
         if data.ndim == 3 and data.shape[2] == 3:
-            img = data[..., ::-1] if frame.format == "RGB3" else data
+            img = codec("RGB3").decode(data, frame.width, frame.height) if frame.format == "RGB3" else data
         elif data.ndim == 2 or (data.ndim == 3 and data.shape[2] == 1):
             img = data
         else:
@@ -164,15 +128,20 @@ def encode_image(frame: Frame, fmt: str) -> bytes:
     return buf.tobytes()
 
 
-def prepare_out_dir(out_dir: Path, overwrite: bool) -> None:
-    """Create ``out_dir``; refuse one that already holds a capture unless ``overwrite`` (then clear it)."""
+def check_out_dir(out_dir: Path, overwrite: bool) -> None:
+    """Refuse an ``out_dir`` that is a file, or holds a capture while ``overwrite`` is off; writes nothing."""
     if out_dir.exists() and not out_dir.is_dir():
         raise ConfigError(f"--out {str(out_dir)!r} exists and is not a directory")
+    if (out_dir / FRAMES_LOG).exists() and not overwrite:
+        raise ConfigError(f"{str(out_dir)!r} already holds a capture ({FRAMES_LOG}); pass --overwrite to "
+                          "replace it, or choose another --out")
+
+
+def prepare_out_dir(out_dir: Path, overwrite: bool) -> None:
+    """Create ``out_dir``; refuse one that already holds a capture unless ``overwrite`` (then clear it)."""
+    check_out_dir(out_dir, overwrite)
     out_dir.mkdir(parents=True, exist_ok=True)
     if (out_dir / FRAMES_LOG).exists():
-        if not overwrite:
-            raise ConfigError(f"{str(out_dir)!r} already holds a capture ({FRAMES_LOG}); pass --overwrite to "
-                              "replace it, or choose another --out")
         for p in out_dir.iterdir():
             if p.is_file() and _CAPTURE_FILE.fullmatch(p.name):
                 p.unlink()
@@ -231,7 +200,7 @@ class CaptureWriter:
         start = self._log.tell()
         try:
             for frame in frames:
-                path = self.out_dir / f"{self.frames:06d}_{SUFFIX.get(frame.shutter, frame.shutter)}.{self.fmt}"
+                path = self.out_dir / f"{self.frames:06d}{SUFFIX.get(frame.shutter, '')}.{self.fmt}"
                 written.append(path)  # listed before it exists, so an interrupt mid-write still removes it
                 write_atomic(path, encode_image(frame, self.fmt))
                 records.append(json.dumps(frame.to_json(path.name), default=_json_default))
@@ -300,6 +269,13 @@ def capture(
         raise ConfigError(f"image format {fmt!r} is not one of {list(IMAGE_FORMATS)}")
     out = Path(out_dir)
     read = frame_reader(source, shutter)
+    check_out_dir(out, overwrite)
+    # The first instant is read before anything is written, and checked against the image format: a frame the
+    # format cannot hold (jpg of a raw stream) is refused while the folder is still as it was.
+    first = read()
+    for frame in first or ():
+        if fmt != "npy":
+            image_array(frame, fmt)
     prepare_out_dir(out, overwrite)
     info: dict[str, Any] = {
         "command": list(command) if command is not None else None,
@@ -314,16 +290,15 @@ def capture(
     }
     write_capture_info(out, info)
     writer = CaptureWriter(out, fmt)
-    bar = Progress(frames, label="capture", stream=stream, enabled=progress, clock=clock)
+    bar = Progress(frames, label="capture", stream=stream, enabled=progress, unit="frame")
     start = clock()
     interrupted = False
     try:
-        while writer.frames < frames:
-            got = read()
-            if got is None:
-                break
-            writer.write(got)
+        pending = first
+        while pending is not None:
+            writer.write(pending)
             bar.update(writer.frames)
+            pending = read() if writer.frames < frames else None
     except KeyboardInterrupt:
         interrupted = True
     finally:

@@ -6,6 +6,10 @@ the rolling-shutter skew is plain to see) and writes
 - ``demo_rs.mp4``: the RS stream with every pedestrian's GS box (green) and RS box (magenta) and a caption
   (frame, stream time, line time);
 - ``contact_sheet.png``: GS and RS frames of the same instants side by side, boxes drawn, with a legend.
+
+The demo follows the sensor's shutter: a global-shutter sensor (``--sensor ov9281``) exposes every row at
+once, so it streams GS frames only, writes ``demo_gs.mp4`` with the GS boxes, a one-column contact sheet, and
+reports no rolling-shutter shift.
 """
 
 from __future__ import annotations
@@ -15,14 +19,16 @@ import os
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, TextIO
+from typing import TextIO
 
 import numpy as np
 from rollcam.common.errors import ConfigError, RollcamError
+from rollcam.common.lifecycle import Stats
 from rollcam.sim.frame import Frame
 from rollcam.sim.hwconfig import load_sensor
 
-from .capture import Progress, write_atomic
+from .capture import write_atomic
+from .progress import Progress
 from .sources import open_camera
 
 DEFAULT_OUT = Path("rollcam_out") / "demo"
@@ -41,6 +47,14 @@ BAND_BGR = (30, 30, 30)
 MIN_BOX_HEIGHT_PX = 6  # boxes of walkers far down the street would only clutter the picture
 
 
+@dataclass(frozen=True)
+class DemoStats(Stats):
+    """The demo's extra figures: the largest RS-GS box-centre shift, and the frame size streamed."""
+
+    max_shift_px: float = 0.0
+    size: tuple[int, int] = (0, 0)
+
+
 @dataclass
 class DemoResult:
     """Where the demo wrote its files and what it saw."""
@@ -53,12 +67,16 @@ class DemoResult:
     line_time_ns: int
     pedestrians: int
     mean_shift_px: float
-    stats: dict[str, Any] = field(default_factory=dict)
+    stats: DemoStats = field(default_factory=DemoStats)
+    shutter: str = "rolling"
 
     def summary(self) -> str:
         """The one-line summary the CLI prints."""
-        return (f"{self.frames} frames at {self.fps:.4g} fps, {self.pedestrians} pedestrians, mean |RS-GS| box "
-                f"centre shift {self.mean_shift_px:.1f} px (line time {self.line_time_ns / 1000:.2f} us)")
+        head = f"{self.frames} frames at {self.fps:.4g} fps, {self.pedestrians} pedestrians, "
+        if self.shutter == "global":
+            return head + "global shutter: every row exposed at once, so no rolling-shutter skew to show"
+        return head + (f"mean |RS-GS| box centre shift {self.mean_shift_px:.1f} px (line time "
+                       f"{self.line_time_ns / 1000:.2f} us)")
 
 
 def default_size(sensor: str) -> tuple[int, int]:
@@ -104,39 +122,46 @@ def caption(image: np.ndarray, text: str, *, scale: float | None = None) -> np.n
     return np.vstack([band, image])
 
 
-def _legend(width: int) -> np.ndarray:
+def _legend(width: int, rolling: bool = True) -> np.ndarray:
     import cv2
 
     band = np.full((34, width, 3), BAND_BGR, np.uint8)
     x = 8
-    for colour, text in ((GS_BGR, "GS box: every row at the frame's reference time"),
-                         (RS_BGR, "RS box: each row at its own read-out time")):
+    keys = [(GS_BGR, "GS box: every row at the frame's reference time")]
+    if rolling:
+        keys.append((RS_BGR, "RS box: each row at its own read-out time"))
+    for colour, text in keys:
         cv2.rectangle(band, (x, 10), (x + 22, 24), colour, 2)
         cv2.putText(band, text, (x + 30, 22), cv2.FONT_HERSHEY_SIMPLEX, 0.45, TEXT_BGR, 1, cv2.LINE_AA)
         x += 30 + cv2.getTextSize(text, cv2.FONT_HERSHEY_SIMPLEX, 0.45, 1)[0][0] + 24
     return band
 
 
-def contact_sheet(pairs: Sequence[tuple[Frame, Frame]], tile_width: int = SHEET_TILE_WIDTH_PX) -> np.ndarray:
-    """A grid of (GS, RS) pairs, one instant a row, GS left and RS right, boxes drawn, legend on top."""
+def contact_sheet(pairs: Sequence[tuple[Frame, Frame | None]], tile_width: int = SHEET_TILE_WIDTH_PX) -> np.ndarray:
+    """A grid of (GS, RS) pairs, one instant a row, GS left and RS right, boxes drawn, legend on top; pairs
+    without an RS frame (a global-shutter sensor) make a one-column sheet of GS frames."""
     import cv2
 
+    rolling = all(rs is not None for _, rs in pairs)
     rows = []
     for gs, rs in pairs:
         tiles = []
-        for frame, name in ((gs, "GS"), (rs, "RS")):
+        for frame, name in ((gs, "GS"), (rs, "RS")) if rolling else ((gs, "GS"),):
             h = round(frame.height * tile_width / frame.width)
             img = cv2.resize(np.ascontiguousarray(frame.data), (tile_width, h), interpolation=cv2.INTER_AREA)
             draw_boxes(img, frame, gs=True, rs=name == "RS")
             t_s = frame.timestamp_ns / 1e9
             label = f"{name} frame {frame.sequence}  t={t_s:.4f} s  line time {frame.line_time_ns / 1000:.2f} us"
             tiles.append(caption(img, label, scale=0.4))
-        rows.append(np.hstack([tiles[0], np.full((tiles[0].shape[0], 4, 3), 255, np.uint8), tiles[1]]))
+        if len(tiles) == 1:
+            rows.append(tiles[0])
+        else:
+            rows.append(np.hstack([tiles[0], np.full((tiles[0].shape[0], 4, 3), 255, np.uint8), tiles[1]]))
     sep = np.full((4, rows[0].shape[1], 3), 255, np.uint8)
     body = [rows[0]]
     for r in rows[1:]:
         body += [sep, r]
-    return np.vstack([_legend(rows[0].shape[1]), *body])
+    return np.vstack([_legend(rows[0].shape[1], rolling), *body])
 
 
 def _centre_shift(frame: Frame) -> list[float]:
@@ -170,33 +195,44 @@ def run_demo(
     if out.exists() and not out.is_dir():
         raise ConfigError(f"--out {str(out)!r} exists and is not a directory")
     out.mkdir(parents=True, exist_ok=True)
-    video, sheet = out / "demo_rs.mp4", out / "contact_sheet.png"
-    tmp_video = out / ".demo_rs.part.mp4"  # VideoWriter picks the container from the extension
     with open_camera(uri) as source:
         info = source.info()
+        rolling = info.get("shutter") != "global"  # a GS sensor's frames are GS: no RS frame is claimed
+        name = "demo_rs" if rolling else "demo_gs"
+        video, sheet = out / f"{name}.mp4", out / "contact_sheet.png"
+        tmp_video = out / f".{name}.part.mp4"  # VideoWriter picks the container from the extension
         fps = float(info["fps"])
         n = max(1, round(seconds * fps))
         picks = set(np.linspace(0, n - 1, min(SHEET_ROWS, n)).round().astype(int).tolist())
         writer = None
-        sheet_pairs: list[tuple[Frame, Frame]] = []
+        sheet_pairs: list[tuple[Frame, Frame | None]] = []
         shifts: list[float] = []
         seen: set[int] = set()
         bar = Progress(n, label="demo", stream=stream, enabled=progress)
         finished = False
         try:
             for i in range(n):
-                pair = source.read_pair()
-                if pair is None:
+                if rolling:
+                    pair = source.read_pair()
+                    shown = None if pair is None else pair[1]
+                else:
+                    shown = source.read()
+                    pair = None if shown is None else (shown, None)
+                if pair is None or shown is None:
                     break
-                rs = pair[1]
-                shifts += _centre_shift(rs)
-                seen.update(o.id for o in _shown(rs))
+                if rolling:
+                    shifts += _centre_shift(shown)
+                seen.update(o.id for o in _shown(shown))
                 if i in picks:
                     sheet_pairs.append(pair)
-                img = np.ascontiguousarray(rs.data).copy()
-                draw_boxes(img, rs, thickness=2 if img.shape[1] >= 1280 else 1)
-                text = (f"RS frame {rs.sequence}  t={rs.timestamp_ns / 1e9:.3f} s  line time "
-                        f"{rs.line_time_ns / 1000:.2f} us   green: GS box  magenta: RS box")
+                img = np.ascontiguousarray(shown.data).copy()
+                draw_boxes(img, shown, rs=rolling, thickness=2 if img.shape[1] >= 1280 else 1)
+                if rolling:
+                    text = (f"RS frame {shown.sequence}  t={shown.timestamp_ns / 1e9:.3f} s  line time "
+                            f"{shown.line_time_ns / 1000:.2f} us   green: GS box  magenta: RS box")
+                else:
+                    text = (f"GS frame {shown.sequence}  t={shown.timestamp_ns / 1e9:.3f} s  global shutter: "
+                            "every row at once   green: GS box")
                 img = caption(img, text)
                 if writer is None:
                     # Playback rate only (captions carry the exact times); MPEG-4 wants a simple time base.
@@ -222,4 +258,5 @@ def run_demo(
     write_atomic(sheet, png.tobytes())
     return DemoResult(video, sheet, uri, n, fps, int(info["line_time_ns"]), len(seen),
                       float(np.mean(shifts)) if shifts else 0.0,
-                      {"max_shift_px": float(np.max(shifts)) if shifts else 0.0, "size": list(size)})
+                      DemoStats(float(np.max(shifts)) if shifts else 0.0, (int(size[0]), int(size[1]))),
+                      "rolling" if rolling else "global")

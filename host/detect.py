@@ -14,17 +14,15 @@ and shows fps, capture latency and detector latency on one status line. With ``-
 
 For synthetic sources, detections are matched to the GS and RS ground truth and running precision and
 recall are printed (``rollcam.host.truthmatch``). Ctrl-C stops cleanly: what was written stays valid and the
-command exits with status 130.
+command exits with status 130. The command line is ``rollcam.host.commands.detect``.
 """
 
 from __future__ import annotations
 
-import argparse
 import contextlib
 import json
 import os
 import queue
-import sys
 import threading
 import time
 from array import array
@@ -34,7 +32,7 @@ from pathlib import Path
 from typing import Any, TextIO
 
 import numpy as np
-from rollcam.common.errors import ConfigError, SourceError
+from rollcam.common.errors import SourceError
 from rollcam.sim.frame import Frame
 
 from .detectors import Detections, Detector
@@ -136,7 +134,8 @@ def annotate(image: np.ndarray, dets: Detections, frame: Frame, names: dict[int,
     return out
 
 
-def _stats(values: Sequence[float]) -> dict[str, float] | None:
+def summary_stats(values: Sequence[float]) -> dict[str, float] | None:
+    """Mean, median, p95 and max of per-frame latencies (ms), or None without any."""
     if not len(values):
         return None
     a = np.asarray(values)
@@ -166,8 +165,8 @@ class DetectResult:
     def to_json(self) -> dict[str, Any]:
         return {"frames": self.frames, "detections": self.detections, "seconds": round(self.seconds, 3),
                 "fps": round(self.fps, 3), "complete": self.complete,
-                "capture_ms": _stats(self.capture_ms), "detect_ms": _stats(self.detect_ms),
-                "bookkeeping_ms": _stats(self.bookkeeping_ms),
+                "capture_ms": summary_stats(self.capture_ms), "detect_ms": summary_stats(self.detect_ms),
+                "bookkeeping_ms": summary_stats(self.bookkeeping_ms),
                 "truth": self.truth.to_json() if self.truth is not None and self.truth.frames else None,
                 "out_dir": None if self.out_dir is None else str(self.out_dir)}
 
@@ -264,111 +263,24 @@ def _write_summary(out_dir: Path, result: DetectResult, source: CameraSource, de
 
 
 class StatusLine:
-    """The live status: fps, capture and detector latency, detections, and running P/R with truth."""
+    """The live status on the one progress line: frames and their rate, capture and detector latency (mean of
+    the last 30), detections, and running P/R with truth. Off when stderr is not a terminal unless ``enabled``."""
 
-    def __init__(self, stream: TextIO | None = None, tty: bool | None = None, interval_s: float = 2.0,
-                 clock: Callable[[], float] = time.monotonic) -> None:
-        self.stream = stream or sys.stderr
-        self.tty = self.stream.isatty() if tty is None else tty
-        self.interval_s, self.clock = interval_s, clock
-        self._last = -float("inf")
-        self._shown = False
+    def __init__(self, total: int | None = None, *, enabled: bool | None = None, stream: TextIO | None = None) -> None:
+        from .progress import Progress
+
+        self.bar = Progress(total, label="detect", stream=stream, enabled=enabled, unit="frame")
 
     def __call__(self, result: DetectResult, dets: Detections) -> None:
-        now = self.clock()
-        if not self.tty and now - self._last < self.interval_s:
+        if not self.bar.enabled:
             return
-        self._last = now
         recent = slice(-30, None)
-        line = (f"frame {result.frames:5d}  {result.fps:6.2f} fps  capture {np.mean(result.capture_ms[recent]):7.1f} ms"
-                f"  detect {np.mean(result.detect_ms[recent]):7.1f} ms  dets {len(dets):3d}")
+        capture_ms, detect_ms = np.mean(result.capture_ms[recent]), np.mean(result.detect_ms[recent])
+        line = f"capture {capture_ms:6.1f} ms  detect {detect_ms:6.1f} ms  dets {len(dets):3d}"
         if result.truth is not None and result.truth.frames:
             line += "  " + result.truth.summary()
-        self.stream.write(("\r" + line + "  ") if self.tty else line + "\n")
-        self.stream.flush()
-        self._shown = self.tty
+        self.bar.status(line, refresh=False)
+        self.bar.update(result.frames)
 
     def close(self) -> None:
-        if self._shown:
-            self.stream.write("\n")
-            self._shown = False
-
-
-# ---------------------------------------------------------------------------------------------- command
-def cmd_detect(args: argparse.Namespace) -> int:
-    """``rollcam detect``: run the loop, print the summary; 130 after Ctrl-C with everything kept."""
-    from .cli import EXIT_INTERRUPTED, EXIT_OK, PROG
-    from .detectors import load_detector
-    from .sources import open_camera
-
-    out_dir = Path(args.out) if args.out else None
-    if out_dir is not None and (out_dir / LOG).exists() and not args.overwrite:
-        raise ConfigError(f"{str(out_dir)!r} already holds a detection run ({LOG}); pass --overwrite or choose "
-                          "another --out")
-    truth = RunningPR(iou=args.iou, min_height_px=args.min_height, min_visible=args.min_visible)
-    status = StatusLine(tty=True if args.progress else None)
-    detector = load_detector(args.detector)
-    try:
-        with open_camera(args.source) as source:
-            try:
-                result = run_detect(source, detector, frames=args.frames, out_dir=out_dir, shutter=args.shutter,
-                                    video=not args.no_video, truth=truth, status=status,
-                                    meta={"command": [PROG, *args.argv]})
-            except DetectInterrupted as exc:
-                status.close()
-                _print_summary(exc.result, args, interrupted=True)
-                return EXIT_INTERRUPTED
-    finally:
-        detector.close()
-    status.close()
-    _print_summary(result, args)
-    return EXIT_OK
-
-
-def _print_summary(result: DetectResult, args: argparse.Namespace, interrupted: bool = False) -> None:
-    if args.json:
-        print(json.dumps(result.to_json()))
-        return
-    how = "interrupted after" if interrupted else "ran"
-    cap, det = _stats(result.capture_ms), _stats(result.detect_ms)
-    lines = [f"{how} {result.frames} frame(s) in {result.seconds:.1f} s ({result.fps:.2f} fps), "
-             f"{result.detections} detection(s)"]
-    if cap and det:
-        lines.append(f"capture {cap['mean']:.1f} ms (p95 {cap['p95']:.1f}), detector {det['mean']:.1f} ms "
-                     f"(p95 {det['p95']:.1f}) per frame")
-    if result.truth is not None and result.truth.frames:
-        lines.append(f"against ground truth (IoU >= {result.truth.iou}): {result.truth.summary()}")
-    if result.out_dir is not None:
-        lines.append(f"wrote {result.out_dir / LOG}" + ("" if args.no_video else f", {result.out_dir / VIDEO}")
-                     + f", {result.out_dir / SUMMARY}")
-    print("\n".join(lines), file=sys.stderr if interrupted else sys.stdout)
-
-
-def register(sub: argparse._SubParsersAction) -> None:
-    """Add ``rollcam detect`` to the CLI."""
-    from .cli import _positive_int
-
-    p = sub.add_parser(
-        "detect", help="run a detector on a source live: fps, latencies, detections.jsonl, annotated MP4",
-        description="Run a detector on SOURCE frame by frame, showing fps, capture and detector latency, and "
-                    "for synthetic sources running precision/recall against the GS and RS ground truth. With --out, "
-                    "write DIR/detections.jsonl, DIR/detections.mp4 and DIR/detect.json. Ctrl-C stops cleanly "
-                    "(exit 130) keeping everything written.",
-        epilog="Detectors: 'hog', 'ssdlite' (packaged SSDLite-MobileNetV2 person model), 'onnx:MODEL.onnx' "
-               "(YOLO or SSD exports); options follow '?', e.g. 'ssdlite?conf=0.4&tiles=3x2'.")
-    p.add_argument("source", metavar="SOURCE", help="source URI, e.g. 'emu:imx219?scene=street&speed=fast'")
-    p.add_argument("--detector", required=True, metavar="NAME", help="detector spec (hog, ssdlite, onnx:PATH)")
-    p.add_argument("--frames", type=_positive_int, default=None, metavar="N", help="stop after N frames")
-    p.add_argument("--out", default=None, metavar="DIR", help="write detections.jsonl, detections.mp4, detect.json")
-    p.add_argument("--no-video", action="store_true", help="skip the annotated MP4")
-    p.add_argument("--overwrite", action="store_true", help="replace an earlier run in DIR")
-    p.add_argument("--shutter", choices=("rolling", "global"), default=None,
-                   help="read this shutter from sources that render both (default: the source's)")
-    p.add_argument("--iou", type=float, default=0.5, help="IoU for matching ground truth (default: %(default)s)")
-    p.add_argument("--min-height", type=float, default=0.0, metavar="PX",
-                   help="truth boxes shorter than this are ignored, not counted as missed (default: %(default)s)")
-    p.add_argument("--min-visible", type=float, default=0.25, metavar="F",
-                   help="truth boxes less visible than this are ignored (default: %(default)s)")
-    p.add_argument("--json", action="store_true", help="print the summary as JSON")
-    p.add_argument("--progress", action="store_true", help="refresh the status line even when stderr is no terminal")
-    p.set_defaults(func=cmd_detect)
+        self.bar.close()

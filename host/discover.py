@@ -12,6 +12,8 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
+from rollcam.common.errors import MissingDependencyError, require
+
 Rows = list[dict[str, Any]]
 USB_VIDEO_CLASS = 0x0E
 
@@ -31,13 +33,11 @@ def v4l2_devices(dev: Path = Path("/dev"), sysfs: Path = Path("/sys/class/video4
 def oak_devices(dai: Any = None) -> tuple[Rows, str]:
     """OAK cameras depthai can see."""
     if dai is None:
-        from rollcam.common.errors import SourceError
-
         from .sources.oak import import_depthai
 
         try:
             dai = import_depthai()
-        except SourceError as exc:
+        except MissingDependencyError as exc:
             return [], str(exc)
     try:
         infos = dai.Device.getAllAvailableDevices()
@@ -52,10 +52,9 @@ def usb_video_devices(usb_find: Callable[..., Any] | None = None) -> tuple[Rows,
     """USB devices with a video-class interface (UVC cameras), through pyusb."""
     if usb_find is None:
         try:
-            import usb.core
-        except ImportError:
-            return [], "pyusb is not installed: pip install pyusb (and libusb-1.0 from the OS)"
-        usb_find = usb.core.find
+            usb_find = require("usb.core", "pyusb", "usb", "USB discovery").find
+        except MissingDependencyError as exc:
+            return [], f"{exc}; real cameras also need libusb-1.0 from the OS"
     try:
         devices = list(usb_find(find_all=True))
     except Exception as exc:  # pyusb's NoBackendError and libusb access errors

@@ -90,7 +90,7 @@ def start_usbip(args: argparse.Namespace, camera: Any, pump: Any) -> Running | N
     """The camera as a UVC device on a USB/IP server, when ``--usbip`` is given."""
     if args.usbip is None:
         return None
-    from rollcam.emu.usbip.server import USBIPServer
+    from rollcam.emu.usbip.server import USBIPServer, usbip_commands
     from rollcam.emu.uvc import DeviceIdentity, FirmwareProducer, UVCFunction
 
     host, port = args.usbip
@@ -104,9 +104,9 @@ def start_usbip(args: argparse.Namespace, camera: Any, pump: Any) -> Running | N
         raise OSError(f"cannot serve USB/IP on {host}:{port}: {exc.strerror or exc}") from None
     addr_host, addr_port = server.address
     busids = sorted(server.exports)
+    list_cmd, attach_cmd = usbip_commands(addr_host, addr_port, busids[0])
     return Running("usbip", server, [f"USB/IP:        {addr_host}:{addr_port} busid {', '.join(busids)}   "
-                                     f"(usbip list -r {addr_host} --tcp-port {addr_port}; usbip attach -r "
-                                     f"{addr_host} -b {busids[0]})"],
+                                     f"({list_cmd}; {attach_cmd})"],
                    {"host": addr_host, "port": addr_port, "busids": busids}, uses_pump=False)
 
 

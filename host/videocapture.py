@@ -9,7 +9,10 @@ For rollcam sources: ``read``/``grab``/``retrieve`` give 8-bit BGR (``CAP_PROP_C
 frame's own pixels), ``frame`` is the last rollcam ``Frame`` (timing and ground truth). ``get`` answers
 FRAME_WIDTH/HEIGHT, FPS, POS_FRAMES, POS_MSEC (the frame's device timestamp), FRAME_COUNT (-1 when
 endless), EXPOSURE (us), GAIN, CONVERT_RGB and FOURCC; other properties read 0, as OpenCV's backends
-answer properties they lack. ``set`` changes FRAME_WIDTH/HEIGHT, FPS, EXPOSURE (us) and GAIN of an ``emu:``
+answer properties they lack. As OpenCV's FFmpeg backend reads a network stream's first frame when it opens
+it, an ``http://`` stream is probed at open (its first frames are read ahead, and still returned by
+``read``), so FRAME_WIDTH/HEIGHT and FPS are known before the first read (FPS from the parts' device
+timestamps, else FFmpeg's 25). ``set`` changes FRAME_WIDTH/HEIGHT, FPS, EXPOSURE (us) and GAIN of an ``emu:``
 stream (it continues at the same frame index with the new settings) and POS_FRAMES (seek) of ``emu:``;
 on ``opencv:``/``v4l2:``/``oak:`` it goes to the device's controls. It returns False for what it cannot do.
 """
@@ -68,7 +71,13 @@ class VideoCapture:
         try:
             self._source = open_camera(os.fspath(source))
             self._uri = os.fspath(source)
-        except RollcamError as exc:  # OpenCV reports failure by isOpened(), not by raising
+            probe = getattr(self._source, "probe", None)
+            if probe is not None:  # a stream that only its frames describe (OpenCV reads one at open, too)
+                probe()
+        except RollcamError as exc:
+            if self._source is not None:
+                self._source.close()
+                self._source = None  # OpenCV reports failure by isOpened(), not by raising
             self.error = exc
             if parse_uri(os.fspath(source)).scheme in ("http", "https"):
                 # Not an MJPEG stream rollcam can read (HLS, a plain video file...): OpenCV may still play it.

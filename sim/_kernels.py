@@ -57,8 +57,10 @@ from ._world import (  # noqa: E402
     C_CY,
     C_FX,
     C_FY,
+    C_H,
     C_MOVING,
     C_TRANSPOSED,
+    C_W,
     KIND_STREET,
     L_AMB,
     L_SUN,
@@ -267,6 +269,64 @@ def actor_parts(act, world, lut, bld, light, cam, rot, pos, t, parts, scratch):
         parts[p, g + 4] = r_px
         parts[p, Q_YMIN] = min(ua[1], ub[1]) - r_px
         parts[p, Q_YMAX] = max(ua[1], ub[1]) + r_px
+
+
+@njit(cache=True, inline="always")
+def _clamped(v, lo, hi):
+    return min(max(v, lo), hi)
+
+
+@njit(cache=True)
+def actor_speeds(actors, world, lut, bld, light, cam, rot_tab, pos_tab, times, out):
+    """out[o] = fastest render-space displacement rate (px/s) of any part end point of actor o.
+
+    Parts wholly off the image (beyond half its size) at both times cannot move a pixel and are skipped;
+    end points are clamped to that margin, so a part clipped at the camera's near plane (whose clipped end
+    point races across image space far outside the frame) counts only its motion near the image.
+    """
+    w, h = cam[C_W], cam[C_H]
+    if cam[C_TRANSPOSED] != 0.0:
+        w, h = h, w
+    x_lo, x_hi, y_lo, y_hi = -0.5 * w, 1.5 * w, -0.5 * h, 1.5 * h
+    scratch = parts_scratch()
+    pa = np.empty((MAX_PARTS, PART_COLS))
+    pb = np.empty((MAX_PARTS, PART_COLS))
+    g = Q_GEO
+    for o in range(actors.shape[0]):
+        best = 0.0
+        if int(actors[o, A_TYPE]) == TYPE_BAR:
+            out[o] = abs(actors[o, R_VX])
+            continue
+        if not actors[o, P_H] > 0.0:  # a zero-size walker shows no pixel (and has no stride to walk by)
+            out[o] = 0.0
+            continue
+        actor_parts(actors[o], world, lut, bld, light, cam, rot_tab[0], pos_tab[0], times[0], pa, scratch)
+        for k in range(1, times.shape[0]):
+            actor_parts(actors[o], world, lut, bld, light, cam, rot_tab[k], pos_tab[k], times[k], pb, scratch)
+            dt = times[k] - times[k - 1]
+            for p in range(MAX_PARTS):
+                if pa[p, Q_KIND] != PART_CAPSULE or pb[p, Q_KIND] != PART_CAPSULE:
+                    continue
+                off = True
+                for q in (pa, pb):
+                    r = q[p, g + 4]
+                    if not (max(q[p, g], q[p, g + 2]) + r < x_lo or min(q[p, g], q[p, g + 2]) - r > x_hi
+                            or q[p, Q_YMAX] < y_lo or q[p, Q_YMIN] > y_hi):
+                        off = False
+                if off:
+                    continue
+                c = np.empty(8)
+                for i in range(2):
+                    c[4 * i] = _clamped(pa[p, g + 2 * i], x_lo, x_hi)
+                    c[4 * i + 1] = _clamped(pa[p, g + 2 * i + 1], y_lo, y_hi)
+                    c[4 * i + 2] = _clamped(pb[p, g + 2 * i], x_lo, x_hi)
+                    c[4 * i + 3] = _clamped(pb[p, g + 2 * i + 1], y_lo, y_hi)
+                da = math.hypot(c[2] - c[0], c[3] - c[1])
+                db = math.hypot(c[6] - c[4], c[7] - c[5])
+                d = max(da, db) + abs(pb[p, g + 4] - pa[p, g + 4])
+                best = max(best, d / dt)
+            pa, pb = pb, pa
+        out[o] = best
 
 
 # ======================================================================================================

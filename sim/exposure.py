@@ -27,74 +27,14 @@ from itertools import pairwise
 
 import numpy as np
 from numba import njit, prange
+from rollcam.common.errors import ConfigError
 
-from . import _body as B
-from . import _kernels as K
-from . import _world as Wd
 from .render import LinearFrame, Renderer
 
 DEFAULT_BOUND_PX = 0.5
 MAX_SAMPLES = 512
 BATCH_SAMPLES = 32_768  # (line, sample) pairs per render call: bounds the per-call tables (actors x pairs)
 _SPEED_STEP_NS = 250_000  # actor speed sampling step; gait changes little within a quarter millisecond
-
-
-@njit(cache=True, inline="always")
-def _clamped(v, lo, hi):
-    return min(max(v, lo), hi)
-
-
-@njit(cache=True)
-def _actor_speeds(actors, world, lut, bld, light, cam, rot_tab, pos_tab, times, out):
-    """out[o] = fastest render-space displacement rate (px/s) of any part end point of actor o.
-
-    Parts wholly off the image (beyond half its size) at both times cannot move a pixel and are skipped;
-    end points are clamped to that margin, so a part clipped at the camera's near plane (whose clipped end
-    point races across image space far outside the frame) counts only its motion near the image.
-    """
-    w, h = cam[Wd.C_W], cam[Wd.C_H]
-    if cam[Wd.C_TRANSPOSED] != 0.0:
-        w, h = h, w
-    x_lo, x_hi, y_lo, y_hi = -0.5 * w, 1.5 * w, -0.5 * h, 1.5 * h
-    scratch = K.parts_scratch()
-    pa = np.empty((K.MAX_PARTS, K.PART_COLS))
-    pb = np.empty((K.MAX_PARTS, K.PART_COLS))
-    g = K.Q_GEO
-    for o in range(actors.shape[0]):
-        best = 0.0
-        if int(actors[o, B.A_TYPE]) == B.TYPE_BAR:
-            out[o] = abs(actors[o, B.R_VX])
-            continue
-        if not actors[o, B.P_H] > 0.0:  # a zero-size walker shows no pixel (and has no stride to walk by)
-            out[o] = 0.0
-            continue
-        K.actor_parts(actors[o], world, lut, bld, light, cam, rot_tab[0], pos_tab[0], times[0], pa, scratch)
-        for k in range(1, times.shape[0]):
-            K.actor_parts(actors[o], world, lut, bld, light, cam, rot_tab[k], pos_tab[k], times[k], pb, scratch)
-            dt = times[k] - times[k - 1]
-            for p in range(K.MAX_PARTS):
-                if pa[p, K.Q_KIND] != K.PART_CAPSULE or pb[p, K.Q_KIND] != K.PART_CAPSULE:
-                    continue
-                off = True
-                for q in (pa, pb):
-                    r = q[p, g + 4]
-                    if not (max(q[p, g], q[p, g + 2]) + r < x_lo or min(q[p, g], q[p, g + 2]) - r > x_hi
-                            or q[p, K.Q_YMAX] < y_lo or q[p, K.Q_YMIN] > y_hi):
-                        off = False
-                if off:
-                    continue
-                c = np.empty(8)
-                for i in range(2):
-                    c[4 * i] = _clamped(pa[p, g + 2 * i], x_lo, x_hi)
-                    c[4 * i + 1] = _clamped(pa[p, g + 2 * i + 1], y_lo, y_hi)
-                    c[4 * i + 2] = _clamped(pb[p, g + 2 * i], x_lo, x_hi)
-                    c[4 * i + 3] = _clamped(pb[p, g + 2 * i + 1], y_lo, y_hi)
-                da = math.hypot(c[2] - c[0], c[3] - c[1])
-                db = math.hypot(c[6] - c[4], c[7] - c[5])
-                d = max(da, db) + abs(pb[p, g + 4] - pa[p, g + 4])
-                best = max(best, d / dt)
-            pa, pb = pb, pa
-        out[o] = best
 
 
 @dataclass(frozen=True)
@@ -120,37 +60,31 @@ class SamplePlan:
 
 
 def _ego_speed_px_s(renderer: Renderer, by_column: bool, t0_s: float, t1_s: float) -> float:
-    cam = renderer._cams[by_column]
-    times = np.array([t0_s, t1_s])
-    rot, pos = np.empty((2, 3, 3)), np.empty((2, 3))
-    Wd.pose_table(cam, times, rot, pos)
+    rot, pos = renderer.poses(np.array([t0_s, t1_s]), by_column=by_column)
     dt = max(t1_s - t0_s, 1e-9)
     cos_a = np.clip((np.trace(rot[1] @ rot[0].T) - 1.0) / 2.0, -1.0, 1.0)
-    f = max(cam[Wd.C_FX], cam[Wd.C_FY])
-    corner = math.hypot(cam[Wd.C_W], cam[Wd.C_H]) / (2 * f)
+    cam = renderer.camera
+    f = float(cam.fx_px)
+    corner = math.hypot(float(cam.width), float(cam.height)) / (2 * f)
     rot_px_s = math.acos(cos_a) / dt * f * (1 + corner * corner)
     height_m = max(abs(float(pos[0, 2])), 1.0)
     trans_px_s = float(np.linalg.norm(pos[1] - pos[0])) / dt * f / height_m
     return rot_px_s + trans_px_s
 
 
-def _swept_bounds(renderer: Renderer, cam: np.ndarray, start_s: np.ndarray, exp_s: float, need: np.ndarray
+def _swept_bounds(renderer: Renderer, by_column: bool, start_s: np.ndarray, exp_s: float, need: np.ndarray
                   ) -> np.ndarray:
     """Per actor and line, a render-space box holding the actor over that line's window.
 
     A static camera has one pose, so the renderer's swept bounds serve directly. A moving camera's bounds
     hold at one pose only: the hull of the boxes at the window's start and end stands in for the sweep.
     """
-    n_obj, n_lines = need.shape
-    ks = np.arange(n_lines)
+    n_lines = need.shape[1]
     ends = [start_s] if not renderer.camera_moving else [start_s, start_s + exp_s]
     span = np.full(n_lines, 0.0 if renderer.camera_moving else exp_s)
     out: np.ndarray | None = None
     for t in ends:
-        rot, pos = np.empty((n_lines, 3, 3)), np.empty((n_lines, 3))
-        Wd.pose_table(cam, t, rot, pos)
-        b = np.empty((n_obj, n_lines, 4))
-        K.actor_bounds_all(renderer._c.actors, renderer._c.world, cam, rot, pos, t, ks, span, need, b)
+        b = renderer.actor_bounds(t, span, need, by_column=by_column)
         if out is None:
             out = b
         else:
@@ -168,30 +102,23 @@ def plan_samples(renderer: Renderer, starts_ns: np.ndarray, exposure_ns: int, *,
     starts = np.asarray(starts_ns, np.int64)
     n_lines = starts.shape[0]
     if not bound_px > 0 or not math.isfinite(bound_px):
-        from rollcam.common.errors import ConfigError
-
         raise ConfigError(f"blur bound must be a finite number of pixels > 0, got {bound_px!r}")
     speed = np.zeros(n_lines)
     exp_s = exposure_ns * 1e-9
     if exposure_ns > 0:
         t0, t1 = int(starts.min()), int(starts.max()) + int(exposure_ns)
-        c, cam = renderer._c, renderer._cams[by_column]
         if renderer.camera_moving:
             speed[:] = _ego_speed_px_s(renderer, by_column, t0 * 1e-9, t1 * 1e-9)
-        moving = np.flatnonzero(c.actors[:, B.A_STATIC] == 0.0) if renderer.n_actors else np.zeros(0, np.int64)
+        moving = renderer.moving_actors
         if moving.size:
             n_t = max(2, -(-(t1 - t0) // _SPEED_STEP_NS) + 1)
-            times = np.linspace(t0 * 1e-9, t1 * 1e-9, n_t)
-            rot, pos = np.empty((n_t, 3, 3)), np.empty((n_t, 3))
-            Wd.pose_table(cam, times, rot, pos)
-            act_speed = np.zeros(c.actors.shape[0])
-            _actor_speeds(c.actors, c.world, c.building_lut, c.buildings, c.light, cam, rot, pos, times, act_speed)
+            act_speed = renderer.actor_image_speeds(np.linspace(t0 * 1e-9, t1 * 1e-9, n_t), by_column=by_column)
             # Lines each actor can touch during each line's window (conservative swept bounds).
             start_s = starts.astype(np.float64) * 1e-9
-            need = np.zeros((c.actors.shape[0], n_lines), np.bool_)
+            need = np.zeros((renderer.n_actors, n_lines), np.bool_)
             need[moving] = True
-            bounds = _swept_bounds(renderer, cam, start_s, exp_s, need)
-            n_along = renderer.camera.height if by_column else renderer.camera.width
+            bounds = _swept_bounds(renderer, by_column, start_s, exp_s, need)
+            n_along = renderer.render_shape(by_column)[1]
             centre = np.arange(n_lines) + 0.5
             for o in moving:
                 b = bounds[o]
@@ -259,8 +186,9 @@ def integrate(renderer: Renderer, plan: SamplePlan, *, by_column: bool = False, 
     ``radiance`` keeps it, so it must not be reused while that is in use. ``batch_samples`` bounds the
     (line, sample) pairs per render call (whole lines per call; the result does not depend on it).
     """
-    n_lines = plan.n.shape[0]
-    n_along = renderer.camera.height if by_column else renderer.camera.width
+    n_lines, n_along = renderer.render_shape(by_column)
+    if plan.n.shape != (n_lines,):
+        raise ConfigError(f"the plan has {plan.n.shape[0]} lines, the render {n_lines}")
     shape = (n_lines, n_along, 3)
     # Fresh np.empty pages are only faulted in where a line is written, so untouched lines cost nothing.
     acc = np.empty(shape, np.float32) if out is None else out

@@ -17,6 +17,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 from rollcam.common.errors import ConfigError, SourceError
+from rollcam.common.lifecycle import Closeable
 
 from .timing import NS_PER_S
 
@@ -177,7 +178,7 @@ class _ArrayReader:
         pass
 
 
-class Footage:
+class Footage(Closeable):
     """Global-shutter footage at a known frame rate: frames by index, each with an exact ns timestamp.
 
     ``source`` is a folder of images (png/jpg/tif/bmp/npy, natural sort order; ``fps`` required) or a video
@@ -217,7 +218,6 @@ class Footage:
         self._reader = reader
         self._cache: OrderedDict[int, np.ndarray] = OrderedDict()
         self._cache_frames = max(1, int(cache))
-        self._closed = False
         try:
             self.fps = as_fps(fps)
             first = self._load(0, check=False)
@@ -240,8 +240,7 @@ class Footage:
             k += n
         if not 0 <= k < n:
             raise IndexError(f"footage frame {k} out of range (0..{n - 1})")
-        if self._closed:
-            raise SourceError(f"{self._reader.name!r}: footage is closed")
+        self._check_open()
         frame = self._cache.get(k)
         if frame is not None:
             self._cache.move_to_end(k)
@@ -311,18 +310,15 @@ class Footage:
         return lo + np.searchsorted(table, t, side="right").astype(np.int64) - 1
 
     # ---- lifecycle ----------------------------------------------------------------------------------
-    def close(self) -> None:
-        """Release the video or file handles and drop cached frames; harmless when already closed."""
-        if not self._closed:
-            self._closed = True
-            self._cache.clear()
-            self._reader.close()
+    closed_error = SourceError
 
-    def __enter__(self) -> Footage:
-        return self
+    def _describe(self) -> str:
+        return f"{self._reader.name!r}: footage"
 
-    def __exit__(self, *exc: object) -> None:
-        self.close()
+    def _close(self) -> None:
+        """Release the video or file handles and drop cached frames."""
+        self._cache.clear()
+        self._reader.close()
 
     def __repr__(self) -> str:
         size = "x".join(map(str, self.shape))

@@ -1,4 +1,4 @@
-"""V4L2 pixel formats the emulated sensor delivers: the fourcc table and pure encode/decode functions.
+"""V4L2 pixel formats the emulated sensor delivers: the fourcc table, CSI-2 packing, the Bayer mosaic.
 
 Layouts follow the kernel's documentation (Documentation/userspace-api/media/v4l/pixfmt-*):
 
@@ -8,8 +8,11 @@ Layouts follow the kernel's documentation (Documentation/userspace-api/media/v4l
 - MIPI CSI-2 packed (pRAA, pRCC, Y10P, ...): ``uint8 (H, bytesperline)``. 10-bit: every 4 pixels take 5
   bytes, the 8 high bits of each pixel then one byte of their 2 low bits (pixel 0 in bits 1:0). 12-bit: every
   2 pixels take 3 bytes, the 8 high bits of each then one byte with pixel 0's low nibble in bits 3:0.
-- YUYV: ``uint8 (H, W, 2)`` (Y0 U0 Y1 V0 ...), NV12: ``uint8 (H * 3 / 2, W)`` (Y plane, then interleaved UV),
-  YU12: ``uint8 (H * 3 / 2, W)`` (Y, U, V planes), BGR3 / RGB3: ``uint8 (H, W, 3)``.
+- YUYV / UYVY: ``uint8 (H, W, 2)`` (Y0 U0 Y1 V0 ... / U0 Y0 V0 Y1 ...), NV12: ``uint8 (H * 3 / 2, W)`` (Y plane,
+  then interleaved UV), YU12: ``uint8 (H * 3 / 2, W)`` (Y, U, V planes), BGR3 / RGB3: ``uint8 (H, W, 3)``,
+  XR24: ``uint8 (H, W, 4)`` (B G R X).
+
+How frames of each fourcc are encoded, decoded and previewed is ``rollcam.sim.codecs``, the table beside this one.
 
 Flips change a Bayer sensor's order as a real sensor's do (``flipped_order``): the readout starts on
 another colour of the 2x2 tile.
@@ -39,7 +42,7 @@ class PixelFormat:
     """One fourcc: sample bits, memory layout (``packing``) and colour filter (Bayer order, 'mono' or None).
 
     ``packing`` is 'raw' (one sample per pixel, uint8 up to 8 bits, else uint16), 'csi2' (MIPI CSI-2 packed),
-    'yuyv', 'nv12', 'yu12', 'bgr' or 'rgb'.
+    'yuyv', 'uyvy', 'nv12', 'yu12', 'bgr', 'rgb' or 'xbgr'.
     """
 
     fourcc: str
@@ -54,7 +57,8 @@ class PixelFormat:
 
     def bytesperline(self, width: int) -> int:
         """Bytes of one line of the first plane (V4L2 ``bytesperline``), unpadded."""
-        per = {"raw": 1 if self.bits <= 8 else 2, "yuyv": 2, "nv12": 1, "yu12": 1, "bgr": 3, "rgb": 3}
+        per = {"raw": 1 if self.bits <= 8 else 2, "yuyv": 2, "uyvy": 2, "nv12": 1, "yu12": 1, "bgr": 3, "rgb": 3,
+               "xbgr": 4}
         if self.packing == "csi2":
             return math.ceil(width * self.bits / 8)
         return width * per[self.packing]
@@ -69,10 +73,12 @@ class PixelFormat:
         """Array shape of a frame's ``data`` in this format."""
         if self.packing in ("nv12", "yu12"):
             return (height * 3 // 2, width)
-        if self.packing == "yuyv":
+        if self.packing in ("yuyv", "uyvy"):
             return (height, width, 2)
         if self.packing in ("bgr", "rgb"):
             return (height, width, 3)
+        if self.packing == "xbgr":
+            return (height, width, 4)
         return (height, self.bytesperline(width)) if self.packing == "csi2" else (height, width)
 
     @property
@@ -87,9 +93,10 @@ FORMATS: dict[str, PixelFormat] = {
     "GREY": PixelFormat("GREY", 8, "raw", "mono"), "Y10 ": PixelFormat("Y10 ", 10, "raw", "mono"),
     "Y12 ": PixelFormat("Y12 ", 12, "raw", "mono"), "Y16 ": PixelFormat("Y16 ", 16, "raw", "mono"),
     "Y10P": PixelFormat("Y10P", 10, "csi2", "mono"), "Y12P": PixelFormat("Y12P", 12, "csi2", "mono"),
-    "YUYV": PixelFormat("YUYV", 8, "yuyv", None), "NV12": PixelFormat("NV12", 8, "nv12", None),
-    "YU12": PixelFormat("YU12", 8, "yu12", None), "BGR3": PixelFormat("BGR3", 8, "bgr", None),
-    "RGB3": PixelFormat("RGB3", 8, "rgb", None),
+    "YUYV": PixelFormat("YUYV", 8, "yuyv", None), "UYVY": PixelFormat("UYVY", 8, "uyvy", None),
+    "NV12": PixelFormat("NV12", 8, "nv12", None), "YU12": PixelFormat("YU12", 8, "yu12", None),
+    "BGR3": PixelFormat("BGR3", 8, "bgr", None), "RGB3": PixelFormat("RGB3", 8, "rgb", None),
+    "XR24": PixelFormat("XR24", 8, "xbgr", None),
 }
 """Every fourcc the emulated sensor can deliver. GREY is the mono sensor's 8-bit output; a colour stream
 asked for GREY gets the ISP's luma (see ``rollcam.sim.isp``)."""
@@ -239,89 +246,3 @@ def unpack_csi2(packed: np.ndarray, bits: int, width: int) -> np.ndarray:
     out = np.empty((p.shape[0], width), np.uint16)
     (_unpack10 if bits == 10 else _unpack12)(p, out)
     return out
-
-
-# ------------------------------------------------------------------------------------------ YUV
-def bgr_to_yuyv(bgr: np.ndarray) -> np.ndarray:
-    """BGR3 -> YUYV 4:2:2, ``uint8 (H, W, 2)`` (W even)."""
-    import cv2
-
-    if bgr.shape[1] % 2:
-        raise ConfigError(f"YUYV needs an even width, got {bgr.shape[1]}")
-    return cv2.cvtColor(np.ascontiguousarray(bgr), cv2.COLOR_BGR2YUV_YUYV)
-
-
-def yuyv_to_bgr(yuyv: np.ndarray) -> np.ndarray:
-    """YUYV ``(H, W, 2)`` (or ``(H, 2W)`` bytes) -> BGR3."""
-    import cv2
-
-    a = np.ascontiguousarray(yuyv, dtype=np.uint8)
-    if a.ndim == 2:
-        a = a.reshape(a.shape[0], a.shape[1] // 2, 2)
-    return cv2.cvtColor(a, cv2.COLOR_YUV2BGR_YUYV)
-
-
-def bgr_to_yu12(bgr: np.ndarray) -> np.ndarray:
-    """BGR3 -> YU12 (I420) planar 4:2:0, ``uint8 (H * 3 / 2, W)`` (W and H even)."""
-    import cv2
-
-    if bgr.shape[0] % 2 or bgr.shape[1] % 2:
-        raise ConfigError(f"4:2:0 formats need even width and height, got {bgr.shape[1]}x{bgr.shape[0]}")
-    return cv2.cvtColor(np.ascontiguousarray(bgr), cv2.COLOR_BGR2YUV_I420)
-
-
-def bgr_to_nv12(bgr: np.ndarray) -> np.ndarray:
-    """BGR3 -> NV12 4:2:0 (Y plane, then interleaved U V), ``uint8 (H * 3 / 2, W)``."""
-    i420 = bgr_to_yu12(bgr)
-    h, w = bgr.shape[:2]
-    out = np.empty_like(i420)
-    out[:h] = i420[:h]
-    chroma = i420[h:].reshape(-1)
-    n = (h // 2) * (w // 2)
-    uv = out[h:].reshape(-1)
-    uv[0::2], uv[1::2] = chroma[:n], chroma[n:]
-    return out
-
-
-def nv12_to_bgr(nv12: np.ndarray) -> np.ndarray:
-    """NV12 ``(H * 3 / 2, W)`` -> BGR3."""
-    import cv2
-
-    return cv2.cvtColor(np.ascontiguousarray(nv12, dtype=np.uint8), cv2.COLOR_YUV2BGR_NV12)
-
-
-def yu12_to_bgr(yu12: np.ndarray) -> np.ndarray:
-    """YU12 (I420) ``(H * 3 / 2, W)`` -> BGR3."""
-    import cv2
-
-    return cv2.cvtColor(np.ascontiguousarray(yu12, dtype=np.uint8), cv2.COLOR_YUV2BGR_I420)
-
-
-# ------------------------------------------------------------------------------------------ raw samples
-def encode_raw(dn: np.ndarray, fourcc: str, adc_bits: int) -> np.ndarray:
-    """ADC samples (``uint16 (H, W)``, ``adc_bits`` wide) in a raw fourcc's layout.
-
-    A format narrower than the ADC keeps the high bits (as a sensor set to RAW8 output does); a wider one is
-    refused, as hwconfig refuses it for a sensor.
-    """
-    f = pixel_format(fourcc)
-    if not f.is_raw:
-        raise ConfigError(f"{fourcc!r} is not a raw sensor format; use rollcam.sim.isp for processed ones")
-    if f.bits > adc_bits:
-        raise ConfigError(f"{fourcc!r} holds {f.bits} bits, more than the sensor's {adc_bits}-bit ADC")
-    v = dn if f.bits == adc_bits else (dn >> (adc_bits - f.bits))
-    if f.packing == "csi2":
-        return pack_csi2(v, f.bits)
-    return v.astype(f.dtype, copy=False)
-
-
-def decode_raw(data: np.ndarray, fourcc: str, width: int | None = None) -> np.ndarray:
-    """Samples of a raw frame as ``uint16 (H, W)`` in the format's own bit depth (unpacks CSI-2)."""
-    f = pixel_format(fourcc)
-    if not f.is_raw:
-        raise ConfigError(f"{fourcc!r} is not a raw sensor format")
-    if f.packing == "csi2":
-        if width is None:
-            width = data.shape[1] * 8 // f.bits
-        return unpack_csi2(data, f.bits, width)
-    return data.astype(np.uint16, copy=False)

@@ -1,8 +1,9 @@
-"""A small preview ISP: raw Bayer or mono samples -> 8-bit BGR (and the processed fourccs made from it).
+"""A small preview ISP: raw Bayer or mono samples -> 8-bit BGR.
 
 Steps, in the order a camera ISP runs them: black-level subtraction, normalisation to the sensor's white
 level, white balance (fixed gains or grey-world), demosaic (OpenCV's bilinear or edge-aware), sRGB gamma.
 It is a preview, for detectors that want RGB: the ISP-less path hands raw frames straight to the consumer.
+``rollcam.sim.codecs`` runs every raw preview through ``preview`` and makes the processed fourccs from its output.
 """
 
 from __future__ import annotations
@@ -11,8 +12,6 @@ from dataclasses import dataclass
 
 import numpy as np
 from rollcam.common.errors import ConfigError
-
-from .formats import bgr_to_nv12, bgr_to_yu12, bgr_to_yuyv, pixel_format
 
 _DEMOSAIC = {  # Bayer order -> OpenCV code (OpenCV names the tile by its second row: RGGB is 'BayerBG')
     "RGGB": "BG", "BGGR": "RG", "GRBG": "GB", "GBRG": "GR",
@@ -80,17 +79,3 @@ def preview(raw: np.ndarray, order: str, params: IspParams) -> np.ndarray:
         return np.round(lin * 255.0).astype(np.uint8)
     idx = (lin * ((1 << _LUT_BITS) - 1) + 0.5).astype(np.int32)
     return _SRGB[idx]
-
-
-def to_processed(bgr: np.ndarray, fourcc: str) -> np.ndarray:
-    """8-bit BGR -> a processed fourcc (BGR3, RGB3, YUYV, NV12, YU12, GREY)."""
-    import cv2
-
-    makers = {
-        "BGR3": lambda b: b, "RGB3": lambda b: np.ascontiguousarray(b[..., ::-1]), "YUYV": bgr_to_yuyv,
-        "NV12": bgr_to_nv12, "YU12": bgr_to_yu12, "GREY": lambda b: cv2.cvtColor(b, cv2.COLOR_BGR2GRAY),
-    }
-    f = pixel_format(fourcc)
-    if f.fourcc not in makers:
-        raise ConfigError(f"{fourcc!r} is not a processed format the preview ISP makes; one of {list(makers)}")
-    return makers[f.fourcc](bgr)

@@ -5,18 +5,20 @@ For each pixel (through its colour filter: Bayer channel, or luma for a mono sen
 
     photons   mu_p = radiance * flux_photons_per_s * t
     electrons mu_e = QE * mu_p * (1 + PRNU_pattern) + dark_current * t
-    signal    e    = Poisson(mu_e) + DSNU_pattern, clipped to [0, full_well]
+    signal    e    = Poisson(mu_e) + DSNU_pattern, clipped at full_well
     DN             = round((e + read_noise * N(0, 1)) * K * analog_gain * digital_gain + black_level)
 
-clipped to the ADC's range ``0 .. 2**bit_depth - 1``. K is the system gain (DN per electron at unity gain).
-Every stage can be switched off (``STAGES``). Noise is reproducible: temporal noise depends only on
-(seed, frame index, pixel), fixed patterns only on (serial number, pixel position on the array), through a
-counter-based hash (SplitMix64), so frame n's noise does not depend on which frames were drawn before it and
-a cropped mode sees the same pattern as the full array. Gaussian draws come from a 65,536-entry inverse-CDF
-table with linear interpolation (rescaled to unit variance; tails truncated at 4.4 sigma). Shot noise is
-exact Poisson (inversion) below 30 electrons and Gaussian with variance mu_e above, where the two agree to
-within the skew of 1/sqrt(30); where the signal is further than 6 sigma from the full well, shot and read
-noise are drawn as one Gaussian of summed variance (the same distribution, one draw instead of two).
+clipped to the ADC's range ``0 .. 2**bit_depth - 1``. Only those two clip, as in a real pixel: the DSNU offset
+is relative to the mean dark signal, so a dark pixel's signal may fall below it (below the black level in DN),
+and the black level keeps those negative excursions in the output. K is the system gain (DN per electron at
+unity gain). Every stage can be switched off (``STAGES``). Noise is reproducible: temporal noise depends only
+on (seed, frame index, pixel), fixed patterns only on (serial number, pixel position on the array), through a
+counter-based hash (SplitMix64), so frame n's noise does not depend on which frames were drawn before it and a
+cropped mode sees the same pattern as the full array. Gaussian draws come from a 65,536-entry inverse-CDF
+table with linear interpolation (rescaled to unit variance; tails truncated at 4.4 sigma). Shot noise is exact
+Poisson (inversion) below 30 electrons and Gaussian with variance mu_e above, where the two agree to within
+the skew of 1/sqrt(30); where the signal is further than 6 sigma from the full well, shot and read noise are
+drawn as one Gaussian of summed variance (the same distribution, one draw instead of two).
 
 ``flux_photons_per_s`` is the photon flux per pixel at linear radiance 1.0 (lens and pixel area folded in;
 ``SensorModel``'s own, else the sensor YAML's ``noise.flux_photons_per_s``); by default, linear 1.0 fills
@@ -246,7 +248,10 @@ def _expose(base, mos, over, use_over, by_col, cfa, mono, flux_s, qe, dark_e, re
                     e = mu
                 e += off
                 if sat:
-                    e = min(max(e, 0.0), full_well)
+                    # The well holds at most the full well. No clip at 0: the DSNU offset is relative to the
+                    # mean dark signal, so a dark pixel may read below it; the black level keeps that visible
+                    # and the ADC clips at 0 DN (``_dn``).
+                    e = min(e, full_well)
                 if read:
                     e += read_e * _normal(ht & mask32, table)
                 if quantize:

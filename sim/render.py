@@ -23,10 +23,8 @@ from dataclasses import dataclass
 import numpy as np
 from rollcam.common.errors import ConfigError
 
-from . import _body as B
 from . import _kernels as K
-from . import _world as Wd
-from .compile import compile_camera, compile_scene
+from ._paint import Painter, Pass
 from .frame import Box, ObjectTruth
 from .scene import Camera, Scene
 
@@ -39,8 +37,6 @@ def srgb_lut() -> np.ndarray:
 
 
 _SRGB = srgb_lut()
-BOUND_GROUPS = 32
-"""Time groups per render for the conservative actor bounds that decide which lines an actor touches."""
 
 
 @dataclass
@@ -132,31 +128,97 @@ class _Layer:
         self.comp_u8: np.ndarray | None = None
         self.comp_gt: np.ndarray | None = None
 
+    def truth(self, n_actors: int, transposed: bool) -> LineTruth:
+        """A fresh copy of the composite's ground truth."""
+        assert self.comp_gt is not None
+        gt = LineTruth.empty(n_actors, self.comp_gt.shape[2], transposed)
+        gt.left[:], gt.right[:] = self.comp_gt[0], self.comp_gt[1]
+        gt.area[:], gt.visible[:] = self.comp_gt[2], self.comp_gt[3]
+        return gt
+
 
 class Renderer:
-    """Renders one camera of a scene at arbitrary per-line times, with exact per-actor ground truth."""
+    """Renders one camera of a scene at arbitrary per-line times, with exact per-actor ground truth.
+
+    Four operations, one kernel (``_paint.Painter``): a frame of lines (8-bit, optionally linear),
+    its ground truth only, linear radiance of chosen lines into a buffer (or accumulated, for exposure
+    integration), and the brute-force reference. The sensor path's planning reads the scene through
+    ``poses``, ``actor_bounds`` and ``actor_image_speeds``.
+    """
 
     def __init__(self, scene: Scene, camera: Camera | int | str = 0, *, gain: float = 1.0) -> None:
         self.scene = scene
         self.camera = camera if isinstance(camera, Camera) else scene.camera(camera)
         if self.camera.width <= 0 or self.camera.height <= 0:
             raise ConfigError(f"camera size must be positive, got {self.camera.width}x{self.camera.height}")
-        self.gain = float(gain)
-        self._c = compile_scene(scene)
-        self._cams = {False: compile_camera(self.camera, False), True: compile_camera(self.camera, True)}
+        self._painter = Painter(scene, self.camera, float(gain), _SRGB)
         self._layers: dict[bool, _Layer] = {}
-        self._parts: np.ndarray | None = None
         self.camera_moving = self.camera.ego.moving
-        self.actor_ids = self._c.actor_ids
-        self.actor_classes = self._c.actor_classes
-        self.actor_speeds_mps = self._c.actor_speeds_mps
+        tables = self._painter.tables
+        self.actor_ids = tables.actor_ids
+        self.actor_classes = tables.actor_classes
+        self.actor_speeds_mps = tables.actor_speeds_mps
+        self._all = np.ones(self.n_actors, np.bool_)
 
-    # ------------------------------------------------------------------ public API
+    # ------------------------------------------------------------------ the scene as the renderer sees it
+    @property
+    def gain(self) -> float:
+        """Scale from linear radiance to the 8-bit image's encoding input."""
+        return self._painter.gain
+
     @property
     def n_actors(self) -> int:
         """Number of actors (pedestrians, chart bars) in the scene."""
-        return int(self._c.actors.shape[0])
+        return self._painter.n_actors
 
+    @property
+    def moving_actors(self) -> np.ndarray:
+        """Indices of the actors that move in the scene (whatever the camera does)."""
+        return np.flatnonzero(~self._painter.actor_static)
+
+    def render_shape(self, by_column: bool = False) -> tuple[int, int]:
+        """(lines, pixels per line) of a render: (height, width), or (width, height) by column."""
+        w, h = self.camera.width, self.camera.height
+        return (w, h) if by_column else (h, w)
+
+    def poses(self, times_s: np.ndarray, *, by_column: bool = False) -> tuple[np.ndarray, np.ndarray]:
+        """Camera rotation ``(n, 3, 3)`` and position ``(n, 3)`` (world to camera) at each time in seconds."""
+        return self._painter.poses(by_column, np.asarray(times_s, np.float64))
+
+    def actor_bounds(self, times_s: np.ndarray, span_s: np.ndarray, need: np.ndarray, *,
+                     by_column: bool = False) -> np.ndarray:
+        """Conservative render-space boxes ``(actors, n, 4)`` (ymin, ymax, xmin, xmax; empty when ymin > ymax).
+
+        Box ``[o, i]`` holds actor o over ``times_s[i] .. times_s[i] + span_s[i]`` seen from the camera pose at
+        ``times_s[i]`` (a moving camera's pose holds at that instant only); computed where ``need[o, i]``,
+        unset elsewhere.
+        """
+        times_s = np.asarray(times_s, np.float64)
+        span_s = np.asarray(span_s, np.float64)
+        if need.shape != (self.n_actors, times_s.shape[0]) or span_s.shape != times_s.shape:
+            raise ConfigError(f"need must be (actors, times) = {(self.n_actors, times_s.shape[0])} and span one per "
+                              f"time, got {need.shape} and {span_s.shape}")
+        rot, pos = self.poses(times_s, by_column=by_column)
+        return self._painter.bounds(self._painter.cams[by_column], rot, pos, times_s,
+                                    np.arange(times_s.shape[0]), span_s, need)
+
+    def actor_image_speeds(self, times_s: np.ndarray, *, by_column: bool = False) -> np.ndarray:
+        """Per actor, the fastest render-space displacement rate (px/s) of its parts between consecutive times.
+
+        Parts wholly off the image by more than half its size are ignored (see ``_kernels.actor_speeds``);
+        a chart bar's rate is its speed.
+        """
+        return self._painter.speeds(by_column, np.asarray(times_s, np.float64))
+
+    def actor_parts(self, times_s: np.ndarray, *, by_column: bool = False) -> np.ndarray:
+        """The render-space primitives the kernels draw: ``(actors, times, MAX_PARTS, PART_COLS)`` float64.
+
+        Row layout in ``rollcam.sim._kernels`` (``Q_KIND`` capsule, quad or none; geometry from ``Q_GEO``;
+        line range ``Q_YMIN``..``Q_YMAX``). For checks and studies; a render computes only the parts it needs.
+        """
+        return self._painter.parts(by_column, np.asarray(times_s, np.float64))
+
+    # ------------------------------------------------------------------ frames
     def render_lines(
         self,
         times_ns: np.ndarray,
@@ -170,15 +232,15 @@ class Renderer:
         Returns the 8-bit BGR image in image orientation, the linear RGB float32 image when ``linear``,
         and the per-line ground truth. ``truth_only`` skips pixels (for boxes at another instant).
         """
-        cam = self._cams[by_column]
-        n_lines, n_along = self._shape(by_column)
+        n_along = self.render_shape(by_column)[1]
         times_ns = self._check_times(times_ns, by_column)
         ut_ns, line_k = np.unique(times_ns, return_inverse=True)
         times_s = ut_ns.astype(np.float64) * 1e-9
         layer = self._layer(by_column, times_s[0])
-        res = self._render(cam, times_s, line_k.astype(np.int64), n_lines, n_along, layer, linear, truth_only,
-                           include=np.ones(self.n_actors, np.bool_), force_paint=False)
-        return res
+        p = self._painter.prepare(by_column, times_s, line_k.astype(np.int64), self._all, n_along)
+        if truth_only:
+            return self._truth(p, layer, by_column)
+        return self._frame(p, layer, by_column, linear)
 
     def render_linear(
         self,
@@ -202,27 +264,12 @@ class Renderer:
         over them (zeroed on a line's first hit; only pixels under actors are touched after), or for a
         moving camera (``radiance.static`` None) the sum of the painted lines.
         """
-        n_lines, n_along = self._shape(by_column)
+        n_lines, n_along = self.render_shape(by_column)
         times_ns = self._check_times(times_ns, by_column)
-        subset = np.ones(n_lines, np.bool_)
-        if lines is not None:
-            lines = np.asarray(lines)
-            if lines.dtype == np.bool_:
-                if lines.shape != (n_lines,):
-                    raise ConfigError(f"line mask must have {n_lines} entries, got shape {lines.shape}")
-                subset = lines
-            else:
-                if lines.size and (lines.min() < 0 or lines.max() >= n_lines):
-                    raise ConfigError(f"line indices must be in 0..{n_lines - 1}")
-                subset = np.zeros(n_lines, np.bool_)
-                subset[lines.astype(np.int64)] = True
+        subset = self._line_mask(lines, n_lines)
         if out is None:
             out = np.empty((n_lines, n_along, 3), np.float32)
-        elif out.shape != (n_lines, n_along, 3) or out.dtype != np.float32 or not out.flags.c_contiguous:
-            raise ConfigError(f"out must be a C-contiguous float32 array of shape {(n_lines, n_along, 3)}, "
-                              f"got {out.dtype} {out.shape}")
-        if hits is not None and (hits.shape != (n_lines,) or hits.dtype != np.int64):
-            raise ConfigError(f"hits must be an int64 array of {n_lines} counts, got {hits.dtype} {hits.shape}")
+        self._check_buffers(out, hits, by_column)
         # Only the asked-for lines' times are posed and bounded (a pass of an exposure needs few lines).
         sub_idx = np.flatnonzero(subset)
         ut_ns, sub_k = np.unique(times_ns[sub_idx] if sub_idx.size else times_ns[:1], return_inverse=True)
@@ -230,20 +277,55 @@ class Renderer:
         line_k[sub_idx] = sub_k
         times_s = ut_ns.astype(np.float64) * 1e-9
         layer = self._layer(by_column, float(times_ns.min()) * 1e-9)
-        return self._render(self._cams[by_column], times_s, line_k, n_lines, n_along, layer, True,
-                            False, include=np.ones(self.n_actors, np.bool_), force_paint=False, subset=subset,
-                            into=out, hits=hits)
+        p = self._painter.prepare(by_column, times_s, line_k, self._all, n_along, only=sub_idx)
+        return self._linear_into(p, layer, by_column, subset, out, hits)
+
+    def accumulate_samples(self, times_ns: np.ndarray, line_of: np.ndarray, out: np.ndarray, hits: np.ndarray,
+                           *, by_column: bool = False) -> tuple[np.ndarray | None, int]:
+        """Render many (line, time) samples in one go and accumulate them, as ``render_linear(hits=...)`` does.
+
+        Sample e is line ``line_of[e]`` (non-decreasing: a line's samples together) at ``times_ns[e]``. Each
+        painted sample is added to ``out`` (render orientation) as its difference from the static composite
+        (or whole, for a moving camera) and counted in ``hits``; samples no actor pixel lands on are the
+        composite and skipped. One call instead of one per sample index saves the per-call set-up that
+        dominates many-pass exposures. Returns the shared composite (None for a moving camera) and the
+        number of samples painted. Ground truth is not produced.
+        """
+        n_lines, n_along = self.render_shape(by_column)
+        times_ns = np.asarray(times_ns, np.int64)
+        line_of = np.asarray(line_of, np.int64)
+        n_ent = times_ns.shape[0]
+        if line_of.shape != (n_ent,) or (n_ent and (line_of[0] < 0 or line_of[-1] >= n_lines
+                                                    or (np.diff(line_of) < 0).any())):
+            raise ConfigError(f"line_of must hold one non-decreasing line index in 0..{n_lines - 1} per sample")
+        self._check_buffers(out, hits, by_column, need_hits=True)
+        layer = self._layer(by_column, float(times_ns.min()) * 1e-9 if n_ent else 0.0)
+        shared = None if self.camera_moving else _read_only(layer.comp_lin)
+        if n_ent == 0:
+            return shared, 0
+        ut_ns, ent_k = np.unique(times_ns, return_inverse=True)
+        p = self._painter.prepare(by_column, ut_ns.astype(np.float64) * 1e-9, ent_k.astype(np.int64), self._all,
+                                  n_along, line_of=line_of)
+        # A moving camera changes every sample; over a composite only samples an actor touches differ from it.
+        ents = np.arange(n_ent) if self.camera_moving else np.flatnonzero(p.touched(self._all))
+        lines, first = np.unique(line_of[ents], return_index=True)
+        gt = LineTruth.empty(self.n_actors, n_lines, by_column)  # scratch for the kernel
+        before = int(hits.sum())
+        self._painter.paint(p, self._all, lines.astype(np.int64), gt, bg=layer.bg_lin, out_lin=out,
+                            full_lines=self.camera_moving, seed=None if self.camera_moving else layer.comp_lin,
+                            hits=hits, e_start=np.append(first, ents.size).astype(np.int64), ents=ents)
+        return shared, int(hits.sum()) - before
 
     def reference_frame(self, t_ns: int, *, by_column: bool = False) -> RenderResult:
         """One full render with every line at ``t_ns`` and no shortcuts: every line painted over the bare
         background with every actor tested against it (no static-actor composite, no touched-line culling).
         """
-        n_lines, n_along = self._shape(by_column)
+        n_lines, n_along = self.render_shape(by_column)
         t_s = np.array([np.int64(t_ns).astype(np.float64) * 1e-9])
         layer = self._layer(by_column, t_s[0])
-        return self._render(self._cams[by_column], t_s, np.zeros(n_lines, np.int64), n_lines, n_along, layer,
-                            False, False, include=np.ones(self.n_actors, np.bool_), force_paint=True,
-                            exhaustive=True)
+        p = self._painter.prepare(by_column, t_s, np.zeros(n_lines, np.int64), self._all, n_along, exhaustive=True)
+        u8, _, gt = self._whole(p, layer, self._all, by_column, linear=False)
+        return RenderResult(_oriented(u8, by_column, contiguous=True), None, gt, n_lines)
 
     def reference_lines(self, times_ns: np.ndarray, *, by_column: bool = False) -> RenderResult:
         """The study's brute-force method: one full render per line, keeping line r of render r.
@@ -275,7 +357,7 @@ class Renderer:
         Objects with no pixel under either shutter are left out.
         """
         if gs_truth is None:
-            n_lines = self._shape(by_column)[0]
+            n_lines = self.render_shape(by_column)[0]
             gs_truth = self.render_lines(np.full(n_lines, reference_time_ns, np.int64), by_column=by_column,
                                          truth_only=True).truth
         rs_boxes = frame_truth.boxes()
@@ -289,239 +371,127 @@ class Renderer:
                                    float(vis[o]), float(self.actor_speeds_mps[o])))
         return tuple(out)
 
-    # ------------------------------------------------------------------ internals
-    def _shape(self, by_column: bool) -> tuple[int, int]:
-        """(lines, pixels per line) of a render."""
-        w, h = self.camera.width, self.camera.height
-        return (w, h) if by_column else (h, w)
+    # ------------------------------------------------------------------ the four operations
+    def _whole(self, p: Pass, layer: _Layer, include: np.ndarray, by_column: bool, linear: bool
+               ) -> tuple[np.ndarray, np.ndarray | None, LineTruth]:
+        """Every line painted whole, over the cached background (or the background at each line's pose,
+        for a moving camera): 8-bit, linear when asked, and truth, in render orientation."""
+        n_lines, n_along = self.render_shape(by_column)
+        u8 = np.empty((n_lines, n_along, 3), np.uint8)
+        lin = np.empty((n_lines, n_along, 3), np.float32) if linear else None
+        gt = LineTruth.empty(self.n_actors, n_lines, by_column)
+        self._painter.paint(p, include, np.arange(n_lines), gt, bg=layer.bg_lin, out_u8=u8, out_lin=lin,
+                            full_lines=True)
+        return u8, lin, gt
 
-    def _check_times(self, times_ns: np.ndarray, by_column: bool) -> np.ndarray:
-        n_lines = self._shape(by_column)[0]
-        times_ns = np.asarray(times_ns, dtype=np.int64)
-        if times_ns.shape != (n_lines,):
-            raise ConfigError(f"need one time per line: {n_lines} lines, got times of shape {times_ns.shape}")
-        return times_ns
-
-    def _parts_buffer(self, n_slots: int) -> np.ndarray:
-        """A parts table of at least ``n_slots`` slots, reused across renders.
-
-        An RS frame needs thousands of slots (megabytes); a fresh array each frame would pay for its page
-        faults every time. This is why a Renderer renders one frame at a time.
-        """
-        if self._parts is None or self._parts.shape[0] < n_slots:
-            self._parts = np.empty((max(n_slots, 1024), K.MAX_PARTS, K.PART_COLS))
-        return self._parts[:n_slots]
-
-    def _touch(self, cam, times_s, rot_tab, pos_tab, k_line, moving, include, n_lines, n_along,
-               obj_line_k, only=None, line_of=None) -> None:
-        """Fill ``obj_line_k[o, line]`` with actor o's time slot on each line its bounds reach.
-
-        ``only`` (line indices) limits the lines looked at; the others keep -1. With ``line_of`` the columns
-        are samples, column e on line ``line_of[e]``.
-
-        The bounds are conservative boxes over groups of consecutive times (one group per time when the
-        camera moves, since each time then has its own pose); a static actor needs only its one time.
-        """
-        c = self._c
-        n_obj, n_t = self.n_actors, times_s.shape[0]
-        n_g = n_t if self.camera_moving else min(n_t, BOUND_GROUPS)
-        group_of_k = (np.arange(n_t) * n_g) // n_t
-        k_first = np.searchsorted(group_of_k, np.arange(n_g))
-        k_last = np.searchsorted(group_of_k, np.arange(n_g), side="right") - 1
-        need = np.zeros((n_obj, n_g), np.bool_)
-        need[:, 0] = include
-        need[moving, :] = True
-        bounds = np.empty((n_obj, n_g, 4))
-        K.actor_bounds_all(c.actors, c.world, cam, rot_tab, pos_tab, times_s[k_first], k_first,
-                           times_s[k_last] - times_s[k_first], need, bounds)
-        idx = np.arange(n_lines) if only is None else only
-        centre = (idx if line_of is None else line_of[idx]) + 0.5
-        objs = np.flatnonzero(include)
-        # All included actors at once (one pass of an exposure is called often: Python loops add up).
-        k = k_line[objs[:, None], idx[None, :]]
-        b = bounds[objs[:, None], group_of_k[k]]
-        touch = (b[..., 0] <= centre) & (centre <= b[..., 1]) & (b[..., 2] < n_along) & (b[..., 3] > 0)
-        t_o, t_l = np.nonzero(touch)
-        obj_line_k[objs[t_o], idx[t_l]] = k[t_o, t_l]
-
-    def _shared_parts(self, cam, times_s, rot_tab, pos_tab, obj_line_k) -> tuple[np.ndarray, np.ndarray]:
-        """Slot table and parts table of a render.
-
-        Parts of an actor at an instant that several lines share (GS, bands, static actors) are computed once
-        into a table; those only one line needs (RS) are computed on that line, in cache (``SLOT_LOCAL``).
-        """
-        c = self._c
-        o_idx, l_idx = np.nonzero(obj_line_k >= 0)
-        uses = np.zeros((self.n_actors, times_s.shape[0]), np.int64)
-        np.add.at(uses, (o_idx, obj_line_k[o_idx, l_idx]), 1)
-        slots = np.where(uses == 1, K.SLOT_LOCAL, K.SLOT_NONE)
-        s_o, s_k = np.nonzero(uses > 1)
-        slots[s_o, s_k] = np.arange(s_o.size)
-        parts = self._parts_buffer(max(s_o.size, 1))
-        if s_o.size:
-            K.actor_parts_all(c.actors, c.world, c.building_lut, c.buildings, c.light, cam, rot_tab, pos_tab,
-                              times_s, s_o, s_k, parts)
-        return slots, parts
-
-    def accumulate_samples(self, times_ns: np.ndarray, line_of: np.ndarray, out: np.ndarray, hits: np.ndarray,
-                           *, by_column: bool = False) -> tuple[np.ndarray | None, int]:
-        """Render many (line, time) samples in one go and accumulate them, as ``render_linear(hits=...)`` does.
-
-        Sample e is line ``line_of[e]`` (non-decreasing: a line's samples together) at ``times_ns[e]``. Each
-        painted sample is added to ``out`` (render orientation) as its difference from the static composite
-        (or whole, for a moving camera) and counted in ``hits``; samples no actor pixel lands on are the
-        composite and skipped. One call instead of one per sample index saves the per-call set-up that
-        dominates many-pass exposures. Returns the shared composite (None for a moving camera) and the
-        number of samples painted. Ground truth is not produced.
-        """
-        n_lines, n_along = self._shape(by_column)
-        times_ns = np.asarray(times_ns, np.int64)
-        line_of = np.asarray(line_of, np.int64)
-        n_ent = times_ns.shape[0]
-        if line_of.shape != (n_ent,) or (n_ent and (line_of[0] < 0 or line_of[-1] >= n_lines
-                                                    or (np.diff(line_of) < 0).any())):
-            raise ConfigError(f"line_of must hold one non-decreasing line index in 0..{n_lines - 1} per sample")
-        if out.shape != (n_lines, n_along, 3) or out.dtype != np.float32 or not out.flags.c_contiguous:
-            raise ConfigError(f"out must be a C-contiguous float32 array of shape {(n_lines, n_along, 3)}, "
-                              f"got {out.dtype} {out.shape}")
-        if hits.shape != (n_lines,) or hits.dtype != np.int64:
-            raise ConfigError(f"hits must be an int64 array of {n_lines} counts, got {hits.dtype} {hits.shape}")
-        layer = self._layer(by_column, float(times_ns.min()) * 1e-9 if n_ent else 0.0)
-        shared = None
-        if not self.camera_moving:
-            assert layer.comp_lin is not None
-            shared = layer.comp_lin.view()
-            shared.flags.writeable = False
-        if n_ent == 0:
-            return shared, 0
-        c, cam, n_obj = self._c, self._cams[by_column], self.n_actors
-        ut_ns, ent_k = np.unique(times_ns, return_inverse=True)
-        ent_k = ent_k.astype(np.int64)
-        times_s = ut_ns.astype(np.float64) * 1e-9
-        n_t = times_s.shape[0]
-        static = c.actors[:, B.A_STATIC] != 0.0 if n_obj else np.zeros(0, np.bool_)
+    def _frame(self, p: Pass, layer: _Layer, by_column: bool, linear: bool) -> RenderResult:
+        """A frame: whole lines for a moving camera, else the composite with the touched lines repainted."""
         if self.camera_moving:
-            static = np.zeros_like(static)
-        k_line = np.where(static[:, None], 0, ent_k[None, :]) if n_obj else np.zeros((0, n_ent), np.int64)
-        rot_tab, pos_tab = np.empty((n_t, 3, 3)), np.empty((n_t, 3))
-        Wd.pose_table(cam, times_s, rot_tab, pos_tab)
-        include = np.ones(n_obj, np.bool_)
-        obj_line_k = np.full((n_obj, n_ent), -1, np.int64)
-        self._touch(cam, times_s, rot_tab, pos_tab, k_line, ~static, include, n_ent, n_along, obj_line_k,
-                    line_of=line_of)
-        slots, parts = self._shared_parts(cam, times_s, rot_tab, pos_tab, obj_line_k)
-        if self.camera_moving:
-            ents = np.arange(n_ent)
-            seed = np.empty((0, 0, 3), np.float32)
+            u8, lin, gt = self._whole(p, layer, self._all, by_column, linear)
+            painted = u8.shape[0]
         else:
-            ents = np.flatnonzero((obj_line_k[~static] >= 0).any(axis=0))
-            seed = layer.comp_lin
-        lines, first = np.unique(line_of[ents], return_index=True)
-        e_start = np.append(first, ents.size).astype(np.int64)
-        gt = LineTruth.empty(n_obj, n_lines, cam[Wd.C_TRANSPOSED] != 0.0)  # scratch for the kernel
-        bg = layer.bg_lin if layer.bg_lin is not None else np.empty((0, 0, 3), np.float32)
-        before = int(hits.sum())
-        K.render_lines_kernel(c.world, c.building_lut, c.buildings, c.light, cam, rot_tab, pos_tab, c.actors, times_s,
-                              ent_k, obj_line_k, slots, parts, include, lines.astype(np.int64), e_start, ents,
-                              n_along, bg, np.empty((0, n_along, 3), np.uint8), out, self.gain, _SRGB, gt.left,
-                              gt.right, gt.area, gt.visible, False, self.camera_moving, seed, hits,
-                              np.zeros(0, np.bool_))
-        return shared, int(hits.sum()) - before
+            # Start from the cached composite (one memcpy) and repaint only lines a moving actor touches.
+            assert layer.comp_u8 is not None and layer.comp_lin is not None
+            lines = np.flatnonzero(p.touched(self._all))
+            u8 = layer.comp_u8.copy()
+            lin = layer.comp_lin.copy() if linear else None
+            gt = layer.truth(self.n_actors, by_column)
+            self._painter.paint(p, self._all, lines, gt, bg=layer.bg_lin, out_u8=u8, out_lin=lin, full_lines=False)
+            painted = int(lines.size)
+        lin_out = None if lin is None else _oriented(lin, by_column, contiguous=False)
+        return RenderResult(_oriented(u8, by_column, contiguous=True), lin_out, gt, painted)
 
+    def _truth(self, p: Pass, layer: _Layer, by_column: bool) -> RenderResult:
+        """Ground truth only: every line for a moving camera, else the composite's with touched lines redone."""
+        n_lines = self.render_shape(by_column)[0]
+        if self.camera_moving:
+            lines, gt = np.arange(n_lines), LineTruth.empty(self.n_actors, n_lines, by_column)
+        else:
+            lines, gt = np.flatnonzero(p.touched(self._all)), layer.truth(self.n_actors, by_column)
+        self._painter.paint(p, self._all, lines, gt, bg=layer.bg_lin, full_lines=self.camera_moving, gt_only=True)
+        return RenderResult(np.empty((0, 0, 3), np.uint8), None, gt, int(lines.size))
+
+    def _linear_into(self, p: Pass, layer: _Layer, by_column: bool, subset: np.ndarray, out: np.ndarray,
+                     hits: np.ndarray | None) -> RenderResult:
+        """Linear-only render of the ``subset`` lines into ``out``: the asked-for lines a moving actor touches
+        (all of them for a moving camera), each seeded from the composite in the kernel; no 8-bit image."""
+        n_lines = subset.shape[0]
+        if self.camera_moving:
+            lines, gt, seed = np.flatnonzero(subset), LineTruth.empty(self.n_actors, n_lines, by_column), None
+        else:
+            assert layer.comp_lin is not None
+            lines = np.flatnonzero(p.touched(self._all) & subset)
+            gt, seed = layer.truth(self.n_actors, by_column), layer.comp_lin
+        painted = np.zeros(n_lines, np.bool_)
+        self._painter.paint(p, self._all, lines, gt, bg=layer.bg_lin, out_lin=out, full_lines=self.camera_moving,
+                            seed=seed, hits=hits, line_hit=painted)
+        frame = LinearFrame(None if seed is None else _read_only(seed), out, painted, by_column)
+        return RenderResult(np.empty((0, 0, 3), np.uint8), None, gt, int(painted.sum()), frame)
+
+    # ------------------------------------------------------------------ internals
     def _layer(self, by_column: bool, t0_s: float) -> _Layer:
         """Static layers for this orientation, built on first use (nothing to cache for a moving camera)."""
         layer = self._layers.get(by_column)
         if layer is not None:
             return layer
-        cam = self._cams[by_column]
-        n_lines, n_along = self._shape(by_column)
-        c = self._c
         if self.camera_moving:
             layer = _Layer(None)
         else:
+            n_lines, n_along = self.render_shape(by_column)
             bg = np.empty((n_lines, n_along, 3), np.float32)
-            Wd.background_image(c.world, c.building_lut, c.buildings, c.light, cam, t0_s, bg)
+            self._painter.background(by_column, t0_s, bg)
             layer = _Layer(bg)
-            static = c.actors[:, B.A_STATIC] != 0.0 if self.n_actors else np.zeros(0, np.bool_)
-            res = self._render(cam, np.array([t0_s]), np.zeros(n_lines, np.int64), n_lines, n_along, layer,
-                               True, False, include=static, force_paint=True)
-            assert res.linear is not None
-            layer.comp_lin = res.linear if not by_column else np.ascontiguousarray(res.linear.transpose(1, 0, 2))
-            img = res.image if not by_column else res.image.transpose(1, 0, 2)
-            layer.comp_u8 = np.ascontiguousarray(img)
-            t = res.truth
-            layer.comp_gt = np.stack([t.left, t.right, t.area.astype(np.float64), t.visible.astype(np.float64)])
+            static = self._painter.actor_static
+            p = self._painter.prepare(by_column, np.array([t0_s]), np.zeros(n_lines, np.int64), static, n_along)
+            layer.comp_u8, layer.comp_lin, gt = self._whole(p, layer, static, by_column, linear=True)
+            layer.comp_gt = np.stack([gt.left, gt.right, gt.area.astype(np.float64), gt.visible.astype(np.float64)])
         self._layers[by_column] = layer
         return layer
 
-    def _render(self, cam, times_s, line_k, n_lines, n_along, layer: _Layer, linear, truth_only, include,
-                force_paint, exhaustive=False, subset=None, into=None, hits=None) -> RenderResult:
-        """Paint a frame; with ``into`` (render_linear), only the ``subset`` lines, linear only, into it."""
-        c = self._c
-        n_obj, n_t = self.n_actors, times_s.shape[0]
-        static = c.actors[:, B.A_STATIC] != 0.0 if n_obj else np.zeros(0, np.bool_)
-        if self.camera_moving:
-            static = np.zeros_like(static)
-        # Actor time slot per line: a moving actor uses the line's own time, a static one the first time.
-        k_line = np.where(static[:, None], 0, line_k[None, :]) if n_obj else np.zeros((0, n_lines), np.int64)
-        rot_tab = np.empty((n_t, 3, 3))
-        pos_tab = np.empty((n_t, 3))
-        Wd.pose_table(cam, times_s, rot_tab, pos_tab)
-        obj_line_k = np.full((n_obj, n_lines), -1, np.int64)
-        if exhaustive:  # the oracle: every included actor is tried on every line
-            obj_line_k[include] = k_line[include]
-        else:
-            # Lines not asked for are not looked at: no parts or truth work for them.
-            self._touch(cam, times_s, rot_tab, pos_tab, k_line, include & ~static, include, n_lines, n_along,
-                        obj_line_k, None if subset is None else np.flatnonzero(subset))
-        slots, parts = self._shared_parts(cam, times_s, rot_tab, pos_tab, obj_line_k)
-        gt = LineTruth.empty(n_obj, n_lines, cam[Wd.C_TRANSPOSED] != 0.0)
-        full_lines = force_paint or self.camera_moving
-        seed = np.empty((0, 0, 3), np.float32)
-        if into is not None:
-            # Linear-only subset render: paint the asked-for lines a moving actor touches (all of them for a
-            # moving camera) into the buffer, each seeded from the composite in the kernel; no 8-bit image.
-            out_u8, out_lin = np.empty((0, n_along, 3), np.uint8), into
-            if full_lines:
-                lines = np.flatnonzero(subset)
-            else:
-                assert layer.comp_gt is not None and layer.comp_lin is not None
-                moving = include & ~static
-                lines = np.flatnonzero((obj_line_k[moving] >= 0).any(axis=0) & subset)
-                seed = layer.comp_lin
-                gt.left[:], gt.right[:] = layer.comp_gt[0], layer.comp_gt[1]
-                gt.area[:], gt.visible[:] = layer.comp_gt[2], layer.comp_gt[3]
-        elif full_lines:
-            lines = np.arange(n_lines)
-            out_u8 = np.empty((n_lines, n_along, 3), np.uint8)
-            out_lin = np.empty((n_lines, n_along, 3) if linear else (0, 0, 3), np.float32)
-        else:
-            # Start from the cached composite (one memcpy) and repaint only lines a moving actor touches.
-            assert layer.comp_u8 is not None and layer.comp_gt is not None and layer.comp_lin is not None
-            moving = include & ~static
-            lines = np.flatnonzero((obj_line_k[moving] >= 0).any(axis=0))
-            out_u8 = np.empty((0, n_along, 3), np.uint8) if truth_only else layer.comp_u8.copy()
-            out_lin = layer.comp_lin.copy() if linear and not truth_only else np.empty((0, 0, 3), np.float32)
-            gt.left[:], gt.right[:] = layer.comp_gt[0], layer.comp_gt[1]
-            gt.area[:], gt.visible[:] = layer.comp_gt[2], layer.comp_gt[3]
-        bg = layer.bg_lin if layer.bg_lin is not None else np.empty((0, 0, 3), np.float32)
-        painted = np.zeros(n_lines if into is not None else 0, np.bool_)
-        K.render_lines_kernel(c.world, c.building_lut, c.buildings, c.light, cam, rot_tab, pos_tab, c.actors, times_s,
-                              line_k, obj_line_k, slots, parts, include, lines, np.arange(lines.size + 1), lines,
-                              n_along, bg, out_u8, out_lin,
-                              self.gain, _SRGB, gt.left, gt.right, gt.area, gt.visible, truth_only, full_lines, seed,
-                              hits if hits is not None else np.empty(0, np.int64), painted)
-        if into is not None:
-            shared = None
-            if not full_lines:
-                shared = seed.view()
-                shared.flags.writeable = False  # the renderer's cache: readers must not write through it
-            frame = LinearFrame(shared, into, painted, bool(cam[Wd.C_TRANSPOSED] != 0.0))
-            return RenderResult(np.empty((0, 0, 3), np.uint8), None, gt, int(painted.sum()), frame)
-        if truth_only:
-            return RenderResult(np.empty((0, 0, 3), np.uint8), None, gt, int(lines.size))
-        image = out_u8.transpose(1, 0, 2) if cam[Wd.C_TRANSPOSED] != 0.0 else out_u8
-        lin = None
-        if linear:
-            lin = out_lin.transpose(1, 0, 2) if cam[Wd.C_TRANSPOSED] != 0.0 else out_lin
-        return RenderResult(np.ascontiguousarray(image), lin, gt, int(lines.size))
+    def _check_times(self, times_ns: np.ndarray, by_column: bool) -> np.ndarray:
+        n_lines = self.render_shape(by_column)[0]
+        times_ns = np.asarray(times_ns, dtype=np.int64)
+        if times_ns.shape != (n_lines,):
+            raise ConfigError(f"need one time per line: {n_lines} lines, got times of shape {times_ns.shape}")
+        return times_ns
+
+    @staticmethod
+    def _line_mask(lines: np.ndarray | None, n_lines: int) -> np.ndarray:
+        """A bool mask of the asked-for lines (a mask, indices, or None for all)."""
+        if lines is None:
+            return np.ones(n_lines, np.bool_)
+        lines = np.asarray(lines)
+        if lines.dtype == np.bool_:
+            if lines.shape != (n_lines,):
+                raise ConfigError(f"line mask must have {n_lines} entries, got shape {lines.shape}")
+            return lines
+        if lines.size and (lines.min() < 0 or lines.max() >= n_lines):
+            raise ConfigError(f"line indices must be in 0..{n_lines - 1}")
+        subset = np.zeros(n_lines, np.bool_)
+        subset[lines.astype(np.int64)] = True
+        return subset
+
+    def _check_buffers(self, out: np.ndarray, hits: np.ndarray | None, by_column: bool,
+                       need_hits: bool = False) -> None:
+        n_lines, n_along = self.render_shape(by_column)
+        if out.shape != (n_lines, n_along, 3) or out.dtype != np.float32 or not out.flags.c_contiguous:
+            raise ConfigError(f"out must be a C-contiguous float32 array of shape {(n_lines, n_along, 3)}, "
+                              f"got {out.dtype} {out.shape}")
+        if (hits is not None or need_hits) and (hits is None or hits.shape != (n_lines,) or hits.dtype != np.int64):
+            got = None if hits is None else f"{hits.dtype} {hits.shape}"
+            raise ConfigError(f"hits must be an int64 array of {n_lines} counts, got {got}")
+
+
+def _oriented(a: np.ndarray, by_column: bool, *, contiguous: bool) -> np.ndarray:
+    """A render-orientation array in image orientation (columns back to columns)."""
+    a = a.transpose(1, 0, 2) if by_column else a
+    return np.ascontiguousarray(a) if contiguous else a
+
+
+def _read_only(a: np.ndarray | None) -> np.ndarray | None:
+    """A read-only view: the renderer's cache, which readers must not write through."""
+    if a is None:
+        return None
+    v = a.view()
+    v.flags.writeable = False
+    return v

@@ -14,9 +14,10 @@ from typing import Any
 import numpy as np
 from rollcam.common.errors import ConfigError
 
-from .formats import FORMATS, PixelFormat, encode_raw, pixel_format
+from .codecs import codec
+from .formats import FORMATS, PixelFormat, pixel_format
 from .hwconfig import SensorConfig
-from .isp import IspParams, preview, to_processed
+from .isp import IspParams, preview
 from .noise import STAGES, SensorModel, split_gain
 from .render import LinearFrame
 
@@ -49,7 +50,7 @@ class SensorPipeline:
         f = pixel_format(fourcc)
         cfa = sensor.bayer_order
         out_cfa = flipped_cfa(cfa, size, hflip, vflip)
-        if f.is_raw:
+        if _samples(f, cfa):
             if f.cfa == out_cfa != cfa:
                 f = pixel_format(_same_layout(f, cfa))
             if f.cfa != cfa:
@@ -65,13 +66,13 @@ class SensorPipeline:
         k = model.system_gain(a, d)
         white = min(sensor.noise.black_level_dn + k * sensor.noise.full_well_e, float(model.max_dn))
         isp = IspParams(black_level_dn=sensor.noise.black_level_dn, white_level_dn=white, wb_gains=wb_gains)
-        out = _same_layout(f, out_cfa) if f.is_raw else f.fourcc
+        out = _same_layout(f, out_cfa) if _samples(f, cfa) else f.fourcc
         return cls(model, out, a, d, clamped, origin, sensor.active_width, isp, hflip, vflip)
 
     @property
     def raw(self) -> bool:
         """True when frames are the ADC output (no ISP)."""
-        return pixel_format(self.fourcc).is_raw
+        return _samples(pixel_format(self.fourcc), self.model.cfa)
 
     def samples(self, radiance: np.ndarray | LinearFrame, exposure_ns: int, frame_index: int) -> np.ndarray:
         """ADC samples ``uint16 (H, W)`` of one exposed frame, in output orientation (flips applied).
@@ -84,13 +85,13 @@ class SensorPipeline:
         return np.ascontiguousarray(flip(dn, self.hflip, self.vflip))
 
     def deliver(self, radiance: np.ndarray | LinearFrame, exposure_ns: int, frame_index: int) -> np.ndarray:
-        """Frame data in ``fourcc``'s layout (see ``rollcam.sim.formats``)."""
+        """Frame data in ``fourcc``'s layout (encoded by ``rollcam.sim.codecs``)."""
         dn = self.samples(radiance, exposure_ns, frame_index)
         if self.raw:
-            return encode_raw(dn, self.fourcc, self.model.bit_depth)
+            return codec(self.fourcc).encode(dn, sample_bits=self.model.bit_depth)
         h, w = dn.shape
         order = flipped_cfa(self.model.cfa, (w, h), self.hflip, self.vflip)
-        return to_processed(preview(dn, order, self.isp), self.fourcc)
+        return codec(self.fourcc).encode(preview(dn, order, self.isp))
 
     def info(self) -> dict[str, Any]:
         """What a frame's metadata records about the sensor path."""
@@ -99,6 +100,11 @@ class SensorPipeline:
                 "bit_depth": self.model.bit_depth, "cfa": self.model.cfa, "serial": self.model.serial,
                 "noise_stages": sorted(self.model.stages),
                 "black_level_dn": self.model.noise.black_level_dn, "hflip": self.hflip, "vflip": self.vflip}
+
+
+def _samples(f: PixelFormat, cfa: str) -> bool:
+    """True when ``f`` delivers the sensor's own samples: a raw format, except GREY on a colour sensor (luma)."""
+    return f.is_raw and not (f.fourcc == "GREY" and cfa != "mono")
 
 
 def flip(a: np.ndarray, hflip: bool, vflip: bool) -> np.ndarray:

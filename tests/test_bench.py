@@ -1,15 +1,17 @@
-"""The bench machinery (``rollcam bench``) on a tiny frame: schema, error ordering, plot. No timing checks."""
+"""The bench machinery (``rollcam bench STUDY``) on a tiny frame: schema, error ordering, plot, the study
+command line and ``--check``. No timing checks."""
 
 from __future__ import annotations
 
-import argparse
 import itertools
 import json
 
 import numpy as np
 import pytest
 from rollcam.benchmarks import bench
+from rollcam.benchmarks.studies import STUDIES, missed
 from rollcam.common.errors import ConfigError
+from rollcam.host.cli import main
 
 ROW_KEYS = {"method", "scene", "ms_per_frame", "mean_abs_err_dn", "max_abs_err_dn", "max_box_err_px", "x_memcpy",
             "speedup_vs_reference", "kind", "n_timed", "note"}
@@ -76,14 +78,69 @@ def test_banded_times_hold_each_band_at_its_middle() -> None:
     assert bench.banded_times_ns(t, 100).tolist() == t.tolist()
 
 
-def test_quick_config_and_bad_options() -> None:
+def test_quick_config_and_bad_options(capsys) -> None:
     cfg = bench.make_config(quick=True)
     assert cfg.quick and not cfg.full_reference and cfg.flow_preset == "fast" and cfg.flow_margin_px == 48
     with pytest.raises(ConfigError, match="scenes"):
         bench.make_config(scenes=("rainy",))
     with pytest.raises(ConfigError, match="unknown bench option"):
         bench.make_config(colour="red")
-    parser = argparse.ArgumentParser()
-    bench.add_arguments(parser)
-    args = parser.parse_args(["--quick", "--size", "big", "--out", "unused"])
-    assert bench.run(args) == 2
+    assert main(["bench", "render", "--quick", "--scenes", "rainy", "--out", "unused"]) == 2
+    assert "rollcam: error: bench scenes" in capsys.readouterr().err
+
+
+def _fake(doc: dict):
+    return lambda *a, **k: doc
+
+
+DATASET_DOC = {"size": "8x8", "targets": {
+    "generation_overhead": {"value": 1.2, "op": "<=", "limit": 1.5, "pass": True},
+    "two_worker_speedup": {"value": 1.1, "op": ">=", "limit": 1.7, "pass": False}}}
+
+
+def test_bench_dataset_runs_the_dataset_study_only(tmp_path, monkeypatch, capsys) -> None:
+    import rollcam.benchmarks.dataset as ds
+
+    monkeypatch.setattr(ds, "bench_dataset", _fake(DATASET_DOC))
+    monkeypatch.setattr(ds, "format_report", lambda doc: "dataset report")
+    monkeypatch.setattr(bench, "run_bench", lambda *a, **k: pytest.fail("the render study ran too"))
+    assert main(["bench", "dataset", "--out", str(tmp_path), "--json"]) == 0
+    assert json.loads(capsys.readouterr().out) == DATASET_DOC
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["dataset_bench.json"]  # no bench.json / bench.png
+    assert main(["bench", "dataset", "--out", str(tmp_path)]) == 0
+    assert capsys.readouterr().out == "dataset report\n"
+
+
+def test_check_exits_1_naming_each_missed_target(tmp_path, monkeypatch, capsys) -> None:
+    import rollcam.benchmarks.dataset as ds
+
+    monkeypatch.setattr(ds, "bench_dataset", _fake(DATASET_DOC))
+    monkeypatch.setattr(ds, "format_report", lambda doc: "dataset report")
+    assert main(["bench", "dataset", "--out", str(tmp_path), "--json", "--check"]) == 1
+    captured = capsys.readouterr()
+    assert json.loads(captured.out) == DATASET_DOC  # the document is printed all the same
+    assert captured.err == ("rollcam: error: bench dataset: 1 target(s) missed: two_worker_speedup (1.1 >= 1.7 "
+                            "failed)\n")
+    passing = {**DATASET_DOC, "targets": {"generation_overhead": DATASET_DOC["targets"]["generation_overhead"]}}
+    monkeypatch.setattr(ds, "bench_dataset", _fake(passing))
+    assert main(["bench", "dataset", "--out", str(tmp_path), "--check"]) == 0
+
+
+def test_every_study_reads_its_targets_in_one_shape(tiny) -> None:
+    doc, _ = tiny
+    targets = STUDIES["render"].targets(doc)
+    assert set(targets) == set(doc["targets"])
+    for t in targets.values():
+        assert set(t) == {"value", "op", "limit", "pass"}
+    ptc = STUDIES["ptc"].targets({"errors": {"gain": 0.01, "read_noise": -0.2}})
+    assert ptc["gain_error"]["pass"] is True and ptc["read_noise_error"]["pass"] is False
+    assert missed(ptc) == ["read_noise_error (-0.2 |x| <= 0.05 failed)"]
+    assert STUDIES["hog"].targets({"recall": 0.4})["recall"]["pass"] is False
+    assert STUDIES["hog"].targets({"recall": None})["recall"]["pass"] is None  # no walker to find: n/a
+
+
+def test_soak_refuses_a_non_positive_duration() -> None:
+    from rollcam.benchmarks.soak import run_soak
+
+    with pytest.raises(ConfigError, match="minutes"):
+        run_soak(-1)

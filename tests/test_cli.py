@@ -1,4 +1,4 @@
-"""The ``rollcam`` command line: capture, demo, list, bench wiring, exit codes, interrupted captures.
+"""The ``rollcam`` command line: capture, demo, list, command registry, exit codes, one-line errors, progress.
 
 Small emulated streams keep these fast; subprocess tests run the installed console script (or
 ``python -m rollcam.host.cli`` where it is missing) exactly as a user would.
@@ -20,10 +20,13 @@ import cv2
 import numpy as np
 import pytest
 from rollcam.host import SourceError, open_camera
-from rollcam.host.capture import FRAMES_LOG, CaptureInterrupted, Progress, capture
+from rollcam.host.capture import FRAMES_LOG, CaptureInterrupted, capture
+from rollcam.host.cli import main
 from rollcam.host.demo import run_demo
+from rollcam.host.progress import Progress
 from rollcam.host.sources import CameraSource
 from rollcam.sim.frame import Frame
+from rollcam.sim.timing import Readout
 
 URI = "emu:letsroll?size=320x180&scene=street&seed=1&speed=fast"
 FIELDS = {"sequence", "shutter", "timestamp_ns", "line_time_ns", "exposure_ns", "readout", "width", "height",
@@ -160,16 +163,103 @@ def test_list_json():
         assert data[key]["devices"] or data[key]["note"]
     table = run("list")
     assert table.returncode == 0 and "letsroll" in table.stdout and "OAK devices" in table.stdout
+    assert res.stderr == table.stderr == ""  # depthai's and OpenCV's own log lines are silenced
 
 
-def test_bench_wiring():
-    if importlib.util.find_spec("rollcam.benchmarks.bench") is None:
-        res = run("bench", "--quick")
-        assert res.returncode == 1
-        assert "rollcam.benchmarks.bench" in res.stderr and "Traceback" not in res.stderr
-    else:
-        res = run("bench", "--help")
-        assert res.returncode == 0 and "rollcam bench" in res.stdout
+def test_bench_lists_one_subcommand_per_study_each_with_json_and_check(capsys):
+    from rollcam.benchmarks.studies import STUDIES
+
+    assert list(STUDIES) == ["render", "hog", "detect", "ptc", "sensor", "uvc", "soak", "dataset"]
+    with pytest.raises(SystemExit) as exc:
+        main(["bench", "--help"])
+    assert exc.value.code == 0
+    listing = capsys.readouterr().out
+    assert all(name in listing for name in STUDIES)
+    for name in STUDIES:
+        with pytest.raises(SystemExit):
+            main(["bench", name, "--help"])
+        text = capsys.readouterr().out
+        assert f"rollcam bench {name}" in text and "--json" in text and "--check" in text and "--out" in text
+
+
+def test_every_command_is_a_module_registered_the_same_way():
+    from rollcam.host.commands import COMMANDS
+
+    assert set(COMMANDS) >= {"demo", "list", "capture", "detect", "emulate", "dataset", "eval", "bench"}
+    for module_name in COMMANDS.values():
+        module = importlib.import_module(f"rollcam.host.commands.{module_name}")
+        assert callable(module.add_parser) and callable(module.run), module_name
+    # Building every parser imports none of the heavy or optional packages: --help is fast whatever is missing.
+    code = ("import sys; from rollcam.host.cli import build_parser; build_parser(); "
+            "print(sorted(m for m in ('numpy', 'cv2', 'numba', 'usb', 'serial', 'depthai', 'onnxruntime', 'tqdm') "
+            "if m in sys.modules))")
+    res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)
+    assert res.returncode == 0 and res.stdout.strip() == "[]", res.stdout + res.stderr
+
+
+@pytest.mark.parametrize("argv, words", [
+    ([], "the following arguments are required: COMMAND"),
+    (["nosuch"], "invalid choice: 'nosuch'"),
+    (["list", "--bogus"], "list: unrecognized arguments: --bogus (see 'rollcam list --help')"),
+    (["capture", URI, "--out", "x"], "capture: the following arguments are required: --frames"),
+    (["capture", URI, "--frames", "0", "--out", "x"], "argument --frames: '0' is invalid: must be an integer >= 1"),
+    (["detect", URI, "--detector", "hog", "--iou", "2"], "argument --iou: '2' is invalid: must be a number in (0, 1]"),
+    (["detect", URI, "--detector", "hog", "--iou", "0"], "--iou"),
+    (["detect", URI, "--detector", "hog", "--min-visible", "5"], "--min-visible: '5' is invalid"),
+    (["detect", URI, "--detector", "hog", "--min-height", "-1"], "--min-height"),
+    (["demo", "--seconds", "nan"], "--seconds"),
+    (["dataset", "--out", "x", "--min-visible", "1.5"], "--min-visible"),
+    (["dataset", "--out", "x", "--min-box", "6by16"], "--min-box"),
+    (["bench"], "bench: the following arguments are required: STUDY"),
+    (["bench", "soak", "--minutes", "-1"], "bench soak: argument --minutes: '-1' is invalid: must be greater than 0"),
+    (["bench", "dataset", "--size", "10x"], "bench dataset: argument --size: size '10x' is not WIDTHxHEIGHT"),
+    (["bench", "render", "--size", "big"], "--size"),
+    (["emulate", "imx219", "--duration", "-1"], "emulate: argument --duration: -1 is invalid: must be greater than 0"),
+])
+def test_usage_errors_are_one_error_line_and_exit_2(capsys, argv, words):
+    assert main(argv) == 2
+    captured = capsys.readouterr()
+    lines = captured.err.splitlines()
+    assert len(lines) == 1 and lines[0].startswith("rollcam: error: ") and words in lines[0], captured.err
+    assert "usage:" not in captured.err and not captured.out
+
+
+@pytest.mark.parametrize("uri, words", [
+    ("opencv:63", "no camera at that index"),
+    ("v4l2:/dev/video99", "no device '/dev/video99'"),
+    ("http://127.0.0.1:9/stream.mjpg#timeout=1", "cannot connect"),
+])
+def test_a_camera_that_is_not_there_is_a_device_failure_exit_1(tmp_path: Path, uri: str, words: str):
+    res = run("capture", uri, "--frames", "1", "--out", str(tmp_path / "x"))
+    assert res.returncode == 1, res.stderr
+    # One line: OpenCV's and depthai's own log lines are silenced for the call.
+    assert res.stderr.count("\n") == 1 and res.stderr.startswith("rollcam: error:") and words in res.stderr
+    assert not (tmp_path / "x").exists()
+
+
+def test_http_fragment_options_are_parsed_like_any_query(tmp_path: Path):
+    res = run("capture", "http://127.0.0.1:9/x#frames=1&frames=9", "--frames", "1", "--out", str(tmp_path / "x"))
+    assert res.returncode == 2 and "option 'frames' given twice" in res.stderr  # refused before connecting
+    with pytest.raises(SourceError, match="latest=2"):
+        open_camera("http://127.0.0.1:9/x#latest=2")
+
+
+def test_a_missing_optional_package_is_one_line_and_exit_1(monkeypatch, capsys, tmp_path: Path):
+    monkeypatch.setitem(sys.modules, "usb", None)  # as if pyusb were not installed
+    monkeypatch.setitem(sys.modules, "usb.core", None)
+    assert main(["capture", "uvc:1d6b:0102?backend=emu", "--frames", "1", "--out", str(tmp_path / "x")]) == 1
+    err = capsys.readouterr().err
+    assert err == "rollcam: error: the uvc: source needs pyusb (pip install 'rollcam[usb]')\n"
+    assert main(["bench", "uvc", "--out", str(tmp_path / "b")]) == 1
+    assert capsys.readouterr().err == "rollcam: error: rollcam bench uvc needs pyusb (pip install 'rollcam[usb]')\n"
+    assert not (tmp_path / "b").exists()
+
+
+def test_no_hand_written_install_hints_outside_the_one_error_type():
+    root = Path(__file__).resolve().parents[1]
+    offenders = [str(p.relative_to(root)) for folder in ("host", "emu", "firmware", "sim", "benchmarks")
+                 for p in (root / folder).rglob("*.py") if "pip install" in p.read_text()]
+    assert offenders == []
 
 
 def test_unknown_argument_is_exit_2():
@@ -297,21 +387,89 @@ def test_finite_source_ends_capture_early(tmp_path: Path):
     assert len(records(tmp_path / "x")) == 2
 
 
-def test_progress_line():
-    t = iter([0.0, 1.0, 1.05, 2.0, 2.01])
+def test_progress_is_one_refreshing_line():
     buf = io.StringIO()
-    bar = Progress(4, label="capture", stream=buf, enabled=True, clock=lambda: next(t))
-    bar.update(1)  # t=1.0: shown
-    bar.update(2)  # t=1.05: under 0.1 s since the last refresh, skipped
-    bar.update(3)  # t=2.0: shown
-    bar.update(4)  # t=2.01: the last one is always shown
+    bar = Progress(4, label="capture", stream=buf, enabled=True, unit="frame", min_interval_s=0)
+    for done in range(1, 5):
+        bar.update(done)
     bar.close()
+    bar.close()  # harmless
     text = buf.getvalue()
-    assert text.count("\r") == 3 and text.endswith("\n")
-    assert "capture 1/4" in text and "ETA" in text and "capture 4/4" in text
+    assert text.count("\n") == 1 and text.endswith("\n") and text.count("\r") >= 4  # redrawn in place
+    assert "capture 4/4" in text and "frame/s" in text and "ETA" in text
+    steps = io.StringIO()
+    bar = Progress(label="bench hog", stream=steps, enabled=True)
+    for i in range(100):
+        bar.status(f"frame {i + 1}/100")
+    bar.close()
+    assert steps.getvalue().count("\n") == 1 and "frame 100/100" in steps.getvalue()  # 100 steps, one line
     quiet = io.StringIO()
-    Progress(4, label="x", stream=quiet).update(1)  # StringIO is not a TTY: nothing shown by default
+    bar = Progress(4, label="x", stream=quiet)  # StringIO is not a TTY: nothing shown by default
+    bar.update(1)
+    bar.status("step")
+    bar.close()
     assert quiet.getvalue() == ""
+
+
+def test_refused_capture_writes_nothing_so_the_corrected_command_runs(tmp_path: Path):
+    out = tmp_path / "raw"
+    raw = "emu:imx219?size=160x120&format=pRAA&frames=3"
+    res = run("capture", raw, "--frames", "2", "--out", str(out), "--format", "jpg")
+    assert res.returncode == 2 and "--format jpg would lose the samples" in res.stderr
+    assert not out.exists()  # no folder, no capture.json, no frames.jsonl
+    res = run("capture", raw, "--frames", "2", "--out", str(out), "--format", "png")
+    assert res.returncode == 0, res.stderr
+    assert [r["file"] for r in records(out)] == ["000000_rs.png", "000001_rs.png"]
+
+
+class _UnknownShutter(CameraSource):
+    """Frames of a camera whose shutter is unknown (a webcam through opencv: without sensor=)."""
+
+    uri = "test:webcam"
+
+    def __init__(self) -> None:
+        self.n = 0
+
+    def read(self) -> Frame | None:
+        self.n += 1
+        if self.n > 2:
+            return None
+        return Frame(np.zeros((8, 8, 3), np.uint8), "BGR3", self.n - 1, self.n * 1000, 0, Readout.TOP_TO_BOTTOM, 0,
+                     shutter="unknown")
+
+
+def test_unknown_shutter_captures_are_named_by_instant_only(tmp_path: Path):
+    capture(_UnknownShutter(), tmp_path / "cam", 5, progress=False)
+    assert sorted(p.name for p in (tmp_path / "cam").glob("*.png")) == ["000000.png", "000001.png"]
+    assert [r["file"] for r in records(tmp_path / "cam")] == ["000000.png", "000001.png"]
+    capture(_UnknownShutter(), tmp_path / "cam", 1, overwrite=True, progress=False)  # --overwrite clears them
+    assert sorted(p.name for p in (tmp_path / "cam").glob("*.png")) == ["000000.png"]
+
+
+def test_demo_follows_a_global_shutter_sensor(tmp_path: Path):
+    result = run_demo(tmp_path / "gs", seconds=0.05, sensor="ov9281", size=(320, 200), progress=False)
+    assert result.shutter == "global" and result.mean_shift_px == 0.0
+    assert result.video.name == "demo_gs.mp4" and result.video.stat().st_size > 0
+    assert "no rolling-shutter skew" in result.summary() and "RS-GS" not in result.summary()
+    sheet = cv2.imread(str(result.contact_sheet))
+    assert sheet.shape[1] == 480  # one column of GS tiles, no RS column
+    rolling = run_demo(tmp_path / "rs", seconds=0.1, size=(320, 180), progress=False)
+    assert rolling.shutter == "rolling" and rolling.video.name == "demo_rs.mp4" and "RS-GS" in rolling.summary()
+
+
+def test_compile_notice_only_when_the_renderer_cache_is_cold(tmp_path: Path):
+    from rollcam.host.commands.compile_notice import NOTICE, notify_if_cold, renderer_cache_cold
+
+    with open_camera("emu:letsroll?size=64x36&frames=1") as src:
+        src.read()  # compiled or loaded: numba has it cached now
+    assert renderer_cache_cold() is False
+    quiet = io.StringIO()
+    assert notify_if_cold(quiet) is False and quiet.getvalue() == ""
+    code = ("import io; from rollcam.host.commands.compile_notice import notify_if_cold; b = io.StringIO(); "
+            "print(notify_if_cold(b), repr(b.getvalue()))")
+    res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60,
+                         env={**os.environ, "NUMBA_CACHE_DIR": str(tmp_path / "empty")})
+    assert res.stdout.strip() == f"True {NOTICE + chr(10)!r}", res.stdout + res.stderr
 
 
 @pytest.mark.skipif(os.name != "posix", reason="sends SIGINT")

@@ -159,6 +159,15 @@ def test_cli_dataset_then_eval_with_ground_truth_detections(tmp_path, capsys):
             assert (m["P"], m["R"], m["mAP50"], m["mAP50_95"]) == pytest.approx((1, 1, 1, 1), abs=1e-6)
         assert doc["results"][speed]["gs_to_rs"]["mAP50_95"] == pytest.approx(0, abs=1e-6)
     assert Path(doc["files"]["chart"]).stat().st_size > 1000
+    # One subset goes to its own files: the four-subset results stay as they were.
+    full = Path(doc["files"]["json"]).read_bytes()
+    assert main(["eval", str(out), "--detections", str(det_file), "--split", "train", "--subset", "fast_rs",
+                 "--json", "--out", str(tmp_path / "ev")]) == 0
+    one = json.loads(capsys.readouterr().out)
+    assert list(one["results"]) == ["fast"] and set(one["results"]["fast"]) == {"rs"}
+    assert Path(one["files"]["json"]).name == "detections_train_fast_rs.json"
+    assert Path(doc["files"]["json"]).read_bytes() == full
+    assert json.loads(Path(one["files"]["json"]).read_text())["results"] == one["results"]
     # The detector path runs end to end too (HOG finds little at 192x108; the point is the plumbing).
     assert main(["eval", str(out), "--detector", "hog", "--split", "val", "--out", str(tmp_path / "ev")]) == 0
     assert "Normal_GS" in capsys.readouterr().out

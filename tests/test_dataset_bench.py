@@ -1,4 +1,4 @@
-"""The dataset bench runs end to end (tiny size; its speed targets are judged by ``rollcam bench --dataset``)."""
+"""The dataset bench runs end to end (tiny size; its speed targets are judged by ``rollcam bench dataset``)."""
 
 from __future__ import annotations
 
@@ -12,13 +12,3 @@ def test_bench_dataset_small():
     assert "targets:" in format_report(doc)
     truths, dets = synthetic_eval_inputs(50)
     assert len(truths) == len(dets) == 50
-
-
-def test_bench_cli_flag_is_wired():
-    import argparse
-
-    from rollcam.benchmarks import bench
-
-    parser = argparse.ArgumentParser()
-    bench.add_arguments(parser)
-    assert parser.parse_args(["--dataset"]).dataset

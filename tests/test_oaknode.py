@@ -44,3 +44,35 @@ def test_bad_uri_fails_in_build():
 
     with dai.Pipeline(False) as pipeline, pytest.raises(SourceError, match="nope"):
         pipeline.create(EmulatedCamera).build("emu:nope")
+
+
+@pytest.mark.parametrize("limit", [1, 4])
+def test_readme_loop_ends_after_the_last_frame(limit):
+    """The README's loop, as written: every frame arrives, then isRunning() is False (no 'MessageQueue was
+    closed'), whether ``frames=`` or the end of a finite source ends the stream."""
+    from rollcam.host.oaknode import EmulatedCamera
+
+    for uri, frames in ((URI, limit), (URI + f"&frames={limit}", None)):
+        seqs = []
+        with dai.Pipeline(False) as pipeline:
+            cam = pipeline.create(EmulatedCamera).build(uri, frames=frames)
+            queue = cam.out.createOutputQueue()
+            pipeline.start()
+            while pipeline.isRunning():
+                frame = queue.get()
+                img, seq = frame.getCvFrame(), frame.getSequenceNum()
+                seqs.append(seq)
+        assert cam.error is None and len(seqs) == limit and seqs == sorted(seqs) and img.shape == (180, 320, 3)
+
+
+def test_a_failing_node_raises_its_error_from_get():
+    from rollcam.host.oaknode import EmulatedCamera
+
+    with dai.Pipeline(False) as pipeline:
+        cam = pipeline.create(EmulatedCamera).build(URI, frames=3)
+        cam.uri = "emu:nope"  # fails in the node's thread, after build() accepted the URI
+        queue = cam.out.createOutputQueue()
+        pipeline.start()
+        with pytest.raises(SourceError, match=r"EmulatedCamera.*nope"):
+            while pipeline.isRunning():
+                queue.get()

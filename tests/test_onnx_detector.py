@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from rollcam.common.errors import ConfigError
+from rollcam.common.errors import ConfigError, MissingDependencyError
 from rollcam.host.detectors import load_detector
 from rollcam.host.detectors.ops import iou_matrix, letterbox, nms, tile_windows
 
@@ -155,8 +155,8 @@ def test_missing_runtimes_name_the_install(monkeypatch, yolo_model):
     import onnxruntime
 
     if "CUDAExecutionProvider" not in onnxruntime.get_available_providers():
-        with pytest.raises(ConfigError, match="onnxruntime-gpu"):
+        with pytest.raises(MissingDependencyError, match="onnxruntime-gpu"):
             load_detector(f"onnx:{yolo_model}?device=cuda")
     monkeypatch.setitem(__import__("sys").modules, "onnxruntime", None)
-    with pytest.raises(ConfigError, match=r"pip install 'rollcam\[onnx\]'"):
+    with pytest.raises(MissingDependencyError, match=r"pip install 'rollcam\[onnx\]'"):
         load_detector("ssdlite")

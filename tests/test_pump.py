@@ -56,7 +56,7 @@ def test_pump_idles_until_streaming_and_stops_cleanly():
     assert rec.enough.wait(20)
     pump.close()
     pump.close()
-    assert not pump._thread.is_alive()
+    assert not pump._worker.alive and pump.closed
 
 
 def test_realtime_priority_is_used_or_refusal_reported():
@@ -67,6 +67,6 @@ def test_realtime_priority_is_used_or_refusal_reported():
         cam.stream_on()
         assert rec.enough.wait(20)
     assert pump.error is None
-    assert pump.stats["rt"] == "SCHED_FIFO 1" or str(pump.stats["rt"]).startswith("refused")
+    assert pump.stats.rt == "SCHED_FIFO 1" or str(pump.stats.rt).startswith("refused")
     for _seq, _band, at, due in rec.bands:
         assert at >= due

@@ -7,7 +7,7 @@ import sys
 import cv2
 import numpy as np
 import pytest
-from rollcam.common.errors import ProtocolError, SourceError
+from rollcam.common.errors import DeviceNotFoundError, MissingDependencyError, ProtocolError, SourceError
 from rollcam.host import open_camera
 from rollcam.host.sources import SourceURI
 from rollcam.host.sources.http import HttpMjpegSource, MjpegParser, boundary_of
@@ -121,7 +121,7 @@ def test_mjpeg_parser_edge_cases():
 
 
 def test_http_errors_are_clear():
-    with pytest.raises(SourceError, match="cannot connect"):
+    with pytest.raises(DeviceNotFoundError, match="cannot connect"):
         open_camera("http://127.0.0.1:9/stream.mjpg#timeout=1")
     with pytest.raises(SourceError, match="unknown option"):
         open_camera("http://127.0.0.1:9/x#bogus=1")
@@ -144,9 +144,9 @@ def test_opencv_file_source_and_vectors(tmp_path, emu_frames):
 
 
 def test_missing_cameras_say_what_to_plug_in():
-    with pytest.raises(SourceError, match="no device '/dev/video99'"):
+    with pytest.raises(DeviceNotFoundError, match="no device '/dev/video99'"):
         open_camera("v4l2:/dev/video99")
-    with pytest.raises(SourceError, match="no camera at that index"):
+    with pytest.raises(DeviceNotFoundError, match="no camera at that index"):
         open_camera("opencv:63")
     with pytest.raises(SourceError, match="sensor='nope'"):
         open_camera("opencv:63?sensor=nope")
@@ -164,10 +164,10 @@ def test_oak_source_on_the_mock(mock_depthai):
         assert f.exposure_ns == pytest.approx(2_000_000, rel=0.05) and f.meta["iso"] == 200
         src.set_control("exposure_us", 4000)
         assert src.read().exposure_ns == pytest.approx(4_000_000, rel=0.05)
-    with pytest.raises(SourceError, match="no OAK with id 'XYZ'"):
+    with pytest.raises(DeviceNotFoundError, match="no OAK with id 'XYZ'"):
         open_camera("oak:XYZ")
     mock_depthai.devices.clear()
-    with pytest.raises(SourceError, match="no OAK device found; plug one in"):
+    with pytest.raises(DeviceNotFoundError, match="no OAK device found; plug one in"):
         open_camera("oak:")
 
 
@@ -211,13 +211,13 @@ def test_oak_with_real_depthai_and_no_device():
     dai = pytest.importorskip("depthai")
     if dai.Device.getAllAvailableDevices():
         pytest.skip("an OAK is attached")
-    with pytest.raises(SourceError, match="no OAK device found"):
+    with pytest.raises(DeviceNotFoundError, match="no OAK device found"):
         open_camera("oak:")
 
 
 def test_oak_without_depthai_names_the_install(monkeypatch):
     monkeypatch.setitem(sys.modules, "depthai", None)
-    with pytest.raises(SourceError, match=r"pip install 'rollcam\[oak\]'"):
+    with pytest.raises(MissingDependencyError, match=r"pip install 'rollcam\[oak\]'"):
         open_camera("oak:")
 
 
@@ -247,7 +247,7 @@ def test_source_uri_unchanged_for_http():
 def test_http_latest_mode_skips_to_the_newest_frame(emu_frames, rollcam_mjpeg_server):
     server = rollcam_mjpeg_server(emu_frames)
     with open_camera(server.url + "#latest=1") as src:
-        src._latest._thread.join(timeout=30)  # the whole (finite) stream has arrived
+        src._latest._worker.join(30)  # the whole (finite) stream has arrived
         newest = src.read()
         assert src.read() is None
     assert newest.sequence == emu_frames[-1].sequence and newest.meta["dropped"] == len(emu_frames) - 1

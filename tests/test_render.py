@@ -121,12 +121,10 @@ def test_static_scene_costs_one_render():
     """A static camera and static actors: every line comes from the cached composite, none is painted."""
     scene = make_street_scene(5, speed="static", width=160, height=90)
     r = Renderer(scene, 0)
-    r.render_lines(np.zeros(90, np.int64))
-    layer = r._layers[False]
-    assert layer.comp_u8 is not None
+    first = r.render_lines(np.zeros(90, np.int64))
     rs = r.render_lines(_times(90, 0, "top_to_bottom"))
-    np.testing.assert_array_equal(rs.image, layer.comp_u8)
-    assert rs.lines_painted == 0
+    np.testing.assert_array_equal(rs.image, first.image)
+    assert first.lines_painted == 0 and rs.lines_painted == 0
     moving = Renderer(make_street_scene(5, speed="fast", width=160, height=90), 0)
     assert 0 < moving.render_lines(_times(90, 0, "top_to_bottom")).lines_painted < 90
 
@@ -160,24 +158,17 @@ def _bounds_and_parts(cases, n_times):
     """(bounds box, parts table, live-part mask) of every walker of every camera of ``cases`` (seed, speed,
     ego) at ``n_times`` instants over 40 s: the actor bounds and the parts the kernels would draw."""
     from rollcam.sim import _kernels as K
-    from rollcam.sim import _world as Wd
 
     for seed, speed, ego in cases:
         scene = make_street_scene(seed, speed=speed, width=320, height=180, n_pedestrians=25, ego=ego_preset(ego))
         for cam_i in range(5):
             r = Renderer(scene, cam_i)
-            c, cam = r._c, r._cams[False]
-            rot, pos = np.empty((3, 3)), np.empty(3)
-            parts = np.empty((K.MAX_PARTS, K.PART_COLS))
-            scratch = K.parts_scratch()
-            box = np.empty(4)
-            for t in np.linspace(0.0, 40.0, n_times):
-                Wd.camera_pose(cam, t, rot, pos)
-                for act in c.actors:
-                    K.actor_bounds(act, c.world, cam, rot, pos, t, 0.0, box, np.empty(4), np.empty(3), np.empty(2))
-                    K.actor_parts(act, c.world, c.building_lut, c.buildings, c.light, cam, rot, pos, t, parts,
-                                  scratch)
-                    yield box, parts, parts[:, K.Q_KIND] != K.PART_NONE
+            times = np.linspace(0.0, 40.0, n_times)
+            parts = r.actor_parts(times)
+            boxes = r.actor_bounds(times, np.zeros(n_times), np.ones((r.n_actors, n_times), np.bool_))
+            for i in range(n_times):
+                for o in range(r.n_actors):
+                    yield boxes[o, i], parts[o, i], parts[o, i, :, K.Q_KIND] != K.PART_NONE
 
 
 def _assert_parts_inside(box, parts, live):

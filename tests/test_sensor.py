@@ -5,14 +5,15 @@ from __future__ import annotations
 import dataclasses
 import json
 import math
+from statistics import NormalDist
 
 import numpy as np
 import pytest
 from rollcam.common.errors import ConfigError
 from rollcam.host import SourceError, open_camera
 from rollcam.host.capture import capture
+from rollcam.sim.codecs import codec
 from rollcam.sim.exposure import dense_plan, integrate, plan_samples
-from rollcam.sim.formats import decode_raw
 from rollcam.sim.hwconfig import load_sensor
 from rollcam.sim.noise import STAGES, SensorModel, parse_stages, split_gain
 from rollcam.sim.scenegen import make_chart_scene, make_flat_scene
@@ -86,6 +87,27 @@ def test_dark_current_grows_with_exposure_and_poisson_at_low_signal():
         assert e_el.mean() == pytest.approx(N.dark_current_e_per_s * t_s, rel=0.05, abs=0.02)
     # Exact Poisson at 0.1 e-: most pixels hold no electron at all.
     assert np.mean(m.expose(flat(0.0, 128, 128), 10_000_000, 0) == 64) == pytest.approx(math.exp(-0.1), abs=0.01)
+
+
+def test_dark_frames_keep_negative_dsnu_offsets_above_the_adc_floor():
+    """Regression: charge was clipped at 0 e- after the DSNU offset, so every negative offset was lost (a
+    dark frame's DSNU read 0.6 e- for 1 e- configured). Only the well and the ADC clip."""
+    for stages in (("dsnu", "saturation"), ("dsnu", "dark", "shot", "saturation")):
+        dn = model(stages).expose(flat(0.0, 256, 256), 10_000_000, 0, array_width=256)  # float DN, no rounding
+        e = (dn - N.black_level_dn) / N.system_gain_dn_per_e - N.dark_current_e_per_s * 0.01 * ("dark" in stages)
+        assert np.mean(e < 0) == pytest.approx(0.5, abs=0.03 if "shot" not in stages else 0.1)
+        assert e.std() == pytest.approx(math.hypot(N.dsnu_e, math.sqrt(0.1) * ("shot" in stages)), rel=0.02)
+    # Quantised, the black level keeps them in the output (mean at the black level, not above it); with no
+    # black level the ADC clips them at 0 DN. DSNU at 8x gain spans 1.7 DN, so rounding moves the fractions.
+    k8 = 8.0 * N.system_gain_dn_per_e
+    below = NormalDist(0.0, N.dsnu_e * k8).cdf(-0.5)
+    q = model(("dsnu", "saturation", "quantization")).expose(flat(0.0, 256, 256), 0, 0, analog_gain=8.0)
+    assert q.mean() == pytest.approx(N.black_level_dn, abs=0.03)
+    assert np.mean(q < N.black_level_dn) == pytest.approx(below, abs=0.01)
+    no_black = SensorModel(dataclasses.replace(N, black_level_dn=0), 10, "RGGB", serial="A",
+                           stages=frozenset(("dsnu", "saturation", "quantization")))
+    z = no_black.expose(flat(0.0, 256, 256), 0, 0, analog_gain=8.0)
+    assert np.mean(z == 0) == pytest.approx(1 - below, abs=0.01)
 
 
 def test_quantization_off_gives_float_dn():
@@ -219,7 +241,8 @@ def test_capture_writes_raw_frames_losslessly(tmp_path):
     png = cv2.imread(str(tmp_path / "png" / recs[0]["file"]), cv2.IMREAD_UNCHANGED)
     npy = np.load(tmp_path / "npy" / "000000_rs.npy")
     assert np.array_equal(png, first.data) and np.array_equal(npy, first.data)
-    assert np.array_equal(decode_raw(png, "pRAA", 64), decode_raw(first.data, "pRAA", 64))
+    raa = codec("pRAA")
+    assert np.array_equal(raa.decode(png, 64, png.shape[0]), raa.decode(first.data, 64, first.height))
     with open_camera(uri) as src, pytest.raises(ConfigError, match="jpg"):
         capture(src, tmp_path / "jpg", 1, fmt="jpg", progress=False)
 
@@ -243,7 +266,8 @@ def test_flips_mirror_the_image_the_truth_and_the_bayer_order():
         fa, fb = a.read(), b.read()
     assert fb.format == "pGAA"  # the flipped order's fourcc may be asked for directly
     # The fixed pattern belongs to the pixel: a vertical flip reads the same array bottom-up.
-    assert np.array_equal(decode_raw(fb.data, "pGAA", 64), decode_raw(fa.data, "pRAA", 64)[::-1])
+    flipped, plain = codec("pGAA").decode(fb.data, 64, fb.height), codec("pRAA").decode(fa.data, 64, fa.height)
+    assert np.array_equal(flipped, plain[::-1])
 
 
 def test_vflip_scans_the_scene_bottom_up():

@@ -4,8 +4,14 @@ from __future__ import annotations
 
 import contextlib
 import errno
+import re
+import shlex
+import shutil
+import signal
 import socket
 import struct
+import subprocess
+import sys
 import threading
 import time
 
@@ -98,9 +104,9 @@ def test_one_importer_at_a_time_and_release_on_disconnect(server):
     _commit(dev)
     dev.control(0x01, C.REQ_SET_INTERFACE, 1, 1, b"")
     dev.iso_read(0x81, 2, 512)  # part of a frame, then the client vanishes
-    with pytest.raises(Exception, match="refused"):
+    with pytest.raises(Exception, match=r"refused.*device busy"):
         ImportedDevice(*server.address, "1-1")
-    with pytest.raises(Exception, match="refused"):
+    with pytest.raises(Exception, match=r"refused.*device not found"):
         ImportedDevice(*server.address, "9-9")
     dev.close()
     _wait_for(lambda: server.exports["1-1"].owner is None)
@@ -196,3 +202,58 @@ def test_an_independent_usbip_client_lists_imports_and_streams(server):
         assert [f.pts_ns for f in frames[:3]] == [0, 33_333_333, 66_666_666]
     finally:
         handle.close()
+
+
+def test_refusals_carry_the_statuses_linux_usbip_decodes(server):
+    """usbip_common.h: ST_DEV_BUSY 2 for a device someone else imported, ST_NODEV 4 for an unknown busid."""
+    assert (P.ST_OK, P.ST_NA, P.ST_DEV_BUSY, P.ST_DEV_ERR, P.ST_NODEV, P.ST_ERROR) == (0, 1, 2, 3, 4, 5)
+    assert _raw(server, P.req_import("9-9")) == P.op_header(P.OP_REP_IMPORT, P.ST_NODEV)
+    with ImportedDevice(*server.address, "1-2"):
+        assert _raw(server, P.req_import("1-2")) == P.op_header(P.OP_REP_IMPORT, P.ST_DEV_BUSY)
+    assert _raw(server, P.op_header(0x8123)) == P.op_header(0x0123, P.ST_ERROR)
+
+
+def test_usbip_hints_put_the_port_before_the_subcommand():
+    from rollcam.emu.usbip import usbip_commands
+
+    assert usbip_commands("127.0.0.1", 3241, "1-1") == (
+        "usbip --tcp-port 3241 list -r 127.0.0.1", "sudo usbip --tcp-port 3241 attach -r 127.0.0.1 -b 1-1")
+
+
+USBIP_TOOL = shutil.which("usbip")
+
+
+@pytest.mark.skipif(USBIP_TOOL is None, reason="Linux usbip tool not installed (apt-get install usbip)")
+def test_linux_usbip_lists_the_emulated_camera_from_the_emulate_hint():
+    """``rollcam emulate --usbip`` prints a ``usbip ... list`` line; run it as printed with the real tool (no
+    kernel module needed to list) and find the camera's busid and ids in its output."""
+    cmd = [sys.executable, "-m", "rollcam.host.cli", "emulate", "imx219", "--size", "640x480", "--scene", "flat",
+           "--usbip", "127.0.0.1:0", "--duration", "120"]
+    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    try:
+        lines = []
+        while not any("USB/IP:" in x for x in lines):
+            line = proc.stdout.readline()
+            assert line, "".join(lines)
+            lines.append(line)
+        hint = next(x for x in lines if "USB/IP:" in x)
+        list_cmd = re.search(r"\((usbip [^;]*list[^;]*);", hint).group(1)
+        out = subprocess.run(shlex.split(list_cmd), capture_output=True, text=True, timeout=30)
+        assert out.returncode == 0, out.stderr
+        assert re.search(r"1-1: .*\(1d6b:0102\)", out.stdout), out.stdout
+    finally:
+        proc.send_signal(signal.SIGINT)
+        try:
+            proc.communicate(timeout=30)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+
+
+@pytest.mark.skipif(USBIP_TOOL is None, reason="Linux usbip tool not installed (apt-get install usbip)")
+def test_linux_usbip_list_shows_every_busid(server):
+    host, port = server.address
+    out = subprocess.run([USBIP_TOOL, "--tcp-port", str(port), "list", "-r", host], capture_output=True, text=True,
+                         timeout=30)
+    assert out.returncode == 0, out.stderr
+    assert "1-1:" in out.stdout and "1-2:" in out.stdout and "1d6b:0102" in out.stdout
+    assert server.stats.devlists == 1

@@ -1,11 +1,11 @@
-"""``rollcam bench --uvc`` wiring: the document's shape and that every timed frame was recovered intact."""
+"""``rollcam bench uvc`` wiring: the document's shape and that every timed frame was recovered intact."""
 
 from __future__ import annotations
 
 import json
 
-from rollcam.benchmarks.bench import main as bench_main
 from rollcam.benchmarks.uvc import PAYLOADS, format_uvc, run_uvc_bench
+from rollcam.host.cli import main
 
 
 def test_uvc_bench_document():
@@ -18,11 +18,11 @@ def test_uvc_bench_document():
     assert "iso_3072" in format_uvc(doc)
 
 
-def test_bench_uvc_flag_writes_json(tmp_path, capsys, monkeypatch):
+def test_bench_uvc_writes_json(tmp_path, capsys, monkeypatch):
     import rollcam.benchmarks.uvc as uvc
 
     real = uvc.run_uvc_bench
     monkeypatch.setattr(uvc, "run_uvc_bench", lambda: real(frames=1, path_frames=1))
-    assert bench_main(["--uvc", "--json", "--out", str(tmp_path)]) == 0
+    assert main(["bench", "uvc", "--json", "--out", str(tmp_path)]) == 0
     printed = json.loads(capsys.readouterr().out)
     assert json.loads((tmp_path / "uvc.json").read_text())["codec"].keys() == printed["codec"].keys()

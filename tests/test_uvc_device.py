@@ -248,3 +248,41 @@ def test_render_ahead_offers_the_newest_completed_frame_and_counts_the_rest():
     assert skipped > 0 and fn.stats.frames_dropped >= skipped
     dev.clear_halt(0x81)  # stops the stream and its renderer thread
     assert not fn.streaming and fn.stream._ahead is None
+
+
+def test_realtime_isochronous_endpoint_keeps_the_bus_pace():
+    """A high-speed bus serves an isochronous endpoint once per service interval (125 us at bInterval 1):
+    however fast the host asks, packets (full or empty) arrive at no more than 8,000 a second of device time,
+    and frames still get through. Fake clock: the function's sleeps move it."""
+    clock = ManualClock()
+    producer = FakeProducer(clock=clock)
+    fn = UVCFunction(producer, realtime=True, sleep=clock.sleep, render_ahead=False)
+    dev = usb.core.find(idVendor=0x1D6B, backend=EmulatedBackend([fn]))
+    dev.set_configuration()
+    probe = _commit(dev)
+    dev.set_interface_altsetting(VS, 4)
+    assert fn.bus.interval_ns == 125_000
+    parser = PayloadParser(probe.dwClockFrequency, 64 * 48 * 2)
+    t0, packets, frames = clock.t_ns, 0, []
+    while clock.t_ns - t0 < 200_000_000:  # 0.2 s of device time, URBs of 32 packets back to back
+        data, lengths = fn.read_packets(0x81, 32, 3072)
+        packets += len(lengths)
+        frames += parser.feed_batch(data, lengths)
+    for _ in range(40):  # one packet a read, as pyusb reads an isochronous endpoint
+        dev.read(0x81, 3072)
+        packets += 1
+    elapsed_s = (clock.t_ns - t0) / 1e9
+    assert packets / elapsed_s <= 8000 * 1.001
+    assert packets / elapsed_s >= 8000 * 0.99  # a host that keeps asking gets every interval
+    assert len(frames) >= 5 and all(f.complete for f in frames)
+
+
+def test_service_interval_follows_binterval_and_a_late_host_loses_intervals():
+    from rollcam.emu.uvc.stream import BusSchedule, service_interval_ns
+
+    ep = bytes((7, C.DT_ENDPOINT, 0x81, 0x05, 0x00, 0x14, 4))  # bInterval 4: every 8 microframes
+    assert service_interval_ns(ep) == 8 * 125_000
+    bus = BusSchedule(125_000)
+    assert bus.book(8, 0) == 1_000_000  # back to back: 8 intervals
+    assert bus.book(1, 500_000) == 1_125_000  # asked early: waits for the next free interval
+    assert bus.book(2, 5_000_000) == 5_250_000  # asked late: the intervals in between went by empty

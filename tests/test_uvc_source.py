@@ -9,7 +9,7 @@ import pytest
 from rollcam.emu.usbip import USBIPServer
 from rollcam.emu.uvc import UVCFunction
 from rollcam.emu.uvc.convert import decode, encode
-from rollcam.host import SourceError, open_camera
+from rollcam.host import DeviceError, DeviceNotFoundError, SourceError, open_camera
 from uvc_fakes import FakeProducer
 
 EMU = "uvc:1d6b:0102?backend=emu&sensor=imx219&size=160x120&scene=chart&frames=3"
@@ -60,7 +60,7 @@ def test_uvc_source_over_usbip():
         deadline = time.monotonic() + 5
         while srv.exports["1-1"].owner is not None and time.monotonic() < deadline:
             time.sleep(0.01)  # the server notices the closed connection on its own thread
-        with pytest.raises(SourceError, match="is 1d6b:0102"):
+        with pytest.raises(DeviceNotFoundError, match="is 1d6b:0102"):
             open_camera(f"uvc:1d6b:9999?backend=usbip&usbip={host}:{port}")
 
 
@@ -71,15 +71,19 @@ def test_uvc_source_over_usbip():
     ("uvc:1d6b:0102?scene=chart", "need backend=emu"),
     ("uvc:1d6b:0102?backend=emu&sensor=imx219&size=160x120&scene=chart&format=h264", "offers"),
     ("uvc:1d6b:0102?backend=emu&sensor=nosuch", "nosuch"),
-    ("uvc:1d6b:0102?backend=usbip&usbip=127.0.0.1:1", "USB/IP import failed"),
 ])
 def test_bad_uvc_uris_are_clear_errors(uri, match):
     with pytest.raises(SourceError, match=match):
         open_camera(uri)
 
 
+def test_absent_usbip_server_is_a_missing_device():
+    with pytest.raises(DeviceNotFoundError, match="USB/IP import failed"):
+        open_camera("uvc:1d6b:0102?backend=usbip&usbip=127.0.0.1:1")
+
+
 def test_real_libusb_without_a_camera_is_a_clear_error():
-    with pytest.raises(SourceError, match=r"libusb|no USB device"):
+    with pytest.raises(DeviceError, match=r"libusb|no USB device"):
         open_camera("uvc:1d6b:0102?frames=1")
 
 

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import errno
 import urllib.request
 
@@ -45,12 +46,27 @@ def test_raw_buffers_decode_to_noisy_10_bit_samples(fourcc, realtime):
         fmt = d.set_format(640, 480, fourcc)
         bufs = list(d.stream(buffers=3, frames=2))
     assert [b.fourcc for b in bufs] == [fourcc, fourcc] and all(b.bytesused == fmt.sizeimage for b in bufs)
-    a, b = (sf.decode_raw(x.data.view(sf.pixel_format(fourcc).dtype).reshape(480, -1), fourcc, 640) for x in bufs)
+    def unpacked(x):  # the kernel's layouts, read without the codec table
+        return x.data.view(np.uint16).reshape(480, 640) if fourcc == "RG10" else \
+            sf.unpack_csi2(x.data.reshape(480, -1), 10, 640)
+
+    a, b = (unpacked(x) for x in bufs)
     assert a.shape == (480, 640) and a.dtype == np.uint16 and a.max() < 1024
     assert np.array_equal(a, bufs[0].samples())
     # A flat scene still varies: shot/read noise within a frame, and temporal noise from frame to frame.
     assert a.std() > 1 and not np.array_equal(a, b)
     assert bufs[0].image().shape == (480, 640, 3)
+
+
+def test_raw_buffer_previews_subtract_the_sensor_black_level():
+    with dev(scene={"scene": "flat", "level": 0.0}) as d:  # a dark frame: samples sit at the black level
+        d.set_format(640, 480, "RG10")
+        (buf,) = list(d.stream(frames=1))
+    black = d.driver.camera.sensor.noise.black_level_dn
+    assert buf.levels is not None and buf.levels.black_level_dn == black > 0
+    assert abs(float(np.median(buf.samples())) - black) <= 2
+    assert float(np.median(buf.image())) <= 40  # black previews (near) black
+    assert float(np.median(dataclasses.replace(buf, levels=None).image())) > 60  # 64 DN of 1023 is grey
 
 
 def test_fixed_pattern_noise_follows_the_serial_number():

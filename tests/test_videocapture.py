@@ -1,4 +1,4 @@
-"""The ``cv2.VideoCapture`` drop-in, driven by an unmodified OpenCV-style loop, and the preview conversions."""
+"""The ``cv2.VideoCapture`` drop-in, driven by an unmodified OpenCV-style loop (previews: test_codecs.py)."""
 
 from __future__ import annotations
 
@@ -7,7 +7,6 @@ import numpy as np
 import pytest
 from rollcam.common.errors import SourceError
 from rollcam.host import VideoCapture
-from rollcam.host.preview import to_bgr
 
 
 def opencv_script(capture_class, source, size=None):
@@ -71,28 +70,52 @@ def test_unopenable_uri_reports_like_opencv():
     assert cap.read() == (False, None)
 
 
-def test_demosaic_table_matches_bayer_orders():
-    red = np.zeros((4, 4), np.uint8)
-    red[0::2, 0::2] = 200  # red sites of an RGGB mosaic
-    assert to_bgr(red, "RGGB")[1, 1].tolist() == [0, 0, 200]
-    assert to_bgr(red.astype(np.uint16) * 4, "RG10")[1, 1].tolist() == [0, 0, 200]
-    blue = np.zeros((4, 4), np.uint8)
-    blue[0::2, 0::2] = 200  # blue sites of a BGGR mosaic
-    assert to_bgr(blue, "BA81")[1, 1].tolist() == [200, 0, 0]
-    assert to_bgr(np.full((2, 2), 4095, np.uint16), "Y12 ").shape == (2, 2, 3)
-    from rollcam.sim.formats import pack_csi2
-
-    packed = pack_csi2(red.astype(np.uint16) * 4, 10)
-    assert to_bgr(packed, "pRAA", width=4)[1, 1].tolist() == [0, 0, 200]
-    with pytest.raises(SourceError, match="bit-packed"):
-        to_bgr(np.zeros(10, np.uint8), "pRAA")
-    with pytest.raises(SourceError, match="no BGR preview"):
-        to_bgr(np.zeros((2, 2), np.uint8), "ZZZZ")
-
-
 def test_http_mjpeg_through_the_drop_in(rollcam_camera, rollcam_mjpeg_server):
     cam = rollcam_camera("imx219", size="160x90", seed=1, pedestrians=2)
     sent = [cam.read(), cam.read()]
     server = rollcam_mjpeg_server(sent)
     frames, stamps = opencv_script(VideoCapture, server.url)
     assert len(frames) == 2 and stamps == [f.timestamp_ns / 1e6 for f in sent]
+
+
+def test_http_stream_reports_size_and_fps_before_the_first_read_like_opencv(tmp_path):
+    """The usual recording script (a VideoWriter sized from the capture before any read) on the emulator's
+    MJPEG stream: rollcam's drop-in knows what cv2.VideoCapture knows at open, and more (the device rate)."""
+    from rollcam.emu.http_mjpeg import MjpegServer
+    from rollcam.firmware.camera import FirmwareCamera
+
+    camera = FirmwareCamera("imx219", scene={"scene": "flat"}, size=(640, 480))
+    with MjpegServer(camera) as server:
+        real = cv2.VideoCapture(server.url)
+        want = [real.get(p) for p in (cv2.CAP_PROP_FRAME_WIDTH, cv2.CAP_PROP_FRAME_HEIGHT)]
+        real.release()
+        assert want == [640, 480]
+        with VideoCapture(server.url) as cap:
+            w, h = int(cap.get(cv2.CAP_PROP_FRAME_WIDTH)), int(cap.get(cv2.CAP_PROP_FRAME_HEIGHT))
+            fps = cap.get(cv2.CAP_PROP_FPS)
+            assert [w, h] == want
+            writer = cv2.VideoWriter(str(tmp_path / "out.avi"), cv2.VideoWriter_fourcc(*"MJPG"), fps, (w, h))
+            assert writer.isOpened()
+            got = []
+            for _ in range(3):
+                ok, img = cap.read()
+                assert ok and img.shape == (h, w, 3)
+                got.append((cap.frame.sequence, cap.frame.timestamp_ns))
+                writer.write(img)
+            writer.release()
+            assert got == sorted(set(got))  # the frames read ahead at open come back first, in order
+            assert cap.get(cv2.CAP_PROP_POS_FRAMES) == 3
+        (s0, t0), (s2, t2) = got[0], got[-1]
+        assert fps == pytest.approx(1e9 * (s2 - s0) / (t2 - t0), rel=1e-3)  # the device's rate, from the headers
+
+
+def test_http_stream_without_timestamps_reports_ffmpegs_rate(rollcam_mjpeg_server):
+    images = [np.full((48, 64, 3), v, np.uint8) for v in (10, 90, 170)]
+    server = rollcam_mjpeg_server(images)
+    real = cv2.VideoCapture(server.url)
+    want = (real.get(cv2.CAP_PROP_FRAME_WIDTH), real.get(cv2.CAP_PROP_FRAME_HEIGHT), real.get(cv2.CAP_PROP_FPS))
+    real.release()
+    with VideoCapture(server.url) as cap:
+        got = (cap.get(cv2.CAP_PROP_FRAME_WIDTH), cap.get(cv2.CAP_PROP_FRAME_HEIGHT), cap.get(cv2.CAP_PROP_FPS))
+        assert got == want == (64, 48, 25)
+        assert len([cap.read()[1] for _ in range(3)]) == 3 and not cap.read()[0]  # none lost to the probe

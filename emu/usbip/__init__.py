@@ -5,7 +5,7 @@ from __future__ import annotations
 
 from .client import ImportedDevice, UrbError, list_devices
 from .protocol import ExportedDevice
-from .server import DEFAULT_PORT, USBIPServer, describe
+from .server import DEFAULT_PORT, USBIPServer, describe, usbip_commands
 
 __all__ = ["DEFAULT_PORT", "ExportedDevice", "ImportedDevice", "USBIPServer", "UrbError", "describe",
-           "list_devices"]
+           "list_devices", "usbip_commands"]

@@ -14,6 +14,7 @@ import socket
 import struct
 
 from rollcam.common.errors import DeviceError, ProtocolError
+from rollcam.common.lifecycle import Closeable
 
 from . import protocol as P
 from .server import DEFAULT_PORT, _recv_exact
@@ -47,7 +48,7 @@ def list_devices(host: str = "127.0.0.1", port: int = DEFAULT_PORT, timeout_s: f
         return [P.ExportedDevice.read(recv, with_interfaces=True) for _ in range(n)]
 
 
-class ImportedDevice:
+class ImportedDevice(Closeable):
     """A device imported over USB/IP (``usbip attach`` without the kernel): URBs on one connection."""
 
     def __init__(self, host: str, port: int, busid: str, timeout_s: float = 10.0) -> None:
@@ -56,37 +57,33 @@ class ImportedDevice:
         self._seq = itertools.count(1)
         self._outstanding: dict[int, P.Submit] = {}
         self._early: dict[int, P.RetSubmit | P.RetUnlink] = {}
-        self.closed = False
         try:
             self._sock.sendall(P.req_import(busid))
             _v, code, status = P.read_op_header(self._recv)
             if code != P.OP_REP_IMPORT or status != P.ST_OK:
-                raise DeviceError(f"USB/IP server {host}:{port} refused to import {busid!r} (status {status})")
+                raise DeviceError(f"USB/IP server {host}:{port} refused to import {busid!r}: "
+                                  f"{P.status_text(status)}")
             self.info = P.ExportedDevice.read(self._recv, with_interfaces=False)
         except BaseException:
             self.close()
             raise
 
     def __repr__(self) -> str:
-        return f"ImportedDevice({self.info.busid}, {self.info.idVendor:04x}:{self.info.idProduct:04x})"
+        info = getattr(self, "info", None)
+        if info is None:
+            return "ImportedDevice(not imported)"
+        return f"ImportedDevice({info.busid}, {info.idVendor:04x}:{info.idProduct:04x})"
 
-    def __enter__(self) -> ImportedDevice:
-        return self
-
-    def __exit__(self, *exc: object) -> None:
-        self.close()
-
-    def close(self) -> None:
-        """Leave the server (it resets the device for the next importer); safe to call twice."""
-        if not self.closed:
-            self.closed = True
-            with contextlib.suppress(OSError):
-                self._sock.close()
+    def _close(self) -> None:
+        """Leave the server (it resets the device for the next importer)."""
+        with contextlib.suppress(OSError):
+            self._sock.close()
 
     # -------------------------------------------------------------------------------- raw URBs
     def submit(self, ep: int, direction: int, length: int, *, setup: bytes = bytes(8), data: bytes = b"",
                iso_lengths: tuple[int, ...] = ()) -> int:
         """Send one CMD_SUBMIT; returns its seqnum (collect the reply with ``reply``)."""
+        self._check_open()
         seq = next(self._seq)
         iso = tuple(P.IsoPacket(off, n) for off, n in zip(itertools.accumulate((0, *iso_lengths)), iso_lengths,
                                                               strict=False))
@@ -98,6 +95,7 @@ class ImportedDevice:
 
     def unlink(self, seqnum: int) -> int:
         """Send CMD_UNLINK for ``seqnum``; returns its seqnum."""
+        self._check_open()
         seq = next(self._seq)
         self._sock.sendall(P.Unlink(seq, self.info.devid, P.DIR_OUT, 0, seqnum).pack())
         return seq

@@ -20,9 +20,16 @@ OP_REQ_DEVLIST = 0x8005
 OP_REP_DEVLIST = 0x0005
 OP_REQ_IMPORT = 0x8003
 OP_REP_IMPORT = 0x0003
+# Operation statuses, numbered as Linux's usbip tools decode them (tools/usb/usbip/libsrc/usbip_common.h).
 ST_OK = 0
-ST_NA = 1  # the device is not available (not exported, or imported by someone else)
-ST_ERROR = 2
+ST_NA = 1  # the request failed (generic)
+ST_DEV_BUSY = 2  # the device is exported but imported by someone else
+ST_DEV_ERR = 3  # the device is in an error state
+ST_NODEV = 4  # no device has the busid asked for
+ST_ERROR = 5  # an unexpected request
+STATUS_TEXT = {ST_OK: "request completed", ST_NA: "request failed", ST_DEV_BUSY: "device busy (imported by another "
+               "client)", ST_DEV_ERR: "device in error state", ST_NODEV: "device not found", ST_ERROR:
+               "unexpected request"}
 
 CMD_SUBMIT = 1
 CMD_UNLINK = 2
@@ -87,6 +94,11 @@ class ExportedDevice:
         intfs = tuple(struct.unpack(">BBBx", recv(4))[:3] for _ in range(f[13])) if with_interfaces else ()
         text = [v.split(b"\0", 1)[0].decode("utf-8", "replace") for v in f[:2]]
         return cls(*text, *f[2:13], interfaces=intfs)
+
+
+def status_text(status: int) -> str:
+    """What an operation status means, as the usbip tool words it (with the number)."""
+    return f"{STATUS_TEXT.get(status, 'unknown status')} (status {status})"
 
 
 def op_header(code: int, status: int = ST_OK) -> bytes:

@@ -2,7 +2,8 @@
 
 Each TCP connection starts with one operation: OP_REQ_DEVLIST (answered, then closed) or OP_REQ_IMPORT (on
 success the connection carries URBs for that device until the peer leaves). A device serves one importer at
-a time; others are told it is not available. URBs run in order per endpoint (control, stream) on worker
+a time; others are told it is busy (``ST_DEV_BUSY``), and a busid nobody exports gets ``ST_NODEV``, the
+statuses Linux's ``usbip`` decodes. URBs run in order per endpoint (control, stream) on worker
 threads, so CMD_UNLINK can cancel one still queued; the queues are bounded, so a client that floods costs
 itself back-pressure, not server memory. A malformed message closes that connection only; the server keeps
 serving everyone else.
@@ -20,6 +21,7 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 
 from rollcam.common.errors import DeviceError, ProtocolError
+from rollcam.common.lifecycle import Closeable, Stats, Worker
 from rollcam.emu.uvc import constants as C
 from rollcam.emu.uvc.descriptors import split_descriptors
 from rollcam.emu.uvc.device import Setup, UVCFunction
@@ -34,7 +36,7 @@ POLL_MS = 200  # how often a blocked bulk read looks whether the connection is c
 
 
 @dataclass
-class ServerStats:
+class ServerStats(Stats):
     """Counts a server keeps: connections, lists, imports, refusals, malformed peers, URBs."""
 
     connections: int = 0
@@ -51,6 +53,13 @@ class _Export:
     function: UVCFunction
     info: P.ExportedDevice
     owner: object | None = None
+
+
+def usbip_commands(host: str, port: int, busid: str) -> tuple[str, str]:
+    """The Linux ``usbip`` command lines that list a server's devices and attach ``busid`` (``--tcp-port`` is
+    an option of ``usbip`` itself, so it goes before the subcommand; attaching needs root and vhci-hcd)."""
+    return (f"usbip --tcp-port {port} list -r {host}",
+            f"sudo usbip --tcp-port {port} attach -r {host} -b {busid}")
 
 
 def describe(function: UVCFunction, busnum: int, devnum: int) -> P.ExportedDevice:
@@ -76,8 +85,9 @@ def _recv_exact(sock: socket.socket) -> Callable[[int], bytes]:
     return recv
 
 
-class USBIPServer:
-    """Serves ``functions`` as busids ``1-1``, ``1-2``, ... on ``host:port`` (port 0 picks a free one)."""
+class USBIPServer(Closeable):
+    """Serves ``functions`` as busids ``1-1``, ``1-2``, ... on ``host:port`` (port 0 picks a free one), from
+    construction until ``close()``; a context manager."""
 
     def __init__(self, functions: Sequence[UVCFunction], host: str = "127.0.0.1", port: int = DEFAULT_PORT,
                  *, busnum: int = 1) -> None:
@@ -89,27 +99,17 @@ class USBIPServer:
         self._lock = threading.Lock()
         self._conns: set[socket.socket] = set()
         self._threads: list[threading.Thread] = []
-        self._closed = False
         self._sock = socket.create_server((host, port), reuse_port=False)
         self.address: tuple[str, int] = self._sock.getsockname()[:2]
-        self._accept = threading.Thread(target=self._accept_loop, name="usbip-accept", daemon=True)
+        self._accept = Worker(self._accept_loop, name="usbip-accept", wrap=DeviceError, join_timeout_s=2)
         self._accept.start()
 
     def __repr__(self) -> str:
         return f"USBIPServer({self.address[0]}:{self.address[1]}, busids={sorted(self.exports)})"
 
-    def __enter__(self) -> USBIPServer:
-        return self
-
-    def __exit__(self, *exc: object) -> None:
-        self.close()
-
-    def close(self) -> None:
-        """Stop accepting, drop every connection, reset the devices; safe to call twice."""
+    def _close(self) -> None:
+        """Stop accepting, drop every connection, reset the devices."""
         with self._lock:
-            if self._closed:
-                return
-            self._closed = True
             conns = list(self._conns)
         with contextlib.suppress(OSError):
             self._sock.shutdown(socket.SHUT_RDWR)
@@ -117,19 +117,19 @@ class USBIPServer:
         for c in conns:
             with contextlib.suppress(OSError):
                 c.shutdown(socket.SHUT_RDWR)
-        self._accept.join(timeout=2)
         for t in list(self._threads):
             t.join(timeout=2)
+        self._accept.close()  # re-raises what stopped accepting early, if anything did
 
     def _accept_loop(self) -> None:
-        while not self._closed:
+        while not self.closed:
             try:
                 conn, _ = self._sock.accept()
             except OSError:
                 return
             conn.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
             with self._lock:
-                if self._closed:
+                if self.closed:
                     conn.close()
                     return
                 self._conns.add(conn)
@@ -148,10 +148,10 @@ class USBIPServer:
                 self.stats.devlists += 1
             elif code == P.OP_REQ_IMPORT:
                 busid = P.read_busid(recv)
-                export = self._claim(busid, conn)
+                export, status = self._claim(busid, conn)
                 if export is None:
                     self.stats.refused += 1
-                    conn.sendall(P.rep_import(None, P.ST_NA))
+                    conn.sendall(P.rep_import(None, status))
                 else:
                     self.stats.imports += 1
                     conn.sendall(P.rep_import(export.info))
@@ -173,13 +173,16 @@ class USBIPServer:
             with contextlib.suppress(OSError):
                 conn.close()
 
-    def _claim(self, busid: str, conn: socket.socket) -> _Export | None:
+    def _claim(self, busid: str, conn: socket.socket) -> tuple[_Export | None, int]:
+        """The export ``busid`` names, now owned by ``conn``; or None and ST_NODEV / ST_DEV_BUSY."""
         with self._lock:
             export = self.exports.get(busid)
-            if export is None or export.owner is not None:
-                return None
+            if export is None:
+                return None, P.ST_NODEV
+            if export.owner is not None:
+                return None, P.ST_DEV_BUSY
             export.owner = conn
-            return export
+            return export, P.ST_OK
 
 
 def _read_or_none(fn: UVCFunction, ep: int, length: int) -> bytes | None:

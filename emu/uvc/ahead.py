@@ -9,6 +9,7 @@ replaced by it, and a renderer that falls behind skips to the newest frame due; 
 
 from __future__ import annotations
 
+import contextlib
 import threading
 import time
 from collections.abc import Callable
@@ -16,6 +17,7 @@ from typing import Any
 
 import numpy as np
 from rollcam.common.errors import DeviceError
+from rollcam.common.lifecycle import Worker
 from rollcam.sim.frame import Frame
 
 from .producer import FrameProducer
@@ -34,27 +36,26 @@ class RenderAhead:
         self._slot: tuple[int, Frame, np.ndarray] | None = None
         self._next_due = producer.frame_due_ns(0)
         self._stopped = False
-        self._error: BaseException | None = None
-        self._thread = threading.Thread(target=self._run, name="uvc-render-ahead", daemon=True)
-        self._thread.start()
+        self._worker = Worker(self._run, name="uvc-render-ahead", wrap=DeviceError)
+        self._worker.start()
 
     def take(self) -> tuple[int, Frame, np.ndarray] | int:
         """The newest completed frame (index, frame, encoded bytes), or the ns to wait before asking again."""
+        self._worker.check()  # a render that failed fails the host's reads from now on
         with self._cond:
-            if self._error is not None:
-                raise DeviceError(f"rendering frames failed: {self._error!r}") from self._error
             if self._slot is None:
                 return max(self._next_due - self.producer.now_ns(), POLL_NS)
             got, self._slot = self._slot, None
             return got
 
     def stop(self) -> None:
-        """Stop the renderer thread (it finishes the frame it is on, if any); safe to call twice."""
+        """Stop the renderer thread (it finishes the frame it is on, if any); safe to call twice. A render
+        error the host was never told of (it stopped reading first) is not raised here: stopping must work."""
         with self._cond:
             self._stopped = True
             self._cond.notify_all()
-        if self._thread is not threading.current_thread():
-            self._thread.join(timeout=5)
+        with contextlib.suppress(DeviceError):  # take() reports it to a host still reading; this one stopped
+            self._worker.close()
 
     def _wait_until(self, t_ns: int) -> bool:
         while not self._stopped:
@@ -67,30 +68,26 @@ class RenderAhead:
     def _run(self) -> None:
         p = self.producer
         i = 0
-        try:
-            while not self._stopped:
-                if i and not self._wait_until(p.frame_due_ns(i - 1)):
-                    return
-                now = p.now_ns()
-                if p.frame_due_ns(i) <= now:  # the renderer fell behind: the sensor does not queue frames
-                    newest = newest_due(p, i, now)
-                    self.stats.frames_dropped += newest - i
-                    i = newest
-                frame = p.frame(i)
-                data = self._encode(frame)
-                with self._cond:
-                    self._next_due = p.frame_due_ns(i)
-                if not self._wait_until(self._next_due):
-                    return
-                with self._cond:
-                    if self._slot is not None:
-                        self.stats.frames_dropped += 1  # the host never took the previous frame
-                    self._slot = (i, frame, data)
-                    self._next_due = p.frame_due_ns(i + 1)
-                i += 1
-        except BaseException as exc:  # reported to the host on its next read
+        while not self._stopped:
+            if i and not self._wait_until(p.frame_due_ns(i - 1)):
+                return
+            now = p.now_ns()
+            if p.frame_due_ns(i) <= now:  # the renderer fell behind: the sensor does not queue frames
+                newest = newest_due(p, i, now)
+                self.stats.frames_dropped += newest - i
+                i = newest
+            frame = p.frame(i)
+            data = self._encode(frame)
             with self._cond:
-                self._error = exc
+                self._next_due = p.frame_due_ns(i)
+            if not self._wait_until(self._next_due):
+                return
+            with self._cond:
+                if self._slot is not None:
+                    self.stats.frames_dropped += 1  # the host never took the previous frame
+                self._slot = (i, frame, data)
+                self._next_due = p.frame_due_ns(i + 1)
+            i += 1
 
 
 def newest_due(p: FrameProducer, index: int, now_ns: int) -> int:

@@ -6,6 +6,9 @@ endpoint (``stream.py``) that turns the producer's frames into payloads.
 returns one payload (a bulk transfer, or one isochronous packet). In real-time mode frames are sent at their
 device times and a host that reads too slowly skips to the newest frame, the skipped ones counted in
 ``stats.frames_dropped``; only the frame being sent is held, so memory stays bounded whatever the host does.
+An isochronous endpoint in real-time mode also keeps the bus's pace: one packet per service interval of the
+selected alternate setting's endpoint (bInterval; a packet carries up to mult x wMaxPacketSize bytes), so
+packets arrive no faster than a high-speed bus carries them (8,000 a second at bInterval 1).
 """
 
 from __future__ import annotations
@@ -16,6 +19,8 @@ import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
+from rollcam.common.lifecycle import Closeable, Deadline
+
 from . import constants as C
 from .descriptors import (
     STREAM_EP,
@@ -24,11 +29,12 @@ from .descriptors import (
     FrameSize,
     StreamFormat,
     build_descriptors,
+    split_descriptors,
     string_descriptor,
 )
 from .producer import FrameProducer
 from .requests import Stall, VideoControls
-from .stream import MICROFRAME_NS, StreamEndpoint, TransferTimeout
+from .stream import BusSchedule, StreamEndpoint, TransferTimeout, service_interval_ns
 
 DEFAULT_BULK_PAYLOAD = 512 * 1024
 MICROFRAMES_PER_S = 8000
@@ -56,8 +62,9 @@ class Setup:
         return bool(self.bmRequestType & C.DIR_IN)
 
 
-class UVCFunction:
-    """A UVC 1.5 camera function over a ``FrameProducer``: descriptors, requests and the stream."""
+class UVCFunction(Closeable):
+    """A UVC 1.5 camera function over a ``FrameProducer``: descriptors, requests and the stream; a context
+    manager (closing stops the stream)."""
 
     def __init__(self, producer: FrameProducer, *, fourccs: Sequence[str] = ("YUYV", "NV12", "MJPG"),
                  transfer: str = "iso", identity: DeviceIdentity | None = None, clock_hz: int = 1_000_000_000,
@@ -88,6 +95,7 @@ class UVCFunction:
         self.alt = {0: 0, 1: 0}
         self.stream = StreamEndpoint(producer, clock_hz, realtime, sleep, render_ahead)
         self.stats = self.stream.stats
+        self.bus = BusSchedule()
 
     def __repr__(self) -> str:
         c = self.controls.committed
@@ -177,7 +185,18 @@ class UVCFunction:
                 if alt:
                     if self.controls.committed is None:
                         raise Stall("alternate setting selected before commit", C.ERR_WRONG_STATE)
+                    self.bus = BusSchedule(service_interval_ns(self._iso_endpoint(alt)))
                     self._start_stream(self.descriptors.iso_packet_sizes[alt - 1])
+
+    def _iso_endpoint(self, alt: int) -> bytes:
+        """The endpoint descriptor of the streaming interface's alternate setting ``alt``."""
+        current = None
+        for d in split_descriptors(self.descriptors.configuration):
+            if d[1] == C.DT_INTERFACE:
+                current = (d[2], d[3])
+            elif d[1] == C.DT_ENDPOINT and current == (1, alt):
+                return d
+        raise Stall(f"alternate setting {alt} has no endpoint", C.ERR_INVALID_VALUE)
 
     def _payload_size(self, frame_bytes: int, interval_ns: int) -> int:
         if self.transfer == "bulk":
@@ -210,43 +229,50 @@ class UVCFunction:
             self.configuration = 0
             self.alt = {0: 0, 1: 0}
 
-    def close(self) -> None:
-        """Stop streaming (and the renderer thread of real-time mode); safe to call twice."""
+    def _close(self) -> None:
+        """Stop streaming (and the renderer thread of real-time mode)."""
         self.reset()
 
-    def __enter__(self) -> UVCFunction:
-        return self
+    def _clock_s(self) -> float:
+        return self.producer.now_ns() / 1e9
 
-    def __exit__(self, *exc: object) -> None:
-        self.close()
+    def _bus_time(self, n_packets: int) -> None:
+        """Real-time mode: wait (on the device clock) until ``n_packets`` more packets have had their service
+        intervals on the bus."""
+        if not self.realtime:
+            return
+        now = self.producer.now_ns()
+        end = self.bus.book(n_packets, now)
+        if end > now:
+            self._sleep((end - now) / 1e9)
 
     def read(self, endpoint: int, max_len: int, timeout_ms: int | None = None) -> bytes:
         """One payload from the streaming endpoint; b'' (a zero-length packet) when an isochronous stream has
-        nothing due. A bulk read waits for the next frame up to ``timeout_ms`` (None or 0: forever).
-        Waiting happens outside the function's lock, so control requests are answered meanwhile."""
-        deadline = None if not timeout_ms else time.monotonic() + timeout_ms / 1000
+        nothing due. A bulk read waits for the next frame up to ``timeout_ms`` (None or 0: forever), on the
+        device clock. Waiting happens outside the function's lock, so control requests are answered meanwhile."""
+        deadline = Deadline(timeout_ms / 1000 if timeout_ms else None, self._clock_s)
         while True:
             got = self._try_read(endpoint, max_len)
+            if self.transfer == "iso":  # one packet, with or without data, per service interval
+                self._bus_time(1)
+                return got if isinstance(got, bytes) else b""
             if isinstance(got, bytes):
                 return got
-            if self.transfer == "iso":  # one empty packet per microframe while the next frame is read out
-                self._sleep(min(got, MICROFRAME_NS) / 1e9)
-                return b""
-            if deadline is not None and time.monotonic() + got / 1e9 > deadline:
-                self._sleep(max(deadline - time.monotonic(), 0))
+            left = deadline.remaining()
+            if left is not None and got / 1e9 > left:
+                self._sleep(left)
                 raise TransferTimeout(f"no frame within {timeout_ms} ms")
             self._sleep(got / 1e9)
 
     def read_packets(self, endpoint: int, n_packets: int, max_len: int) -> tuple[bytes, list[int]]:
         """An isochronous URB's worth of packets: their data back to back and their lengths. Packets for which
-        no frame is due yet are zero-length, and take their bus time (125 us each) in real-time mode."""
+        no frame is due yet are zero-length; in real-time mode every packet takes its service interval."""
         if self.transfer != "iso":
             raise Stall("packets are read from an isochronous endpoint", C.ERR_INVALID_REQUEST)
         with self._lock:
             self._check_stream(endpoint)
-            data, lengths, wait_ns = self.stream.next_payloads(n_packets, max_len)
-        if wait_ns:
-            self._sleep(min(wait_ns, (n_packets - len(lengths)) * MICROFRAME_NS) / 1e9)
+            data, lengths, _wait_ns = self.stream.next_payloads(n_packets, max_len)
+        self._bus_time(n_packets)
         return data, lengths + [0] * (n_packets - len(lengths))
 
     def _check_stream(self, endpoint: int) -> None:

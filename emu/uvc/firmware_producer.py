@@ -15,8 +15,9 @@ from collections.abc import Sequence
 
 from rollcam.common.errors import DeviceError
 from rollcam.firmware.camera import FirmwareCamera, FramePlan
-from rollcam.firmware.pixfmt import is_raw, to_bgr
+from rollcam.firmware.pixfmt import is_raw
 from rollcam.firmware.scheduler import FrameSchedule
+from rollcam.sim.codecs import Levels, preview_frame
 from rollcam.sim.frame import Frame
 from rollcam.sim.synthetic import DEFAULT_EXPOSURE_NS
 
@@ -70,7 +71,8 @@ class FirmwareProducer:
         self.camera.note_made(seq)  # a later timing change re-anchors after this frame, not at the commit
         frame = self.camera.render(plan)  # a processed format's frame is the BGR picture UVC encodes
         if is_raw(frame.format):
-            frame = dataclasses.replace(frame, data=to_bgr(frame, self.camera.sensor), format="BGR3")
+            frame = dataclasses.replace(frame, data=preview_frame(frame, Levels.of_sensor(self.camera.sensor)),
+                                        format="BGR3")
         return frame
 
     def now_ns(self) -> int:

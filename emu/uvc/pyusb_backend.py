@@ -15,7 +15,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass, field
 from types import SimpleNamespace
 
-from rollcam.common.errors import SourceError
+from rollcam.common.errors import SourceError, require
 
 from . import constants as C
 from .descriptors import split_descriptors
@@ -23,11 +23,9 @@ from .device import Setup, UVCFunction
 from .requests import Stall
 from .stream import TransferOverflow, TransferTimeout
 
-try:
-    import usb.backend
-    import usb.core
-except ImportError as exc:  # pragma: no cover - pyusb is in the usb and dev extras
-    raise SourceError("the emulated USB backend needs pyusb: pip install 'rollcam[usb]'") from exc
+require("usb.core", "pyusb", "usb", "the emulated USB backend")
+import usb.backend  # noqa: E402
+import usb.core  # noqa: E402
 
 _DEVICE_FIELDS = ("bLength", "bDescriptorType", "bcdUSB", "bDeviceClass", "bDeviceSubClass", "bDeviceProtocol",
                   "bMaxPacketSize0", "idVendor", "idProduct", "bcdDevice", "iManufacturer", "iProduct",

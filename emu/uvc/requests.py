@@ -12,6 +12,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 from rollcam.common.errors import DeviceError, ProtocolError
+from rollcam.sim.codecs import JPEG_QUALITY
 from rollcam.sim.formats import pixel_format
 
 from . import constants as C
@@ -21,7 +22,7 @@ from .probe import Probe
 from .producer import FrameProducer
 
 EXPOSURE_UNIT_NS = 100_000  # CT_EXPOSURE_TIME_ABSOLUTE counts 100 us
-DEFAULT_QUALITY = 8500  # wCompQuality, 1..10000
+DEFAULT_QUALITY = JPEG_QUALITY * 100  # wCompQuality, 1..10000
 _MJPEG_BOUND = pixel_format("YUYV")  # dwMaxVideoFrameSize of MJPEG: an uncompressed 4:2:2 frame's size
 
 

@@ -22,6 +22,7 @@ from .producer import FrameProducer
 from .requests import Committed
 
 MICROFRAME_NS = 125_000
+"""A high-speed USB microframe: 8,000 a second."""
 
 
 class TransferTimeout(DeviceError):
@@ -30,6 +31,35 @@ class TransferTimeout(DeviceError):
 
 class TransferOverflow(DeviceError):
     """The host's buffer is smaller than the payload the device has to send (a babble/overflow error)."""
+
+
+def service_interval_ns(endpoint_descriptor: bytes) -> int:
+    """How often a high-speed isochronous endpoint is served: every 2**(bInterval-1) microframes (USB 2.0
+    9.6.6; bInterval 1..16)."""
+    b_interval = min(max(endpoint_descriptor[6], 1), 16)
+    return MICROFRAME_NS << (b_interval - 1)
+
+
+class BusSchedule:
+    """The service intervals of an isochronous endpoint on the bus: each packet, full or empty, takes one.
+
+    ``book(n, now_ns)`` places ``n`` packets in the next free intervals (none before ``now_ns``: intervals
+    nobody asked for are gone, as on a real bus) and returns the device time the last one ends, which is when
+    an isochronous URB of ``n`` packets completes. So an endpoint never delivers more than one packet (of up
+    to mult x wMaxPacketSize bytes) per interval, 8,000 a second at bInterval 1, however fast the host asks.
+    """
+
+    def __init__(self, interval_ns: int = MICROFRAME_NS) -> None:
+        if interval_ns <= 0:
+            raise ValueError(f"service interval must be > 0 ns, got {interval_ns!r}")
+        self.interval_ns = int(interval_ns)
+        self._next_ns: int | None = None
+
+    def book(self, n_packets: int, now_ns: int) -> int:
+        """Device time (ns) by which ``n_packets`` more packets have been on the bus."""
+        start = now_ns if self._next_ns is None else max(self._next_ns, now_ns)
+        self._next_ns = start + n_packets * self.interval_ns
+        return self._next_ns
 
 
 @dataclass

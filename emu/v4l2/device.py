@@ -15,25 +15,21 @@ from collections.abc import Iterator
 from dataclasses import dataclass, field
 from typing import Any
 
-import cv2
 import numpy as np
 from rollcam.common.errors import ConfigError
+from rollcam.common.lifecycle import Closeable
 from rollcam.firmware.camera import Clock, FirmwareCamera
-from rollcam.firmware.pixfmt import COMPRESSED, is_raw
-from rollcam.sim import formats as sf
-from rollcam.sim.isp import IspParams, preview
+from rollcam.firmware.pixfmt import is_raw
+from rollcam.sim.codecs import Levels, codec
 
 from . import functions as fn
 from . import raw
 from .driver import CID_TO_CONTROL, EmuDriver, Faults
 
-_TO_BGR = {"RGB3": lambda a: cv2.cvtColor(a, cv2.COLOR_RGB2BGR), "YUYV": sf.yuyv_to_bgr}
-"""Pictures of processed formats (in their ``rollcam.sim.formats`` shape) that are not already BGR or grey."""
-
 
 @dataclass(frozen=True)
 class CapturedBuffer:
-    """One dequeued buffer's bytes (a copy) and metadata."""
+    """One dequeued buffer's bytes (a copy) and metadata; ``levels``: the sensor's, for a raw buffer's preview."""
 
     sequence: int
     timestamp_ns: int
@@ -43,6 +39,7 @@ class CapturedBuffer:
     width: int
     height: int
     data: np.ndarray = field(repr=False)
+    levels: Levels | None = field(default=None, repr=False)
 
     @property
     def error(self) -> bool:
@@ -58,21 +55,12 @@ class CapturedBuffer:
         """A raw buffer's samples as ``uint16 (H, W)`` at the format's bit depth (CSI-2 unpacked)."""
         if not self.raw:
             raise ConfigError(f"buffer format {self.fourcc!r} is not a raw sensor format")
-        f = sf.pixel_format(self.fourcc)
-        return sf.decode_raw(self.data.view(f.dtype).reshape(f.shape(self.width, self.height)), f.fourcc,
-                             self.width)
+        return codec(self.fourcc).decode(self.data, self.width, self.height)
 
     def image(self) -> np.ndarray:
-        """The pixels as a BGR image (decoded from YUYV/MJPG; GREY stays single-channel; a raw buffer is
-        demosaicked by the preview ISP at its full scale, without black-level subtraction)."""
-        w, h, d = self.width, self.height, self.data
-        if self.raw:
-            f = sf.pixel_format(self.fourcc)
-            return preview(self.samples(), f.cfa or "mono", IspParams(white_level_dn=float((1 << f.bits) - 1)))
-        if self.fourcc in COMPRESSED:
-            return cv2.imdecode(d, cv2.IMREAD_COLOR)
-        pixels = d.reshape(sf.pixel_format(self.fourcc).shape(w, h))
-        return _TO_BGR.get(self.fourcc, lambda a: a)(pixels)
+        """The buffer's preview, 8-bit BGR (``rollcam.sim.codecs``: a raw buffer through the preview ISP, less
+        the sensor's black level; GREY as a grey picture)."""
+        return codec(self.fourcc).preview(self.data, self.width, self.height, self.levels)
 
 
 class ControlHandle:
@@ -100,13 +88,12 @@ class ControlHandle:
         return f"<control {i.name!r} = {self.value} [{i.minimum}..{i.maximum}]>"
 
 
-class Device:
+class Device(Closeable):
     """An open emulated /dev/videoN: format, controls, buffers and streaming; a context manager."""
 
     def __init__(self, driver: EmuDriver) -> None:
         self.driver = driver
         self.controls = {name: ControlHandle(self, int(cid)) for cid, name in CID_TO_CONTROL.items()}
-        self.closed = False
 
     @classmethod
     def open(cls, sensor: str, *, scene: dict[str, Any] | None = None, realtime: bool = True, bands: int = 8,
@@ -117,22 +104,14 @@ class Device:
         camera = FirmwareCamera(sensor, scene=scene, clock=clock, **camera_options)
         return cls(EmuDriver(camera, realtime=realtime, bands=bands, faults=faults, rt_priority=rt_priority))
 
-    def __enter__(self) -> Device:
-        return self
-
-    def __exit__(self, *exc: object) -> None:
-        self.close()
-
     def __repr__(self) -> str:
         f = self.driver.fmt
         return (f"<emulated V4L2 device {self.driver.camera.sensor.name} {f.width}x{f.height} {f.pixelformat}"
                 f"{' streaming' if self.driver.queue.streaming else ''}{' closed' if self.closed else ''}>")
 
-    def close(self) -> None:
-        """Stop streaming and free the buffers. Idempotent."""
-        if not self.closed:
-            self.closed = True
-            self.driver.close()
+    def _close(self) -> None:
+        """Stop streaming and free the buffers."""
+        self.driver.close()
 
     @property
     def info(self) -> raw.Capability:
@@ -156,8 +135,9 @@ class Device:
             while frames is None or count < frames:
                 buf, view = fn.dequeue_buffer(d, timeout_s=timeout_s)
                 f = d.fmt
+                levels = Levels.of_sensor(d.camera.sensor) if is_raw(f.pixelformat) else None
                 out = CapturedBuffer(buf.sequence, buf.timestamp_ns, buf.bytesused, buf.flags, f.pixelformat,
-                                     f.width, f.height, view.copy())
+                                     f.width, f.height, view.copy(), levels)
                 fn.queue_buffer(d, buf.index)
                 count += 1
                 yield out

@@ -16,10 +16,12 @@ from typing import Any
 
 import numpy as np
 from rollcam.common.errors import ConfigError, DeviceError
+from rollcam.common.lifecycle import Stats
 from rollcam.emu.pump import FramePump
 from rollcam.firmware.camera import FirmwareCamera, FramePlan
 from rollcam.firmware.controls import CONTROLS
-from rollcam.firmware.pixfmt import convert, device_format
+from rollcam.firmware.pixfmt import device_format
+from rollcam.sim.codecs import transcode
 from rollcam.sim.frame import Frame
 
 from . import raw
@@ -47,6 +49,16 @@ class Faults:
     seed: int = 0
 
 
+@dataclass
+class DriverStats(Stats):
+    """What the driver did with frames: delivered, dropped (no buffer queued, or injected), ERROR-flagged."""
+
+    delivered: int = 0
+    dropped_no_buffer: int = 0
+    dropped_injected: int = 0
+    errors_injected: int = 0
+
+
 class EmuDriver:
     """Driver state of one emulated /dev/videoN: format, buffer queue, streaming, faults, statistics."""
 
@@ -61,7 +73,7 @@ class EmuDriver:
         self.queue = BufferQueue()
         self.pump: FramePump | None = None
         self.seq0 = 0
-        self.stats = {"delivered": 0, "dropped_no_buffer": 0, "dropped_injected": 0, "errors_injected": 0}
+        self.stats = DriverStats()
         self._filling: tuple[int, Slot, np.ndarray] | None = None
 
     @property
@@ -88,21 +100,29 @@ class EmuDriver:
 
     def disconnect(self) -> None:
         """Unplug: stop producing; every call and waiter from now on gets ENODEV."""
-        self._stop_pump()
-        self.camera.stream_off()
-        self.queue.disconnect()
+        try:
+            self._stop_pump()
+        finally:
+            self.camera.stream_off()
+            self.queue.disconnect()
 
     def close(self) -> None:
         """Release the device (stream off, buffers freed). Idempotent."""
-        self._stop_pump()
-        self.camera.stream_off()
-        self.queue.stop()
+        try:
+            self._stop_pump()
+        finally:
+            self.camera.stream_off()
+            self.queue.stop()
 
     # ------------------------------------------------------------------------------------- frame delivery
     def _stop_pump(self) -> None:
-        if self.pump is not None:
-            self.pump.close()
-            self.pump = None
+        """Stop the pump; what stopped it early (if anything did and nobody saw it yet) is raised as EIO."""
+        pump, self.pump = self.pump, None
+        if pump is not None:
+            try:
+                pump.close()
+            except DeviceError as exc:
+                raise V4L2Error(errno.EIO, f"the frame pump stopped: {exc.__cause__!r}") from exc
 
     def on_band(self, frame: Frame, plan: FramePlan, band: int, n_bands: int) -> None:
         """Pump sink: copy the band's lines into the buffer being filled (taking one at the first band)."""
@@ -126,7 +146,7 @@ class EmuDriver:
     def on_frame(self, frame: Frame, plan: FramePlan) -> None:
         """Pump sink: the frame is complete; deliver (or drop) the buffer."""
         if self._filling is None or self._filling[0] != plan.seq:
-            self.stats["dropped_no_buffer"] += 1
+            self.stats.dropped_no_buffer += 1
             return
         _, slot, payload = self._filling
         self._filling = None
@@ -134,24 +154,24 @@ class EmuDriver:
 
     def _payload(self, frame: Frame) -> np.ndarray:
         fourcc = self.fmt.pixelformat
-        # A raw frame is already in its fourcc's layout (the sensor's samples); renders go through the ISP.
-        data = frame.data if frame.format == fourcc else convert(frame.data, fourcc)
+        # A raw frame is already in its fourcc's layout (the sensor's samples); renders are encoded.
+        data = transcode(frame, fourcc)
         return np.ascontiguousarray(data).reshape(-1).view(np.uint8)
 
     def _deliver(self, slot: Slot, frame: Frame, size: int) -> None:
         f = self.faults
-        if f.disconnect_after is not None and self.stats["delivered"] >= f.disconnect_after:
+        if f.disconnect_after is not None and self.stats.delivered >= f.disconnect_after:
             self.queue.disconnect()  # unplugged before this frame: it is lost, as on a real unplug
             return
         if f.drop_percent and self.rng.random() * 100 < f.drop_percent:
-            self.stats["dropped_injected"] += 1
+            self.stats.dropped_injected += 1
             self.queue.give_back(slot)
             return
         error = bool(f.error_percent) and self.rng.random() * 100 < f.error_percent
-        self.stats["errors_injected"] += error
+        self.stats.errors_injected += error
         self.queue.complete(slot, bytesused=size, sequence=frame.sequence - self.seq0,
                             timestamp_ns=self.camera.host_ns(frame.timestamp_ns), error=error)
-        self.stats["delivered"] += 1
+        self.stats.delivered += 1
 
     def produce_now(self) -> bool:
         """As-fast-as-possible mode: render the next frame into the oldest queued buffer; False if none is due."""
@@ -302,8 +322,11 @@ def _qbuf(d: EmuDriver, arg: raw.Buffer) -> raw.Buffer:
 def _dqbuf(d: EmuDriver, arg: dict[str, Any] | None) -> Slot:
     opts = arg or {}
     block, timeout_s = opts.get("block", True), opts.get("timeout_s")
-    if d.pump is not None and d.pump.error is not None:
-        raise V4L2Error(errno.EIO, f"the frame pump stopped: {d.pump.error!r}")
+    if d.pump is not None:
+        try:
+            d.pump.check()
+        except DeviceError as exc:
+            raise V4L2Error(errno.EIO, f"the frame pump stopped: {exc.__cause__!r}") from exc
     # As fast as possible: frames are made on demand, while a buffer is queued and none is done (injected
     # drops hand their buffer back, so this may take several frames).
     while not d.realtime and d.queue.streaming and not d.queue.done and d.queue.queued:
@@ -329,10 +352,12 @@ def _streamon(d: EmuDriver, _arg: Any) -> None:
 
 
 def _streamoff(d: EmuDriver, _arg: Any) -> None:
-    d._stop_pump()
-    d.camera.stream_off()
-    d.queue.stop()
-    d._filling = None
+    try:
+        d._stop_pump()
+    finally:
+        d.camera.stream_off()
+        d.queue.stop()
+        d._filling = None
 
 
 _HANDLERS: dict[raw.Ioctl, Callable[[EmuDriver, Any], Any]] = {

@@ -6,10 +6,12 @@ import collections
 import errno
 import threading
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
 from rollcam.common.errors import DeviceError
+from rollcam.common.lifecycle import Deadline
 
 from .raw import VIDEO_MAX_FRAME, Buffer, BufFlag, Memory
 
@@ -37,7 +39,8 @@ class Slot:
 class BufferQueue:
     """Buffers move dequeued -> queued (QBUF) -> filled by the driver -> done -> dequeued (DQBUF)."""
 
-    def __init__(self) -> None:
+    def __init__(self, clock: Callable[[], float] = time.monotonic) -> None:
+        self.clock = clock  # what DQBUF timeouts are measured on
         self.cond = threading.Condition()
         self.slots: list[Slot] = []
         self.queued: collections.deque[int] = collections.deque()
@@ -124,7 +127,7 @@ class BufferQueue:
     def dequeue(self, block: bool = True, timeout_s: float | None = None) -> Slot:
         """DQBUF: the oldest done buffer. EINVAL when not streaming, EAGAIN when non-blocking and none is
         ready, ETIMEDOUT after ``timeout_s``, ENODEV once the device is gone."""
-        deadline = None if timeout_s is None else time.monotonic() + timeout_s
+        deadline = Deadline(timeout_s, self.clock)
         with self.cond:
             while True:
                 if self.disconnected:
@@ -137,10 +140,9 @@ class BufferQueue:
                     return slot
                 if not block:
                     raise V4L2Error(errno.EAGAIN, "no buffer ready (non-blocking DQBUF)")
-                left = None if deadline is None else deadline - time.monotonic()
-                if left is not None and left <= 0:
+                if deadline.expired:
                     raise V4L2Error(errno.ETIMEDOUT, f"no buffer within {timeout_s} s")
-                self.cond.wait(left)
+                self.cond.wait(deadline.remaining())
 
     def start(self) -> None:
         """STREAMON: EINVAL without buffers; a no-op when already streaming."""

@@ -19,7 +19,8 @@ from typing import Any, TextIO
 
 from rollcam.common.errors import ConfigError, RollcamError
 
-from ..capture import Progress, write_atomic
+from ..capture import write_atomic
+from ..progress import Progress
 from ..sources import open_camera
 from .executors import open_executor
 from .layout import CARD_JSON, CARD_MD, finalize
@@ -132,7 +133,7 @@ def build_dataset(
     writes = (not ex.remote) if worker_writes is None else worker_writes
     fn = functools.partial(run_task, cfg, root=str(out) if writes and ex.name != "inline" else None)
     bar = Progress(n_todo, label=f"dataset ({ex.name} x{ex.workers})", stream=stream, enabled=progress,
-                   clock=clock, unit="pairs/s")
+                   unit="pair")
     start = clock()
     rendered = 0
     try:

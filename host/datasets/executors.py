@@ -15,15 +15,11 @@ from collections.abc import Callable, Iterable, Iterator
 from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from typing import Any
 
-from rollcam.common.errors import ConfigError, RollcamError
+from rollcam.common.errors import ConfigError, require
 
 from .plan import Task
 
 TaskFn = Callable[[Task], Any]
-
-
-class MissingDependency(RollcamError):
-    """An optional dependency a feature needs is not installed; the message names the package and extra."""
 
 
 class InlineExecutor:
@@ -102,11 +98,8 @@ class DaskExecutor:
     remote = True
 
     def __init__(self, address: str) -> None:
-        try:
-            from distributed import Client
-        except ImportError:
-            raise MissingDependency("--executor dask://... needs Dask distributed: pip install 'rollcam[cluster]' "
-                                    "(or pip install 'dask[distributed]')") from None
+        require("distributed", "dask[distributed]", "cluster", "--executor dask://...")
+        from distributed import Client
         self.address = address
         try:
             self._client: Any = Client(address, timeout="20s")

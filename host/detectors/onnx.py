@@ -30,7 +30,7 @@ from pathlib import Path
 from typing import Any, Literal
 
 import numpy as np
-from rollcam.common.errors import ConfigError
+from rollcam.common.errors import ConfigError, MissingDependencyError, require
 from rollcam.common.values import parse_bool, positive_int
 
 from .base import Detections, DetectorSpec
@@ -58,13 +58,8 @@ COCO_NAMES = (
 
 
 def import_onnxruntime() -> Any:
-    """onnxruntime, or a ConfigError naming the extra to install."""
-    try:
-        import onnxruntime
-    except ImportError:
-        raise ConfigError("the onnx detectors need onnxruntime: pip install 'rollcam[onnx]' "
-                          "(or pip install onnxruntime)") from None
-    return onnxruntime
+    """onnxruntime, or a MissingDependencyError naming the extra to install."""
+    return require("onnxruntime", "onnxruntime", "onnx", "the onnx detector")
 
 
 def _fraction(text: str) -> float:
@@ -120,8 +115,8 @@ class OnnxDetector:
         providers = ["CPUExecutionProvider"]
         if device == "cuda":
             if "CUDAExecutionProvider" not in ort.get_available_providers():
-                raise ConfigError(f"detector {name!r}: device=cuda needs onnxruntime-gpu (pip install "
-                                  f"onnxruntime-gpu); this onnxruntime offers {ort.get_available_providers()}")
+                raise MissingDependencyError("onnxruntime-gpu", feature=f"detector {name!r}: device=cuda (this "
+                                             f"onnxruntime offers {ort.get_available_providers()})")
             providers.insert(0, "CUDAExecutionProvider")
         try:
             self._session = ort.InferenceSession(str(self.path), opts, providers=providers)

@@ -15,13 +15,9 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-from rollcam.common.errors import RollcamError
+from rollcam.common.errors import require
 
 EPS = 1e-16
-
-
-class MissingEvaluator(RollcamError):
-    """The COCO evaluator is not installed; the message says what to install."""
 
 
 @dataclass(frozen=True)
@@ -180,10 +176,8 @@ def coco_map(truths: Sequence[Truth], dets: Sequence[Dets], backend: str = "fast
     if not results:
         return {"mAP50": 0.0, "mAP50_95": 0.0}
     if backend == "faster":
-        try:
-            from faster_coco_eval import COCO, COCOeval_faster
-        except ImportError:
-            raise MissingEvaluator("rollcam eval needs faster-coco-eval: pip install 'rollcam[eval]'") from None
+        require("faster_coco_eval", "faster-coco-eval", "eval", "rollcam eval")
+        from faster_coco_eval import COCO, COCOeval_faster
         quiet = lambda *_a, **_k: None  # noqa: E731
         coco_gt = COCO(gt, print_function=quiet)
         coco_dt = coco_gt.loadRes(results)

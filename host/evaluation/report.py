@@ -52,7 +52,9 @@ def format_table(doc: dict[str, Any]) -> str:
 
 
 def plot(doc: dict[str, Any], path: Path) -> None:
-    """Grouped bars: one group per metric, one bar per row (speed x shutter)."""
+    """Grouped bars: one group per metric, one bar per row (speed x shutter); written atomically."""
+    import io
+
     import matplotlib
 
     matplotlib.use("Agg")
@@ -73,5 +75,9 @@ def plot(doc: dict[str, Any], path: Path) -> None:
     ax.legend(fontsize=8)
     ax.grid(axis="y", alpha=0.3)
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png", dpi=110)
     plt.close(fig)
+    from ..capture import write_atomic
+
+    write_atomic(Path(path), buf.getvalue())

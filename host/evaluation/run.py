@@ -31,7 +31,7 @@ def evaluate_dataset(dataset: str | Path, *, detector: str | None = None, detect
                      split: str = "test", subset: str | None = None, images: str | Path | None = None,
                      save_detections: str | Path | None = None, progress: bool | None = None) -> dict[str, Any]:
     """The evaluation document of ``rollcam eval`` (see ``report.build_document``)."""
-    from ..capture import Progress
+    from ..progress import Progress
 
     if (detector is None) == (detections is None):
         raise ConfigError("give exactly one of a detector spec or a detections file")
@@ -45,7 +45,7 @@ def evaluate_dataset(dataset: str | Path, *, detector: str | None = None, detect
         from ..detectors import load_detector
 
         det = load_detector(detector)
-        bar = Progress(sum(len(s.images) for s in sets), label=f"eval {detector}", enabled=progress, unit="img/s")
+        bar = Progress(sum(len(s.images) for s in sets), label=f"eval {detector}", enabled=progress, unit="img")
         n = [0]
 
         def tick() -> None:

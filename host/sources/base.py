@@ -7,12 +7,14 @@ from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from typing import Any
 
-from rollcam.common.errors import ConfigError, SourceError
+from rollcam.common.errors import SourceError
+from rollcam.common.lifecycle import Closeable
 from rollcam.common.values import (  # noqa: F401  (the value parsers are re-exported for the source modules)
     convert_option,
     finite_float,
     non_negative_float,
     non_negative_int,
+    parse_host_port,
     parse_size,
     positive_float,
     positive_int,
@@ -40,32 +42,19 @@ class SourceURI:
         return convert_option(self.options, key, kind, default, f"source {self.uri!r}", SourceError)
 
 
-def parse_host_port(text: str, default_host: str = "127.0.0.1") -> tuple[str, int]:
-    """``HOST:PORT``, ``[IPv6]:PORT``, ``:PORT`` or ``PORT`` -> (host, port); the host defaults to 127.0.0.1."""
-    host, sep, port = text.rpartition(":")
-    host = host.strip("[]") if sep else ""
-    try:
-        number = int(port)
-    except ValueError:
-        raise ConfigError(f"expected HOST:PORT, got {text!r}") from None
-    if not 0 <= number <= 65535:
-        raise ConfigError(f"port {number} is not in 0..65535 (in {text!r})")
-    return host or default_host, number
+class CameraSource(Closeable, ABC):
+    """A stream of Frames. Iterate it, or call ``read()``; ``close()`` is idempotent; use ``with``.
 
-
-class CameraSource(ABC):
-    """A stream of Frames. Iterate it, or call ``read()``; ``close()`` is idempotent; use ``with``."""
+    Sources release their device in ``_close()`` (run once, by the first ``close()``); ``read()`` on a
+    closed source raises SourceError (``_check_open()``).
+    """
 
     uri: str = ""
-    closed: bool = False
+    closed_error = SourceError
 
     @abstractmethod
     def read(self) -> Frame | None:
         """The next frame, or None at the end of a finite source."""
-
-    def close(self) -> None:
-        """Release the device; safe to call twice."""
-        self.closed = True
 
     def info(self) -> dict[str, Any]:
         """What the source is (sensor, size, timing) as plain data."""
@@ -94,12 +83,5 @@ class CameraSource(ABC):
                 return
             yield frame
 
-    def __enter__(self) -> CameraSource:
-        return self
-
-    def __exit__(self, *exc: object) -> None:
-        self.close()
-
-    def _check_open(self) -> None:
-        if self.closed:
-            raise SourceError(f"source {self.uri!r} is closed")
+    def _describe(self) -> str:
+        return f"source {self.uri!r}"

@@ -89,7 +89,6 @@ class FileSource(CameraSource):
         except SourceError as exc:
             raise SourceError(f"source {uri.uri!r}: {exc}") from None
         self.index = 0
-        self.closed = False
         try:
             self.format = _pixel_format(self.footage[0])
             self._stream: Iterator[ComposedFrame] | None = None
@@ -206,11 +205,9 @@ class FileSource(CameraSource):
         self.index += 1
         return self._global_frame(k, rs.sequence), rs
 
-    def close(self) -> None:
-        """Release the footage; safe to call twice."""
-        if not self.closed:
-            self.closed = True
-            self.footage.close()
+    def _close(self) -> None:
+        """Release the footage."""
+        self.footage.close()
 
     def info(self) -> dict[str, Any]:
         """Footage and, when composing, the RS timing as plain data."""

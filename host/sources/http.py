@@ -1,7 +1,7 @@
 """``http://HOST:PORT/PATH[#sensor=..&timeout=..&frames=..]`` -- an MJPEG stream (multipart/x-mixed-replace).
 
 The URL (query included) goes to the server untouched; rollcam's own options ride in the fragment, which
-HTTP clients never send. Each part's JPEG is decoded to BGR3 (or GREY for a grey JPEG). Part headers fill
+HTTP clients never send. Each part's JPEG is decoded to BGR3 (the codec table's MJPEG decoder). Part headers fill
 the Frame when the server sends them (the rollcam emulator does; mjpg-streamer sends ``X-Timestamp``):
 
 | Part header | Frame field | Form |
@@ -21,15 +21,22 @@ are kept: ``X-Line-Time-Ns`` is whole ns, so rows built from it alone drift from
 18,903.5 ns line by 0.5 ns a row). ``X-Shutter: rolling`` needs a line time (the header's or the sensor's);
 an unknown shutter or readout, or a negative line time or exposure, is a ProtocolError naming the header.
 Options: ``sensor``, ``timeout`` (seconds to connect and between parts, default 10), ``frames``,
-``latest`` (1: a thread reads the stream and ``read()`` returns the newest part, dropping older ones, so a
-consumer slower than the stream, such as a detector, sees live frames instead of a growing backlog; the
-count dropped goes into ``meta["dropped"]``; default 0: every part, in order).
+``latest`` (a boolean, 1/on/true/yes: a thread reads the stream and ``read()`` returns the newest part,
+dropping older ones, so a consumer slower than the stream, such as a detector, sees live frames instead of a
+growing backlog; the count dropped goes into ``meta["dropped"]``; default off: every part, in order). An
+option given twice in the fragment is refused, as in any query.
+
+``probe()`` reads the first two frames ahead (``read()`` still returns them, in order) so that ``info()`` can
+tell the size and the frame rate before the first read, as OpenCV's FFmpeg backend does when it opens a stream;
+the rate comes from the parts' device timestamps (``X-Timestamp-Ns``/``X-Timestamp``), else it is FFmpeg's
+25 fps for an MJPEG stream that states none.
 """
 
 from __future__ import annotations
 
 import threading
 import time
+from collections import deque
 from collections.abc import Callable
 from decimal import Decimal, InvalidOperation
 from typing import Any, BinaryIO
@@ -37,16 +44,20 @@ from urllib.error import URLError
 from urllib.parse import parse_qsl, urldefrag
 from urllib.request import Request, urlopen
 
-import cv2
-import numpy as np
-from rollcam.common.errors import ProtocolError, SourceError
+from rollcam.common.errors import DeviceError, DeviceNotFoundError, ProtocolError, SourceError
+from rollcam.common.lifecycle import Closeable, Worker
+from rollcam.common.values import parse_bool, parse_query
+from rollcam.sim.codecs import codec
 from rollcam.sim.frame import Frame
 from rollcam.sim.timing import NS_PER_S, LineTiming, Readout, line_sample_times_ns
 
-from .base import CameraSource, SourceURI, finite_float, non_negative_int, positive_int
+from .base import CameraSource, SourceURI, non_negative_int, positive_float, positive_int
 from .rowtiming import FrameTimer
 
+_JPEG = codec("MJPG")
+
 OPTIONS = {"sensor", "timeout", "frames", "latest"}
+UNSTATED_FPS = 25.0  # what FFmpeg (so cv2.VideoCapture) reports for an MJPEG stream without a rate
 MAX_HEADER_LINES = 64
 MAX_PART_BYTES = 64 << 20
 
@@ -167,7 +178,7 @@ def part_fields(headers: dict[str, str], uri: str) -> dict[str, Any]:
     return out
 
 
-class LatestPart:
+class LatestPart(Closeable):
     """Reads parts on a thread and keeps only the newest (with its arrival time) for a slower consumer."""
 
     def __init__(self, next_part: Callable[[], tuple[dict[str, str], bytes] | None], clock: Callable[[], int]) -> None:
@@ -175,25 +186,22 @@ class LatestPart:
         self._cond = threading.Condition()
         self._part: tuple[tuple[dict[str, str], bytes], int] | None = None
         self._done = False
-        self._error: BaseException | None = None
         self.dropped = 0
-        self._thread = threading.Thread(target=self._run, name="mjpeg-reader", daemon=True)
-        self._thread.start()
+        self._worker = Worker(self._run, name="mjpeg-reader")
+        self._worker.start()
 
     def _run(self) -> None:
         try:
-            while (part := self._next()) is not None:
+            while not self._worker.stopping and (part := self._next()) is not None:
                 arrival = self._clock()
                 with self._cond:
                     self.dropped += self._part is not None
                     self._part = (part, arrival)
                     self._cond.notify_all()
-        except BaseException as exc:  # handed to the consumer by get()
+        finally:  # an error is kept by the worker and handed to the consumer by get()
             with self._cond:
-                self._error = exc
-        with self._cond:
-            self._done = True
-            self._cond.notify_all()
+                self._done = True
+                self._cond.notify_all()
 
     def get(self, timeout_s: float) -> tuple[tuple[dict[str, str], bytes], int] | None:
         """The newest part not yet taken and its arrival time; None at the end of the stream."""
@@ -203,9 +211,12 @@ class LatestPart:
             if self._part is not None:
                 got, self._part = self._part, None
                 return got
-            if self._error is not None:
-                raise self._error
-            return None
+        self._worker.join()  # the reader has ended: re-raise what ended it, if anything did
+        return None
+
+    def _close(self) -> None:
+        """Tell the reader to stop (the owner closes the connection it blocks on; it is not waited for)."""
+        self._worker.stop()
 
 
 class HttpMjpegSource(CameraSource):
@@ -214,24 +225,28 @@ class HttpMjpegSource(CameraSource):
     def __init__(self, uri: SourceURI, clock: Callable[[], int] = time.monotonic_ns) -> None:
         self.uri = uri.uri
         url, fragment = urldefrag(uri.uri)
-        opts = SourceURI(uri.uri, uri.scheme, url, dict(parse_qsl(fragment, keep_blank_values=True)))
+        opts = SourceURI(uri.uri, uri.scheme, url, parse_query(fragment, f"source {uri.uri!r}", SourceError))
         opts.take(set(), OPTIONS)
         self.url, self.clock = url, clock
-        self.timeout_s = opts.get("timeout", finite_float, 10.0)
+        self.timeout_s = opts.get("timeout", positive_float, 10.0)
         self.limit = opts.get("frames", positive_int)
         self.timer = FrameTimer(opts.get("sensor", str), uri.uri)
-        self.index = 0
+        latest = opts.get("latest", parse_bool, False)  # every option is checked before connecting
+        self.index = 0  # frames returned by read()
+        self._parts = 0  # parts decoded (read ahead by probe() included)
+        self._ahead: deque[Frame] = deque()
+        self._stamped = False
+        self._stream_info: dict[str, Any] = {}
         try:
             self._response = urlopen(Request(url, headers={"User-Agent": "rollcam"}), timeout=self.timeout_s)
         except (URLError, OSError) as exc:
-            raise SourceError(f"source {uri.uri!r}: cannot connect ({getattr(exc, 'reason', exc)}); is the "
-                              "stream running (e.g. 'rollcam emulate')?") from None
+            raise DeviceNotFoundError(f"source {uri.uri!r}: cannot connect ({getattr(exc, 'reason', exc)}); is "
+                                      "the stream running (e.g. 'rollcam emulate')?") from None
         try:
             self._parser = MjpegParser(self._response, boundary_of(self._response.headers.get("Content-Type", "")))
         except ProtocolError as exc:
             self._response.close()
             raise SourceError(f"source {uri.uri!r}: {exc}") from None
-        latest = opts.get("latest", int, 0)
         self._latest = LatestPart(self._parser.next_part, clock) if latest else None
 
     def read(self) -> Frame | None:
@@ -239,6 +254,28 @@ class HttpMjpegSource(CameraSource):
         self._check_open()
         if self.limit is not None and self.index >= self.limit:
             return None
+        frame = self._ahead.popleft() if self._ahead else self._next_frame()
+        if frame is not None:
+            self.index += 1
+        return frame
+
+    def probe(self) -> dict[str, Any]:
+        """Width, height and fps of the stream, from its first frames (read ahead, not lost); empty when the
+        stream ends before its first frame."""
+        self._check_open()
+        if not self._stream_info:
+            want = 2 if self.limit is None or self.limit - self.index >= 2 else 1
+            stamped = [self._stamped] * len(self._ahead)
+            while len(self._ahead) < want and (frame := self._next_frame()) is not None:
+                self._ahead.append(frame)
+                stamped.append(self._stamped)
+            if self._ahead:
+                first = self._ahead[0]
+                fps = _fps(*self._ahead) if len(self._ahead) == 2 and all(stamped) else UNSTATED_FPS
+                self._stream_info = {"width": first.width, "height": first.height, "fps": fps}
+        return dict(self._stream_info)
+
+    def _next_frame(self) -> Frame | None:
         try:
             if self._latest is not None:
                 got = self._latest.get(self.timeout_s)
@@ -247,25 +284,28 @@ class HttpMjpegSource(CameraSource):
                 part = self._parser.next_part()
                 arrival_ns = self.clock()
         except TimeoutError:
-            raise SourceError(f"source {self.uri!r}: no frame within {self.timeout_s:g} s") from None
+            raise DeviceError(f"source {self.uri!r}: no frame within {self.timeout_s:g} s") from None
         except OSError as exc:
-            raise SourceError(f"source {self.uri!r}: connection lost ({exc})") from None
+            raise DeviceError(f"source {self.uri!r}: connection lost ({exc})") from None
         if part is None:
             return None
         headers, body = part
-        image = cv2.imdecode(np.frombuffer(body, np.uint8), cv2.IMREAD_UNCHANGED)
-        if image is None:
-            raise ProtocolError(f"source {self.uri!r}: part {self.index} is not a decodable JPEG ({len(body)} bytes)")
+        try:
+            image = _JPEG.decode(body)
+        except ProtocolError:
+            raise ProtocolError(f"source {self.uri!r}: part {self._parts} is not a decodable JPEG ({len(body)} bytes)"
+                                ) from None
         fields = part_fields(headers, self.uri)
-        fmt = "GREY" if image.ndim == 2 else "BGR3"
-        seq = fields.get("sequence", self.index)
+        fmt = "BGR3"
+        seq = fields.get("sequence", self._parts)
+        self._stamped = "timestamp_ns" in fields  # a device timestamp from the server, not the arrival time
         ts = fields.get("timestamp_ns", arrival_ns)
         frame = self.timer.frame(image, fmt, seq, ts, fields.get("exposure_ns", 0),
                                  meta={"arrival_ns": arrival_ns, "jpeg_bytes": len(body),
                                        **({"dropped": self._latest.dropped} if self._latest is not None else {})})
         if "line_time_ns" in fields or "shutter" in fields or "readout" in fields:
             frame = self._with_header_timing(frame, fields)
-        self.index += 1
+        self._parts += 1
         return frame
 
     def _with_header_timing(self, frame: Frame, fields: dict[str, Any]) -> Frame:
@@ -297,15 +337,21 @@ class HttpMjpegSource(CameraSource):
                                 "send the line time, or name the sensor with #sensor=NAME")
         return LineTiming(pixel_rate_hz=NS_PER_S, line_length_pck=header_line, frame_length_lines=n_lines)
 
-    def close(self) -> None:
-        """Close the connection; safe to call twice."""
-        if not self.closed:
-            self.closed = True
-            self._response.close()
+    def _close(self) -> None:
+        """Close the connection (which ends the reader thread of ``latest=1``)."""
+        self._response.close()
+        if self._latest is not None:
+            self._latest.close()
 
     def info(self) -> dict[str, Any]:
         """URL and row timing."""
-        return {"uri": self.uri, "url": self.url, **self.timer.timing.to_json()}
+        return {"uri": self.uri, "url": self.url, **self.timer.timing.to_json(), **self._stream_info}
+
+
+def _fps(a: Frame, b: Frame) -> float:
+    """The frame rate two frames' device timestamps give (per sequence step), else FFmpeg's default."""
+    dt = (b.timestamp_ns - a.timestamp_ns) / max(b.sequence - a.sequence, 1)
+    return round(1e9 / dt, 3) if dt > 0 else UNSTATED_FPS
 
 
 def open_source(uri: SourceURI) -> HttpMjpegSource:

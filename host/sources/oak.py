@@ -22,7 +22,7 @@ import sys
 from typing import Any
 
 import numpy as np
-from rollcam.common.errors import SourceError
+from rollcam.common.errors import DeviceError, DeviceNotFoundError, MissingDependencyError, SourceError
 from rollcam.sim.frame import Frame
 
 from .base import CameraSource, SourceURI, finite_float, positive_float, positive_int
@@ -33,35 +33,46 @@ DEFAULT_SENSOR = {"CAM_A": "imx378", "CAM_B": "ov9281", "CAM_C": "ov9281"}
 """Board socket -> hw_config of the sensor OAK cameras usually carry there."""
 DEFAULT_SIZE = (1920, 1080)
 ISO_PER_GAIN = 100
-INSTALL_HINT = "pip install 'rollcam[oak]' (depthai 3)"
 DEFAULT_EXPOSURE_US = 10_000.0
 """Manual exposure used when only ``gain`` is given."""
 
 
+DEPTHAI_LOG_LEVEL = "error"
+"""depthai's log level while rollcam imports it (its own ``DEPTHAI_LEVEL`` wins when set): its start-up
+warnings (``USB protocol not available`` in a container, ...) are noise to a user of ``rollcam list``."""
+
+
 def _import_quietly(name: str) -> Any:
-    """Import ``name`` with file descriptor 1 pointed at stderr: depthai's logger prints its start-up warnings
-    (no USB in a container, ...) on stdout, which would corrupt JSON output such as ``rollcam list --json``."""
+    """Import ``name`` with depthai's logger at ``DEPTHAI_LOG_LEVEL`` and file descriptor 1 pointed at stderr:
+    what it still prints at start-up must not corrupt JSON output such as ``rollcam list --json``."""
     if name in sys.modules:
         return importlib.import_module(name)
     sys.stdout.flush()
     saved = os.dup(1)
+    set_level = "DEPTHAI_LEVEL" not in os.environ
+    if set_level:  # read once, when depthai loads; removed again so child processes see the user's environment
+        os.environ["DEPTHAI_LEVEL"] = DEPTHAI_LOG_LEVEL
     try:
         os.dup2(2, 1)
         return importlib.import_module(name)
     finally:
         os.dup2(saved, 1)
         os.close(saved)
+        if set_level:
+            os.environ.pop("DEPTHAI_LEVEL", None)
 
 
 def import_depthai() -> Any:
-    """The depthai module (v3), or a SourceError naming what to install."""
+    """The depthai module (v3), or a MissingDependencyError naming what to install."""
     try:
         dai = _import_quietly("depthai")
-    except ImportError:
-        raise SourceError(f"oak: sources need depthai: {INSTALL_HINT}") from None
+    except ImportError as exc:
+        if exc.name is not None and exc.name.split(".")[0] != "depthai":
+            raise
+        raise MissingDependencyError("depthai", "oak", "the oak: source") from None
     version = getattr(dai, "__version__", "0")
     if not str(version).split(".")[0].isdigit() or int(str(version).split(".")[0]) < 3:
-        raise SourceError(f"oak: sources need depthai 3, found {version!r}: {INSTALL_HINT}")
+        raise MissingDependencyError("depthai>=3,<4", "oak", f"the oak: source (found depthai {version})")
     return dai
 
 
@@ -98,7 +109,6 @@ class OakSource(CameraSource):
         if exposure_us is not None or gain is not None:
             self._check_manual(exposure_us or DEFAULT_EXPOSURE_US, gain or 1.0)
         self.index = 0
-        self.closed = True  # until the pipeline runs
         self.device = self._open_device(uri)
         try:
             self.pipeline = dai.Pipeline(self.device)
@@ -109,8 +119,7 @@ class OakSource(CameraSource):
             self.pipeline.start()
         except Exception as exc:  # depthai raises RuntimeError subclasses for device-side failures
             self.device.close()
-            raise SourceError(f"source {uri.uri!r}: the OAK pipeline failed to start ({exc})") from None
-        self.closed = False
+            raise DeviceError(f"source {uri.uri!r}: the OAK pipeline failed to start ({exc})") from None
         if exposure_us is not None or gain is not None:
             self.set_exposure(exposure_us or DEFAULT_EXPOSURE_US, gain or 1.0)
 
@@ -118,20 +127,20 @@ class OakSource(CameraSource):
         dai = self.dai
         available = dai.Device.getAllAvailableDevices()
         if not available:
-            raise SourceError(f"source {uri.uri!r}: no OAK device found; plug one in (USB3 cable, or on the same "
-                              "network for PoE models) and check 'rollcam list'")
+            raise DeviceNotFoundError(f"source {uri.uri!r}: no OAK device found; plug one in (USB3 cable, or on the "
+                                      "same network for PoE models) and check 'rollcam list'")
         if uri.target:
             match = [d for d in available if d.getDeviceId() == uri.target]
             if not match:
                 ids = [d.getDeviceId() for d in available]
-                raise SourceError(f"source {uri.uri!r}: no OAK with id {uri.target!r}; available: {ids}")
+                raise DeviceNotFoundError(f"source {uri.uri!r}: no OAK with id {uri.target!r}; available: {ids}")
             info = match[0]
         else:
             info = available[0]
         try:
             return dai.Device(info)
         except Exception as exc:
-            raise SourceError(f"source {uri.uri!r}: cannot open OAK {info.getDeviceId()!r} ({exc}); is another "
+            raise DeviceError(f"source {uri.uri!r}: cannot open OAK {info.getDeviceId()!r} ({exc}); is another "
                               "program using it?") from None
 
     def _check_manual(self, exposure_us: float, gain: float) -> tuple[int, int]:
@@ -172,7 +181,7 @@ class OakSource(CameraSource):
             return None
         msg = self.queue.get(datetime.timedelta(seconds=self.timeout_s))
         if msg is None:
-            raise SourceError(f"source {self.uri!r}: no frame from the OAK within {self.timeout_s:g} s")
+            raise DeviceError(f"source {self.uri!r}: no frame from the OAK within {self.timeout_s:g} s")
         image = np.asarray(msg.getCvFrame())
         # The no-argument getter is the END of exposure; a Frame's timestamp is its start of exposure.
         start = msg.getTimestampDevice(self.dai.CameraExposureOffset.START)
@@ -182,14 +191,12 @@ class OakSource(CameraSource):
         self.index += 1
         return frame
 
-    def close(self) -> None:
-        """Stop the pipeline and release the device; safe to call twice."""
-        if not self.closed:
-            self.closed = True
-            try:
-                self.pipeline.stop()
-            finally:
-                self.device.close()
+    def _close(self) -> None:
+        """Stop the pipeline and release the device."""
+        try:
+            self.pipeline.stop()
+        finally:
+            self.device.close()
 
     def info(self) -> dict[str, Any]:
         """Device id, size, fps and row timing."""

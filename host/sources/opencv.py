@@ -12,17 +12,18 @@ Row timing comes from ``sensor=NAME`` (see ``rowtiming``). Options: ``sensor``, 
 
 from __future__ import annotations
 
+import contextlib
 import sys
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from typing import Any
 
 import cv2
 import numpy as np
-from rollcam.common.errors import SourceError
+from rollcam.common.errors import DeviceError, DeviceNotFoundError, SourceError
 from rollcam.sim.frame import Frame
 
-from .base import CameraSource, SourceURI, finite_float, positive_int
+from .base import CameraSource, SourceURI, finite_float, parse_size, positive_int
 from .rowtiming import FrameTimer
 
 OPTIONS = {"sensor", "size", "fps", "exposure", "auto_exposure", "gain", "fourcc", "frames"}
@@ -42,16 +43,23 @@ V4L2_EXPOSURE_UNIT_NS = 100_000
 _AUTO_EXPOSURE = {0: 1, 1: 3}
 
 
+@contextlib.contextmanager
+def quiet_opencv() -> Iterator[None]:
+    """OpenCV's own log silenced for a call (it prints ``[ WARN:0@...]`` lines on stderr when a camera or file
+    cannot be opened); the level it had is restored afterwards."""
+    logging = cv2.utils.logging
+    level = logging.getLogLevel()
+    logging.setLogLevel(logging.LOG_LEVEL_SILENT)
+    try:
+        yield
+    finally:
+        logging.setLogLevel(level)
+
+
 def _fourcc(text: str) -> str:
     if len(text) != 4:
         raise ValueError("must be 4 characters, e.g. MJPG or YUYV")
     return text
-
-
-def _size(text: str) -> tuple[int, int]:
-    from .base import parse_size
-
-    return parse_size(text)
 
 
 class OpenCVSource(CameraSource):
@@ -64,14 +72,16 @@ class OpenCVSource(CameraSource):
         self.limit = uri.get("frames", positive_int)
         self.timer = FrameTimer(uri.get("sensor", str), uri.uri)
         self.is_camera = isinstance(target, int) or str(target).startswith("/dev/")
-        self.cap = cv2.VideoCapture(target, api)
+        with quiet_opencv():  # a failed open logs WARN lines; the error below says it once, in rollcam's words
+            self.cap = cv2.VideoCapture(target, api)
         # V4L2's exposure_time_absolute is in 100 us units; other backends use their own scales (or none).
         self._exposure_unit_ns = V4L2_EXPOSURE_UNIT_NS if self.is_camera and api == cv2.CAP_V4L2 else 0
         if not self.cap.isOpened():
             self.cap.release()
-            raise SourceError(f"source {uri.uri!r}: OpenCV cannot open {target!r}{hint}")
+            # No camera at an index or node is a device that is not there; an unreadable file is bad input.
+            error = DeviceNotFoundError if self.is_camera else SourceError
+            raise error(f"source {uri.uri!r}: OpenCV cannot open {target!r}{hint}")
         self.index = 0
-        self.closed = False
         try:
             self._apply_options(uri)
         except SourceError:
@@ -82,7 +92,7 @@ class OpenCVSource(CameraSource):
         fourcc = uri.get("fourcc", _fourcc)
         if fourcc is not None:
             self.cap.set(cv2.CAP_PROP_FOURCC, cv2.VideoWriter_fourcc(*fourcc))
-        size = uri.get("size", _size)
+        size = uri.get("size", parse_size)
         if size is not None:
             self.set_control("width", size[0])
             self.set_control("height", size[1])
@@ -116,7 +126,7 @@ class OpenCVSource(CameraSource):
         host_ns = self.clock()
         if not ok or image is None:
             if self.is_camera:
-                raise SourceError(f"source {self.uri!r}: the camera delivered no frame (unplugged, or in use by "
+                raise DeviceError(f"source {self.uri!r}: the camera delivered no frame (unplugged, or in use by "
                                   "another program?)")
             return None
         msec = float(self.cap.get(cv2.CAP_PROP_POS_MSEC))
@@ -129,11 +139,9 @@ class OpenCVSource(CameraSource):
         self.index += 1
         return frame
 
-    def close(self) -> None:
-        """Release the capture; safe to call twice."""
-        if not self.closed:
-            self.closed = True
-            self.cap.release()
+    def _close(self) -> None:
+        """Release the capture."""
+        self.cap.release()
 
     def info(self) -> dict[str, Any]:
         """Target, backend, size, fps and row timing."""

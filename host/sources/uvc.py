@@ -25,7 +25,8 @@ from collections import deque
 from typing import Any
 
 import numpy as np
-from rollcam.common.errors import ConfigError, DeviceError, ProtocolError, SourceError
+from rollcam.common.errors import ConfigError, DeviceError, DeviceNotFoundError, ProtocolError, SourceError, require
+from rollcam.common.lifecycle import Deadline
 from rollcam.common.values import parse_bool
 from rollcam.emu.usbip import ImportedDevice, UrbError
 from rollcam.emu.uvc import DeviceIdentity, FirmwareProducer, UVCFunction
@@ -57,10 +58,9 @@ FORMAT_NAMES = {"yuyv": "YUYV", "nv12": "NV12", "mjpeg": "MJPG", "mjpg": "MJPG"}
 
 
 def _usb():
-    try:
-        import usb.core
-    except ImportError:
-        raise SourceError("uvc: sources need pyusb (and libusb for real cameras): pip install 'rollcam[usb]'") from None
+    require("usb.core", "pyusb", "usb", "the uvc: source")
+    import usb.core
+
     return usb
 
 
@@ -102,7 +102,7 @@ class _PyUSBLink:
         except self.usb.core.USBTimeoutError:
             return [], False
         except self.usb.core.USBError as exc:
-            raise SourceError(f"reading endpoint {ep:#04x} failed: {exc}") from None
+            raise DeviceError(f"reading endpoint {ep:#04x} failed: {exc}") from None
         return parser.feed(payload), bool(payload)
 
     def close(self) -> None:
@@ -154,10 +154,11 @@ def _open_link(uri: SourceURI, vid: int, pid: int, sensor: SensorConfig | None, 
         try:
             dev = ImportedDevice(host, port, uri.get("busid", str, "1-1"))
         except (OSError, ValueError, DeviceError, ProtocolError) as exc:
-            raise SourceError(f"source {uri.uri!r}: USB/IP import failed: {exc}") from None
+            raise DeviceNotFoundError(f"source {uri.uri!r}: USB/IP import failed: {exc}") from None
         if (dev.info.idVendor, dev.info.idProduct) != (vid, pid):
             dev.close()
-            raise SourceError(f"source {uri.uri!r}: USB/IP device is {dev.info.idVendor:04x}:{dev.info.idProduct:04x}")
+            raise DeviceNotFoundError(f"source {uri.uri!r}: the USB/IP device is {dev.info.idVendor:04x}:"
+                                      f"{dev.info.idProduct:04x}")
         return _USBIPLink(dev), None
     usb = _usb()
     function = None
@@ -168,11 +169,11 @@ def _open_link(uri: SourceURI, vid: int, pid: int, sensor: SensorConfig | None, 
 
         be = usb.backend.libusb1.get_backend()
         if be is None:
-            raise SourceError(f"source {uri.uri!r}: libusb-1.0 was not found (install libusb, e.g. apt install "
+            raise DeviceError(f"source {uri.uri!r}: libusb-1.0 was not found (install libusb, e.g. apt install "
                               "libusb-1.0-0, or use backend=emu / backend=usbip)")
     dev = usb.core.find(idVendor=vid, idProduct=pid, backend=be)
     if dev is None:
-        raise SourceError(f"source {uri.uri!r}: no USB device {vid:04x}:{pid:04x} found")
+        raise DeviceNotFoundError(f"source {uri.uri!r}: no USB device {vid:04x}:{pid:04x} found")
     return _PyUSBLink(dev, timeout_ms), function
 
 
@@ -295,7 +296,7 @@ class UVCSource(CameraSource):
         self._check_open()
         if self.limit is not None and self.index >= self.limit:
             return None
-        deadline = time.monotonic() + self.timeout_ms / 1000
+        deadline = Deadline(self.timeout_ms / 1000)  # restarted whenever data comes
         while True:
             while self._pending:
                 parsed = self._pending.popleft()
@@ -310,9 +311,9 @@ class UVCSource(CameraSource):
             parsed, got = self.link.read_into(self.parser, self.stream.endpoint, self.read_size, self.stream.transfer)
             self._pending.extend(parsed)
             if got:
-                deadline = time.monotonic() + self.timeout_ms / 1000
-            elif time.monotonic() > deadline:
-                raise SourceError(f"source {self.uri!r}: no data from the camera for {self.timeout_ms} ms")
+                deadline.restart()
+            elif deadline.expired:
+                raise DeviceError(f"source {self.uri!r}: no data from the camera for {self.timeout_ms} ms")
 
     def _frame(self, parsed: Any) -> Frame | None:
         w, h, fourcc = self.width, self.height, self.fourcc
@@ -335,7 +336,7 @@ class UVCSource(CameraSource):
                                         self.readout)
             line_ns = self.timing.line_time_ns if rolling else 0
         meta = {"wire_format": fourcc, "pts": parsed.pts, "scr": parsed.scr, "payloads": parsed.payloads}
-        return Frame(data=data, format=fmt, sequence=parsed.index, timestamp_ns=int(t0),
+        return Frame(data=data, format=fmt, size=(w, h), sequence=parsed.index, timestamp_ns=int(t0),
                      line_time_ns=line_ns, readout=self.readout, exposure_ns=self.exposure_ns, shutter=self.shutter,
                      row_times_ns=rows, meta=meta)
 
@@ -348,13 +349,14 @@ class UVCSource(CameraSource):
                 "exposure_ns": self.exposure_ns, "frames_parsed": st.frames, "frames_damaged": st.frames - st.complete,
                 "bad_headers": st.bad_headers}
 
-    def close(self) -> None:
-        """Release the device; safe to call twice."""
-        if not self.closed and getattr(self, "link", None) is not None:
-            self.link.close()
-            if self.function is not None:
-                self.function.close()  # the emulated camera belongs to this source
-        self.closed = True
+    def _close(self) -> None:
+        """Release the device."""
+        if getattr(self, "link", None) is not None:
+            try:
+                self.link.close()
+            finally:
+                if self.function is not None:
+                    self.function.close()  # the emulated camera belongs to this source
 
 
 def open_source(uri: SourceURI) -> UVCSource:

@@ -10,7 +10,7 @@ import os
 import sys
 
 import cv2
-from rollcam.common.errors import SourceError
+from rollcam.common.errors import DeviceError, DeviceNotFoundError, SourceError
 
 from .base import SourceURI
 from .opencv import OpenCVSource
@@ -24,8 +24,8 @@ def open_source(uri: SourceURI) -> OpenCVSource:
     if path.isdigit():
         path = f"/dev/video{path}"
     if not os.path.exists(path):
-        raise SourceError(f"source {uri.uri!r}: no device {path!r}; plug in a camera (or load its driver) and "
-                          "check 'rollcam list' or 'ls /dev/video*'")
+        raise DeviceNotFoundError(f"source {uri.uri!r}: no device {path!r}; plug in a camera (or load its driver) "
+                                  "and check 'rollcam list' or 'ls /dev/video*'")
     if not os.access(path, os.R_OK | os.W_OK):
-        raise SourceError(f"source {uri.uri!r}: no permission to open {path!r}; add yourself to the 'video' group")
+        raise DeviceError(f"source {uri.uri!r}: no permission to open {path!r}; add yourself to the 'video' group")
     return OpenCVSource(uri, path, cv2.CAP_V4L2, hint=" (is it a capture device and not busy?)")

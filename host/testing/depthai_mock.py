@@ -25,8 +25,8 @@ from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any, ClassVar
 
-import cv2
 import numpy as np
+from rollcam.sim.codecs import codec, preview_frame
 
 __version__ = "3.0.0+rollcam.mock"
 
@@ -219,11 +219,8 @@ class _Output:
         limit = self.pipeline.device_state.frames
         if limit is not None and self.index >= limit:
             self.pipeline.stop()
-        img = frame.data if frame.data.ndim == 3 else cv2.cvtColor(frame.data, cv2.COLOR_GRAY2BGR)
-        if self.type == _ImgType.GRAY8:
-            img = cv2.cvtColor(img, cv2.COLOR_BGR2GRAY)
-        elif self.type == _ImgType.RGB888i:
-            img = img[..., ::-1]
+        out = {_ImgType.GRAY8: "GREY", _ImgType.RGB888i: "RGB3"}.get(self.type, "BGR3")
+        img = codec(out).encode(preview_frame(frame))
         msg = ImgFrame()
         msg.setCvFrame(np.ascontiguousarray(img), self.type if self.type != _ImgType.NV12 else _ImgType.BGR888i)
         # A real OAK stamps the frame at the end of exposure and keeps the exposure in whole microseconds.

@@ -9,23 +9,20 @@ free port, and ``close()`` (or leaving the ``with`` block) shuts it down and rel
 
 from __future__ import annotations
 
-import threading
 from collections.abc import Callable, Iterable, Sequence
 from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
 
-import cv2
 import numpy as np
+from rollcam.common.lifecycle import Closeable, Worker
+from rollcam.sim.codecs import JPEG_QUALITY, codec
 from rollcam.sim.frame import Frame
 
 BOUNDARY = "rollcamframe"
 
 
-def jpeg_bytes(image: np.ndarray, quality: int = 90) -> bytes:
-    """``image`` (BGR or grey) as JPEG bytes."""
-    ok, buf = cv2.imencode(".jpg", image, [cv2.IMWRITE_JPEG_QUALITY, quality])
-    if not ok:
-        raise ValueError(f"cannot encode an image of shape {image.shape} as JPEG")
-    return buf.tobytes()
+def jpeg_bytes(image: np.ndarray, quality: int = JPEG_QUALITY) -> bytes:
+    """``image`` (BGR or grey) as JPEG bytes (the codec table's MJPG row)."""
+    return codec("MJPG").encode(image, quality=quality).tobytes()
 
 
 def frame_headers(frame: Frame) -> dict[str, str]:
@@ -35,11 +32,11 @@ def frame_headers(frame: Frame) -> dict[str, str]:
             "X-Readout": frame.readout.value, "X-Shutter": frame.shutter}
 
 
-class MjpegTestServer:
+class MjpegTestServer(Closeable):
     """Serves ``frames`` (Frames or bare images) at ``url`` as an MJPEG stream, then ends the response."""
 
     def __init__(self, frames: Iterable[Frame | np.ndarray], *, path: str = "/stream.mjpg",
-                 timing_headers: bool = True, content_length: bool = True, quality: int = 90) -> None:
+                 timing_headers: bool = True, content_length: bool = True, quality: int = JPEG_QUALITY) -> None:
         parts: list[tuple[dict[str, str], bytes]] = []
         for f in frames:
             image = f.data if isinstance(f, Frame) else np.asarray(f)
@@ -50,9 +47,7 @@ class MjpegTestServer:
         handler = _handler(self.parts, path, content_length)
         self._server = ThreadingHTTPServer(("127.0.0.1", 0), handler)
         self._server.daemon_threads = True
-        self._thread = threading.Thread(target=self._server.serve_forever, name="mjpeg-test-server", daemon=True)
-        self._thread.start()
-        self.closed = False
+        self._worker = Worker(self._server.serve_forever, name="mjpeg-test-server").start()
 
     @property
     def url(self) -> str:
@@ -60,19 +55,11 @@ class MjpegTestServer:
         host, port = self._server.server_address[:2]
         return f"http://{host}:{port}{self.path}"
 
-    def close(self) -> None:
-        """Stop serving and release the port; safe to call twice."""
-        if not self.closed:
-            self.closed = True
-            self._server.shutdown()
-            self._server.server_close()
-            self._thread.join(timeout=5)
-
-    def __enter__(self) -> MjpegTestServer:
-        return self
-
-    def __exit__(self, *exc: object) -> None:
-        self.close()
+    def _close(self) -> None:
+        """Stop serving and release the port."""
+        self._server.shutdown()
+        self._server.server_close()
+        self._worker.close()
 
 
 def _handler(parts: Sequence[tuple[dict[str, str], bytes]], path: str,

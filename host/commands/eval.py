@@ -4,9 +4,7 @@ from __future__ import annotations
 
 import argparse
 import json
-import sys
 from pathlib import Path
-from typing import Any
 
 from rollcam.common.errors import ConfigError
 
@@ -15,11 +13,13 @@ Evaluate a detector on the GS and RS images of a rollcam dataset (or on an Ultra
 JSON) and report P, R, mAP@0.5 and mAP@0.5:0.95 per speed and shutter, as the study's tables do, with the
 GS->RS difference. mAP comes from faster-coco-eval (COCO rules; ignore regions are iscrowd); P and R are read
 at the confidence of best mean F1, as Ultralytics reports them. Instead of a detector, --detections takes a
-file of your own model's outputs (rollcam detections.jsonl or a COCO results JSON)."""
+file of your own model's outputs (rollcam detections.jsonl or a COCO results JSON). Results go to
+OUT/DETECTOR_SPLIT.json and .png; with --subset NAME to OUT/DETECTOR_SPLIT_NAME.json and .png, so evaluating
+one subset never replaces the results of all of them."""
 
 
-def register(sub: Any) -> None:
-    """Add ``rollcam eval`` to the CLI."""
+def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
+    """Add ``rollcam eval``."""
     p = sub.add_parser("eval", help="P, R, mAP@0.5 and mAP@0.5:0.95 of a detector per shutter and speed",
                        description=DESCRIPTION, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("dataset", metavar="DATASET", help="rollcam dataset folder, YOLO data.yaml (or its folder), "
@@ -32,35 +32,41 @@ def register(sub: Any) -> None:
     p.add_argument("--images", default=None, metavar="DIR",
                    help="folder the COCO JSON's file names are relative to (default: its folder, or the folder "
                         "above when it lies in annotations/)")
-    p.add_argument("--out", default=None, metavar="DIR", help="folder for DETECTOR_SPLIT.json and .png "
+    p.add_argument("--out", default=None, metavar="DIR", help="folder for the result JSON and chart "
                    "(default: DATASET/eval/ for a folder, else rollcam_out/eval)")
     p.add_argument("--save-detections", default=None, metavar="FILE", help="also write the detector's detections "
                    "as detections.jsonl (to re-evaluate without inference)")
     p.add_argument("--json", action="store_true", help="print one JSON document instead of the table")
     p.add_argument("--progress", action="store_true", help="show progress even when stderr is not a terminal")
-    p.set_defaults(func=cmd_eval)
+    return p
 
 
 def _slug(text: str) -> str:
     return "".join(c if c.isalnum() or c in "-_." else "_" for c in text)[:60]
 
 
-def cmd_eval(args: argparse.Namespace) -> int:
-    """Run ``rollcam eval``."""
-    from .run import evaluate_dataset
+def result_stem(detector: str | None, detections: str | None, split: str, subset: str | None) -> str:
+    """File stem of one evaluation's results: DETECTOR_SPLIT, or DETECTOR_SPLIT_SUBSET for one subset."""
+    stem = f"{_slug(detector or Path(detections or 'detections').stem)}_{_slug(split)}"
+    return stem if subset is None else f"{stem}_{_slug(subset)}"
+
+
+def run(args: argparse.Namespace) -> int:
+    """Evaluate, write the result JSON and chart atomically, print the table (or the JSON)."""
+    from ..capture import write_atomic
+    from ..evaluation.report import format_table, plot
+    from ..evaluation.run import evaluate_dataset
 
     doc = evaluate_dataset(args.dataset, detector=args.detector, detections=args.detections, split=args.split,
                            subset=args.subset, images=args.images, save_detections=args.save_detections,
                            progress=True if args.progress else None)
+    if not any(doc["results"].values()) and not doc["sets"]:
+        raise ConfigError("nothing was evaluated")
     ds = Path(args.dataset)
     out = Path(args.out) if args.out else (ds / "eval" if ds.is_dir() else Path("rollcam_out/eval"))
     out.mkdir(parents=True, exist_ok=True)
-    stem = f"{_slug(args.detector or Path(args.detections).stem)}_{_slug(args.split)}"
-    from .report import format_table, plot
-
+    stem = result_stem(args.detector, args.detections, args.split, args.subset)
     doc["files"] = {"json": str(out / f"{stem}.json"), "chart": str(out / f"{stem}.png")}
-    from ..capture import write_atomic
-
     write_atomic(out / f"{stem}.json", (json.dumps(doc, indent=1) + "\n").encode())
     plot(doc, out / f"{stem}.png")
     if args.json:
@@ -69,7 +75,4 @@ def cmd_eval(args: argparse.Namespace) -> int:
         print(format_table(doc))
         print(f"metric time {doc['timing']['metrics_s']:.3f} s (inference {doc['timing']['inference_s']:.1f} s); "
               f"chart {out / (stem + '.png')}")
-    if not any(doc["results"].values()) and not doc["sets"]:
-        raise ConfigError("nothing was evaluated")
-    print("", end="", file=sys.stderr)
     return 0

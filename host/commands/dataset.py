@@ -4,8 +4,11 @@ from __future__ import annotations
 
 import argparse
 import json
-import sys
 from typing import Any
+
+from rollcam.common.values import box_size, fraction, name_list, parse_size, positive_int
+
+from . import value_type
 
 DESCRIPTION = """\
 Render paired global- and rolling-shutter images of the same instants with exact labels, by default the
@@ -20,64 +23,38 @@ examples:
   rollcam dataset --out data/small --frames 40 --size 960x540 --workers 2
   rollcam dataset --out /shared/lr --executor dask://10.0.0.5:8786 --worker-writes"""
 
-
-def _csv(text: str) -> tuple[str, ...]:
-    items = tuple(t.strip() for t in text.split(",") if t.strip())
-    if not items:
-        raise argparse.ArgumentTypeError(f"expected a comma-separated list, got {text!r}")
-    return items
+_COUNT = value_type(positive_int, "an integer >= 1")
 
 
-def _min_box(text: str) -> tuple[float, float]:
-    try:
-        w, h = (float(v) for v in text.lower().split("x"))
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected WIDTHxHEIGHT in pixels, got {text!r}") from None
-    if w < 0 or h < 0:
-        raise argparse.ArgumentTypeError(f"expected non-negative sizes, got {text!r}")
-    return w, h
-
-
-def _fraction(text: str) -> float:
-    try:
-        v = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a number in [0, 1], got {text!r}") from None
-    if not 0.0 <= v <= 1.0:
-        raise argparse.ArgumentTypeError(f"expected a number in [0, 1], got {text!r}")
-    return v
-
-
-def register(sub: Any) -> None:
-    """Add ``rollcam dataset`` to the CLI."""
-    from ..cli import _positive_int, _size
-
+def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
+    """Add ``rollcam dataset``."""
     p = sub.add_parser("dataset", help="build paired GS/RS datasets with exact labels (YOLO + COCO + card)",
                        description=DESCRIPTION, epilog=EPILOG, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--out", required=True, metavar="DIR", help="output folder (rerun to resume)")
     p.add_argument("--sensor", default="letsroll", help="emulated sensor (default: %(default)s, the study's camera)")
-    p.add_argument("--size", type=_size, default=None, help="image WxH (default: the sensor's default mode)")
-    p.add_argument("--frames", type=_positive_int, default=None, metavar="N",
+    p.add_argument("--size", type=value_type(parse_size), default=None,
+                   help="image WxH (default: the sensor's default mode)")
+    p.add_argument("--frames", type=_COUNT, default=None, metavar="N",
                    help="total GS/RS pairs over all speeds (default: the full grid, 2,000 for the study's design)")
-    p.add_argument("--scenes", type=_positive_int, default=40, help="street scenes (default: %(default)s)")
-    p.add_argument("--cameras", type=_positive_int, default=5, help="cameras per scene, 1-5 (default: %(default)s)")
-    p.add_argument("--times", type=_csv, default=None,
+    p.add_argument("--scenes", type=_COUNT, default=40, help="street scenes (default: %(default)s)")
+    p.add_argument("--cameras", type=_COUNT, default=5, help="cameras per scene, 1-5 (default: %(default)s)")
+    p.add_argument("--times", type=value_type(name_list), default=None,
                    help="times of day (default: dawn,morning,noon,afternoon,dusk)")
-    p.add_argument("--speeds", type=_csv, default=("normal", "fast"),
+    p.add_argument("--speeds", type=value_type(name_list), default=("normal", "fast"),
                    help="walker speeds: normal, fast, static or a multiplier (default: normal,fast)")
     p.add_argument("--ego", default="none", help="camera ego-motion: none, pan, walk, vehicle, drone (default: none)")
-    p.add_argument("--pedestrians", type=_positive_int, default=20, help="pedestrians per scene (default: 20)")
-    p.add_argument("--seed", type=int, default=0, help="dataset seed (default: 0)")
+    p.add_argument("--pedestrians", type=_COUNT, default=20, help="pedestrians per scene (default: 20)")
+    p.add_argument("--seed", type=value_type(int, "an integer"), default=0, help="dataset seed (default: 0)")
     p.add_argument("--image-format", choices=("png", "jpg"), default="png", help="image files (default: png)")
     p.add_argument("--raw", default=None, metavar="FORMAT",
                    help="store the sensor's raw output instead of BGR images: passed to the emu: source as format=")
     p.add_argument("--source-options", default="", metavar="QUERY",
                    help="extra emu: options for every sample, e.g. 'exposure_us=2000&gain=2'")
-    p.add_argument("--min-box", type=_min_box, default=(6.0, 16.0), metavar="WxH",
+    p.add_argument("--min-box", type=value_type(box_size), default=(6.0, 16.0), metavar="WxH",
                    help="smallest labelled box in px; smaller people become ignore regions (default: 6x16)")
-    p.add_argument("--min-visible", type=_fraction, default=0.3,
-                   help="smallest unoccluded fraction of a labelled person (default: 0.3)")
-    p.add_argument("--workers", type=_positive_int, default=1, help="local worker processes (default: 1)")
+    p.add_argument("--min-visible", type=value_type(fraction, "a number in [0, 1]"), default=0.3,
+                   help="smallest unoccluded fraction of a labelled person, in [0, 1] (default: 0.3)")
+    p.add_argument("--workers", type=_COUNT, default=1, help="local worker processes (default: 1)")
     p.add_argument("--executor", default=None, metavar="SPEC",
                    help="'local' (default) or 'dask://HOST:PORT' (a Dask distributed scheduler)")
     p.add_argument("--worker-writes", action="store_true",
@@ -86,14 +63,14 @@ def register(sub: Any) -> None:
     p.add_argument("--overwrite", action="store_true", help="replace a dataset built with other options in --out")
     p.add_argument("--json", action="store_true", help="print a JSON summary on stdout")
     p.add_argument("--progress", action="store_true", help="show progress even when stderr is not a terminal")
-    p.set_defaults(func=cmd_dataset)
+    return p
 
 
 def config_from_args(args: argparse.Namespace) -> Any:
     """The DatasetConfig the options describe."""
     from rollcam.sim.scenegen import TIMES_OF_DAY
 
-    from .plan import DatasetConfig, LabelPolicy
+    from ..datasets.plan import DatasetConfig, LabelPolicy
 
     return DatasetConfig(
         sensor=args.sensor, size=args.size, scenes=args.scenes, cameras=args.cameras,
@@ -104,12 +81,13 @@ def config_from_args(args: argparse.Namespace) -> Any:
     )
 
 
-def cmd_dataset(args: argparse.Namespace) -> int:
-    """Run ``rollcam dataset``."""
-    from .build import build_dataset
+def run(args: argparse.Namespace) -> int:
+    """Build (or resume) the dataset and print what it holds."""
+    from ..datasets.build import build_dataset
+    from .compile_notice import notify_if_cold
 
     cfg = config_from_args(args)
-    print("building the dataset (the first run on a machine also compiles the renderer, ~30 s)...", file=sys.stderr)
+    notify_if_cold()
     result = build_dataset(cfg, args.out, workers=args.workers, executor=args.executor,
                            worker_writes=True if args.worker_writes else None, overwrite=args.overwrite,
                            progress=True if args.progress else None)

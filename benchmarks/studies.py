@@ -1,0 +1,251 @@
+"""The studies behind ``rollcam bench STUDY``: one entry each, with its options, run, report and targets.
+
+Each study's code lives in its own module of ``rollcam.benchmarks`` (``bench`` renders, ``hog_recall``,
+``detect``, ``ptc``, ``sensor_bench``, ``uvc``, ``soak``, ``dataset``); an entry here is the thin layer the
+command line needs. ``run(args, progress)`` does the work, writes its files under ``args.out`` and returns the
+JSON document with its plain-text report; ``targets(doc)`` reads the document's targets as ``{name: {"value",
+"op", "limit", "pass"}}`` (``pass`` None when a target did not apply). This module imports only the standard
+library at the top, so ``rollcam --help`` stays fast.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from rollcam.common.errors import RollcamError, require
+from rollcam.common.values import name_list, parse_size, positive_float, positive_int
+from rollcam.host.commands import value_type
+
+Doc = dict[str, Any]
+Targets = dict[str, dict[str, Any]]
+PTC_TOLERANCE = 0.05
+"""Largest relative error of a figure the PTC measures against the sensor's configuration."""
+
+_COUNT = value_type(positive_int, "an integer >= 1")
+
+
+class TargetMissed(RollcamError):
+    """``--check``: a study's number missed its target (exit status 1); the message names each one."""
+
+
+@dataclass(frozen=True)
+class Study:
+    """One ``rollcam bench`` subcommand."""
+
+    name: str
+    help: str
+    add_arguments: Callable[[argparse.ArgumentParser], None]
+    run: Callable[[argparse.Namespace, Any], tuple[Doc, str]]
+    targets: Callable[[Doc], Targets]
+
+
+def write_json(out: str | Path, name: str, doc: Doc) -> Path:
+    """``doc`` as ``out/name``, written atomically (the folder is created)."""
+    from rollcam.host.capture import write_atomic
+
+    path = Path(out) / name
+    path.parent.mkdir(parents=True, exist_ok=True)
+    write_atomic(path, (json.dumps(doc, indent=1) + "\n").encode())
+    return path
+
+
+def missed(targets: Targets) -> list[str]:
+    """``name (value op limit)`` of every target that failed."""
+    return [f"{name} ({t['value']} {t['op']} {t['limit']} failed)" for name, t in targets.items() if t["pass"] is False]
+
+
+def _target(value: Any, op: str, limit: float, ok: bool | None) -> dict[str, Any]:
+    return {"value": value, "op": op, "limit": limit, "pass": ok}
+
+
+def _no_arguments(p: argparse.ArgumentParser) -> None:
+    pass
+
+
+# --------------------------------------------------------------------------------------------- render
+def _render_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--quick", action="store_true", help="two scenes, fewer methods and frames (< 1 min)")
+    p.add_argument("--size", type=value_type(parse_size), default=(1920, 1080), metavar="WxH",
+                   help="frame size (default: the study's 1920x1080)")
+    p.add_argument("--scenes", type=value_type(name_list), default=None,
+                   help="comma-separated subset of normal,fast,normal_ego,fast_ego")
+
+
+def _render(args: argparse.Namespace, progress: Any) -> tuple[Doc, str]:
+    from .bench import run_bench
+    from .render_report import format_table
+
+    overrides = {"scenes": args.scenes} if args.scenes else {}
+    doc = run_bench(*args.size, quick=args.quick, out_dir=args.out, progress=progress.status, **overrides)
+    return doc, format_table(doc)
+
+
+def _render_targets(doc: Doc) -> Targets:
+    return {name: _target(t["value"], t["op"], t["limit"], t["pass"]) for name, t in doc["targets"].items()}
+
+
+# ------------------------------------------------------------------------------------------------ hog
+def _hog_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--scenes", type=_COUNT, default=10, help="street scenes (default: %(default)s)")
+    p.add_argument("--seed", type=value_type(int, "an integer"), default=0, help="first scene's seed (default: 0)")
+
+
+def _hog(args: argparse.Namespace, progress: Any) -> tuple[Doc, str]:
+    from .hog_recall import hog_recall
+
+    doc = hog_recall(n_scenes=args.scenes, seed=args.seed,
+                     progress=lambda done, total: progress.status(f"frame {done}/{total}"))
+    write_json(args.out, "hog_recall.json", doc)
+    lines = [f"HOG recall {doc['recall']:.3f}, precision {doc['precision']:.3f} on {doc['n_pedestrians']} "
+             "unoccluded pedestrians >= 128 px in daylight GS frames"]
+    lines += [f"  {name:>8} px: recall {row['recall']:.3f} (n={row['n']})"
+              for name, row in doc["recall_by_height_px"].items() if row["recall"] is not None]
+    return doc, "\n".join(lines)
+
+
+HOG_RECALL_TARGET = 0.5
+"""The walkers look enough like people when OpenCV's stock HOG finds at least half of the fair ones."""
+
+
+def _hog_targets(doc: Doc) -> Targets:
+    recall = doc["recall"]
+    return {"recall": _target(recall, ">=", HOG_RECALL_TARGET, None if recall is None else recall >= HOG_RECALL_TARGET)}
+
+
+# --------------------------------------------------------------------------------------------- detect
+def _detect_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--quick", action="store_true", help="fewer frames and repeats")
+    p.add_argument("--onnx", action="append", metavar="MODEL", help="also time onnx:MODEL (repeatable)")
+
+
+def _detect(args: argparse.Namespace, progress: Any) -> tuple[Doc, str]:
+    from .detect import detect_bench, format_detect_bench
+
+    doc = detect_bench(quick=args.quick, onnx=args.onnx or (), say=progress.status)
+    write_json(args.out, "detect_bench.json", doc)
+    return doc, format_detect_bench(doc)
+
+
+def _detect_targets(doc: Doc) -> Targets:
+    o = doc["loop_overhead"]
+    return {"bookkeeping_ms": _target(o["bookkeeping_ms_median"], "<=", o["target_bookkeeping_ms"],
+                                      o["meets_target"])}
+
+
+# ------------------------------------------------------------------------------------------------ ptc
+def _ptc_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("sensor", nargs="?", default="imx219", metavar="SENSOR",
+                   help="emulated sensor to measure (default: %(default)s)")
+
+
+def _ptc(args: argparse.Namespace, progress: Any) -> tuple[Doc, str]:
+    from .ptc import format_ptc, run_ptc
+
+    progress.status(f"flat-field pairs of emu:{args.sensor}")
+    result = run_ptc(args.sensor, args.out)  # writes ptc.json and ptc.png
+    return result.to_json(), f"{format_ptc(result)}\nwrote {Path(args.out) / 'ptc.png'}"
+
+
+def _ptc_targets(doc: Doc) -> Targets:
+    return {f"{name}_error": _target(round(err, 5), "|x| <=", PTC_TOLERANCE, abs(err) <= PTC_TOLERANCE)
+            for name, err in doc["errors"].items()}
+
+
+# --------------------------------------------------------------------------------------------- sensor
+def _quick_argument(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--quick", action="store_true", help="at 480x270 instead of 1920x1080")
+
+
+def _sensor(args: argparse.Namespace, progress: Any) -> tuple[Doc, str]:
+    from .sensor_bench import format_sensor_bench, run_sensor_bench
+
+    progress.status("noise, mosaic, packing and adaptive blur")
+    doc = run_sensor_bench(quick=args.quick)
+    write_json(args.out, "sensor_bench.json", doc)
+    return doc, format_sensor_bench(doc)
+
+
+def _sensor_targets(doc: Doc) -> Targets:
+    o, a = doc["sensor_overhead"], doc["adaptive_blur"]
+    return {"sensor_overhead_vs_rs_frame": _target(o["overhead_vs_rs_frame"], "<=", o["target"],
+                                                   o["overhead_vs_rs_frame"] <= o["target"]),
+            "adaptive_blur_evaluation_ratio": _target(a["evaluation_ratio"], ">=", a["target_ratio"],
+                                                      a["evaluation_ratio"] >= a["target_ratio"])}
+
+
+# ------------------------------------------------------------------------------------------------ uvc
+def _uvc(args: argparse.Namespace, progress: Any) -> tuple[Doc, str]:
+    require("usb.core", "pyusb", "usb", "rollcam bench uvc")  # before the codec half, not after it
+    from .uvc import format_uvc, run_uvc_bench
+
+    progress.status("UVC payload packing and parsing")
+    doc = run_uvc_bench()
+    write_json(args.out, "uvc.json", doc)
+    return doc, format_uvc(doc)
+
+
+def _uvc_targets(doc: Doc) -> Targets:
+    t = doc["target"]
+    return {"pack_parse_iso_3072_mb_s": _target(t["value_mb_s"], t["op"], t["limit_mb_s"], t["pass"])}
+
+
+# ----------------------------------------------------------------------------------------------- soak
+def _soak_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--minutes", type=value_type(positive_float, "a number of minutes > 0"), default=10.0,
+                   help="how long to stream (default: %(default)s)")
+    p.add_argument("--scene", default="street", choices=("street", "chart", "flat"),
+                   help="scene (default: street; flat isolates pacing from rendering cost)")
+    p.add_argument("--rt-priority", type=value_type(positive_int, "an integer >= 1"), default=None, metavar="N",
+                   help="run the pump's waits and the reader under SCHED_FIFO priority N")
+
+
+def _soak(args: argparse.Namespace, progress: Any) -> tuple[Doc, str]:
+    from .soak import format_report, run_soak
+
+    doc = run_soak(args.minutes, scene=args.scene, rt_priority=args.rt_priority, progress=progress.status)
+    c = doc["config"]
+    write_json(args.out, f"soak_{c['scene']}{'_rt' if c['rt_priority'] is not None else ''}.json", doc)
+    return doc, format_report(doc)
+
+
+def _doc_targets(doc: Doc) -> Targets:
+    return {name: _target(t["value"], t.get("op", "=="), t["limit"], t["pass"]) for name, t in doc["targets"].items()}
+
+
+# -------------------------------------------------------------------------------------------- dataset
+def _dataset_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--size", type=value_type(parse_size), default=(1920, 1080), metavar="WxH",
+                   help="image size (default: 1920x1080)")
+
+
+def _dataset(args: argparse.Namespace, progress: Any) -> tuple[Doc, str]:
+    from .dataset import bench_dataset, format_report
+
+    doc = bench_dataset(args.size, say=progress.status)
+    write_json(args.out, "dataset_bench.json", doc)
+    return doc, format_report(doc)
+
+
+STUDIES: dict[str, Study] = {s.name: s for s in (
+    Study("render", "speed versus error of the ways to make an RS frame (bench.json, bench.png)",
+          _render_arguments, _render, _render_targets),
+    Study("hog", "does OpenCV's stock HOG people detector find the synthetic walkers? (~1 min)",
+          _hog_arguments, _hog, _hog_targets),
+    Study("detect", "detect-loop overhead and each built-in detector's time per frame",
+          _detect_arguments, _detect, _detect_targets),
+    Study("ptc", "photon transfer curve of an emulated sensor, measured from its frames (ptc.png)",
+          _ptc_arguments, _ptc, _ptc_targets),
+    Study("sensor", "cost of the sensor model (noise, mosaic, packing) and of adaptive motion blur",
+          _quick_argument, _sensor, _sensor_targets),
+    Study("uvc", "UVC payload packing and parsing throughput (a few seconds)", _no_arguments, _uvc, _uvc_targets),
+    Study("soak", "stream an emulated 1080p30 RS V4L2 device in real time: drops, jitter, latency",
+          _soak_arguments, _soak, _doc_targets),
+    Study("dataset", "dataset generation (vs render+encode, 1 vs 2 workers) and evaluation metric speed",
+          _dataset_arguments, _dataset, _doc_targets),
+)}
+"""Study name -> study, in the order ``rollcam bench --help`` lists them."""

@@ -1,0 +1,54 @@
+"""The ``rollcam`` commands, one module each, registered the same way.
+
+A command module ``rollcam.host.commands.<module>`` provides
+
+- ``add_parser(subparsers) -> argparse.ArgumentParser``: its subparser, options and help;
+- ``run(args) -> int``: the work, returning the exit status (errors are raised, ``rollcam.host.cli`` turns
+  them into one ``rollcam: error:`` line and the status of ``rollcam.common.errors.exit_code``).
+
+Command modules import only the standard library at the top; the work (numpy, OpenCV, the renderer, optional
+packages) is imported inside ``run``, so ``rollcam --help`` starts fast and works whatever optional package is
+missing. A new command is one module and one entry in ``COMMANDS``.
+"""
+
+from __future__ import annotations
+
+import argparse
+from collections.abc import Callable
+from typing import Any
+
+COMMANDS: dict[str, str] = {
+    "demo": "demo",
+    "list": "list",
+    "capture": "capture",
+    "detect": "detect",
+    "emulate": "emulate",
+    "dataset": "dataset",
+    "eval": "eval",
+    "bench": "bench",
+}
+"""Command name -> module under ``rollcam.host.commands``, in the order ``rollcam --help`` lists them."""
+
+PROG = "rollcam"
+
+
+def value_type(parse: Callable[[str], Any], what: str | None = None) -> Callable[[str], Any]:
+    """An argparse ``type`` from a value parser of ``rollcam.common.values`` (or any ``str -> value``).
+
+    A refused value becomes argparse's usage error naming the option and the value, with the parser's own
+    reason (``must be an integer >= 1``) or ``what`` it expected when the reason is Python's (``invalid
+    literal for int()``).
+    """
+
+    def convert(text: str) -> Any:
+        try:
+            return parse(text)
+        except (TypeError, ValueError) as exc:
+            reason = str(exc)
+            if what is not None and (not reason or "invalid literal" in reason or "could not convert" in reason):
+                reason = f"expected {what}"
+            message = reason if repr(text) in reason else f"{text!r} is invalid: {reason}"
+            raise argparse.ArgumentTypeError(message) from None
+
+    convert.__name__ = getattr(parse, "__name__", "value")
+    return convert

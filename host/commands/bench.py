@@ -1,0 +1,52 @@
+"""``rollcam bench STUDY``: one speed-versus-error study per call (the studies are ``rollcam.benchmarks``).
+
+Every study takes ``--out DIR`` (its JSON, and plots, go there), ``--json`` (the JSON document on stdout
+instead of the report), ``--check`` (exit status 1 when a target is missed, naming each) and ``--progress``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+
+
+def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
+    """Add ``rollcam bench`` with one subcommand per study of ``rollcam.benchmarks.studies``."""
+    from rollcam.benchmarks.studies import STUDIES
+
+    p = sub.add_parser("bench", help="speed-versus-error studies, one per call ('rollcam bench STUDY --help')",
+                       description="Run one of rollcam's benchmark studies: " + ", ".join(STUDIES) + ".")
+    studies = p.add_subparsers(dest="study", metavar="STUDY", required=True)
+    for study in STUDIES.values():
+        sp = studies.add_parser(study.name, help=study.help, description=study.help[0].upper() + study.help[1:] + ".")
+        study.add_arguments(sp)
+        g = sp.add_argument_group("every study")
+        g.add_argument("--out", default="rollcam_out/bench", metavar="DIR",
+                       help="folder for the study's JSON and plots (default: %(default)s)")
+        g.add_argument("--json", action="store_true", help="print the JSON document instead of the report")
+        g.add_argument("--check", action="store_true",
+                       help="exit with status 1, naming each target missed, when the study misses one")
+        g.add_argument("--progress", action="store_true", help="show progress even when stderr is not a terminal")
+    return p
+
+
+def run(args: argparse.Namespace) -> int:
+    """Run the chosen study, print its report (or JSON), and with ``--check`` judge its targets."""
+    from rollcam.benchmarks.studies import STUDIES, TargetMissed, missed
+
+    from ..progress import Progress
+    from .compile_notice import notify_if_cold
+
+    study = STUDIES[args.study]
+    notify_if_cold()
+    bar = Progress(label=f"bench {study.name}", enabled=True if args.progress else None)
+    try:
+        doc, report = study.run(args, bar)
+    finally:
+        bar.close()
+    print(json.dumps(doc, indent=1) if args.json else report, flush=True)
+    if args.check:
+        failed = missed(study.targets(doc))
+        if failed:
+            raise TargetMissed(f"bench {study.name}: {len(failed)} target(s) missed: {'; '.join(failed)}")
+    return 0

@@ -1,0 +1,39 @@
+"""Say once, on stderr, that the renderer is about to compile, when numba's cache of it is cold.
+
+The first render on a machine (or after an edit of the kernels) compiles them for ~30 s; a command that is
+silent that long looks hung. A warm cache says nothing, so the notice appears exactly when it is true.
+"""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+from typing import TextIO
+
+NOTICE = "rollcam: compiling the renderer (first use on this machine, ~30 s; later runs load it from numba's cache)"
+
+
+def renderer_cache_cold() -> bool:
+    """True when numba holds no cached machine code for the renderer's entry kernel."""
+    from rollcam.sim import _kernels
+
+    try:
+        # numba keeps one index file per cached function; none means the next call compiles. The path is
+        # numba's internal, so a numba that moved it gets no notice rather than a crash.
+        index = Path(_kernels.render_lines_kernel._cache._cache_file._index_path)
+    except AttributeError:
+        return False
+    return not index.exists()
+
+
+def renders(uri: str) -> bool:
+    """Whether opening source ``uri`` runs rollcam's renderer (``emu:`` and the emulated UVC backend)."""
+    return uri.lower().startswith("emu:") or (uri.lower().startswith("uvc:") and "backend=emu" in uri.lower())
+
+
+def notify_if_cold(stream: TextIO | None = None) -> bool:
+    """Print ``NOTICE`` when the renderer's cache is cold; returns whether it did."""
+    if not renderer_cache_cold():
+        return False
+    print(NOTICE, file=stream or sys.stderr, flush=True)
+    return True

@@ -1,0 +1,212 @@
+"""Render passes of the per-line renderer: poses, touched lines, shared actor parts, and the one kernel call.
+
+``rollcam.sim.render.Renderer`` decides what a render needs (which lines, over which layer, into which
+buffers); ``Painter.prepare`` does the work every render shares (camera poses at the distinct times, which
+actor touches which line at which time, the parts several lines share) into a ``Pass``, and
+``Painter.paint`` is the only caller of the line kernel, so every render goes through the same code.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from . import _body as B
+from . import _kernels as K
+from . import _world as Wd
+from .compile import compile_camera, compile_scene
+from .scene import Camera, Scene
+
+BOUND_GROUPS = 32
+"""Time groups per render for the conservative actor bounds that decide which lines an actor touches."""
+
+_EMPTY_LIN = np.empty((0, 0, 3), np.float32)
+
+
+@dataclass
+class Pass:
+    """What one kernel call shares: the distinct times, their camera poses, and each actor's time slot per entry.
+
+    An entry is a line at one time: one per line for a frame, one per (line, sample) for exposure integration.
+    ``obj_k[o, e]`` is actor o's time slot on entry e (-1 when its bounds do not reach that line then);
+    ``slots``/``parts`` are the shared parts table (``K.SLOT_LOCAL``: computed on the one line needing it).
+    """
+
+    cam: np.ndarray
+    times_s: np.ndarray
+    entry_k: np.ndarray
+    rot: np.ndarray
+    pos: np.ndarray
+    obj_k: np.ndarray
+    slots: np.ndarray
+    parts: np.ndarray
+    moving: np.ndarray  # (actors,) bool: moves in render space (every actor when the camera moves)
+    n_along: int  # pixels per line
+
+    def touched(self, include: np.ndarray) -> np.ndarray:
+        """Entries some included moving actor's bounds reach (bool per entry)."""
+        return (self.obj_k[include & self.moving] >= 0).any(axis=0)
+
+
+class Painter:
+    """The kernel tables of one scene camera (both orientations) and the render passes over them."""
+
+    def __init__(self, scene: Scene, camera: Camera, gain: float, lut: np.ndarray) -> None:
+        self.gain, self.lut = gain, lut  # the 8-bit output: radiance scale and encoding curve
+        self.tables = compile_scene(scene)
+        self.cams = {False: compile_camera(camera, False), True: compile_camera(camera, True)}
+        self.camera_moving = camera.ego.moving
+        actors = self.tables.actors
+        self.n_actors = int(actors.shape[0])
+        self.actor_static = actors[:, B.A_STATIC] != 0.0 if self.n_actors else np.zeros(0, np.bool_)
+        # Fixed in render space: a static actor seen from a static camera.
+        self.fixed = self.actor_static & (not self.camera_moving)
+        self._parts: np.ndarray | None = None
+
+    def poses(self, by_column: bool, times_s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Camera rotation ``(n, 3, 3)`` and position ``(n, 3)`` at each time (seconds)."""
+        n = times_s.shape[0]
+        rot, pos = np.empty((n, 3, 3)), np.empty((n, 3))
+        Wd.pose_table(self.cams[by_column], times_s, rot, pos)
+        return rot, pos
+
+    def background(self, by_column: bool, t_s: float, out: np.ndarray) -> None:
+        """The static world (no actors) seen at time ``t_s``, linear RGB, into ``out`` (render orientation)."""
+        t = self.tables
+        Wd.background_image(t.world, t.building_lut, t.buildings, t.light, self.cams[by_column], t_s, out)
+
+    def bounds(self, cam: np.ndarray, rot: np.ndarray, pos: np.ndarray, t_first: np.ndarray, k_first: np.ndarray,
+               span_s: np.ndarray, need: np.ndarray) -> np.ndarray:
+        """Render-space box (ymin, ymax, xmin, xmax) of actor o over group g, from ``t_first[g]`` lasting
+        ``span_s[g]`` at pose ``k_first[g]``, where ``need[o, g]`` (other entries are not written)."""
+        out = np.empty((*need.shape, 4))
+        t = self.tables
+        K.actor_bounds_all(t.actors, t.world, cam, rot, pos, t_first, k_first, span_s, need, out)
+        return out
+
+    def speeds(self, by_column: bool, times_s: np.ndarray) -> np.ndarray:
+        """Fastest render-space displacement rate (px/s) of each actor's parts over ``times_s``."""
+        rot, pos = self.poses(by_column, times_s)
+        t = self.tables
+        out = np.zeros(self.n_actors)
+        K.actor_speeds(t.actors, t.world, t.building_lut, t.buildings, t.light, self.cams[by_column], rot, pos,
+                       times_s, out)
+        return out
+
+    def parts(self, by_column: bool, times_s: np.ndarray) -> np.ndarray:
+        """Render-space parts ``(actors, times, K.MAX_PARTS, K.PART_COLS)`` of every actor at every time."""
+        rot, pos = self.poses(by_column, times_s)
+        n_t = times_s.shape[0]
+        s_o, s_k = np.repeat(np.arange(self.n_actors), n_t), np.tile(np.arange(n_t), self.n_actors)
+        out = np.empty((self.n_actors * n_t, K.MAX_PARTS, K.PART_COLS))
+        t = self.tables
+        K.actor_parts_all(t.actors, t.world, t.building_lut, t.buildings, t.light, self.cams[by_column], rot, pos,
+                          times_s, s_o, s_k, out)
+        return out.reshape(self.n_actors, n_t, K.MAX_PARTS, K.PART_COLS)
+
+    def prepare(self, by_column: bool, times_s: np.ndarray, entry_k: np.ndarray, include: np.ndarray, n_along: int,
+                *, exhaustive: bool = False, only: np.ndarray | None = None,
+                line_of: np.ndarray | None = None) -> Pass:
+        """The shared work of a render of entries at ``times_s[entry_k]``, for the ``include``d actors.
+
+        ``exhaustive`` (the oracle) tries every included actor on every entry instead of bounding them;
+        ``only`` (entry indices) limits the entries looked at; ``line_of`` maps entries to lines (default:
+        entry e is line e).
+        """
+        cam = self.cams[by_column]
+        n_ent = entry_k.shape[0]
+        fixed = self.fixed
+        # Actor time slot per entry: a moving actor uses the entry's own time, a fixed one the first time.
+        if self.n_actors:
+            k_line = np.where(fixed[:, None], 0, entry_k[None, :])
+        else:
+            k_line = np.zeros((0, n_ent), np.int64)
+        rot, pos = self.poses(by_column, times_s)
+        obj_k = np.full((self.n_actors, n_ent), -1, np.int64)
+        if exhaustive:
+            obj_k[include] = k_line[include]
+        else:
+            self._touch(cam, times_s, rot, pos, k_line, include & ~fixed, include, n_along, obj_k, only, line_of)
+        slots, parts = self._shared_parts(cam, times_s, rot, pos, obj_k)
+        return Pass(cam, times_s, entry_k, rot, pos, obj_k, slots, parts, ~fixed, n_along)
+
+    def paint(self, p: Pass, include: np.ndarray, lines: np.ndarray, gt, *, bg: np.ndarray | None,
+              out_u8: np.ndarray | None = None, out_lin: np.ndarray | None = None, full_lines: bool,
+              gt_only: bool = False, seed: np.ndarray | None = None, hits: np.ndarray | None = None,
+              line_hit: np.ndarray | None = None, e_start: np.ndarray | None = None,
+              ents: np.ndarray | None = None) -> None:
+        """Run the line kernel on ``lines`` (see ``K.render_lines_kernel``; None stands for an empty array).
+
+        Without ``e_start``/``ents`` each line is painted once, as its own entry.
+        """
+        t, n_along = self.tables, p.n_along
+        if e_start is None:
+            e_start, ents = np.arange(lines.size + 1), lines
+        K.render_lines_kernel(
+            t.world, t.building_lut, t.buildings, t.light, p.cam, p.rot, p.pos, t.actors, p.times_s, p.entry_k,
+            p.obj_k, p.slots, p.parts, include, lines, e_start, ents, n_along,
+            _EMPTY_LIN if bg is None else bg,
+            np.empty((0, n_along, 3), np.uint8) if out_u8 is None else out_u8,
+            _EMPTY_LIN if out_lin is None else out_lin,
+            self.gain, self.lut, gt.left, gt.right, gt.area, gt.visible, gt_only,
+            full_lines, _EMPTY_LIN if seed is None else seed,
+            np.empty(0, np.int64) if hits is None else hits,
+            np.zeros(0, np.bool_) if line_hit is None else line_hit)
+
+    # ------------------------------------------------------------------ internals
+    def _touch(self, cam, times_s, rot, pos, k_line, moving, include, n_along, obj_k, only, line_of) -> None:
+        """Fill ``obj_k[o, e]`` with actor o's time slot on each entry its bounds reach.
+
+        The bounds are conservative boxes over groups of consecutive times (one group per time when the
+        camera moves, since each time then has its own pose); an actor fixed in render space needs only its
+        one time.
+        """
+        n_obj, n_t = self.n_actors, times_s.shape[0]
+        n_g = n_t if self.camera_moving else min(n_t, BOUND_GROUPS)
+        group_of_k = (np.arange(n_t) * n_g) // n_t
+        k_first = np.searchsorted(group_of_k, np.arange(n_g))
+        k_last = np.searchsorted(group_of_k, np.arange(n_g), side="right") - 1
+        need = np.zeros((n_obj, n_g), np.bool_)
+        need[:, 0] = include
+        need[moving, :] = True
+        bounds = self.bounds(cam, rot, pos, times_s[k_first], k_first, times_s[k_last] - times_s[k_first], need)
+        idx = np.arange(obj_k.shape[1]) if only is None else only
+        centre = (idx if line_of is None else line_of[idx]) + 0.5
+        objs = np.flatnonzero(include)
+        # All included actors at once (one pass of an exposure is called often: Python loops add up).
+        k = k_line[objs[:, None], idx[None, :]]
+        b = bounds[objs[:, None], group_of_k[k]]
+        touch = (b[..., 0] <= centre) & (centre <= b[..., 1]) & (b[..., 2] < n_along) & (b[..., 3] > 0)
+        t_o, t_l = np.nonzero(touch)
+        obj_k[objs[t_o], idx[t_l]] = k[t_o, t_l]
+
+    def _shared_parts(self, cam, times_s, rot, pos, obj_k) -> tuple[np.ndarray, np.ndarray]:
+        """Slot table and parts table of a render.
+
+        Parts of an actor at an instant that several entries share (GS, bands, static actors) are computed
+        once into a table; those only one entry needs (RS) are computed on that line, in cache
+        (``K.SLOT_LOCAL``).
+        """
+        t = self.tables
+        o_idx, l_idx = np.nonzero(obj_k >= 0)
+        uses = np.zeros((self.n_actors, times_s.shape[0]), np.int64)
+        np.add.at(uses, (o_idx, obj_k[o_idx, l_idx]), 1)
+        slots = np.where(uses == 1, K.SLOT_LOCAL, K.SLOT_NONE)
+        s_o, s_k = np.nonzero(uses > 1)
+        slots[s_o, s_k] = np.arange(s_o.size)
+        parts = self._parts_buffer(max(s_o.size, 1))
+        if s_o.size:
+            K.actor_parts_all(t.actors, t.world, t.building_lut, t.buildings, t.light, cam, rot, pos, times_s, s_o,
+                              s_k, parts)
+        return slots, parts
+
+    def _parts_buffer(self, n_slots: int) -> np.ndarray:
+        """A parts table of at least ``n_slots`` slots, reused across renders.
+
+        An RS frame needs thousands of slots (megabytes); a fresh array each frame would pay for its page
+        faults every time. This is why a Renderer renders one frame at a time.
+        """
+        if self._parts is None or self._parts.shape[0] < n_slots:
+            self._parts = np.empty((max(n_slots, 1024), K.MAX_PARTS, K.PART_COLS))
+        return self._parts[:n_slots]
