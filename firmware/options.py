@@ -23,10 +23,10 @@ from rollcam.common.values import (
     positive_float,
     reject_unknown,
 )
-from rollcam.sim.noise import parse_stages
-from rollcam.sim.scenegen import SPEED_PRESETS, ego_preset, parse_speed
-from rollcam.sim.synthetic import SHUTTERS
-from rollcam.sim.timing import Readout
+
+# The value parsers import the simulator only when they run: the table also builds the ``rollcam emulate``
+# flags, and ``rollcam --help`` must not load numpy and numba.
+SHUTTERS = ("rolling", "global")
 
 SCENE_KINDS = ("street", "chart", "flat")
 
@@ -41,16 +41,22 @@ def _choice(*allowed: str) -> Callable[[str], str]:
 
 
 def _speed(text: str) -> str:
+    from rollcam.sim.scenegen import SPEED_PRESETS, parse_speed
+
     parse_speed(text if str(text).lower() in SPEED_PRESETS else float(text))
     return str(text).lower()
 
 
 def _ego(text: str) -> str:
+    from rollcam.sim.scenegen import ego_preset
+
     ego_preset(str(text))
     return str(text)
 
 
 def _readout(text: str) -> str:
+    from rollcam.sim.timing import Readout
+
     return Readout.parse(text).value
 
 
@@ -60,6 +66,8 @@ def _fourcc(text: str) -> str:
 
 
 def _noise(text: str) -> frozenset[str]:
+    from rollcam.sim.noise import parse_stages
+
     return parse_stages(str(text))
 
 

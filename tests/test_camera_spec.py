@@ -151,3 +151,10 @@ def test_gain_is_the_linear_total_gain_on_every_door():
     assert handle_line(cam, "OPT? gain") == "4"
     cam.set_options({"gain": "1.5"})  # a gain the codes cannot hold exactly stays exact in the spec
     assert cam.spec.gain == 1.5 and cam.get_control("analogue_gain") == round(256 - 256 / 1.5)
+
+
+def test_the_option_table_names_the_simulators_shutters():
+    from rollcam.firmware import options
+    from rollcam.sim import synthetic
+
+    assert options.SHUTTERS == synthetic.SHUTTERS  # kept apart so the table loads without numpy
