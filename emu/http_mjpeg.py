@@ -178,7 +178,7 @@ class MjpegServer(Closeable):
         with self._lock:
             clients = {str(k): {"sent": b.sent, "dropped": b.dropped} for k, b in self.clients.items()}
         return {**self.stats.to_json(), "clients": clients, "pump": self.pump.stats.to_json(),
-                "camera": {k: int(v) for k, v in self.camera.stats.items()}}
+                "camera": self.camera.stats.to_json()}
 
     def _join(self) -> tuple[int, Mailbox[Part]] | None:
         with self._lock:

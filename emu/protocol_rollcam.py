@@ -5,7 +5,8 @@
     port = serial.serial_for_url("rollcam://imx219?scene=flat", timeout=1)
     port.write(b"*IDN?\\n"); port.readline()   # b'rollcam,IMX219-EMU,0001,1.0.0\\r\\n'
 
-``rollcam://SENSOR?scene=..&seed=..`` makes a new FirmwareCamera; ``rollcam://NAME`` where NAME was given to
+``rollcam://SENSOR?scene=..&seed=..`` makes a new FirmwareCamera from the emulated camera's option table (the
+``emu:`` URI's options; a repeated or unknown option is refused); ``rollcam://NAME`` where NAME was given to
 ``register_camera`` talks to that camera (so one test can drive a V4L2 device and its serial port).
 """
 
@@ -15,10 +16,12 @@ import threading
 import urllib.parse
 from typing import Any
 
-from rollcam.common.errors import RollcamError, require
+from rollcam.common.errors import ConfigError, RollcamError, require
 from rollcam.common.lifecycle import Deadline
+from rollcam.common.values import parse_query
 from rollcam.firmware.camera import FirmwareCamera
 from rollcam.firmware.protocol import ProtocolSession
+from rollcam.firmware.spec import CameraSpec
 
 _serialutil = require("serial.serialutil", "pyserial", "serial", "the rollcam:// serial URL handler")
 PortNotOpenError, SerialBase, SerialException = (_serialutil.PortNotOpenError, _serialutil.SerialBase,
@@ -58,13 +61,16 @@ class Serial(SerialBase):
         parts = urllib.parse.urlsplit(url)
         if parts.scheme != "rollcam" or not parts.netloc:
             raise SerialException(f"expected rollcam://SENSOR[?scene=..&seed=..] or rollcam://NAME, got {url!r}")
-        if parts.netloc in CAMERAS:
-            return CAMERAS[parts.netloc]
-        scene = dict(urllib.parse.parse_qsl(parts.query))
         try:
-            return FirmwareCamera(parts.netloc, scene=scene or None)
+            options = parse_query(parts.query, f"URL {url!r}", ConfigError)
+            if parts.netloc in CAMERAS:
+                if options:
+                    raise ConfigError(f"URL {url!r}: rollcam://{parts.netloc} names a registered camera; it takes "
+                                      "no options")
+                return CAMERAS[parts.netloc]
+            return FirmwareCamera(CameraSpec.from_options(parts.netloc, options, f"URL {url!r}"))
         except RollcamError as exc:
-            raise SerialException(f"{url!r}: {exc}") from None
+            raise SerialException(str(exc)) from None
 
     def close(self) -> None:
         """Close the port (the camera keeps running). Idempotent."""

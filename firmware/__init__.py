@@ -1,10 +1,12 @@
 """The emulated camera's own logic: register map, controls, serial control protocol, frame scheduler.
 
-``FirmwareCamera`` (``camera``) is the device every transport sits on: ``controls`` (programmable state and
-V4L2-named controls with their side effects), ``registers`` (the hw_config register map with the part's
+``FirmwareCamera`` (``camera``, with its stream half in ``stream``) is the device every source and transport
+reads frames from; it holds a ``CameraSpec`` (``spec``: the one validated description of the camera, built
+from the option table in ``options``). ``controls`` (the spec in the sensor's units and V4L2-named controls
+with their side effects), ``registers`` (the hw_config register map with the part's
 effects), ``traits`` (per-sensor register encodings), ``scheduler`` (device times of frames, lines and
 bands), ``patterns`` (test patterns), ``imaging`` (pixels: BGR renders, or raw frames through the sensor model),
-``pixfmt`` (the formats it offers: the ISP's processed ones and the sensor's raw ones),
-``scene`` (scene controls) and ``protocol`` (the line-based serial protocol). Nothing here knows of USB,
+``pixfmt`` (the one place BGR renders become YUYV, MJPG, ...; raw formats and their preview),
+and ``protocol`` (the line-based serial protocol). Nothing here knows of USB,
 sockets or ptys.
 """

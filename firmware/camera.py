@@ -1,124 +1,117 @@
-"""The firmware camera: the one device object every transport (V4L2, serial, HTTP, UVC) sits on.
+"""The firmware camera: the one device object every path to an emulated sensor reads frames from.
 
-``FirmwareCamera`` joins a sensor's programmable state (``controls``), its register map (``registers``), a
-frame schedule in device time (``scheduler``) and a ``SyntheticCamera`` that makes the pixels. It is passive
-and thread-safe: a transport asks ``plan_next()`` which frame is due next and when, waits until then on its
-own clock, and calls ``render(plan)``. The device clock is the host clock passed in minus the boot time, in
-integer ns.
+``FirmwareCamera`` holds the current ``CameraSpec`` (``spec``, replaced whole on every change) and the stream
+state (``DeviceStream``: clock, stream on/off, trigger, frame plan). The in-process ``emu:`` source, V4L2,
+serial, HTTP and UVC all program it and call ``render(plan)``; a transport asks ``plan_next()`` which frame
+is due next and when, waits until then on its own clock, and renders it. Controls and registers are edited
+on a ``SensorState`` working copy and committed as a new spec, so every door validates the same way.
 """
 
 from __future__ import annotations
 
-import collections
-import threading
-import time
-from collections.abc import Callable
-from dataclasses import dataclass
+import dataclasses
+from collections.abc import Mapping
 from typing import Any
 
 from rollcam.common.errors import ConfigError, DeviceError
-from rollcam.sim import formats as sf
 from rollcam.sim.frame import Frame
-from rollcam.sim.hwconfig import SensorConfig, load_sensor
-from rollcam.sim.synthetic import DEFAULT_EXPOSURE_NS, SHUTTERS
+from rollcam.sim.hwconfig import SensorConfig
+from rollcam.sim.synthetic import SyntheticCamera
 
 from . import controls as ctl
 from .imaging import Imager
+from .options import SHUTTERS
 from .pixfmt import FORMATS, raw_formats
 from .registers import RegisterFile
-from .scene import build_scene
-from .scheduler import FrameSchedule
+from .spec import CameraSpec
+from .stream import CameraStats, Clock, DeviceStream, FramePlan, schedule_of
 from .traits import traits_for
 
 FIRMWARE_VERSION = "1.0.0"
-Clock = Callable[[], int]
-"""A monotonic host clock in integer ns (``time.monotonic_ns`` by default; tests pass their own)."""
+_IDLE_ONLY = ("size", "pixel_format", "shutter", "readout", "hflip", "vflip")
+__all__ = ["CameraStats", "Clock", "FirmwareCamera", "FramePlan"]
 
 
-@dataclass(frozen=True)
-class FramePlan:
-    """The next frame to make: its sequence number and the schedule that says when its lines are due."""
+class FirmwareCamera(DeviceStream):
+    """An emulated camera: its spec, controls and registers, formats, and frame production."""
 
-    seq: int
-    schedule: FrameSchedule
-
-    @property
-    def start_ns(self) -> int:
-        """Start of exposure of the first line (device clock)."""
-        return self.schedule.start_ns(self.seq)
-
-    @property
-    def due_ns(self) -> int:
-        """Time the frame is complete (its last line read out)."""
-        return self.schedule.frame_due_ns(self.seq)
-
-
-class FirmwareCamera:
-    """An emulated camera: controls and registers, stream state, trigger, device clock and frame production."""
-
-    def __init__(self, sensor: SensorConfig | str, *, scene: dict[str, Any] | None = None,
-                 size: tuple[int, int] | None = None, fps: float | None = None, shutter: str | None = None,
-                 exposure_ns: int | None = None, gain: float = 1.0, clock: Clock | None = None,
-                 serial_number: str = "0001", pixel_format: str | None = None, blur_px: float = 0.0) -> None:
-        self.sensor = load_sensor(sensor) if isinstance(sensor, str) else sensor
+    def __init__(self, spec: CameraSpec | SensorConfig | str, *, clock: Clock | None = None,
+                 serial_number: str | None = None, **fields: Any) -> None:
+        if not isinstance(spec, CameraSpec):
+            if serial_number is not None:
+                fields["serial"] = serial_number
+            spec = CameraSpec.create(spec, **fields)
+        elif fields or serial_number is not None:
+            raise ConfigError(f"give a CameraSpec or its fields, not both ({sorted(fields)})")
+        super().__init__(clock)
+        self.spec = spec
+        self.sensor = spec.sensor
         self.traits = traits_for(self.sensor.name)
-        self.clock = clock or time.monotonic_ns
-        self.boot_ns = self.clock()
-        self.serial_number = serial_number
-        self.lock = threading.RLock()
-        self.changed = threading.Condition(self.lock)
-        self.scene_options: dict[str, Any] = dict(scene or {"scene": "street"})
-        mode = self.sensor.mode(None if size is None else f"{size[0]}x{size[1]}")
-        t = self.sensor.timing(mode)
-        shutter = shutter or self.sensor.shutter
-        if shutter not in SHUTTERS:
-            raise ConfigError(f"shutter {shutter!r} is not one of {SHUTTERS}")
-        self.state = ctl.SensorState(self.sensor, self.traits, mode, t.frame_length_lines, t.line_length_pck, 1,
-                                     0, 0, shutter)
-        if fps is not None:
-            if not (isinstance(fps, (int, float)) and 0 < fps < float("inf")):
-                raise ConfigError(f"fps must be a positive finite number, got {fps!r}")
-            self.state.set_frame_length(round(self.state.pixel_rate_hz / (fps * t.line_length_pck)))
-        want_ns = DEFAULT_EXPOSURE_NS if exposure_ns is None else exposure_ns
-        self.state.set_exposure(round(want_ns / max(t.line_offset_ns(1), 1)))
-        self.state.analog_code = ctl._clamp(self.traits.analog.to_code(max(gain, 1e-6)),
-                                            *self.state.gain_range("analog"))
-        self.state.digital_code = ctl._clamp(self.traits.digital.to_code(1.0), *self.state.gain_range("digital"))
-        self.registers = RegisterFile(self.state, self._mode_select)
-        self.trigger_mode = "free"
-        self._triggers: collections.deque[int] = collections.deque()
-        self._schedule: FrameSchedule | None = None
-        self._next_seq = 0
-        self.imager = Imager(self.sensor, serial=serial_number, blur_px=_blur(blur_px))
-        self._format = "YUYV"  # processed fourcc, or a raw one as the sensor lists it (before flips)
-        if pixel_format is not None:
-            self.set_format(pixel_format)
-        self.stats = {"frames": 0, "skipped": 0, "triggers": 0}
-        build_scene(self.scene_options, mode.width, mode.height)  # validate now, not at the first frame
+        self.registers = RegisterFile(self.sensor, self._mode_select)
+        self.imager = Imager()
 
     def __repr__(self) -> str:
-        s = self.state
-        return (f"FirmwareCamera({self.sensor.name!r}, {s.mode.width}x{s.mode.height}, {s.timing.fps:.2f} fps, "
-                f"{s.shutter}, {'streaming' if s.streaming else 'idle'}, next seq {self._next_seq})")
+        s = self.spec.settings
+        return (f"FirmwareCamera({self.sensor.name!r}, {s.width}x{s.height}, {s.timing.fps:.2f} fps, {s.shutter}, "
+                f"{self.pixel_format.strip()}, {'streaming' if self.streaming else 'idle'}, next seq {self.next_seq})")
 
-    # -------------------------------------------------------------------------------------- identity, clock
+    @property
+    def serial_number(self) -> str:
+        """The device's serial number (also the seed of its fixed-pattern noise)."""
+        return self.spec.serial
+
     def identity(self) -> str:
         """The SCPI ``*IDN?`` answer: maker, model, serial number, firmware version."""
         return f"rollcam,{self.sensor.name.upper()}-EMU,{self.serial_number},{FIRMWARE_VERSION}"
 
-    def clock_ns(self) -> int:
-        """Device clock: integer ns since the device booted."""
-        return self.clock() - self.boot_ns
+    # -------------------------------------------------------------------------------------- the spec
+    @property
+    def state(self) -> ctl.SensorState:
+        """A snapshot of the programming in the sensor's units (lines, codes, flips)."""
+        with self.lock:
+            return ctl.SensorState.of(self.spec, self.streaming)
 
-    def host_ns(self, device_ns: int) -> int:
-        """The host clock reading of a device time (for pacing)."""
-        return device_ns + self.boot_ns
+    def reprogram(self, spec: CameraSpec, *, idle_only: str | None = None) -> CameraSpec:
+        """Make ``spec`` the camera's programming from the next frame. ``idle_only`` names a change that a
+        streaming device refuses (mode, format, shutter) when ``spec`` differs from the current one in it."""
+        with self.changed:
+            if spec.sensor is not self.sensor:
+                raise ConfigError(f"a {spec.sensor.name} spec cannot program a {self.sensor.name} camera")
+            if idle_only and self.streaming and spec != self.spec:
+                raise DeviceError(f"cannot change the {idle_only} while streaming; stop first")
+            self.spec = spec
+            self.changed.notify_all()
+            return spec
+
+    def update(self, *, idle_only: str | None = None, **fields: Any) -> CameraSpec:
+        """Replace fields of the spec (re-validated), as ``dataclasses.replace`` does."""
+        with self.lock:
+            return self.reprogram(dataclasses.replace(self.spec, **fields), idle_only=idle_only)
+
+    def set_options(self, options: Mapping[str, Any]) -> CameraSpec:
+        """Change options by their text names (``rollcam.firmware.options``): ``scene``, ``seed``, ``gain``, ...;
+        a change of size, format, shutter, readout or flips is refused while streaming."""
+        with self.lock:
+            spec = self.spec.with_options(options)
+            moved = [f for f in _IDLE_ONLY if getattr(spec, f) != getattr(self.spec, f)]
+            if self.streaming and moved:
+                raise DeviceError(f"cannot change {moved} while streaming; stop first")
+            return self.reprogram(spec)
+
+    def set_scene(self, **changes: Any) -> None:
+        """Change scene options (``scene``, ``seed`` and the kind's own); applies from the next frame."""
+        self.set_options(changes)
+
+    @property
+    def scene_options(self) -> dict[str, Any]:
+        """The scene: kind, seed and the options given (the rest are the option table's defaults)."""
+        return self.spec.scene_values()
 
     # ---------------------------------------------------------------------------------------- format
     @property
     def size(self) -> tuple[int, int]:
-        """Output width and height of the current mode."""
-        return self.state.mode.width, self.state.mode.height
+        """Output width and height."""
+        return self.spec.settings.width, self.spec.settings.height
 
     def sizes(self) -> list[tuple[int, int]]:
         """Output sizes of the sensor's modes."""
@@ -128,269 +121,131 @@ class FirmwareCamera:
     def formats(self) -> list[str]:
         """Fourccs the camera streams: the ISP's processed ones, then the sensor's raw ones in the Bayer order
         the current flips give (as a Linux sensor driver enumerates them)."""
-        with self.lock:
-            return [*FORMATS, *(self._flipped(f) for f in raw_formats(self.sensor))]
+        spec = self.spec
+        return [*FORMATS, *(spec.flipped(f) for f in raw_formats(self.sensor))]
 
     @property
     def pixel_format(self) -> str:
-        """The current format's fourcc; a raw one follows the flips (RG10 with HFLIP is BA10)."""
-        with self.lock:
-            return self._flipped(self._format)
-
-    def _flipped(self, fourcc: str) -> str:
-        f = sf.FORMATS.get(fourcc)
-        if fourcc in FORMATS or f is None or f.cfa == "mono":
-            return fourcc
-        return sf.bayer_fourcc(self.state.bayer_order, f.bits, f.packing == "csi2")
-
-    def _unflipped(self, fourcc: str) -> str:
-        """The processed or sensor-listed raw fourcc a request means (raw: either Bayer order's name)."""
-        want = fourcc.ljust(4) if len(fourcc) == 3 else fourcc
-        if want in FORMATS:
-            return want
-        for base in raw_formats(self.sensor):
-            if want in (base, self._flipped(base)):
-                return base
-        raise ConfigError(f"pixel format {fourcc!r} is not one of this {self.sensor.name} camera's "
-                          f"{self.formats}")
+        """The current format's fourcc; a raw one follows the flips (RG10 with HFLIP is GR10)."""
+        return self.spec.output_format
 
     def resolve_format(self, fourcc: str) -> str:
         """The fourcc ``set_format(fourcc)`` would give (a raw one in the current Bayer order); ConfigError if
         the camera has no such format."""
-        with self.lock:
-            return self._flipped(self._unflipped(fourcc))
+        want = fourcc.ljust(4) if len(fourcc) == 3 else fourcc
+        if want in FORMATS:
+            return want
+        spec = self.spec
+        for base in raw_formats(self.sensor):
+            if want in (base, spec.flipped(base)):
+                return spec.flipped(base)
+        raise ConfigError(f"pixel format {fourcc!r} is not one of this {self.sensor.name} camera's {self.formats}")
 
     def set_format(self, fourcc: str) -> str:
         """Select the output format (processed, or raw: sensor samples without the ISP); refused while
         streaming, as a driver refuses S_FMT on a busy queue. Returns the fourcc in effect."""
-        with self.changed:
-            base = self._unflipped(fourcc)
-            if self.state.streaming and base != self._format:
-                raise DeviceError(f"cannot change the format to {fourcc!r} while streaming; stop first")
-            self._format = base
-            self.changed.notify_all()
-            return self._flipped(base)
+        with self.lock:
+            return self.update(pixel_format=self.resolve_format(fourcc), idle_only="format").output_format
 
     @property
     def raw(self) -> bool:
-        """True when the current format is raw sensor samples (frames carry them instead of a BGR render)."""
-        return self._format not in FORMATS
+        """True when the current format is raw sensor samples."""
+        return self.spec.raw
 
     @property
     def blur_px(self) -> float:
-        """Motion-blur bound of raw frames in pixels (0: each line sampled at mid-exposure, the real-time default)."""
-        return self.imager.blur_px
+        """Motion-blur bound of sensor-model frames in pixels (0: each line sampled at mid-exposure)."""
+        return self.spec.blur_px
 
     def set_blur_px(self, blur_px: float) -> None:
-        """Integrate raw frames over each line's exposure with this blur bound (px); 0 turns it off."""
-        with self.changed:
-            self.imager.blur_px = _blur(blur_px)
-            self.changed.notify_all()
+        """Integrate sensor-model frames over each line's exposure with this blur bound (px); 0 turns it off."""
+        self.update(blur_px=blur_px)
 
     def set_size(self, width: int, height: int) -> None:
-        """Switch to the mode of this output size (its default frame length); refused while streaming."""
-        with self.lock:
-            if self.state.streaming:
-                raise DeviceError("cannot change the mode while streaming; stop first")
-            mode = self.sensor.mode(f"{width}x{height}")
-            s = self.state
-            s.mode, s.line_length_pck = mode, mode.line_length_pck
-            s.set_frame_length(mode.frame_length_lines)
-            s.set_exposure(s.exposure_lines)
+        """Switch to this output size (its default frame length); refused while streaming."""
+        self.update(size=(width, height), frame_length_lines=None, line_length_pck=None, idle_only="mode")
+
+    def set_shutter(self, shutter: str) -> None:
+        """Switch global/rolling shutter, where the sensor has both; refused while streaming."""
+        if shutter not in SHUTTERS:
+            raise ConfigError(f"shutter {shutter!r} is not one of {SHUTTERS}")
+        if shutter != self.spec.shutter and not self.traits.dual_shutter:
+            raise DeviceError(f"sensor {self.sensor.name!r} has only a {self.sensor.shutter} shutter")
+        self.update(shutter=shutter, idle_only="shutter")
 
     @property
     def frame_interval_ns(self) -> int:
         """Frame period as programmed (whole ns, rounded down)."""
-        return self.state.timing.frame_period_ns
+        return self.spec.settings.timing.frame_period_ns
 
     def set_frame_interval_ns(self, interval_ns: int) -> int:
         """Program the frame length nearest ``interval_ns`` (within the mode's limits); returns the new interval."""
         with self.lock:
-            s = self.state
-            lines = round(interval_ns * s.pixel_rate_hz / (s.line_length_pck * 1_000_000_000))
-        self.set_control("vblank", lines - s.mode.height)
-        return self.frame_interval_ns
+            t = self.spec.settings.timing
+            lines = round(interval_ns * t.pixel_rate_hz / (t.line_length_pck * 1_000_000_000))
+            self.set_control("vblank", lines - self.spec.settings.n_lines)
+            return self.frame_interval_ns
 
     # ---------------------------------------------------------------------------------------- controls
     def controls(self) -> dict[str, dict[str, Any]]:
         """Every control with its kind, unit, range, current value and menu items."""
-        with self.lock:
-            out = {}
-            for name, c in ctl.CONTROLS.items():
-                lo, hi = c.limits(self.state)
-                out[name] = {"kind": c.kind, "unit": c.unit, "min": lo, "max": hi, "value": c.get(self.state),
-                             "read_only": c.set is None, "menu": c.menu(self.state) if c.menu else None}
-            return out
+        state = self.state
+        out = {}
+        for name, c in ctl.CONTROLS.items():
+            lo, hi = c.limits(state)
+            out[name] = {"kind": c.kind, "unit": c.unit, "min": lo, "max": hi, "value": c.get(state),
+                         "read_only": c.set is None, "menu": c.menu(state) if c.menu else None}
+        return out
 
     def get_control(self, name: str) -> int:
         """Current value of a control."""
-        with self.lock:
-            return ctl.get_control(self.state, name)
+        return ctl.get_control(self.state, name)
 
     def set_control(self, name: str, value: int) -> int:
         """Set a control (integers clamped to range); returns the value in effect; takes effect next frame."""
-        with self.changed:
-            value = ctl.set_control(self.state, name, value)
-            self.changed.notify_all()
+        with self.lock:
+            state = self.state
+            value = ctl.set_control(state, name, value)
+            self.reprogram(state.to_spec())
             return value
 
     def read_register(self, key: str | int) -> int:
         """Read a register by address or name."""
-        with self.lock:
-            return self.registers.read(key)
+        return self.registers.read(self.state, key)
 
     def write_register(self, key: str | int, value: int) -> int:
         """Write a register (with its effect); returns its new value."""
-        with self.changed:
-            value = self.registers.write(key, value)
-            self.changed.notify_all()
-            return value
-
-    def set_shutter(self, shutter: str) -> None:
-        """Switch global/rolling shutter, where the sensor has both; refused while streaming."""
         with self.lock:
-            if shutter not in SHUTTERS:
-                raise ConfigError(f"shutter {shutter!r} is not one of {SHUTTERS}")
-            if shutter != self.state.shutter and not self.traits.dual_shutter:
-                raise DeviceError(f"sensor {self.sensor.name!r} has only a {self.sensor.shutter} shutter")
-            if self.state.streaming and shutter != self.state.shutter:
-                raise DeviceError("cannot change the shutter while streaming; stop first")
-            self.state.shutter = shutter
-
-    def set_scene(self, **changes: Any) -> None:
-        """Change scene options (``scene``, ``seed`` and the kind's own); applies from the next frame."""
-        with self.changed:
-            options = dict(self.scene_options)
-            if "scene" in changes and changes["scene"] != options.get("scene"):
-                options = {"seed": options.get("seed", 0)}  # another kind: its own defaults
-            options.update(changes)
-            build_scene(options, *self.size)
-            self.scene_options = options
-            self.changed.notify_all()
-
-    # ---------------------------------------------------------------------------------------- streaming
-    @property
-    def streaming(self) -> bool:
-        """True between stream_on and stream_off."""
-        return self.state.streaming
-
-    @property
-    def next_seq(self) -> int:
-        """Sequence number the next planned frame gets (it counts across stream starts)."""
-        return self._next_seq
+            state = self.state
+            value = self.registers.write(state, key, value)  # a MODE_SELECT write starts or stops the stream
+            self.reprogram(state.to_spec())
+            return value
 
     def _mode_select(self, on: bool) -> None:
         (self.stream_on if on else self.stream_off)()
 
-    def stream_on(self) -> None:
-        """Start streaming: frame ``next seq`` starts exposing now (device clock). Idempotent."""
-        with self.changed:
-            if not self.state.streaming:
-                # built before the clock starts
-                self.imager.camera(self.state, self.scene_options, self._format if self.raw else None)
-                self.state.streaming = True
-                self._schedule = self._new_schedule(self.clock_ns(), self._next_seq)
-                self.changed.notify_all()
+    # ---------------------------------------------------------------------------------------- pixels
+    @property
+    def synthetic(self) -> SyntheticCamera:
+        """The SyntheticCamera that renders the current spec."""
+        return self.imager.camera(self.spec)
 
-    def stream_off(self) -> None:
-        """Stop streaming; frames not yet planned are never made. Idempotent."""
-        with self.changed:
-            self.state.streaming = False
-            self._triggers.clear()
-            self.changed.notify_all()
+    def _warm(self) -> None:
+        self.imager.camera(self.spec)
 
-    def set_trigger_mode(self, mode: str) -> None:
-        """``free`` (frames back to back) or ``external`` (one frame per ``trigger()``)."""
-        if mode not in ("free", "external"):
-            raise ConfigError(f"trigger mode {mode!r} is not 'free' or 'external'")
-        with self.changed:
-            self.trigger_mode = mode
-            self._triggers.clear()
-            if self.state.streaming:
-                self._schedule = self._new_schedule(self.clock_ns(), self._next_seq)
-            self.changed.notify_all()
-
-    def trigger(self) -> int:
-        """Start one frame now (external trigger mode, streaming); returns its exposure start (device ns)."""
-        with self.changed:
-            if self.trigger_mode != "external":
-                raise DeviceError("trigger needs trigger mode 'external' (TRIGMODE EXTERNAL)")
-            if not self.state.streaming:
-                raise DeviceError("trigger while not streaming (STREAM ON first)")
-            t = self.clock_ns()
-            self._triggers.append(t)
-            self.stats["triggers"] += 1
-            self.changed.notify_all()
-            return t
-
-    def _new_schedule(self, epoch_ns: int, first_seq: int) -> FrameSchedule:
-        s = self.state
-        exposure_ns = int(s.timing.line_offset_ns(s.exposure_lines))
-        n_lines = s.mode.width if self.sensor.readout.by_column else s.mode.height
-        return FrameSchedule(s.timing, epoch_ns, first_seq, exposure_ns, n_lines, s.shutter == "rolling")
-
-    def current_schedule(self) -> FrameSchedule | None:
-        """The schedule frames follow from the next one on (timing changes included), or None when idle."""
-        with self.lock:
-            if not self.state.streaming or self._schedule is None:
-                return None
-            sched = self._schedule
-            fresh = self._new_schedule(sched.start_ns(self._next_seq), self._next_seq)
-            if (fresh.timing, fresh.exposure_ns, fresh.rolling) != (sched.timing, sched.exposure_ns, sched.rolling):
-                sched = self._schedule = fresh
-            return sched
-
-    def plan_next(self, now_ns: int | None = None) -> FramePlan | None:
-        """The next frame to make, or None (not streaming, or waiting for a trigger).
-
-        Timing changes take effect from the next frame. With ``now_ns`` (device clock), a free-running stream
-        skips the frames whose readout already ended before ``now_ns`` (counted in ``stats['skipped']``).
-        """
-        with self.lock:
-            if not self.state.streaming or self._schedule is None:
-                return None
-            seq = self._next_seq
-            if self.trigger_mode == "external":
-                if not self._triggers:
-                    return None
-                sched = self._new_schedule(self._triggers.popleft(), seq)
-            else:
-                sched = self.current_schedule()
-                assert sched is not None
-                if now_ns is not None:
-                    late = sched.first_due_from(seq, now_ns)
-                    self.stats["skipped"] += late - seq
-                    seq = late
-            self._next_seq = seq + 1
-            return FramePlan(seq, sched)
+    def schedule(self, epoch_ns: int = 0, first_seq: int = 0) -> Any:
+        """A schedule of the current spec from ``epoch_ns`` on, for reading frames without pacing."""
+        return schedule_of(self.spec, epoch_ns, first_seq)
 
     def next_frame(self, now_ns: int | None = None) -> Frame | None:
         """Plan and render the next frame at once (no pacing); None when none is due (idle, or no trigger)."""
         plan = self.plan_next(now_ns)
         return None if plan is None else self.render(plan)
 
-    def wait_changed(self, timeout_s: float) -> None:
-        """Block until a control, the stream state or a trigger changes, or ``timeout_s`` passes."""
-        with self.changed:
-            self.changed.wait(timeout_s)
-
-    # ---------------------------------------------------------------------------------------- pixels
-    def note_made(self, seq: int) -> None:
-        """Record that frame ``seq`` was planned by a consumer that does not use ``plan_next`` (UVC), so the
-        next timing change re-anchors the schedule after it rather than at the stream's start."""
+    def render(self, plan: FramePlan, shutter: str | None = None) -> Frame:
+        """Make frame ``plan.seq`` from the current spec at its lines' device times (optionally under the other
+        shutter, for paired GS/RS data): the scene or the test pattern, flips applied."""
         with self.lock:
-            self._next_seq = max(self._next_seq, seq + 1)
-
-    def render(self, plan: FramePlan) -> Frame:
-        """Make frame ``plan.seq``: the scene (or the test pattern) at its lines' device times, flips applied."""
-        with self.lock:
-            cam = self.imager.camera(self.state, self.scene_options, self._format if self.raw else None)
-            look = (self.state.hflip, self.state.vflip, self.state.test_pattern, self.state.bayer_order)
-            self.stats["frames"] += 1
-        return self.imager.render(cam, plan, *look)
-
-
-def _blur(blur_px: float) -> float:
-    if not isinstance(blur_px, (int, float)) or not 0 <= blur_px < float("inf"):
-        raise ConfigError(f"blur_px must be a finite number >= 0 (0: no motion blur), got {blur_px!r}")
-    return float(blur_px)
+            spec = self.spec
+            self.stats.frames += 1
+        return self.imager.render(spec, plan.seq, plan.start_ns, shutter)

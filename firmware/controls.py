@@ -8,40 +8,100 @@ range are clamped, as the V4L2 control framework does; a bad menu entry or boole
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Callable
 from dataclasses import dataclass
 
 from rollcam.common.errors import ConfigError, DeviceError
-from rollcam.sim.hwconfig import SensorConfig, SensorMode
+from rollcam.sim.hwconfig import SensorConfig
+from rollcam.sim.noise import split_gain
+from rollcam.sim.sensor import flipped_cfa
 from rollcam.sim.timing import LineTiming
 
-from .traits import SensorTraits
+from .spec import CameraSpec
+from .traits import SensorTraits, traits_for
 
 MAX_FRAME_LENGTH = 0xFFFF  # 16-bit frame length registers
 
 
 @dataclass
 class SensorState:
-    """The sensor's programmed values: mode, frame and line length, exposure lines, gain codes, flips."""
+    """A working copy of a spec's programming in the sensor's own units (lines, pixel clocks, gain codes).
 
-    sensor: SensorConfig
+    Controls and registers edit it with the clamping a driver has; ``to_spec`` makes the new ``CameraSpec``.
+    Gain codes are a view of the spec's linear total gain (split analog first, as ``SensorPipeline`` does):
+    writing a code sets the total gain to the product of the two codes' gains.
+    """
+
+    spec: CameraSpec
     traits: SensorTraits
-    mode: SensorMode
     frame_length_lines: int
     line_length_pck: int
     exposure_lines: int
     analog_code: int
     digital_code: int
-    shutter: str
     hflip: bool = False
     vflip: bool = False
     test_pattern: str = "none"
     streaming: bool = False
 
+    @classmethod
+    def of(cls, spec: CameraSpec, streaming: bool = False) -> SensorState:
+        """The working copy of ``spec``."""
+        traits = traits_for(spec.sensor.name)
+        t, g = spec.settings.timing, spec.sensor.gain
+        a, d, _ = split_gain(spec.gain, (g.analog_min, g.analog_max), (g.digital_min, g.digital_max))
+        state = cls(spec, traits, t.frame_length_lines, t.line_length_pck, _lines_of(spec), 0, 0, spec.hflip,
+                    spec.vflip, spec.test_pattern, streaming)
+        state.analog_code = _clamp(traits.analog.to_code(a), *state.gain_range("analog"))
+        state.digital_code = _clamp(traits.digital.to_code(d), *state.gain_range("digital"))
+        return state
+
+    def to_spec(self) -> CameraSpec:
+        """The spec this state programs (validated); fields left as they were keep the spec's own values."""
+        spec, before = self.spec, SensorState.of(self.spec)
+        changes: dict = {"hflip": self.hflip, "vflip": self.vflip, "test_pattern": self.test_pattern}
+        timing_changed = (self.frame_length_lines, self.line_length_pck) != (before.frame_length_lines,
+                                                                           before.line_length_pck)
+        if timing_changed:
+            changes.update(frame_length_lines=self.frame_length_lines, line_length_pck=self.line_length_pck)
+        if timing_changed or self.exposure_lines != before.exposure_lines:
+            # Pinned in whole lines of the new timing: round(ns / line) gives these lines back.
+            changes["exposure_ns"] = self.exposure_lines * max(int(self.timing.line_offset_ns(1)), 1)
+        if (self.analog_code, self.digital_code) != (before.analog_code, before.digital_code):
+            changes["gain"] = self.traits.analog.to_gain(self.analog_code) * self.traits.digital.to_gain(
+                self.digital_code)
+        return dataclasses.replace(spec, **changes)
+
+    @property
+    def sensor(self) -> SensorConfig:
+        """The sensor description."""
+        return self.spec.sensor
+
+    @property
+    def width(self) -> int:
+        """Output width."""
+        return self.spec.settings.width
+
+    @property
+    def height(self) -> int:
+        """Output height."""
+        return self.spec.settings.height
+
+    @property
+    def shutter(self) -> str:
+        """``rolling`` or ``global``."""
+        return self.spec.settings.shutter
+
     @property
     def pixel_rate_hz(self) -> int:
-        """Pixel clock of the current mode."""
-        return self.mode.pixel_rate_hz or self.sensor.pixel_rate_hz
+        """Pixel clock of the output's timing (a rescaled readout scales it)."""
+        return self.spec.settings.timing.pixel_rate_hz
+
+    @property
+    def n_lines(self) -> int:
+        """Lines read per frame."""
+        return self.spec.settings.n_lines
 
     @property
     def timing(self) -> LineTiming:
@@ -50,13 +110,16 @@ class SensorState:
 
     @property
     def min_frame_length(self) -> int:
-        """Shortest frame length the mode allows (its configured one when that has less blanking)."""
-        return min(self.mode.frame_length_lines, self.mode.height + max(self.sensor.exposure.max_margin_lines, 1))
+        """Shortest frame length the mode allows (its default one when that has less blanking)."""
+        default = dataclasses.replace(self.spec, frame_length_lines=None, line_length_pck=None)
+        return min(default.settings.timing.frame_length_lines,
+                   self.n_lines + max(self.sensor.exposure.max_margin_lines, 1))
 
     def exposure_range(self) -> tuple[int, int]:
-        """Exposure limits in lines for the current frame length."""
+        """Exposure limits in lines for the current frame length (as ``resolve_settings`` clamps)."""
         e = self.sensor.exposure
-        return e.min_lines, max(self.frame_length_lines - e.max_margin_lines, e.min_lines)
+        return e.min_lines, min(max(self.frame_length_lines - e.max_margin_lines, e.min_lines),
+                                self.frame_length_lines)
 
     def gain_range(self, which: str) -> tuple[int, int]:
         """Code range of the ``analog`` or ``digital`` gain."""
@@ -67,20 +130,13 @@ class SensorState:
 
     @property
     def gain(self) -> float:
-        """Total linear gain (analog times digital)."""
+        """Total linear gain the codes give (analog times digital)."""
         return self.traits.analog.to_gain(self.analog_code) * self.traits.digital.to_gain(self.digital_code)
 
     @property
     def bayer_order(self) -> str:
         """The Bayer order the output has with the current flips (a mirror swaps columns, a flip rows)."""
-        order = self.sensor.bayer_order
-        if order == "mono":
-            return order
-        if self.hflip:
-            order = order[1] + order[0] + order[3] + order[2]
-        if self.vflip:
-            order = order[2:] + order[:2]
-        return order
+        return flipped_cfa(self.sensor.bayer_order, (self.width, self.height), self.hflip, self.vflip)
 
     def set_frame_length(self, lines: int) -> int:
         """Program the frame length (clamped), keeping the exposure within its new range."""
@@ -107,6 +163,12 @@ class SensorState:
             raise ConfigError(f"test pattern {name!r} is not one of {list(self.traits.test_pattern_codes)}")
         self.test_pattern = name
         return name
+
+
+def _lines_of(spec: CameraSpec) -> int:
+    """The spec's realised exposure in whole lines."""
+    t = spec.settings.timing
+    return max(round(spec.settings.exposure_ns * t.pixel_rate_hz / (t.line_length_pck * 1_000_000_000)), 1)
 
 
 def _clamp(value: int, lo: int, hi: int) -> int:
@@ -153,10 +215,10 @@ CONTROLS: dict[str, Control] = {c.name: c for c in (
             lambda s, v: setattr(s, "analog_code", _clamp(v, *s.gain_range("analog")))),
     Control("digital_gain", "int", "code", lambda s: s.gain_range("digital"), lambda s: s.digital_code,
             lambda s, v: setattr(s, "digital_code", _clamp(v, *s.gain_range("digital")))),
-    Control("vblank", "int", "lines", lambda s: (s.min_frame_length - s.mode.height, MAX_FRAME_LENGTH - s.mode.height),
-            lambda s: s.frame_length_lines - s.mode.height, lambda s, v: s.set_frame_length(s.mode.height + int(v))),
-    Control("hblank", "int", "pixel clocks", lambda s: (s.line_length_pck - s.mode.width,) * 2,
-            lambda s: s.line_length_pck - s.mode.width, None),
+    Control("vblank", "int", "lines", lambda s: (s.min_frame_length - s.n_lines, MAX_FRAME_LENGTH - s.n_lines),
+            lambda s: s.frame_length_lines - s.n_lines, lambda s, v: s.set_frame_length(s.n_lines + int(v))),
+    Control("hblank", "int", "pixel clocks", lambda s: (s.line_length_pck - s.width,) * 2,
+            lambda s: s.line_length_pck - s.width, None),
     Control("pixel_rate", "int", "Hz", lambda s: (s.pixel_rate_hz,) * 2, lambda s: s.pixel_rate_hz, None),
     Control("test_pattern", "menu", "", lambda s: (0, len(_menu(s)) - 1),
             lambda s: _menu(s).index(s.test_pattern), _set_menu, _menu),

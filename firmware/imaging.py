@@ -1,131 +1,91 @@
-"""Pixels of the firmware camera: a cached SyntheticCamera per programming, test patterns, flips.
+"""Pixels of the emulated camera: the SyntheticCamera of a spec, test patterns, processed-format encoding.
 
-A vertical flip (a horizontal one for column readout) renders the opposite readout direction and mirrors
-the image, so the first line out of the sensor is still the first line read, as on the real part; the
-ground-truth boxes are mirrored with the pixels.
+``Imager`` keeps one ``SyntheticCamera`` for the current ``CameraSpec`` (rebuilt only when a setting that
+changes pixels does) and makes frame ``seq`` from a start time it is given: the camera holds no clock.
+Flips happen in one place, the SyntheticCamera's readout (a vertical flip of a row readout scans the
+scene bottom-up, and a raw stream's Bayer order follows the flips as the sensor's does).
 
-Processed formats (YUYV, MJPG, ...) start from a plain BGR render. A raw format goes through the sensor
-model instead (``SyntheticCamera(pixel_format=...)``: EMVA noise on, fixed patterns keyed by the device's
-serial number, temporal noise by frame sequence, the ADC and the raw layout), read out with the flips so the
-Bayer order and fourcc follow them. Motion blur (integration over each line's exposure) costs several
-renders per line, so real-time devices default to ``blur_px=0`` (each line sampled at mid-exposure); a
-positive bound turns it on. A test pattern in a raw format is the BGR pattern sampled through the colour
-filter (``rollcam.sim.formats.mosaic``) at full scale of the format's bits, without noise or black level.
+A raw format is the sensor model's output (EMVA noise, fixed patterns keyed by the serial number, temporal
+noise by frame sequence, the ADC and the raw layout). A processed format is a BGR picture: the sensor
+model's preview ISP when physics is on (the default for every format but BGR3), else the clean render;
+``encode`` turns it into the processed layout (YUYV, NV12, ...), and transports encode it to their wire
+formats. A test pattern in a raw format is the BGR pattern sampled through the colour filter
+(``rollcam.sim.formats.mosaic``) at full scale of the format's bits, without noise or black level.
 """
 
 from __future__ import annotations
 
 import dataclasses
 import threading
-from typing import Any
 
 import numpy as np
 from rollcam.sim import formats as sf
 from rollcam.sim.codecs import codec
-from rollcam.sim.frame import Frame, ObjectTruth
-from rollcam.sim.hwconfig import SensorConfig
+from rollcam.sim.frame import Frame
 from rollcam.sim.synthetic import SyntheticCamera
-from rollcam.sim.timing import Readout
 
-from .controls import SensorState
 from .patterns import render_pattern
-from .scene import build_scene
-from .scheduler import FrameSchedule
+from .spec import CameraSpec, scene_of
 
-_OPPOSITE = {Readout.TOP_TO_BOTTOM: Readout.BOTTOM_TO_TOP, Readout.BOTTOM_TO_TOP: Readout.TOP_TO_BOTTOM,
-             Readout.LEFT_TO_RIGHT: Readout.RIGHT_TO_LEFT, Readout.RIGHT_TO_LEFT: Readout.LEFT_TO_RIGHT}
+_PATTERN_ONLY = ("test_pattern",)  # spec fields that change frames without a new SyntheticCamera
+
+
+def synthetic_camera(spec: CameraSpec) -> SyntheticCamera:
+    """The SyntheticCamera that renders ``spec``'s frames (raw samples, or a BGR picture for processed
+    formats)."""
+    fourcc = spec.pixel_format if spec.raw else "BGR3"
+    return SyntheticCamera(spec.sensor, scene_of(spec), spec.camera, settings=spec.settings, pixel_format=fourcc,
+                           physics=spec.uses_physics, blur_px=spec.blur_px or None, noise=spec.noise,
+                           serial=spec.serial, noise_seed=spec.noise_seed, hflip=spec.hflip, vflip=spec.vflip)
 
 
 class Imager:
-    """Makes a sensor's frames for a programmed state; rebuilds its SyntheticCamera only when that changes."""
+    """Makes a spec's frames; rebuilds its SyntheticCamera only when the pixels' programming changes."""
 
-    def __init__(self, sensor: SensorConfig, *, serial: str = "0", blur_px: float = 0.0) -> None:
-        self.sensor = sensor
-        self.serial = serial
-        self.blur_px = blur_px
-        self._cached: tuple[tuple, SyntheticCamera] | None = None
-        # One frame at a time: rendering sets the camera's clock for the frame and uses the renderer's scratch
-        # buffers, and two transports (HTTP's pump, UVC's render-ahead) may ask for frames at once.
+    def __init__(self) -> None:
+        self._cached: tuple[CameraSpec, SyntheticCamera] | None = None
+        # One frame at a time: the renderer's scratch buffers are shared, and two transports (HTTP's pump,
+        # UVC's render-ahead) may ask for frames at once.
         self._render_lock = threading.Lock()
 
-    def camera(self, s: SensorState, scene_options: dict[str, Any], raw_fourcc: str | None = None
-               ) -> SyntheticCamera:
-        """The SyntheticCamera for this programming (mode, frame/line length, exposure, gain, shutter, scene,
-        and for a raw format, given unflipped as the sensor lists it, the format and the flips)."""
-        readout = self.sensor.readout
-        line_flip = s.vflip if not readout.by_column else s.hflip
-        flips = (s.hflip, s.vflip) if raw_fourcc else (line_flip,)
-        key = (s.mode.name, s.frame_length_lines, s.line_length_pck, s.exposure_lines, s.gain, s.shutter,
-               flips, raw_fourcc, self.blur_px, tuple(sorted(scene_options.items(), key=str)))
-        if self._cached is None or self._cached[0] != key:
-            mode = dataclasses.replace(s.mode, frame_length_lines=s.frame_length_lines,
-                                       line_length_pck=s.line_length_pck)
-            sensor = dataclasses.replace(self.sensor, modes=(mode,), default_mode=mode.name)
-            scene = build_scene(scene_options, mode.width, mode.height)
-            common = {"size": (mode.width, mode.height), "shutter": s.shutter, "gain": s.gain,
-                      "exposure_ns": int(s.timing.line_offset_ns(s.exposure_lines))}
-            if raw_fourcc:  # the sensor model reads the array flipped itself
-                cam = SyntheticCamera(sensor, scene, 0, readout=readout, pixel_format=raw_fourcc,
-                                      blur_px=self.blur_px or None, serial=self.serial, hflip=s.hflip,
-                                      vflip=s.vflip, **common)
-            else:
-                cam = SyntheticCamera(sensor, scene, 0, readout=_OPPOSITE[readout] if line_flip else readout,
-                                      **common)
-            self._cached = (key, cam)
-        return self._cached[1]
+    def camera(self, spec: CameraSpec) -> SyntheticCamera:
+        """The SyntheticCamera for ``spec``."""
+        cached = self._cached
+        if cached is not None and cached[0] is spec:
+            return cached[1]
+        cam = cached[1] if cached is not None and _same_pixels(cached[0], spec) else synthetic_camera(spec)
+        self._cached = (spec, cam)
+        return cam
 
-    def render(self, cam: SyntheticCamera, plan: Any, hflip: bool, vflip: bool, pattern: str,
-               bayer_order: str) -> Frame:
-        """Frame ``plan.seq`` (``plan``: a FramePlan) from ``cam``, with the test pattern and flips applied."""
-        sched: FrameSchedule = plan.schedule
+    def render(self, spec: CameraSpec, seq: int, start_ns: int, shutter: str | None = None) -> Frame:
+        """Frame ``seq`` of ``spec`` exposed from device time ``start_ns`` (optionally under the other shutter)."""
         with self._render_lock:
-            if cam.pipeline is not None:
-                return self._render_raw(cam, plan, pattern, bayer_order)
-            cam.start_ns = sched.start_ns(plan.seq)  # frame 0 of a camera whose clock starts at this frame
-            frame = cam.frame(0)
-        meta = {**frame.meta, "bayer_order": bayer_order, "test_pattern": pattern}
-        if pattern != "none":
-            return dataclasses.replace(frame, data=render_pattern(pattern, frame.width, frame.height),
-                                       sequence=plan.seq, objects=(), meta=meta)
-        data, rows, objects = frame.data, frame.row_times_ns, frame.objects
-        by_col = self.sensor.readout.by_column
-        if hflip:
-            data, objects = data[:, ::-1], _flip_boxes(objects, frame.width, None)
-            rows = rows[::-1] if rows is not None and by_col else rows
-        if vflip:
-            data, objects = data[::-1], _flip_boxes(objects, None, frame.height)
-            rows = rows[::-1] if rows is not None and not by_col else rows
-        if hflip or vflip:
-            data = np.ascontiguousarray(data)
-        return dataclasses.replace(frame, data=data, row_times_ns=rows, objects=objects, sequence=plan.seq,
-                                   readout=self.sensor.readout, meta=meta)
-
-    def _render_raw(self, cam: SyntheticCamera, plan: Any, pattern: str, bayer_order: str) -> Frame:
-        """A raw frame through the sensor model (flips already in the readout), or a mosaicked test pattern."""
-        # Frame ``seq`` of a camera whose clock puts it at the schedule's start: temporal noise follows seq.
-        seq = plan.seq
-        cam.start_ns = plan.schedule.start_ns(seq) - cam.settings.timing.frame_start_ns(seq, 0)
-        frame = cam.frame(seq)
-        meta = {**frame.meta, "bayer_order": bayer_order, "test_pattern": pattern}
+            cam = self.camera(spec)
+            frame = cam.render(seq, start_ns, shutter)
+        pattern = spec.test_pattern
+        meta = {**frame.meta, "bayer_order": spec.bayer_order, "test_pattern": pattern,
+                "pixel_format": spec.output_format}
         if pattern == "none":
             return dataclasses.replace(frame, meta=meta)
-        bits = self.sensor.bit_depth
-        cfa = sf.mosaic(render_pattern(pattern, frame.width, frame.height), bayer_order)
-        dn = cfa.astype(np.uint16) << (bits - 8)  # hwconfig holds bit_depth to 8..16
-        return dataclasses.replace(frame, data=codec(frame.format).encode(dn, sample_bits=bits), objects=(),
-                                   meta=meta)
+        image = render_pattern(pattern, frame.width, frame.height)
+        if spec.raw:
+            bits = spec.sensor.bit_depth
+            dn = sf.mosaic(image, spec.bayer_order).astype(np.uint16) << (bits - 8)  # hwconfig: 8..16 bits
+            data = codec(frame.format).encode(dn, sample_bits=bits)
+            return dataclasses.replace(frame, data=data, objects=(), meta=meta)
+        return dataclasses.replace(frame, data=image, objects=(), meta=meta)
 
 
-def _flip_boxes(objects: tuple[ObjectTruth, ...] | None, width: int | None, height: int | None
-                ) -> tuple[ObjectTruth, ...] | None:
-    """Ground-truth boxes mirrored across the image width or height (whichever is given)."""
-    if objects is None:
-        return None
+def encode(frame: Frame, spec: CameraSpec) -> Frame:
+    """A device frame in ``spec``'s processed format (raw frames and BGR3 are returned as they are)."""
+    fourcc = spec.pixel_format
+    if spec.raw or frame.format == fourcc:
+        return frame
+    return dataclasses.replace(frame, data=codec(fourcc).encode(frame.data), format=fourcc)
 
-    def flip(b: tuple[float, float, float, float] | None) -> tuple[float, float, float, float] | None:
-        if b is None:
-            return None
-        x0, y0, x1, y1 = b
-        return (width - x1, y0, width - x0, y1) if width is not None else (x0, height - y1, x1, height - y0)
 
-    return tuple(dataclasses.replace(o, box_gs=flip(o.box_gs), box_rs=flip(o.box_rs)) for o in objects)
+def _same_pixels(a: CameraSpec, b: CameraSpec) -> bool:
+    """True when ``a`` and ``b`` differ at most in fields applied after the render (the test pattern)."""
+    if a.sensor is not b.sensor:
+        return False
+    return dataclasses.replace(a, **{k: getattr(b, k) for k in _PATTERN_ONLY}) == b

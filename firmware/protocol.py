@@ -8,6 +8,7 @@ LF, CR or CRLF. A query ends in ``?``. Replies: a value, ``OK`` (or ``OK <value>
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Callable
 from dataclasses import dataclass
 
@@ -15,6 +16,7 @@ from rollcam.common.errors import ConfigError, DeviceError, ProtocolError
 from rollcam.common.values import parse_bool
 
 from .camera import FirmwareCamera
+from .options import OPTIONS, SCENE_OPTIONS, as_text
 
 MAX_LINE = 256
 ERRORS = {100: "unknown command", 101: "wrong arguments", 102: "invalid value", 103: "refused by the device",
@@ -72,8 +74,26 @@ def _fmt(cam: FirmwareCamera, text: str) -> str:
 
 
 def _scene(cam: FirmwareCamera, key: str, value: str) -> str:
-    cam.set_scene(**{key.lower(): value})
+    name = key.lower()
+    if name not in SCENE_OPTIONS:
+        raise CommandError(102, f"SCENE {key!r} is not a scene option; options: {sorted(SCENE_OPTIONS)}")
+    cam.set_options({name: value})
     return "OK"
+
+
+def _set_option(cam: FirmwareCamera, key: str, value: str) -> str:
+    name = key.lower()
+    if name not in OPTIONS:
+        raise CommandError(102, f"{key!r} is not a camera option; options: {sorted(OPTIONS)}")
+    cam.set_options({name: value})
+    return f"OK {as_text(cam.spec.option_values()[name])}"
+
+
+def _get_option(cam: FirmwareCamera, key: str) -> str:
+    name = key.lower()
+    if name not in OPTIONS:
+        raise CommandError(102, f"{key!r} is not a camera option; options: {sorted(OPTIONS)}")
+    return as_text(cam.spec.option_values()[name])
 
 
 def _scene_query(cam: FirmwareCamera) -> str:
@@ -81,7 +101,7 @@ def _scene_query(cam: FirmwareCamera) -> str:
 
 
 def _stats(cam: FirmwareCamera) -> str:
-    return " ".join(f"{k}={v}" for k, v in cam.stats.items())
+    return " ".join(f"{k}={v}" for k, v in dataclasses.asdict(cam.stats).items())
 
 
 @dataclass(frozen=True)
@@ -125,6 +145,9 @@ COMMANDS: dict[str, Command] = {
     "FMTS?": Command((), lambda c: " ".join(f.strip() for f in c.formats), "formats: processed, then raw"),
     "SCENE": Command(("KEY", "VALUE"), _scene, "scene control: scene, seed, and the kind's own options"),
     "SCENE?": Command((), _scene_query, "scene options"),
+    "OPT": Command(("NAME", "VALUE"), _set_option, "set a camera option as the emu: URI names it (gain 2, "
+                   "exposure_us 5000, format RG10, ...); replies with the value in effect"),
+    "OPT?": Command(("NAME",), _get_option, "a camera option's value in effect"),
     "STATS?": Command((), _stats, "frames made, skipped, triggers"),
 }
 """The protocol: command word -> Command."""

@@ -11,7 +11,7 @@ from __future__ import annotations
 from collections.abc import Callable
 
 from rollcam.common.errors import ConfigError, DeviceError
-from rollcam.sim.hwconfig import Register
+from rollcam.sim.hwconfig import Register, SensorConfig
 
 from .controls import SensorState, set_control
 
@@ -38,7 +38,7 @@ def _pattern_write(s: SensorState, r: Register, value: int) -> None:
 
 
 def _set_line_length(s: SensorState, _r: Register, value: int) -> None:
-    s.line_length_pck = max(int(value), s.mode.width)
+    s.line_length_pck = max(int(value), s.width)
 
 
 ROLE_CODECS: dict[str, tuple[Callable[[SensorState, Register], int],
@@ -58,19 +58,22 @@ ROLE_CODECS: dict[str, tuple[Callable[[SensorState, Register], int],
 
 
 class RegisterFile:
-    """Register reads and writes of one sensor; ``on_mode_select(streaming)`` starts and stops the stream."""
+    """Register reads and writes of one sensor over a ``SensorState``; plain registers are kept here.
 
-    def __init__(self, state: SensorState, on_mode_select: Callable[[bool], None]) -> None:
-        self.state = state
+    ``on_mode_select(streaming)`` starts and stops the stream.
+    """
+
+    def __init__(self, sensor: SensorConfig, on_mode_select: Callable[[bool], None]) -> None:
+        self.sensor = sensor
         self.on_mode_select = on_mode_select
-        self.by_address = {r.address: r for r in state.sensor.registers}
-        self.plain = {r.address: r.reset or 0 for r in state.sensor.registers if r.role is None}
+        self.by_address = {r.address: r for r in sensor.registers}
+        self.plain = {r.address: r.reset or 0 for r in sensor.registers if r.role is None}
 
     def lookup(self, key: str | int) -> Register:
         """The register at address ``key`` (int) or named ``key`` (str, case-insensitive)."""
-        regs = self.state.sensor.registers
+        regs = self.sensor.registers
         if not regs:
-            raise DeviceError(f"sensor {self.state.sensor.name!r} has no register map")
+            raise DeviceError(f"sensor {self.sensor.name!r} has no register map")
         if isinstance(key, str):
             found = next((r for r in regs if r.name == key.upper()), None)
             if found is None:
@@ -84,15 +87,16 @@ class RegisterFile:
                               f"{inside.width_bits} bits); access it at its first byte")
         raise ConfigError(f"no register at address {key:#06x}")
 
-    def read(self, key: str | int) -> int:
+    def read(self, state: SensorState, key: str | int) -> int:
         """Value of a register."""
         r = self.lookup(key)
         if r.role is None:
             return self.plain[r.address]
-        return ROLE_CODECS[r.role][0](self.state, r) & ((1 << r.width_bits) - 1)
+        return ROLE_CODECS[r.role][0](state, r) & ((1 << r.width_bits) - 1)
 
-    def write(self, key: str | int, value: int) -> int:
-        """Write a register with the part's side effects; returns the value it then reads back."""
+    def write(self, state: SensorState, key: str | int, value: int) -> int:
+        """Write a register into ``state`` with the part's side effects; returns the value it then reads back
+        (a MODE_SELECT write goes to ``on_mode_select`` instead)."""
         r = self.lookup(key)
         if r.access == "ro":
             raise DeviceError(f"register {r.name} ({r.address:#06x}) is read-only")
@@ -101,10 +105,11 @@ class RegisterFile:
         if r.role is None:
             self.plain[r.address] = value
         elif r.role == "mode_select":
-            self.on_mode_select(bool(value & self.state.traits.stream_bits))
+            self.on_mode_select(bool(value & state.traits.stream_bits))
+            state.streaming = bool(value & state.traits.stream_bits)
         else:
             writer = ROLE_CODECS[r.role][1]
             if writer is None:
                 raise DeviceError(f"register {r.name} is not writable")
-            writer(self.state, r, value)
-        return self.read(r.address)
+            writer(state, r, value)
+        return self.read(state, r.address)

@@ -147,25 +147,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                        epilog="Example: rollcam emulate imx219 --scene street --speed fast --http 127.0.0.1:8080 "
                               "--serial")
     p.add_argument("sensor", metavar="SENSOR", help="sensor name (see 'rollcam list') or a .yaml path")
-    g = p.add_argument_group("scene")
-    g.add_argument("--scene", default="street", choices=("street", "chart", "flat"), help="scene kind")
-    g.add_argument("--seed", type=int, default=0, help="scene seed (default: 0)")
-    g.add_argument("--speed", default=None, help="street: static | normal | fast | a multiplier")
-    g.add_argument("--time", default=None, help="street: dawn | morning | noon | afternoon | dusk")
-    g.add_argument("--pedestrians", type=int, default=None, help="street: number of walkers")
-    g.add_argument("--ego", default=None, help="street: none | pan | walk | vehicle | drone")
-    g.add_argument("--vx", type=float, default=None, help="chart: bar speed, px/s")
-    g.add_argument("--level", type=float, default=None, help="flat: radiance level")
-    g = p.add_argument_group("sensor programming")
-    g.add_argument("--size", default=None, help="output WxH: one of the sensor's modes (default: its default)")
-    g.add_argument("--fps", type=float, default=None, help="frame rate (sets the frame length)")
-    g.add_argument("--shutter", choices=("rolling", "global"), default=None, help="sensors with both only")
-    g.add_argument("--exposure-us", type=float, default=None, help="exposure in microseconds")
-    g.add_argument("--gain", type=float, default=1.0, help="analog gain, linear (default: 1.0)")
-    g.add_argument("--format", default=None, metavar="FOURCC",
-                   help="pixel format: YUYV (default), MJPG, ... or one of the sensor's raw fourccs (RG10, pRAA)")
-    g.add_argument("--blur-px", type=float, default=0.0,
-                   help="raw formats: motion-blur bound in px (default 0: lines sampled at mid-exposure)")
+    _camera_flags(p)
     g = p.add_argument_group("transports")
     for _name, add_options, _start in TRANSPORTS:
         add_options(g)
@@ -174,28 +156,42 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(func=cmd_emulate)
 
 
-def _scene_options(args: argparse.Namespace) -> dict[str, Any]:
-    opts: dict[str, Any] = {"scene": args.scene, "seed": args.seed}
-    for key in ("speed", "time", "pedestrians", "ego", "vx", "level"):
-        if getattr(args, key) is not None:
-            opts[key] = getattr(args, key)
-    return opts
+FLAG_NAMES = {"serial": "serial-number"}
+"""Camera options whose flag is not ``--<name>`` (``--serial`` is the serial transport)."""
+
+
+def _flag(name: str) -> str:
+    return "--" + FLAG_NAMES.get(name, name.replace("_", "-"))
+
+
+def _camera_flags(p: argparse.ArgumentParser) -> None:
+    """One flag per camera option of ``rollcam.firmware.options.OPTIONS`` (the emu: URI's options), taken as
+    text and parsed by the option table, so a value means and is checked the same as in an emu: URI."""
+    from rollcam.firmware.options import OPTIONS, as_text
+
+    scene = p.add_argument_group("scene (the emu: URI's scene options)")
+    camera = p.add_argument_group("camera (the emu: URI's options)")
+    for name, o in OPTIONS.items():
+        group = scene if o.scenes is not None else camera
+        default = "" if o.default is None else f" (default: {as_text(o.default)})"
+        group.add_argument(_flag(name), dest=f"camera_{name}", default=None, metavar=name.upper(),
+                           help=o.doc + default)
+
+
+def camera_options(args: argparse.Namespace) -> dict[str, str]:
+    """The camera options given as flags, by option name."""
+    return {k.removeprefix("camera_"): v for k, v in vars(args).items() if k.startswith("camera_") and v is not None}
 
 
 def cmd_emulate(args: argparse.Namespace) -> int:
     """Run the emulator until Ctrl-C, SIGTERM or ``--duration``; every transport is closed on the way out."""
     from rollcam.emu.pump import FramePump
     from rollcam.firmware.camera import FirmwareCamera
-
-    from .sources.base import parse_size
+    from rollcam.firmware.spec import CameraSpec
 
     if not any(getattr(args, name, None) for name, _add, _start in TRANSPORTS):
         args.http = host_port(DEFAULT_HTTP)
-    size = parse_size(args.size) if args.size else None
-    exposure_ns = None if args.exposure_us is None else round(args.exposure_us * 1000)
-    camera = FirmwareCamera(args.sensor, scene=_scene_options(args), size=size, fps=args.fps, shutter=args.shutter,
-                            exposure_ns=exposure_ns, gain=args.gain, pixel_format=args.format,
-                            blur_px=args.blur_px)
+    camera = FirmwareCamera(CameraSpec.from_options(args.sensor, camera_options(args), "rollcam emulate"))
     stop = threading.Event()
     previous = signal.signal(signal.SIGTERM, lambda *_: stop.set())
     running: list[Running] = []
@@ -225,5 +221,5 @@ def cmd_emulate(args: argparse.Namespace) -> int:
             r.server.close()
         camera.stream_off()
         signal.signal(signal.SIGTERM, previous)
-    print(f"stopped; {camera.stats['frames']} frames made, {camera.stats['skipped']} skipped", file=sys.stderr)
+    print(f"stopped; {camera.stats.frames} frames made, {camera.stats.skipped} skipped", file=sys.stderr)
     return 0

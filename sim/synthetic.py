@@ -80,12 +80,16 @@ def resolve_settings(
     readout: str | Readout | None = None,
     exposure_ns: int | None = None,
     gain: float = 1.0,
+    frame_length_lines: int | None = None,
+    line_length_pck: int | None = None,
 ) -> StreamSettings:
     """Sensor programming for a stream: mode by size, frame length by fps, exposure clamped to the frame.
 
     The mode's timing reads ``mode.height`` rows per readout. An output of another size, or read by
     columns, is a rescaled readout: the same readout time spread over the output's lines, and the same
-    frame period (kept exact by counting it in pixel clocks, scaled with the clock).
+    frame period (kept exact by counting it in pixel clocks, scaled with the clock). ``frame_length_lines``
+    and ``line_length_pck`` program the frame and line length directly (in the timing's own lines and
+    clocks, as registers hold them) instead of ``fps``.
     """
     mode = None
     if size is not None:
@@ -103,6 +107,18 @@ def resolve_settings(
         frame_pck = base.frame_period_pck * n_out
         line_pck = base.line_length_pck * mode.height
         timing = _reduced(base.pixel_rate_hz * n_out, line_pck, -(-frame_pck // line_pck), frame_pck)
+    if frame_length_lines is not None or line_length_pck is not None:
+        if fps is not None:
+            raise ConfigError("give fps or a frame length, not both")
+        for name, value in (("frame_length_lines", frame_length_lines), ("line_length_pck", line_length_pck)):
+            if value is not None and (isinstance(value, bool) or not isinstance(value, (int, np.integer))
+                                      or value < 1):
+                raise ConfigError(f"{name} must be a whole number >= 1, got {value!r}")
+        lines = timing.frame_length_lines if frame_length_lines is None else int(frame_length_lines)
+        if lines < n_out:
+            raise ConfigError(f"frame length {lines} lines is shorter than the {n_out} output lines of "
+                              f"{width}x{height}")
+        timing = LineTiming(timing.pixel_rate_hz, int(line_length_pck or timing.line_length_pck), lines)
     if fps is not None:
         fps = _finite("fps", fps)
         frame_s = 1.0 / max(fps, MIN_FPS)
@@ -162,10 +178,12 @@ class SyntheticCamera:
     def __init__(self, sensor: SensorConfig, scene: Scene, camera: int | str = 0, *, start_ns: int = 0,
                  pixel_format: str = "BGR3", physics: bool | None = None, blur_px: float | None = DEFAULT_BOUND_PX,
                  noise: frozenset[str] | None = None, serial: str = "0", noise_seed: int = 0, hflip: bool = False,
-                 vflip: bool = False, **settings) -> None:
+                 vflip: bool = False, settings: StreamSettings | None = None, **programming) -> None:
         self.sensor = sensor
         self.scene = scene
-        self.settings = resolve_settings(sensor, **settings)
+        if settings is not None and programming:
+            raise ConfigError(f"give resolved settings or {sorted(programming)}, not both")
+        self.settings = settings or resolve_settings(sensor, **programming)
         s = self.settings
         crop = sensor.crop(s.mode)
         # The output covers the mode's crop of the array; its width in mm fixes the focal length in pixels.
@@ -177,7 +195,7 @@ class SyntheticCamera:
         ref_exposure = resolve_settings(sensor, size=(s.width, s.height), readout=s.readout).exposure_ns
         brightness = s.gain * s.exposure_ns / max(ref_exposure, 1)
         self.renderer = Renderer(scene, cam, gain=brightness)
-        self.start_ns = int(start_ns)
+        self._start_ns = int(start_ns)
         self.pixel_format = fourcc_of(pixel_format).fourcc
         self.physics = self.pixel_format != "BGR3" if physics is None else bool(physics)
         if not self.physics and self.pixel_format != "BGR3":
@@ -204,29 +222,41 @@ class SyntheticCamera:
                 f"{s.width}x{s.height} {s.shutter} {s.readout.value}, {s.timing.fps:.2f} fps, "
                 f"exposure {s.exposure_ns} ns)")
 
+    @property
+    def start_ns(self) -> int:
+        """Device time at which frame 0 starts exposing (fixed at construction; ``render`` takes any start)."""
+        return self._start_ns
+
     def timestamp_ns(self, index: int) -> int:
         """Start of exposure of frame ``index``'s first line, device clock."""
-        return self.settings.timing.frame_start_ns(index, self.start_ns)
+        return self.settings.timing.frame_start_ns(index, self._start_ns)
 
-    def line_times_ns(self, index: int, shutter: str | None = None) -> np.ndarray:
+    def line_times_ns(self, index: int, shutter: str | None = None, timestamp_ns: int | None = None) -> np.ndarray:
         """Sample time of every scene line of frame ``index`` under ``shutter`` (default: the stream's).
 
         These are the render's times, in scene orientation; a flipped stream's ``Frame.row_times_ns`` are
-        the same times mirrored into output orientation.
+        the same times mirrored into output orientation. ``timestamp_ns`` overrides the frame's start.
         """
         s = self.settings
         shutter = shutter or s.shutter
-        t0 = self.timestamp_ns(index) + s.exposure_ns // 2
+        start = self.timestamp_ns(index) if timestamp_ns is None else int(timestamp_ns)
         timing = s.timing if shutter == "rolling" else None
-        return line_sample_times_ns(t0, s.n_lines, timing, self.scan_readout)
+        return line_sample_times_ns(start + s.exposure_ns // 2, s.n_lines, timing, self.scan_readout)
 
     def frame(self, index: int, shutter: str | None = None) -> Frame:
-        """Render frame ``index`` (optionally under the other shutter, for paired GS/RS data)."""
+        """Render frame ``index`` at its place in this camera's timeline (optionally under the other shutter,
+        for paired GS/RS data)."""
+        return self.render(index, self.timestamp_ns(index), shutter)
+
+    def render(self, index: int, timestamp_ns: int, shutter: str | None = None) -> Frame:
+        """Frame ``index`` (its sequence number and temporal-noise draw) exposed from device time
+        ``timestamp_ns``: the camera holds no clock, each frame's start is given."""
         s = self.settings
         shutter = shutter or s.shutter
         if shutter not in SHUTTERS:
             raise ConfigError(f"shutter {shutter!r} is not one of {SHUTTERS}")
-        times = self.line_times_ns(index, shutter)
+        timestamp_ns = int(timestamp_ns)
+        times = self.line_times_ns(index, shutter, timestamp_ns)
         by_col = s.readout.by_column
         data, fourcc, extra = None, "BGR3", {}
         if self.pipeline is not None:
@@ -234,7 +264,7 @@ class SyntheticCamera:
             fourcc = self.pipeline.fourcc
         else:
             res = self.renderer.render_lines(times, by_column=by_col)
-        t_ref = self.timestamp_ns(index) + s.exposure_ns // 2
+        t_ref = timestamp_ns + s.exposure_ns // 2
         gs_truth: LineTruth | None = res.truth if shutter == "global" else None
         objects = self.renderer.object_truth(res.truth, t_ref, by_column=by_col, gs_truth=gs_truth)
         meta = {"scene": self.scene.kind, "seed": self.scene.seed, "camera": self.camera.name,
@@ -252,7 +282,7 @@ class SyntheticCamera:
             format=fourcc,
             size=(s.width, s.height),
             sequence=index,
-            timestamp_ns=self.timestamp_ns(index),
+            timestamp_ns=timestamp_ns,
             line_time_ns=s.timing.line_time_ns if shutter == "rolling" else 0,
             readout=s.readout,
             exposure_ns=s.exposure_ns,

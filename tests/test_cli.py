@@ -214,7 +214,7 @@ def test_every_command_is_a_module_registered_the_same_way():
     (["bench", "soak", "--minutes", "-1"], "bench soak: argument --minutes: '-1' is invalid: must be greater than 0"),
     (["bench", "dataset", "--size", "10x"], "bench dataset: argument --size: size '10x' is not WIDTHxHEIGHT"),
     (["bench", "render", "--size", "big"], "--size"),
-    (["emulate", "imx219", "--duration", "-1"], "emulate: argument --duration: -1 is invalid: must be greater than 0"),
+    (["emulate", "imx219", "--duration", "-1"], "emulate: argument --duration: -1 is invalid: must be a number >= 0"),
 ])
 def test_usage_errors_are_one_error_line_and_exit_2(capsys, argv, words):
     assert main(argv) == 2

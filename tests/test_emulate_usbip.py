@@ -33,8 +33,8 @@ def test_firmware_producer_programs_the_firmware_and_serves_its_frames():
     assert second.timestamp_ns - first.timestamp_ns == pytest.approx(interval, abs=1)
     assert p.frame_due_ns(0) > first.timestamp_ns
     # UVC controls write the firmware's controls (and so its registers).
-    line = p.control_range("exposure_ns").step
-    assert p.set_control("exposure_ns", 5_000_000) == cam.get_control("exposure") * line
+    timing = cam.spec.settings.timing  # UVC exposure is the spec's, whole lines of its exact line time
+    assert p.set_control("exposure_ns", 5_000_000) == timing.line_offset_ns(cam.get_control("exposure"))
     assert p.set_control("gain", 400) == pytest.approx(400, abs=2)
     assert cam.state.gain == pytest.approx(4.0, rel=0.01)
     assert p.set_control("gain", 10**6) == p.control_range("gain").maximum  # clamped as the sensor does
@@ -110,4 +110,4 @@ def test_late_frames_are_skipped_in_closed_form():
     ten_days = 10 * 86_400 * 10**9
     plan = cam.plan_next(now_ns=ten_days)
     assert sched.frame_due_ns(plan.seq) >= ten_days > sched.frame_due_ns(plan.seq - 1)
-    assert cam.stats["skipped"] == plan.seq
+    assert cam.stats.skipped == plan.seq

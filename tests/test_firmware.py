@@ -165,7 +165,7 @@ def test_plan_skips_late_frames_and_timing_changes_apply_from_the_next_frame():
     assert p1.schedule.timing.frame_length_lines == 2480
     clock.t += 10 * NS_PER_S
     p2 = c.plan_next(c.clock_ns())
-    assert p2.seq > 2 and c.stats["skipped"] == p2.seq - 2
+    assert p2.seq > 2 and c.stats.skipped == p2.seq - 2
     assert p2.due_ns >= c.clock_ns()
 
 

@@ -104,8 +104,8 @@ def test_real_uvc_camera():
 def test_emulated_timestamps_are_the_full_device_clock_after_a_wrap():
     with open_camera(EMU.replace("frames=3", "frames=2")) as src:
         producer = src.function.producer
-        producer._clock0 -= 5 * (1 << 32)  # the device has been up for ~21 s when streaming starts:
-        producer.configure(160, 120, producer._interval_ns)  # its timeline starts now
+        producer.camera.boot_ns -= 5 * (1 << 32)  # the device has been up for ~21 s when streaming starts:
+        producer.configure(160, 120, producer.camera.frame_interval_ns)  # its timeline starts now
         frames = list(src)
     assert frames[0].timestamp_ns > 5 * (1 << 32)
     assert [f.timestamp_ns for f in frames] == [producer.frame(i).timestamp_ns for i in range(2)]

@@ -83,7 +83,7 @@ def test_s_fmt_reqbufs_streamon_misuse_gives_kernel_errnos():
         assert errno_of(fn.request_buffers, h, 4) == errno.EBUSY
         assert errno_of(fn.set_control, h, raw.CID.HFLIP, 1) == errno.EBUSY  # flips grabbed while streaming
         buf, data = fn.dequeue_buffer(h)
-        assert buf.index == 0 and buf.bytesused == 640 * 480 * 2 == data.size
+        assert buf.index == 0 and buf.bytesused == 640 * 480 * 3 == data.size  # BGR3, the spec's default
         assert errno_of(fn.dequeue_buffer, h, block=False) == errno.EAGAIN  # nothing queued, nothing done
         fn.stream_off(h)
         fn.stream_off(h)

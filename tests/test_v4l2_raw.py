@@ -135,7 +135,7 @@ def test_format_change_while_streaming_is_ebusy():
 
 def test_camera_format_state_and_errors():
     cam = FirmwareCamera("ov9281", scene={"scene": "flat"})
-    assert cam.formats[-2:] == ["Y10 ", "Y10P"] and cam.pixel_format == "YUYV"
+    assert cam.formats[-2:] == ["Y10 ", "Y10P"] and cam.pixel_format == "BGR3"  # the spec's default
     assert cam.set_format("Y10") == "Y10 "
     with pytest.raises(ConfigError, match="RG10"):
         cam.set_format("RG10")
@@ -144,7 +144,7 @@ def test_camera_format_state_and_errors():
 
 
 def test_blur_option_integrates_raw_frames_over_the_exposure():
-    cam = FirmwareCamera("imx219", scene={"scene": "street"}, size=(640, 480), pixel_format="RG10")
+    cam = FirmwareCamera("imx219", scene={"scene": "street"}, size=(640, 480), pixel_format="RG10", blur_px=0)
     cam.stream_on()
     assert cam.next_frame().meta["blur_samples_max"] == 1
     cam.set_blur_px(0.5)
@@ -153,7 +153,7 @@ def test_blur_option_integrates_raw_frames_over_the_exposure():
 
 def test_serial_fmt_commands():
     cam = FirmwareCamera("imx219", scene={"scene": "flat"}, size=(640, 480))
-    assert handle_line(cam, "FMT?") == "YUYV"
+    assert handle_line(cam, "FMT?") == "BGR3"  # the spec's default format
     assert handle_line(cam, "FMT rg10") == "OK RG10"
     assert handle_line(cam, "CTRL hflip 1") == "OK 1"
     assert handle_line(cam, "FMT?") == "BA10"

@@ -2,7 +2,8 @@
 
 This is how ``rollcam emulate --usbip`` and the pyusb backend expose the same device the serial line, the
 V4L2-like API and HTTP talk to: UVC's commit programs the firmware's mode and frame length and starts its
-stream; UVC exposure and gain requests write the firmware's controls (so its registers follow); frames are
+stream; UVC exposure requests write the firmware's exposure control and gain requests (hundredths) its linear
+total gain (so its registers follow); frames are
 the firmware's frames by sequence number, due when the firmware's schedule reads out their last line. UVC
 offers YUYV, NV12 and MJPEG only, so a firmware camera left in a raw format streams its preview-ISP picture.
 """
@@ -18,6 +19,7 @@ from rollcam.firmware.pixfmt import is_raw
 from rollcam.firmware.scheduler import FrameSchedule
 from rollcam.sim.codecs import Levels, preview_frame
 from rollcam.sim.frame import Frame
+from rollcam.sim.synthetic import DEFAULT_EXPOSURE_NS
 
 from .producer import CONTROLS, FPS_CHOICES, ControlRange, offered_intervals_ns
 
@@ -43,7 +45,7 @@ class FirmwareProducer:
         return [current, *(s for s in self.camera.sizes() if s != current)]
 
     def intervals_ns(self, width: int, height: int) -> list[int]:
-        return offered_intervals_ns(self.camera.sensor, width, height, self._fps, self.camera.state.shutter)
+        return offered_intervals_ns(self.camera.sensor, width, height, self._fps, self.camera.spec.shutter)
 
     def configure(self, width: int, height: int, interval_ns: int) -> None:
         cam = self.camera
@@ -67,7 +69,7 @@ class FirmwareProducer:
         seq = self._base + index
         plan = FramePlan(seq, self._schedule())
         self.camera.note_made(seq)  # a later timing change re-anchors after this frame, not at the commit
-        frame = self.camera.render(plan)
+        frame = self.camera.render(plan)  # a processed format's frame is the BGR picture UVC encodes
         if is_raw(frame.format):
             frame = dataclasses.replace(frame, data=preview_frame(frame, Levels.of_sensor(self.camera.sensor)),
                                         format="BGR3")
@@ -77,32 +79,34 @@ class FirmwareProducer:
         return self.camera.clock_ns()
 
     def _line_ns(self) -> int:
-        return max(int(self.camera.state.timing.line_offset_ns(1)), 1)
+        return max(int(self.camera.spec.settings.timing.line_offset_ns(1)), 1)
 
     def control_range(self, name: str) -> ControlRange:
         s = self.camera.state
         if name == "exposure_ns":
             lo, hi = s.exposure_range()
-            line = self._line_ns()
-            default = min(max(round(10_000_000 / line), lo), hi)  # the firmware's own default: 10 ms
-            return ControlRange(lo * line, hi * line, default * line, line)
+            t = self.camera.spec.settings.timing
+            default = min(max(round(DEFAULT_EXPOSURE_NS / self._line_ns()), lo), hi)  # the spec's own default
+            return ControlRange(*(int(t.line_offset_ns(n)) for n in (lo, hi, default)), self._line_ns())
         if name == "gain":
-            lo, hi = (round(g * 100) for g in (s.sensor.gain.analog_min, s.sensor.gain.analog_max))
-            return ControlRange(lo, hi, max(lo, 100))
+            # UVC's PU gain is hundredths of the spec's linear total gain (analog x digital).
+            g = s.sensor.gain
+            lo, hi = round(g.analog_min * g.digital_min * 100), round(g.analog_max * g.digital_max * 100)
+            return ControlRange(lo, hi, min(max(lo, 100), hi))
         raise DeviceError(f"control {name!r} is not one of {CONTROLS}")
 
     def get_control(self, name: str) -> int:
         self.control_range(name)
-        s = self.camera.state
         if name == "gain":
-            return round(s.traits.analog.to_gain(s.analog_code) * 100)
-        return s.exposure_lines * self._line_ns()
+            return round(self.camera.spec.gain * 100)
+        return self.camera.spec.settings.exposure_ns
 
     def set_control(self, name: str, value: int) -> int:
         r = self.control_range(name)
         value = min(max(int(value), r.minimum), r.maximum)
         if name == "gain":
-            self.camera.set_control("analogue_gain", self.camera.state.traits.analog.to_code(value / 100))
+            self.camera.update(gain=value / 100)
         else:
-            self.camera.set_control("exposure", round(value / self._line_ns()))
+            t = self.camera.spec.settings.timing
+            self.camera.set_control("exposure", round(value * t.pixel_rate_hz / (t.line_length_pck * 1_000_000_000)))
         return self.get_control(name)

@@ -120,26 +120,30 @@ class SyntheticProducer:
         if (width, height) not in self._sizes:
             raise DeviceError(f"size {width}x{height} is not one of {self._sizes}")
         self._size, self._interval_ns = (width, height), int(interval_ns)
-        self._build(self.now_ns())
+        self._build(0)
         # One render fills the renderer's caches (static layers, compiled kernels) before the timeline starts,
         # so a real-time stream does not open with a burst of dropped frames.
         self.cam.frame(0)
-        self.cam.start_ns = self.now_ns()
+        self._start_ns = self.now_ns()
 
     def _build(self, start_ns: int) -> None:
+        self._start_ns = start_ns
         try:
-            self.cam = SyntheticCamera(self.sensor, self.scene, self._camera_key, start_ns=start_ns, size=self._size,
+            self.cam = SyntheticCamera(self.sensor, self.scene, self._camera_key, size=self._size,
                                        fps=1e9 / self._interval_ns, shutter=self._shutter,
                                        exposure_ns=self._exposure_ns, gain=self._gain_x100 / 100)
         except ConfigError as exc:
             raise DeviceError(f"{self.name}: cannot program {self._size} at {self._interval_ns} ns: {exc}") from None
 
+    def _start(self, index: int) -> int:
+        return self.cam.settings.timing.frame_start_ns(index, self._start_ns)
+
     def frame_due_ns(self, index: int) -> int:
         s = self.cam.settings
-        return self.cam.timestamp_ns(index) + s.exposure_ns + int(s.timing.line_offset_ns(s.n_lines))
+        return self._start(index) + s.exposure_ns + int(s.timing.line_offset_ns(s.n_lines))
 
     def frame(self, index: int) -> Frame:
-        return self.cam.frame(index)
+        return self.cam.render(index, self._start(index))
 
     def now_ns(self) -> int:
         return self._clock() - self._clock0
@@ -168,5 +172,5 @@ class SyntheticProducer:
             self._gain_x100 = value
         else:
             self._exposure_ns = value
-        self._build(self.cam.start_ns)  # same timeline: exposure and gain do not move frame starts
+        self._build(self._start_ns)  # same timeline: exposure and gain do not move frame starts
         return self.get_control(name)

@@ -133,9 +133,10 @@ class EmuDriver:
             return
         _, slot, payload = self._filling
         fmt = self.fmt
-        if fmt.bytesperline and not self.camera.sensor.readout.by_column:
+        readout = self.camera.spec.settings.readout
+        if fmt.bytesperline and not readout.by_column:
             first, end = plan.schedule.band_lines(band, n_bands)
-            if self.camera.sensor.readout.reversed:
+            if readout.reversed:
                 first, end = fmt.height - end, fmt.height - first
             lo, hi = first * fmt.bytesperline, end * fmt.bytesperline
             slot.memory[lo:hi] = payload[lo:hi]
@@ -255,7 +256,7 @@ def _enum_frameintervals(d: EmuDriver, arg: raw.FrmIval) -> raw.FrmIval:
 
 
 def _g_parm(d: EmuDriver, _arg: Any) -> raw.StreamParm:
-    t = d.camera.state.timing
+    t = d.camera.spec.settings.timing
     ival = Fraction(t.frame_period_pck, t.pixel_rate_hz)
     return raw.StreamParm(numerator=ival.numerator, denominator=ival.denominator)
 

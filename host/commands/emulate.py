@@ -9,7 +9,7 @@ from __future__ import annotations
 import argparse
 
 from rollcam.common.errors import ConfigError
-from rollcam.common.values import positive_float
+from rollcam.common.values import non_negative_float
 
 
 def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
@@ -28,7 +28,7 @@ def run(args: argparse.Namespace) -> int:
         # --duration's argparse type belongs with the other emulate options; until it moves there it is
         # checked here with the common value parser, before any server starts.
         try:
-            positive_float(str(args.duration))
+            non_negative_float(str(args.duration))
         except ValueError as exc:
             raise ConfigError(f"emulate: argument --duration: {args.duration:g} is invalid: {exc}") from None
     return int(cmd_emulate(args) or 0)

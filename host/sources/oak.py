@@ -96,7 +96,7 @@ class OakSource(CameraSource):
         socket = uri.get("socket", str, "CAM_A").upper()
         if not hasattr(dai.CameraBoardSocket, socket):
             raise SourceError(f"source {uri.uri!r}: option socket={socket!r} is not a board socket (CAM_A..CAM_D)")
-        from .emu import parse_size
+        from .base import parse_size
 
         self.size = uri.get("size", parse_size, DEFAULT_SIZE)
         self.fps = uri.get("fps", finite_float)

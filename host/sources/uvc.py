@@ -7,7 +7,9 @@ default the device's first), ``size`` (WxH; default the first frame size), ``fps
 ``exposure_us`` and ``gain`` (set through the camera terminal and processing unit), ``sensor`` (a hw_config
 name: fills line time, readout and row times of each Frame; the emulated camera's sensor), ``decode``
 (1: BGR3 frames, the default; 0: the wire format as sent), ``frames`` (stop after N), ``timeout_ms``.
-With ``backend=emu`` also ``scene``, ``seed``, ``transfer`` (iso | bulk) and ``realtime`` (0 | 1).
+With ``backend=emu`` also ``scene`` and ``seed`` (the emulated camera's options, as ``emu:`` reads them),
+``transfer`` (iso | bulk) and ``realtime`` (on | off): the camera is a FirmwareCamera behind the UVC function,
+the device object every emulated path shares.
 
 Each Frame's timestamp is the payloads' PTS (start of exposure in the device clock, converted from
 dwClockFrequency ticks to integer ns). The PTS has 32 bits: the first frame's timestamp is the device clock
@@ -25,16 +27,18 @@ from typing import Any
 import numpy as np
 from rollcam.common.errors import ConfigError, DeviceError, DeviceNotFoundError, ProtocolError, SourceError, require
 from rollcam.common.lifecycle import Deadline
+from rollcam.common.values import parse_bool
 from rollcam.emu.usbip import ImportedDevice, UrbError
-from rollcam.emu.uvc import DeviceIdentity, SyntheticProducer, UVCFunction
+from rollcam.emu.uvc import DeviceIdentity, FirmwareProducer, UVCFunction
 from rollcam.emu.uvc import constants as C
 from rollcam.emu.uvc.convert import WIRE_FORMATS, decode, wire_layout
 from rollcam.emu.uvc.descriptors import parse_streaming
 from rollcam.emu.uvc.payload import PayloadParser
 from rollcam.emu.uvc.probe import Probe
+from rollcam.firmware.camera import FirmwareCamera
+from rollcam.firmware.spec import CameraSpec
 from rollcam.sim.frame import Frame
 from rollcam.sim.hwconfig import SensorConfig, load_sensor
-from rollcam.sim.scenegen import make_scene
 from rollcam.sim.synthetic import resolve_settings
 from rollcam.sim.timing import Readout, line_sample_times_ns
 
@@ -42,7 +46,6 @@ from .base import (
     CameraSource,
     SourceURI,
     finite_float,
-    non_negative_int,
     parse_host_port,
     parse_size,
     positive_int,
@@ -175,18 +178,15 @@ def _open_link(uri: SourceURI, vid: int, pid: int, sensor: SensorConfig | None, 
 
 
 def _emulated(uri: SourceURI, vid: int, pid: int, sensor: SensorConfig | None) -> tuple[Any, Any]:
+    """The UVC function of an emulated camera: the same FirmwareCamera (from the same option table) the emu:
+    source and ``rollcam emulate`` use, behind a FirmwareProducer."""
     from rollcam.emu.uvc.pyusb_backend import EmulatedBackend  # needs pyusb
 
-    sensor = sensor or load_sensor("imx219")
-    size = uri.get("size", parse_size)
-    sizes = [(m.width, m.height) for m in sensor.modes]
-    if size is not None and size not in sizes:
-        sizes.insert(0, size)
-    w, h = size or (sensor.mode().width, sensor.mode().height)
-    scene = make_scene(uri.get("scene", str, "street"), uri.get("seed", non_negative_int, 0), width=w, height=h)
-    producer = SyntheticProducer(sensor, scene, sizes=sizes)
-    function = UVCFunction(producer, identity=DeviceIdentity(vendor_id=vid, product_id=pid),
-                           transfer=uri.get("transfer", str, "iso"), realtime=bool(uri.get("realtime", int, 0)))
+    options = {k: uri.options[k] for k in ("scene", "seed", "size") if k in uri.options}
+    spec = CameraSpec.from_options(sensor or load_sensor("imx219"), options, f"source {uri.uri!r}", SourceError)
+    function = UVCFunction(FirmwareProducer(FirmwareCamera(spec)), identity=DeviceIdentity(vendor_id=vid,
+                           product_id=pid), transfer=uri.get("transfer", str, "iso"),
+                           realtime=uri.get("realtime", parse_bool, False))
     return function, EmulatedBackend([function])
 
 
@@ -206,7 +206,7 @@ class UVCSource(CameraSource):
         self.timeout_ms = uri.get("timeout_ms", positive_int, 5000)
         self.link, self.function = _open_link(uri, vid, pid, self.sensor, self.timeout_ms)
         if self.function is not None and self.sensor is None:
-            self.sensor = self.function.producer.sensor
+            self.sensor = self.function.producer.camera.sensor
         self.index = 0
         self._pending: deque = deque()
         try:

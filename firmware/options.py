@@ -1,0 +1,172 @@
+"""The emulated camera's options: one table of name, parser, default, scene kinds and one-line doc.
+
+Every front door that names camera settings in text reads this table: the ``emu:`` URI query, the flags of
+``rollcam emulate``, ``rollcam://`` URL queries and the serial ``SCENE`` command. ``parse_options`` turns
+``{name: text}`` into typed values (each parser is one of ``rollcam.common.values``' or a small one here),
+rejecting unknown names and options that do not apply to the chosen scene kind; ``CameraSpec.from_options``
+builds the validated spec from them. Defaults are the table's, whichever door the options came through.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass
+from typing import Any
+
+from rollcam.common.errors import ConfigError, RollcamError
+from rollcam.common.values import (
+    finite_float,
+    non_negative_float,
+    non_negative_int,
+    parse_bool,
+    parse_size,
+    positive_float,
+    reject_unknown,
+)
+
+# The value parsers import the simulator only when they run: the table also builds the ``rollcam emulate``
+# flags, and ``rollcam --help`` must not load numpy and numba.
+SHUTTERS = ("rolling", "global")
+
+SCENE_KINDS = ("street", "chart", "flat")
+
+
+def _choice(*allowed: str) -> Callable[[str], str]:
+    def parse(text: str) -> str:
+        word = str(text).strip().lower()
+        if word not in allowed:
+            raise ValueError(f"expected one of {'/'.join(allowed)}")
+        return word
+    return parse
+
+
+def _speed(text: str) -> str:
+    from rollcam.sim.scenegen import SPEED_PRESETS, parse_speed
+
+    parse_speed(text if str(text).lower() in SPEED_PRESETS else float(text))
+    return str(text).lower()
+
+
+def _ego(text: str) -> str:
+    from rollcam.sim.scenegen import ego_preset
+
+    ego_preset(str(text))
+    return str(text)
+
+
+def _readout(text: str) -> str:
+    from rollcam.sim.timing import Readout
+
+    return Readout.parse(text).value
+
+
+def _fourcc(text: str) -> str:
+    text = str(text)
+    return text.ljust(4) if len(text) == 3 else text
+
+
+def _noise(text: str) -> frozenset[str]:
+    from rollcam.sim.noise import parse_stages
+
+    return parse_stages(str(text))
+
+
+def _text(text: str) -> str:
+    if not str(text):
+        raise ValueError("must not be empty")
+    return str(text)
+
+
+@dataclass(frozen=True)
+class Option:
+    """One camera option: its parser, default, the scene kinds it applies to (None: not a scene option)."""
+
+    name: str
+    parse: Callable[[str], Any]
+    default: Any
+    doc: str
+    scenes: tuple[str, ...] | None = None
+    kwarg: str | None = None  # make_scene keyword of a scene option (default: the option's name)
+
+
+OPTIONS: dict[str, Option] = {o.name: o for o in (
+    Option("scene", _choice(*SCENE_KINDS), "street", "scene kind: street | chart | flat", SCENE_KINDS),
+    Option("seed", non_negative_int, 0, "scene seed (integer >= 0)", SCENE_KINDS),
+    Option("camera", _text, "0", "scene camera: index or name", SCENE_KINDS),
+    Option("time", _choice("dawn", "morning", "noon", "afternoon", "dusk"), "noon",
+           "street: dawn | morning | noon | afternoon | dusk", ("street",), "time_of_day"),
+    Option("speed", _speed, "normal", "street: static | normal | fast | a multiplier", ("street",)),
+    Option("pedestrians", non_negative_int, 20, "street: number of walkers", ("street",), "n_pedestrians"),
+    Option("ego", _ego, "none", "street: camera motion none | pan | walk | vehicle | drone", ("street",)),
+    Option("vx", finite_float, 2000.0, "chart: bar speed, px/s",
+           ("chart",), "vx_px_s"),
+    Option("level", non_negative_float, 0.5, "flat: radiance level (0..1 is the sensor's range)", ("flat",)),
+    Option("size", parse_size, None, "output WxH (default: the sensor's default mode; another size is a "
+                                     "rescaled readout)"),
+    Option("fps", positive_float, None, "frame rate: sets the frame length (default: the mode's); above the "
+                                        "sensor's maximum for the size is an error"),
+    Option("shutter", _choice(*SHUTTERS), None, "rolling | global (default: the sensor's)"),
+    Option("readout", _readout, None, "readout direction tb | bt | lr | rl (default: the sensor's)"),
+    Option("exposure_us", non_negative_float, None, "exposure in us, whole lines, clamped to the frame "
+                                                    "(default: 10 ms)"),
+    Option("gain", positive_float, 1.0, "linear total gain (analog first, then digital, as drivers split it)"),
+    Option("format", _fourcc, "BGR3", "pixel format: BGR3 | YUYV | NV12 | YU12 | RGB3 | GREY | MJPG or a raw "
+                                      "fourcc of the sensor (RG10, pRAA, Y10, ...)"),
+    Option("physics", parse_bool, None, "sensor model (exposure integration, EMVA noise, ADC): default on for "
+                                        "every format but BGR3"),
+    Option("blur_px", non_negative_float, 0.5, "sensor model: motion-blur bound in px (0: mid-exposure only)"),
+    Option("noise", _noise, None, "sensor model: on | off | comma list of shot, dark, read, dsnu, prnu, "
+                                  "saturation (default: on)"),
+    Option("serial", _text, "0001", "device serial number (fixes the DSNU/PRNU patterns)"),
+    Option("noise_seed", non_negative_int, 0, "temporal noise seed"),
+    Option("hflip", parse_bool, False, "mirror left-right (raw: the Bayer order changes as the sensor's does)"),
+    Option("vflip", parse_bool, False, "flip top-bottom: the scene is read bottom-up, first line still first"),
+    Option("test_pattern", _text, "none", "sensor test pattern instead of the scene: none | bars | solid | "
+                                          "fade_bars | pn9 | walking_ones (as the sensor has them)"),
+)}
+"""The camera options, by name."""
+
+
+SCENE_OPTIONS = {name: o for name, o in OPTIONS.items() if o.scenes is not None}
+"""The options that describe the scene (``SCENE KEY VALUE`` on the serial line)."""
+
+
+def parse_options(options: Mapping[str, Any], owner: str, error: type[RollcamError] = ConfigError,
+                  allowed: set[str] | None = None) -> dict[str, Any]:
+    """``{name: text}`` -> ``{name: value}`` through the table; unknown names, bad values and scene options of
+    another scene kind raise ``error`` naming ``owner`` and the option. Values that are not text are first
+    written as text, so every door goes through the same parser."""
+    reject_unknown(dict(options), set(OPTIONS) if allowed is None else allowed, owner, error)
+    out = {name: _parse(name, raw, owner, error) for name, raw in options.items()}
+    kind = out.get("scene", OPTIONS["scene"].default)
+    misplaced = sorted(n for n in out if OPTIONS[n].scenes is not None and kind not in OPTIONS[n].scenes)
+    if misplaced:
+        what = f"option {misplaced[0]!r} does" if len(misplaced) == 1 else f"options {misplaced} do"
+        raise error(f"{owner}: {what} not apply to scene={kind!r} (its options: "
+                    f"{sorted(n for n, o in SCENE_OPTIONS.items() if kind in o.scenes)})")
+    return out
+
+
+def _parse(name: str, raw: Any, owner: str, error: type[RollcamError]) -> Any:
+    try:
+        return OPTIONS[name].parse(raw if isinstance(raw, str) else as_text(raw))
+    except (TypeError, ValueError, ConfigError) as exc:
+        raise error(f"{owner}: option {name}={raw!r} is invalid ({exc})") from None
+
+
+def as_text(value: Any) -> str:
+    """An option value as the text its parser reads back."""
+    if isinstance(value, bool):
+        return "on" if value else "off"
+    if isinstance(value, tuple) and len(value) == 2:
+        return f"{value[0]}x{value[1]}"
+    if isinstance(value, (set, frozenset)):
+        return ",".join(sorted(value)) or "off"
+    if isinstance(value, float):
+        return f"{value:.6g}"
+    return str(value).strip()
+
+
+def option_help() -> list[tuple[str, str, str]]:
+    """(name, default, doc) of every option, for usage text and documentation."""
+    return [(o.name, "" if o.default is None else as_text(o.default), o.doc) for o in OPTIONS.values()]

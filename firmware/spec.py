@@ -1,0 +1,258 @@
+"""``CameraSpec``: the one frozen, validated description of an emulated camera.
+
+Sensor, output size, frame and line length, shutter, readout, exposure, gain, pixel format, sensor-model
+stages, blur bound, flips, test pattern and scene: everything that decides a frame's bytes besides the
+frame's sequence number and start time. It is validated once, when it is made (``dataclasses.replace``
+re-validates), and never changes; a device that is reprogrammed holds a new one. Every front door builds or
+replaces it: ``from_options`` for text (``emu:`` URIs, ``rollcam emulate`` flags, ``rollcam://`` URLs, serial
+``SCENE``), ``create`` for typed values, and the firmware's controls, registers, V4L2 and UVC requests through
+``rollcam.firmware.controls.SensorState``.
+
+Gain is the linear total gain (1.0 = unity): the sensor model splits it into analog then digital gain as a
+driver does; doors that speak register codes (V4L2 analogue/digital gain, the gain registers) or hundredths
+(UVC) convert in ``rollcam.firmware.controls``. Exposure is a request in ns (None: 10 ms), realised in whole
+lines and clamped to the frame (``settings.exposure_ns``, ``settings.clamped_exposure``).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import functools
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from typing import Any
+
+from rollcam.common.errors import ConfigError, RollcamError
+from rollcam.sim import formats as sf
+from rollcam.sim.hwconfig import SensorConfig, load_sensor
+from rollcam.sim.noise import parse_stages
+from rollcam.sim.scene import Scene
+from rollcam.sim.scenegen import ego_preset, make_scene
+from rollcam.sim.sensor import flipped_cfa
+from rollcam.sim.synthetic import StreamSettings, resolve_settings
+
+from .options import OPTIONS, parse_options
+from .pixfmt import FORMATS
+from .traits import traits_for
+
+_SENSOR_PROCESSED = ("NV12", "YU12")  # processed formats the sensor model's ISP makes besides the device's
+
+
+@dataclass(frozen=True)
+class CameraSpec:
+    """An emulated camera's complete programming (see the module docstring); build it with ``create`` or
+    ``from_options``, change it with ``dataclasses.replace`` or ``with_options``."""
+
+    sensor: SensorConfig
+    size: tuple[int, int] | None = None
+    frame_length_lines: int | None = None
+    line_length_pck: int | None = None
+    shutter: str | None = None
+    readout: str | None = None
+    exposure_ns: int | None = None
+    gain: float = 1.0
+    pixel_format: str = "BGR3"
+    physics: bool | None = None
+    blur_px: float = 0.5
+    noise: frozenset[str] | None = None
+    serial: str = "0001"
+    noise_seed: int = 0
+    hflip: bool = False
+    vflip: bool = False
+    test_pattern: str = "none"
+    scene: str = "street"
+    seed: int = 0
+    scene_options: tuple[tuple[str, Any], ...] = ()
+    camera: str = "0"
+    settings: StreamSettings = field(init=False, repr=False, compare=False)
+
+    def __post_init__(self) -> None:
+        s = resolve_settings(self.sensor, size=self.size, shutter=self.shutter, readout=self.readout,
+                             exposure_ns=self.exposure_ns, gain=self.gain,
+                             frame_length_lines=self.frame_length_lines, line_length_pck=self.line_length_pck)
+        fix = object.__setattr__  # normalised once here, so equal programmings compare equal
+        fix(self, "settings", s)
+        fix(self, "size", (s.width, s.height))
+        fix(self, "shutter", s.shutter)
+        fix(self, "readout", s.readout.value)
+        fix(self, "gain", float(self.gain))
+        fix(self, "pixel_format", self._base_format(self.pixel_format))
+        fix(self, "scene_options", tuple(sorted(dict(self.scene_options).items())))
+        if self.physics is False and self.raw:
+            raise ConfigError(f"pixel format {self.pixel_format!r} needs the sensor model (physics on)")
+        if not isinstance(self.blur_px, (int, float)) or not 0 <= self.blur_px < float("inf"):
+            raise ConfigError(f"blur_px must be a finite number >= 0 (0: no motion blur), got {self.blur_px!r}")
+        patterns = traits_for(self.sensor.name).test_pattern_codes
+        if self.test_pattern not in patterns:
+            raise ConfigError(f"test pattern {self.test_pattern!r} is not one of {list(patterns)}")
+        for name in ("noise_seed", "seed"):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, int) or value < 0:
+                raise ConfigError(f"{name} must be a whole number >= 0, got {value!r}")
+        scene_of(self).camera(self.camera)  # the scene is built (and cached) now: bad options fail here
+
+    # -------------------------------------------------------------------------------------- building
+    @classmethod
+    def create(cls, sensor: SensorConfig | str, *, scene: Mapping[str, Any] | str | None = None,
+               fps: float | None = None, **fields: Any) -> CameraSpec:
+        """A spec from typed values: ``scene`` is a kind or ``{'scene': kind, 'seed': n, <kind's options>}``
+        (values as text or typed, parsed by the option table), ``fps`` sets the frame length; other keywords
+        are fields."""
+        sensor = load_sensor(sensor) if isinstance(sensor, str) else sensor
+        if isinstance(scene, str):
+            fields["scene"], scene = scene, None
+        if scene:
+            fields.update(_scene_fields(parse_options(dict(scene), "scene", ConfigError,
+                                                      allowed=_SCENE_NAMES)))
+        if fps is not None:
+            if "frame_length_lines" in fields:
+                raise ConfigError("give fps or frame_length_lines, not both")
+            probe = resolve_settings(sensor, size=fields.get("size"), readout=fields.get("readout"), fps=fps)
+            fields["frame_length_lines"] = probe.timing.frame_length_lines
+        return cls(sensor, **fields)
+
+    @classmethod
+    def from_options(cls, sensor: SensorConfig | str, options: Mapping[str, Any], owner: str = "camera",
+                     error: type[RollcamError] = ConfigError) -> CameraSpec:
+        """A spec from text options named as in ``rollcam.firmware.options.OPTIONS`` (defaults: the table's);
+        any problem raises ``error`` naming ``owner``."""
+        values = parse_options(options, owner, error)
+        try:
+            sensor = load_sensor(sensor) if isinstance(sensor, str) else sensor
+            return cls.create(sensor, **_fields(values))
+        except ConfigError as exc:
+            if error is ConfigError:
+                raise
+            raise error(f"{owner}: {exc}") from None
+
+    def with_options(self, options: Mapping[str, Any], owner: str = "camera") -> CameraSpec:
+        """This spec with text options changed (``SCENE KEY VALUE``): another scene kind starts from its own
+        defaults (the seed and camera stay); a new fps or size resets the frame length."""
+        current = {"scene": self.scene, "seed": self.seed, "camera": self.camera, **dict(self.scene_options)}
+        if "scene" in options and str(options["scene"]).lower() != self.scene:
+            current = {"seed": self.seed, "camera": self.camera}
+        merged = {**current, **options}
+        values = parse_options(merged, owner, ConfigError)
+        changes = _fields(values)
+        fps = changes.pop("fps", None)
+        if "size" in changes:
+            changes.setdefault("frame_length_lines", None)
+            changes.setdefault("line_length_pck", None)
+        spec = dataclasses.replace(self, **changes)
+        if fps is not None:
+            lines = resolve_settings(self.sensor, size=spec.size, readout=spec.readout, fps=fps).timing
+            spec = dataclasses.replace(spec, frame_length_lines=lines.frame_length_lines, line_length_pck=None)
+        return spec
+
+    # -------------------------------------------------------------------------------------- derived
+    @property
+    def raw(self) -> bool:
+        """True when frames are raw sensor samples (Bayer or mono), not an ISP picture."""
+        return self.pixel_format not in FORMATS and sf.pixel_format(self.pixel_format).is_raw
+
+    @property
+    def uses_physics(self) -> bool:
+        """True when frames go through the sensor model (default: every format but BGR3)."""
+        return self.pixel_format != "BGR3" if self.physics is None else self.physics
+
+    @property
+    def output_format(self) -> str:
+        """The fourcc frames carry: a raw one in the Bayer order the flips give (RG10 with hflip is GR10)."""
+        return self.flipped(self.pixel_format)
+
+    def flipped(self, fourcc: str) -> str:
+        """A processed fourcc as it is; a raw one (given in the sensor's order) in the order the flips give."""
+        if fourcc in FORMATS or fourcc in _SENSOR_PROCESSED:
+            return fourcc
+        f = sf.pixel_format(fourcc)
+        if not f.is_raw or f.cfa == "mono":
+            return fourcc
+        return sf.bayer_fourcc(self.bayer_order, f.bits, f.packing == "csi2")
+
+    @property
+    def bayer_order(self) -> str:
+        """The CFA order the output starts on with the current flips."""
+        return flipped_cfa(self.sensor.bayer_order, self.size, self.hflip, self.vflip)
+
+    def scene_values(self) -> dict[str, Any]:
+        """``scene``, ``seed``, ``camera`` (when not 0) and the scene options given explicitly."""
+        extra = {} if self.camera == "0" else {"camera": self.camera}
+        return {"scene": self.scene, "seed": self.seed, **extra, **dict(self.scene_options)}
+
+    def option_values(self) -> dict[str, Any]:
+        """Every option of the table with the value in effect (defaults filled in, exposure as realised)."""
+        s = self.settings
+        scene = {n: o.default for n, o in OPTIONS.items() if o.scenes is not None and self.scene in o.scenes}
+        scene.update(scene=self.scene, seed=self.seed, camera=self.camera, **dict(self.scene_options))
+        return {**scene, "size": self.size, "fps": s.timing.fps, "shutter": s.shutter, "readout": s.readout.value,
+                "exposure_us": s.exposure_ns / 1000, "gain": self.gain, "format": self.output_format,
+                "physics": self.uses_physics, "blur_px": self.blur_px, "serial": self.serial,
+                "noise": (parse_stages(None) if self.noise is None else self.noise) - {"quantization"},
+                "noise_seed": self.noise_seed, "hflip": self.hflip, "vflip": self.vflip,
+                "test_pattern": self.test_pattern}
+
+    def _base_format(self, fourcc: str) -> str:
+        """``fourcc`` as stored: processed as is, raw in the sensor's own (unflipped) Bayer order."""
+        want = fourcc.ljust(4) if len(fourcc) == 3 else fourcc
+        if want in FORMATS or want in _SENSOR_PROCESSED:
+            return want
+        f = sf.pixel_format(want)  # ConfigError naming the fourcc when unknown
+        if not f.is_raw:
+            return f.fourcc
+        cfa = self.sensor.bayer_order
+        flipped = flipped_cfa(cfa, (self.settings.width, self.settings.height), self.hflip, self.vflip)
+        if f.cfa != cfa and cfa != "mono" and f.cfa == flipped:
+            f = sf.pixel_format(sf.bayer_fourcc(cfa, f.bits, f.packing == "csi2"))
+        if f.cfa != cfa:
+            need = "a mono format (GREY, Y10 , ...)" if cfa == "mono" else f"one of Bayer order {cfa!r}"
+            raise ConfigError(f"format {fourcc!r} samples CFA {f.cfa!r}; sensor {self.sensor.name!r} delivers "
+                              f"{need}")
+        if f.bits > self.sensor.bit_depth:
+            raise ConfigError(f"format {fourcc!r} holds {f.bits} bits, more than sensor {self.sensor.name!r}'s "
+                              f"{self.sensor.bit_depth}-bit ADC")
+        return f.fourcc
+
+
+_SCENE_NAMES = {n for n, o in OPTIONS.items() if o.scenes is not None}
+_FIELD_OF = {"format": "pixel_format", "noise": "noise", "size": "size"}
+
+
+def _fields(values: dict[str, Any]) -> dict[str, Any]:
+    """Parsed option values -> ``create`` keywords."""
+    out = _scene_fields({k: v for k, v in values.items() if k in _SCENE_NAMES})
+    for name, value in values.items():
+        if name in _SCENE_NAMES:
+            continue
+        if name == "exposure_us":
+            out["exposure_ns"] = round(value * 1000)
+        else:
+            out[_FIELD_OF.get(name, name)] = value
+    return out
+
+
+def _scene_fields(values: dict[str, Any]) -> dict[str, Any]:
+    out: dict[str, Any] = {}
+    opts = {}
+    for name, value in values.items():
+        if name in ("scene", "seed", "camera"):
+            out[name] = value
+        else:
+            opts[name] = value
+    out["scene_options"] = tuple(opts.items())
+    return out
+
+
+def scene_of(spec: CameraSpec) -> Scene:
+    """The spec's scene at its output size (built once per distinct scene and size, then shared)."""
+    return _build_scene(spec.scene, spec.seed, spec.scene_options, *spec.size)
+
+
+@functools.lru_cache(maxsize=16)
+def _build_scene(kind: str, seed: int, options: tuple[tuple[str, Any], ...], width: int, height: int) -> Scene:
+    kwargs: dict[str, Any] = {"width": width, "height": height}
+    for name, value in options:
+        o = OPTIONS[name]
+        kwargs[o.kwarg or name] = ego_preset(value) if name == "ego" else value
+    return make_scene(kind, seed, **kwargs)
+
+

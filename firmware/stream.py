@@ -1,0 +1,177 @@
+"""The stream side of the emulated camera: device clock, stream on/off, trigger mode and the frame plan.
+
+``DeviceStream`` is the half of ``FirmwareCamera`` that says which frame is due next and when, in integer ns
+of the device clock (the host clock passed in minus the boot time). It reads the frame timing from the
+camera's current ``CameraSpec``; timing changes apply from the next frame, whose schedule is re-anchored at
+that frame's start.
+"""
+
+from __future__ import annotations
+
+import collections
+import threading
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+
+from rollcam.common.errors import ConfigError, DeviceError
+from rollcam.common.lifecycle import Stats
+
+from .scheduler import FrameSchedule
+from .spec import CameraSpec
+
+Clock = Callable[[], int]
+"""A monotonic host clock in integer ns (``time.monotonic_ns`` by default; tests pass their own)."""
+
+
+@dataclass
+class CameraStats(Stats):
+    """What a device has done: frames made, frames skipped because they were late, external triggers."""
+
+    frames: int = 0
+    skipped: int = 0
+    triggers: int = 0
+
+
+@dataclass(frozen=True)
+class FramePlan:
+    """The next frame to make: its sequence number and the schedule that says when its lines are due."""
+
+    seq: int
+    schedule: FrameSchedule
+
+    @property
+    def start_ns(self) -> int:
+        """Start of exposure of the first line (device clock)."""
+        return self.schedule.start_ns(self.seq)
+
+    @property
+    def due_ns(self) -> int:
+        """Time the frame is complete (its last line read out)."""
+        return self.schedule.frame_due_ns(self.seq)
+
+
+def schedule_of(spec: CameraSpec, epoch_ns: int, first_seq: int = 0) -> FrameSchedule:
+    """The schedule of ``spec``'s frames: frame ``first_seq`` starts exposing at ``epoch_ns``."""
+    s = spec.settings
+    return FrameSchedule(s.timing, epoch_ns, first_seq, s.exposure_ns, s.n_lines, s.shutter == "rolling")
+
+
+class DeviceStream:
+    """Stream state, trigger and frame planning over a ``spec`` attribute the subclass keeps."""
+
+    spec: CameraSpec
+
+    def __init__(self, clock: Clock | None) -> None:
+        self.clock = clock or time.monotonic_ns
+        self.boot_ns = self.clock()
+        self.lock = threading.RLock()
+        self.changed = threading.Condition(self.lock)
+        self.streaming = False
+        self.trigger_mode = "free"
+        self.stats = CameraStats()
+        self._triggers: collections.deque[int] = collections.deque()
+        self._schedule: FrameSchedule | None = None
+        self._next_seq = 0
+
+    def clock_ns(self) -> int:
+        """Device clock: integer ns since the device booted."""
+        return self.clock() - self.boot_ns
+
+    def host_ns(self, device_ns: int) -> int:
+        """The host clock reading of a device time (for pacing)."""
+        return device_ns + self.boot_ns
+
+    @property
+    def next_seq(self) -> int:
+        """Sequence number the next planned frame gets (it counts across stream starts)."""
+        return self._next_seq
+
+    def _warm(self) -> None:
+        """Called before the clock starts (the subclass builds its renderer here)."""
+
+    def stream_on(self) -> None:
+        """Start streaming: frame ``next seq`` starts exposing now (device clock). Idempotent."""
+        with self.changed:
+            if not self.streaming:
+                self._warm()
+                self.streaming = True
+                self._schedule = schedule_of(self.spec, self.clock_ns(), self._next_seq)
+                self.changed.notify_all()
+
+    def stream_off(self) -> None:
+        """Stop streaming; frames not yet planned are never made. Idempotent."""
+        with self.changed:
+            self.streaming = False
+            self._triggers.clear()
+            self.changed.notify_all()
+
+    def set_trigger_mode(self, mode: str) -> None:
+        """``free`` (frames back to back) or ``external`` (one frame per ``trigger()``)."""
+        if mode not in ("free", "external"):
+            raise ConfigError(f"trigger mode {mode!r} is not 'free' or 'external'")
+        with self.changed:
+            self.trigger_mode = mode
+            self._triggers.clear()
+            if self.streaming:
+                self._schedule = schedule_of(self.spec, self.clock_ns(), self._next_seq)
+            self.changed.notify_all()
+
+    def trigger(self) -> int:
+        """Start one frame now (external trigger mode, streaming); returns its exposure start (device ns)."""
+        with self.changed:
+            if self.trigger_mode != "external":
+                raise DeviceError("trigger needs trigger mode 'external' (TRIGMODE EXTERNAL)")
+            if not self.streaming:
+                raise DeviceError("trigger while not streaming (STREAM ON first)")
+            t = self.clock_ns()
+            self._triggers.append(t)
+            self.stats.triggers += 1
+            self.changed.notify_all()
+            return t
+
+    def current_schedule(self) -> FrameSchedule | None:
+        """The schedule frames follow from the next one on (timing changes included), or None when idle."""
+        with self.lock:
+            if not self.streaming or self._schedule is None:
+                return None
+            sched = self._schedule
+            fresh = schedule_of(self.spec, sched.start_ns(self._next_seq), self._next_seq)
+            if (fresh.timing, fresh.exposure_ns, fresh.rolling) != (sched.timing, sched.exposure_ns, sched.rolling):
+                sched = self._schedule = fresh
+            return sched
+
+    def plan_next(self, now_ns: int | None = None) -> FramePlan | None:
+        """The next frame to make, or None (not streaming, or waiting for a trigger).
+
+        Timing changes take effect from the next frame. With ``now_ns`` (device clock), a free-running stream
+        skips the frames whose readout already ended before ``now_ns`` (counted in ``stats.skipped``).
+        """
+        with self.lock:
+            if not self.streaming or self._schedule is None:
+                return None
+            seq = self._next_seq
+            if self.trigger_mode == "external":
+                if not self._triggers:
+                    return None
+                sched = schedule_of(self.spec, self._triggers.popleft(), seq)
+            else:
+                sched = self.current_schedule()
+                assert sched is not None
+                if now_ns is not None:
+                    late = sched.first_due_from(seq, now_ns)
+                    self.stats.skipped += late - seq
+                    seq = late
+            self._next_seq = seq + 1
+            return FramePlan(seq, sched)
+
+    def note_made(self, seq: int) -> None:
+        """Record that frame ``seq`` was planned by a consumer that does not use ``plan_next`` (UVC), so the
+        next timing change re-anchors the schedule after it rather than at the stream's start."""
+        with self.lock:
+            self._next_seq = max(self._next_seq, seq + 1)
+
+    def wait_changed(self, timeout_s: float) -> None:
+        """Block until a control, the stream state or a trigger changes, or ``timeout_s`` passes."""
+        with self.changed:
+            self.changed.wait(timeout_s)
