@@ -12,7 +12,7 @@ define one_opencv
 	@if $(PIP) show $(OTHER_CV2) >/dev/null 2>&1; then \
 	  echo "replacing $$($(PIP) freeze | grep -iE '^opencv-(contrib-)?python' | grep -v contrib-python-headless) \
 	by opencv-contrib-python-headless"; \
-	  $(PIP) uninstall -q -y $(OTHER_CV2); \
+	  for p in $(OTHER_CV2); do if $(PIP) show $$p >/dev/null 2>&1; then $(PIP) uninstall -q -y $$p; fi; done; \
 	  $(PIP) install -q --force-reinstall --no-deps "$$($(PIP) freeze | grep -i '^opencv-contrib-python-headless==')"; \
 	fi
 endef
