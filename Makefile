@@ -1,24 +1,51 @@
-# Set-up and everyday commands. Both main targets create a local virtual environment first.
+# Set-up and everyday commands. Both main targets create a local virtual environment first: `make demo` installs
+# rollcam with what its commands need, `make test` adds the test and lint tools (the `dev` extra).
 PY ?= python3
 VENV := .venv
 BIN := $(VENV)/bin
+PIP := $(BIN)/python -m pip
+# OpenCV wheels that would sit beside rollcam's opencv-contrib-python-headless (a venv made before it was the
+# dependency has one): two cv2 wheels overwrite each other's files, so the others go and contrib is laid anew.
+OTHER_CV2 := opencv-python opencv-python-headless opencv-contrib-python
 
-.PHONY: demo test lint bench venv clean
+define one_opencv
+	@if $(PIP) show $(OTHER_CV2) >/dev/null 2>&1; then \
+	  echo "replacing $$($(PIP) freeze | grep -iE '^opencv-(contrib-)?python' | grep -v contrib-python-headless) \
+	by opencv-contrib-python-headless"; \
+	  for p in $(OTHER_CV2); do if $(PIP) show $$p >/dev/null 2>&1; then $(PIP) uninstall -q -y $$p; fi; done; \
+	  $(PIP) install -q --force-reinstall --no-deps "$$($(PIP) freeze | grep -i '^opencv-contrib-python-headless==')"; \
+	fi
+endef
 
-$(BIN)/rollcam: pyproject.toml
+.PHONY: demo test lint bench venv venv-dev clean
+
+$(BIN)/python:
 	$(PY) -m venv $(VENV)
-	$(BIN)/pip install -q --upgrade pip
-	$(BIN)/pip install -q -e ".[dev]"
-	touch $(BIN)/rollcam
+	$(PIP) install -q --upgrade pip
 
-venv: $(BIN)/rollcam
+$(VENV)/.installed: pyproject.toml | $(BIN)/python
+	$(PIP) install -q -e .
+	$(one_opencv)
+	touch $@
+
+$(VENV)/.installed-dev: pyproject.toml | $(BIN)/python
+	$(PIP) install -q -e ".[dev]"
+	$(one_opencv)
+	touch $@ $(VENV)/.installed
+
+venv: $(VENV)/.installed
+
+venv-dev: $(VENV)/.installed-dev
 
 demo: venv
 	$(BIN)/rollcam demo
 
-test: venv
+test: venv-dev
 	$(BIN)/ruff check .
 	$(BIN)/python -m pytest -q
+
+lint: venv-dev
+	$(BIN)/ruff check .
 
 bench: venv
 	$(BIN)/rollcam bench render --quick

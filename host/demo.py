@@ -3,7 +3,7 @@
 No hardware and no arguments needed. Streams GS/RS pairs of the same instants from ``emu:`` (fast walkers, so
 the rolling-shutter skew is plain to see) and writes
 
-- ``demo_rs.mp4``: the RS stream with every pedestrian's GS box (green) and RS box (magenta) and a caption
+- ``demo_rs.mp4``: the RS stream (H.264) with every pedestrian's GS box (green) and RS box (magenta) and a caption
   (frame, stream time, line time);
 - ``contact_sheet.png``: GS and RS frames of the same instants side by side, boxes drawn, with a legend.
 
@@ -30,6 +30,7 @@ from rollcam.sim.hwconfig import load_sensor
 from .capture import write_atomic
 from .progress import Progress
 from .sources import open_camera
+from .video import VideoWriter
 
 DEFAULT_OUT = Path("rollcam_out") / "demo"
 DEFAULT_SENSOR = "letsroll"
@@ -200,7 +201,6 @@ def run_demo(
         rolling = info.get("shutter") != "global"  # a GS sensor's frames are GS: no RS frame is claimed
         name = "demo_rs" if rolling else "demo_gs"
         video, sheet = out / f"{name}.mp4", out / "contact_sheet.png"
-        tmp_video = out / f".{name}.part.mp4"  # VideoWriter picks the container from the extension
         fps = float(info["fps"])
         n = max(1, round(seconds * fps))
         picks = set(np.linspace(0, n - 1, min(SHEET_ROWS, n)).round().astype(int).tolist())
@@ -235,23 +235,18 @@ def run_demo(
                             "every row at once   green: GS box")
                 img = caption(img, text)
                 if writer is None:
-                    # Playback rate only (captions carry the exact times); MPEG-4 wants a simple time base.
-                    writer = cv2.VideoWriter(str(tmp_video), cv2.VideoWriter_fourcc(*"mp4v"), max(round(fps), 1),
-                                             (img.shape[1], img.shape[0]))
-                    if not writer.isOpened():
-                        raise OSError(f"OpenCV cannot write MP4 ('mp4v') video to {str(tmp_video)!r}")
+                    writer = VideoWriter(video, fps, (img.shape[1], img.shape[0]))
                 writer.write(img)
                 bar.update(i + 1)
             finished = True
         finally:
             bar.close()
-            if writer is not None:
-                writer.release()
-            if not finished:  # interrupted or failed: leave no half-written video behind
-                tmp_video.unlink(missing_ok=True)
+            if writer is not None and finished:
+                writer.close()
+            elif writer is not None:  # interrupted or failed: leave no half-written video behind
+                writer.abort()
         if not sheet_pairs:
             raise RollcamError(f"source {uri!r} gave no frames")
-        os.replace(tmp_video, video)
     ok, png = cv2.imencode(".png", contact_sheet(sheet_pairs))
     if not ok:
         raise RollcamError("could not encode the contact sheet as PNG")

@@ -19,7 +19,6 @@ command exits with status 130. The command line is ``rollcam.host.commands.detec
 
 from __future__ import annotations
 
-import contextlib
 import json
 import os
 import queue
@@ -38,6 +37,7 @@ from rollcam.sim.frame import Frame
 from .detectors import Detections, Detector
 from .sources import CameraSource
 from .truthmatch import RunningPR
+from .video import VideoWriter
 
 LOG, VIDEO, SUMMARY = "detections.jsonl", "detections.mp4", "detect.json"
 COLORS = {"det": (0, 255, 0), "rs": (0, 0, 255), "gs": (255, 128, 0)}
@@ -73,24 +73,18 @@ class VideoSink:
 
     def __init__(self, path: Path, fps: float, max_queue: int = 8) -> None:
         self.path, self.fps = path, fps
-        self.part = path.with_name(path.stem + ".part" + path.suffix)  # OpenCV picks the container by suffix
         self._queue: queue.Queue[np.ndarray | None] = queue.Queue(max_queue)
-        self._writer: Any = None
+        self._writer: VideoWriter | None = None
         self.error: BaseException | None = None
         self.frames = 0
         self._thread = threading.Thread(target=self._run, name="detect-video", daemon=True)
         self._thread.start()
 
     def _run(self) -> None:
-        import cv2
-
         try:
             while (img := self._queue.get()) is not None:
                 if self._writer is None:
-                    h, w = img.shape[:2]
-                    self._writer = cv2.VideoWriter(str(self.part), cv2.VideoWriter_fourcc(*"mp4v"), self.fps, (w, h))
-                    if not self._writer.isOpened():
-                        raise OSError(f"OpenCV cannot write {self.part}")
+                    self._writer = VideoWriter(self.path, self.fps, (img.shape[1], img.shape[0]))
                 self._writer.write(img)
                 self.frames += 1
         except BaseException as exc:  # reported by close(); keep draining so put() never blocks forever
@@ -107,13 +101,12 @@ class VideoSink:
             self._queue.put(None)
             self._thread.join()
         if self._writer is not None:
-            self._writer.release()
-            self._writer = None
+            writer, self._writer = self._writer, None
             if self.error is None:
-                os.replace(self.part, self.path)
+                writer.close()  # an OSError naming the file if ffmpeg failed
+            else:
+                writer.abort()  # a video cut short by a failed write is not kept under its final name
         if self.error is not None:
-            with contextlib.suppress(FileNotFoundError):
-                os.unlink(self.part)  # a video cut short by a failed write is not kept under its final name
             err, self.error = self.error, None
             raise OSError(f"writing {self.path} failed: {err}")
 

@@ -1,0 +1,170 @@
+"""The examples in README.md and docs/*.md run as written, and docs/architecture.md lists exactly the modules.
+
+Every fenced block in the documentation says what it is in its info string:
+
+- ```` ```sh ```` and ```` ```python ```` are run: each document's blocks in order, in one temporary folder per
+  document, shell blocks with ``bash -euo pipefail`` and the venv's ``rollcam`` first on PATH, Python blocks as
+  scripts of this interpreter. A block fails the test when it exits non-zero.
+- ```` ```sh slow ```` / ```` ```python slow ```` run only with ``pytest -m slow`` (minutes of work).
+- ```` ```sh norun ```` / ```` ```python norun ```` are not run here (they need root, hardware, a cluster, the
+  network, or hours). Their ``rollcam`` command lines are still checked against ``--help``: the command exists
+  and takes every ``--flag`` used; Python ones must compile.
+- Anything else (```` ```text ````, ```` ```json ````, ```` ```console ````) is output or a layout, not a command.
+  A fence without an info string is an error, so nothing is left unrun by accident.
+"""
+
+from __future__ import annotations
+
+import os
+import re
+import shlex
+import subprocess
+import sys
+from dataclasses import dataclass
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parent.parent
+DOCS = [ROOT / "README.md", *sorted((ROOT / "docs").glob("*.md"))]
+BIN = Path(sys.executable).parent
+RUN_KINDS = {"sh", "python"}
+SHOWN_KINDS = {"text", "json", "console", "yaml"}
+FLAGS = {"norun", "slow"}
+BLOCK_TIMEOUT_S = 600
+FENCE = re.compile(r"^```([^\n`]*)\n(.*?)^```[ \t]*$", re.M | re.S)
+PACKAGES = ("common", "sim", "firmware", "emu", "host", "benchmarks")
+
+
+@dataclass(frozen=True)
+class Block:
+    doc: Path
+    line: int
+    kind: str
+    flags: frozenset[str]
+    code: str
+
+    @property
+    def where(self) -> str:
+        return f"{self.doc.relative_to(ROOT)}:{self.line}"
+
+
+def blocks(doc: Path) -> list[Block]:
+    text = doc.read_text()
+    found = []
+    for m in FENCE.finditer(text):
+        words = m.group(1).split()
+        kind = words[0] if words else ""
+        found.append(Block(doc, text.count("\n", 0, m.start()) + 1, kind, frozenset(words[1:]), m.group(2)))
+    return found
+
+
+ALL = [b for doc in DOCS for b in blocks(doc)]
+RUN = [b for b in ALL if b.kind in RUN_KINDS and "norun" not in b.flags]
+NORUN = [b for b in ALL if b.kind in RUN_KINDS and "norun" in b.flags]
+
+
+def test_every_block_says_what_it_is() -> None:
+    bad = [f"{b.where}: ```{' '.join([b.kind, *sorted(b.flags)])}" for b in ALL
+           if b.kind not in RUN_KINDS | SHOWN_KINDS or (b.flags - FLAGS) or (b.flags and b.kind not in RUN_KINDS)]
+    assert not bad, "fences need an info string: sh or python [norun|slow], or text/json/console/yaml:\n" + \
+        "\n".join(bad)
+    assert len(RUN) >= 20  # the parser found the examples
+
+
+@pytest.fixture(scope="module")
+def workdirs(tmp_path_factory: pytest.TempPathFactory) -> dict[Path, Path]:
+    return {doc: tmp_path_factory.mktemp(doc.stem) for doc in DOCS}
+
+
+def _env() -> dict[str, str]:
+    env = dict(os.environ)
+    env["PATH"] = f"{BIN}{os.pathsep}{env.get('PATH', '')}"
+    env.pop("PYTHONPATH", None)
+    return env
+
+
+@pytest.mark.parametrize("block", [pytest.param(b, id=b.where, marks=[pytest.mark.slow] if "slow" in b.flags else [])
+                                   for b in RUN])
+def test_example_runs(block: Block, workdirs: dict[Path, Path]) -> None:
+    cwd = workdirs[block.doc]
+    if block.kind == "sh":
+        cmd = ["bash", "-euo", "pipefail", "-c", block.code]
+    else:
+        script = cwd / f"_block_{block.line}.py"
+        script.write_text(block.code)
+        cmd = [sys.executable, str(script)]
+    res = subprocess.run(cmd, cwd=cwd, env=_env(), capture_output=True, text=True, timeout=BLOCK_TIMEOUT_S,
+                         stdin=subprocess.DEVNULL, check=False)
+    assert res.returncode == 0, (f"{block.where} exited {res.returncode}\n--- block\n{block.code}"
+                                 f"--- stdout\n{res.stdout[-3000:]}\n--- stderr\n{res.stderr[-3000:]}")
+
+
+def _rollcam_lines(code: str) -> list[list[str]]:
+    """Each ``rollcam ...`` command of a shell block, as words (continuations joined, comments dropped)."""
+    lines = []
+    for line in code.replace("\\\n", " ").splitlines():
+        for part in re.split(r"&&|;|\|", line):
+            try:
+                words = shlex.split(part, comments=True)
+            except ValueError:
+                continue
+            words = [w for w in words if w not in ("sudo",)]
+            if words and words[0] == "rollcam":
+                lines.append(words[1:])
+    return lines
+
+
+@pytest.mark.parametrize("block", [pytest.param(b, id=b.where) for b in NORUN])
+def test_unrun_example_matches_the_cli(block: Block) -> None:
+    if block.kind == "python":
+        compile(block.code, block.where, "exec")
+        return
+    for words in _rollcam_lines(block.code):
+        command = words[:1]
+        help_text = _help(command, block)
+        sub = re.search(r"\{([\w,-]+)\}", help_text.split("\n\n")[0])  # a command with subcommands
+        if sub and len(words) > 1 and words[1] in sub.group(1).split(","):
+            command = words[:2]
+            help_text = _help(command, block)
+        for flag in (w.split("=")[0] for w in words if w.startswith("--")):
+            assert re.search(rf"{re.escape(flag)}\b", help_text), \
+                f"{block.where}: 'rollcam {' '.join(command)}' has no {flag}"
+
+
+def _help(command: list[str], block: Block) -> str:
+    res = subprocess.run([str(BIN / "rollcam"), *command, "--help"], capture_output=True, text=True, env=_env(),
+                         timeout=120, check=False)
+    assert res.returncode == 0, f"{block.where}: 'rollcam {' '.join(command)} --help' failed: {res.stderr[-2000:]}"
+    return res.stdout
+
+
+def _tree_modules() -> set[str]:
+    return {p.relative_to(ROOT).as_posix() for pkg in PACKAGES for p in (ROOT / pkg).rglob("*.py")
+            if "__pycache__" not in p.parts}
+
+
+def _table_modules() -> set[str]:
+    text = (ROOT / "docs" / "architecture.md").read_text()
+    rows = [line for line in text.splitlines() if line.startswith("|")]
+    pattern = rf"`((?:{'|'.join(PACKAGES)})/[\w/]+\.py)`"
+    return {m for row in rows for m in re.findall(pattern, row.split("|")[1])}
+
+
+def test_architecture_module_table_lists_exactly_the_modules() -> None:
+    tree, table = _tree_modules(), _table_modules()
+    missing, extra = sorted(tree - table), sorted(table - tree)
+    assert not missing and not extra, (
+        f"docs/architecture.md's module tables are out of date.\n  not listed: {missing}\n  listed but absent: {extra}")
+
+
+def test_docs_cite_only_paths_inside_the_repository() -> None:
+    bad = [f"{doc.relative_to(ROOT)}: {m}" for doc in DOCS for m in re.findall(r"/work/\S+|/home/\S+", doc.read_text())]
+    assert not bad, bad
+
+
+def test_relative_links_resolve() -> None:
+    bad = [f"{doc.relative_to(ROOT)}: {target}" for doc in DOCS
+           for target in re.findall(r"\]\(([^)#\s]+)(?:#[^)]*)?\)", doc.read_text())
+           if "://" not in target and not (doc.parent / target).exists()]
+    assert not bad, bad
