@@ -214,7 +214,12 @@ def test_every_command_is_a_module_registered_the_same_way():
     (["bench", "soak", "--minutes", "-1"], "bench soak: argument --minutes: '-1' is invalid: must be greater than 0"),
     (["bench", "dataset", "--size", "10x"], "bench dataset: argument --size: size '10x' is not WIDTHxHEIGHT"),
     (["bench", "render", "--size", "big"], "--size"),
-    (["emulate", "imx219", "--duration", "-1"], "emulate: argument --duration: -1 is invalid: must be a number >= 0"),
+    (["emulate", "imx219", "--duration", "-1"], "emulate: argument --duration: '-1' is invalid: must be a number >= 0"),
+    (["emulate", "imx219", "--quality", "0"], "argument --quality: JPEG quality '0' is not an integer in 1..100"),
+    (["emulate", "imx219", "--quality", "101"], "argument --quality: JPEG quality '101' is not"),
+    (["emulate", "imx219", "--fps", "fast"], "emulate: argument --fps: 'fast' is invalid: expected a number > 0"),
+    (["emulate", "imx219", "--speed", "3x"], "argument --speed: '3x' is invalid: expected static | normal | fast"),
+    (["emulate", "imx219", "--usbip", "host"], "emulate: argument --usbip: expected HOST:PORT, got 'host'"),
 ])
 def test_usage_errors_are_one_error_line_and_exit_2(capsys, argv, words):
     assert main(argv) == 2
@@ -222,6 +227,30 @@ def test_usage_errors_are_one_error_line_and_exit_2(capsys, argv, words):
     lines = captured.err.splitlines()
     assert len(lines) == 1 and lines[0].startswith("rollcam: error: ") and words in lines[0], captured.err
     assert "usage:" not in captured.err and not captured.out
+
+
+def test_emulate_options_are_the_command_modules_and_quality_defaults_to_the_codec_tables():
+    from rollcam.common.values import JPEG_QUALITY
+    from rollcam.host.cli import build_parser
+    from rollcam.sim import codecs
+
+    parser, _ = build_parser()
+    args = parser.parse_args(["emulate", "imx219", "--fps", "15", "--serial-number", "X1", "--serial"])
+    assert args.quality == JPEG_QUALITY == codecs.JPEG_QUALITY
+    assert args.run.__module__ == "rollcam.host.commands.emulate"
+    assert (args.http, args.usbip, args.duration) == (None, None, None) and args.serial
+    from rollcam.host.commands.emulate import camera_options
+
+    assert camera_options(args) == {"fps": "15", "serial": "X1"}  # text, parsed by the option table as in emu:
+    assert parser.parse_args(["emulate", "imx219", "--http", ":0", "--quality", "40"]).http == ("127.0.0.1", 0)
+
+
+def test_emulate_duration_0_stops_as_soon_as_the_servers_are_up():
+    res = run("emulate", "imx219", "--size", "640x480", "--scene", "flat", "--http", "127.0.0.1:0", "--duration", "0",
+              "--json")
+    assert res.returncode == 0, res.stderr
+    assert json.loads(res.stdout)["http"]["url"].startswith("http://127.0.0.1:")
+    assert "stopped;" in res.stderr
 
 
 @pytest.mark.parametrize("uri, words", [
