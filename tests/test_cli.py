@@ -10,6 +10,7 @@ import importlib.util
 import io
 import json
 import os
+import re
 import signal
 import subprocess
 import sys
@@ -278,10 +279,57 @@ def test_a_missing_optional_package_is_one_line_and_exit_1(monkeypatch, capsys, 
     monkeypatch.setitem(sys.modules, "usb.core", None)
     assert main(["capture", "uvc:1d6b:0102?backend=emu", "--frames", "1", "--out", str(tmp_path / "x")]) == 1
     err = capsys.readouterr().err
-    assert err == "rollcam: error: the uvc: source needs pyusb (pip install 'rollcam[usb]')\n"
+    broken = "an install dependency of rollcam missing from this broken install (pip install pyusb)"
+    assert err == f"rollcam: error: the uvc: source needs pyusb, {broken}\n"
     assert main(["bench", "uvc", "--out", str(tmp_path / "b")]) == 1
-    assert capsys.readouterr().err == "rollcam: error: rollcam bench uvc needs pyusb (pip install 'rollcam[usb]')\n"
+    assert capsys.readouterr().err == f"rollcam: error: rollcam bench uvc needs pyusb, {broken}\n"
     assert not (tmp_path / "b").exists()
+
+
+def test_install_hints_follow_pyproject():
+    from rollcam.common.errors import MissingDependencyError
+
+    # An extra's package names the extra; an install dependency's says the install is broken; anything else
+    # (a user's choice such as the GPU runtime) names its own pip install, quoted for the shell.
+    assert str(MissingDependencyError("faster-coco-eval", "eval", "rollcam eval")) == (
+        "rollcam eval needs faster-coco-eval (pip install 'rollcam[eval]')")
+    assert str(MissingDependencyError("pyserial", feature="x")) == (
+        "x needs pyserial, an install dependency of rollcam missing from this broken install (pip install pyserial)")
+    assert str(MissingDependencyError("depthai>=3,<4")).endswith("broken install (pip install 'depthai>=3,<4')")
+    assert str(MissingDependencyError("onnxruntime-gpu", feature="y")) == (
+        "y needs onnxruntime-gpu (pip install onnxruntime-gpu)")
+
+
+def _install_hints(root: Path) -> list[tuple[str, str | None, str | None]]:
+    """(where, package, extra) of every literal ``require(...)`` / ``MissingDependencyError(...)`` call."""
+    import ast
+
+    out = []
+    for folder in ("common", "host", "emu", "firmware", "sim", "benchmarks"):
+        for path in (root / folder).rglob("*.py"):
+            for node in ast.walk(ast.parse(path.read_text())):
+                name = getattr(getattr(node, "func", None), "id", None)
+                if not isinstance(node, ast.Call) or name not in ("require", "MissingDependencyError"):
+                    continue
+                names = ("module", "package", "extra") if name == "require" else ("package", "extra")
+                given = dict(zip(names, node.args, strict=False)) | {k.arg: k.value for k in node.keywords}
+                value = {k: v.value for k, v in given.items() if isinstance(v, ast.Constant)}
+                package = value.get("package") or value.get("module", "").split(".")[0]
+                out.append((f"{path.relative_to(root)}:{node.lineno}", package, value.get("extra")))
+    return out
+
+
+def test_every_install_hint_names_an_extra_that_exists_and_holds_the_package():
+    import tomllib
+
+    root = Path(__file__).resolve().parents[1]
+    extras = tomllib.loads((root / "pyproject.toml").read_text())["project"]["optional-dependencies"]
+    hints = _install_hints(root)
+    assert len(hints) >= 8 and {p for _, p, e in hints if e is None} >= {"pyusb", "pyserial", "depthai", "onnxruntime"}
+    for where, package, extra in hints:
+        if extra is not None:
+            held = {re.split(r"[<>=\[;]", r)[0] for r in extras.get(extra, [])}
+            assert package.split("[")[0] in held, f"{where}: extra {extra!r} does not hold {package!r}"
 
 
 def test_no_hand_written_install_hints_outside_the_one_error_type():
