@@ -230,6 +230,20 @@ def test_usage_errors_are_one_error_line_and_exit_2(capsys, argv, words):
     assert "usage:" not in captured.err and not captured.out
 
 
+@pytest.mark.parametrize("argv, new", [
+    (["--quick"], "rollcam bench render --quick"), (["--hog"], "rollcam bench hog"),
+    (["--detect"], "rollcam bench detect"), (["--ptc"], "rollcam bench ptc"),
+    (["--ptc", "imx477"], "rollcam bench ptc imx477"), (["--sensor"], "rollcam bench sensor"),
+    (["--uvc"], "rollcam bench uvc"), (["--soak", "--minutes", "1"], "rollcam bench soak"),
+    (["--dataset", "--size", "10x"], "rollcam bench dataset"),
+])
+def test_old_bench_flags_name_their_subcommand(capsys, tmp_path: Path, argv, new):
+    assert main(["bench", *argv, "--out", str(tmp_path / "b")]) == 2
+    captured = capsys.readouterr()
+    assert captured.err == f"rollcam: error: bench: {argv[0]} is now {new!r}\n" and not captured.out
+    assert not (tmp_path / "b").exists()
+
+
 def test_emulate_options_are_the_command_modules_and_quality_defaults_to_the_codec_tables():
     from rollcam.common.values import JPEG_QUALITY
     from rollcam.host.cli import build_parser
