@@ -49,8 +49,8 @@ class FirmwareProducer:
 
     def configure(self, width: int, height: int, interval_ns: int) -> None:
         cam = self.camera
-        if (width, height) not in cam.sizes():
-            raise DeviceError(f"{self.name}: size {width}x{height} is not one of {cam.sizes()}")
+        if (width, height) not in self.sizes():  # what the descriptors offered: the modes and the current size
+            raise DeviceError(f"{self.name}: size {width}x{height} is not one of {self.sizes()}")
         cam.stream_off()
         try:
             cam.set_size(width, height)
