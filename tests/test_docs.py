@@ -123,13 +123,22 @@ def test_unrun_example_matches_the_cli(block: Block) -> None:
     for words in _rollcam_lines(block.code):
         command = words[:1]
         help_text = _help(command, block)
-        sub = re.search(r"\{([\w,-]+)\}", help_text.split("\n\n")[0])  # a command with subcommands
-        if sub and len(words) > 1 and words[1] in sub.group(1).split(","):
+        subcommands = _subcommands(help_text)
+        if subcommands:
+            assert len(words) > 1 and words[1] in subcommands, \
+                f"{block.where}: 'rollcam {' '.join(words[:2])}': no such subcommand (one of {sorted(subcommands)})"
             command = words[:2]
             help_text = _help(command, block)
         for flag in (w.split("=")[0] for w in words if w.startswith("--")):
             assert re.search(rf"{re.escape(flag)}\b", help_text), \
                 f"{block.where}: 'rollcam {' '.join(command)}' has no {flag}"
+
+
+def _subcommands(help_text: str) -> set[str]:
+    """The subcommands a ``--help`` text lists (``usage: rollcam bench [-h] STUDY ...``), or none."""
+    if not re.search(r" \.\.\.\s*$", help_text.split("\n\n")[0]):
+        return set()
+    return set(re.findall(r"^    ([\w-]+)(?: |$)", help_text, re.M))  # argparse indents choices by four
 
 
 def _help(command: list[str], block: Block) -> str:
