@@ -177,3 +177,37 @@ def test_relative_links_resolve() -> None:
            for target in re.findall(r"\]\(([^)#\s]+)(?:#[^)]*)?\)", doc.read_text())
            if "://" not in target and not (doc.parent / target).exists()]
     assert not bad, bad
+
+
+def _table_after(doc: Path, heading: str) -> dict[str, list[str]]:
+    """The first table under ``heading`` in ``doc``: first cell's code name -> the other cells."""
+    lines = doc.read_text().splitlines()
+    start = lines.index(heading)
+    rows: dict[str, list[str]] = {}
+    for line in lines[start + 1:]:
+        if line.startswith("|"):
+            cells = [c.strip() for c in line.strip("|").split(" | ")]
+            name = re.fullmatch(r"`(\w+)`", cells[0])
+            if name:
+                assert name.group(1) not in rows, f"{doc.name}: {name.group(1)} listed twice"
+                rows[name.group(1)] = cells[1:]
+        elif rows:
+            break
+    return rows
+
+
+def test_emu_option_table_is_the_firmware_option_table() -> None:
+    from rollcam.firmware.options import OPTIONS, as_text
+    from rollcam.host.sources.emu import SOURCE_OPTIONS
+
+    rows = _table_after(ROOT / "docs" / "sources.md", "### Options of `emu:`")
+    known = set(OPTIONS) | SOURCE_OPTIONS
+    assert set(rows) == known, (f"docs/sources.md's emu: options differ from firmware/options.py: not listed "
+                                f"{sorted(known - set(rows))}, listed but unknown {sorted(set(rows) - known)}")
+    for name, option in OPTIONS.items():
+        default = rows[name][0]
+        if option.default is None:  # decided by the sensor or the format: said in words, not as a value
+            assert not default.startswith("`"), f"{name}: the table has no default value, the doc says {default}"
+        else:
+            want = f"`{as_text(option.default)}`"
+            assert default.split(" ")[0] == want, f"{name}: default {want} in firmware/options.py, {default} in the doc"
