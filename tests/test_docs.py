@@ -70,6 +70,9 @@ def test_every_block_says_what_it_is() -> None:
     assert not bad, "fences need an info string: sh or python [norun|slow], or text/json/console/yaml:\n" + \
         "\n".join(bad)
     assert len(RUN) >= 20  # the parser found the examples
+    unpaired = [doc.relative_to(ROOT).as_posix() for doc in DOCS
+                if sum(line.startswith("```") for line in doc.read_text().splitlines()) != 2 * len(blocks(doc))]
+    assert not unpaired, f"a fence line that opens or closes no block (text after a closing ```?): {unpaired}"
 
 
 @pytest.fixture(scope="module")
@@ -177,6 +180,29 @@ def test_relative_links_resolve() -> None:
            for target in re.findall(r"\]\(([^)#\s]+)(?:#[^)]*)?\)", doc.read_text())
            if "://" not in target and not (doc.parent / target).exists()]
     assert not bad, bad
+
+
+def _anchors(doc: Path) -> set[str]:
+    """The fragment ids of a Markdown page's headings, as GitHub makes them (repeats get -1, -2, ...)."""
+    text = FENCE.sub("", doc.read_text())  # a '# comment' in a code block is no heading
+    seen: dict[str, int] = {}
+    for heading in re.findall(r"^#{1,6} +(.+?) *#* *$", text, re.M):
+        slug = re.sub(r"[^\w\- ]", "", heading.lower()).replace(" ", "-")
+        n = seen.get(slug, 0)
+        seen[slug] = n + 1
+        if n:
+            seen[f"{slug}-{n}"] = 1
+    return set(seen)
+
+
+def test_links_to_sections_find_them() -> None:
+    bad = []
+    for doc in DOCS:
+        for target, fragment in re.findall(r"\]\(([^)#\s]*)#([^)\s]+)\)", doc.read_text()):
+            page = (doc.parent / target) if target else doc
+            if "://" not in target and page.suffix == ".md" and fragment not in _anchors(page):
+                bad.append(f"{doc.relative_to(ROOT)}: {target}#{fragment}")
+    assert not bad, f"links to sections that do not exist: {bad}"
 
 
 def _table_after(doc: Path, heading: str) -> dict[str, list[str]]:
