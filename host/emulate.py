@@ -183,6 +183,20 @@ def camera_options(args: argparse.Namespace) -> dict[str, str]:
     return {k.removeprefix("camera_"): v for k, v in vars(args).items() if k.startswith("camera_") and v is not None}
 
 
+def wait_until_stopped(stop: threading.Event, duration_s: float | None, pump: Any, poll_s: float = 0.5) -> None:
+    """Wait for ``stop`` or ``duration_s``, looking every ``poll_s`` whether the frame pump is still alive: a
+    pump that died raises its error (a DeviceError) here, so ``emulate`` ends with it instead of serving
+    silence."""
+    from rollcam.common.lifecycle import Deadline
+
+    deadline = Deadline(duration_s)
+    while not stop.wait(deadline.within(poll_s)):
+        pump.check()
+        if deadline.expired:
+            return
+    pump.check()
+
+
 def cmd_emulate(args: argparse.Namespace) -> int:
     """Run the emulator until Ctrl-C, SIGTERM or ``--duration``; every transport is closed on the way out."""
     from rollcam.emu.pump import FramePump
@@ -214,7 +228,7 @@ def cmd_emulate(args: argparse.Namespace) -> int:
                     print(f"  {line}", flush=True)
             print("press Ctrl-C to stop", flush=True)
         with contextlib.suppress(KeyboardInterrupt):  # Ctrl-C is the normal way to stop a server
-            stop.wait(args.duration)
+            wait_until_stopped(stop, args.duration, pump)
     finally:
         pump.close()
         for r in reversed(running):
