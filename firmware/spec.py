@@ -102,7 +102,9 @@ class CameraSpec:
             check_size(self.size)
         g = self.sensor.gain
         max_gain = g.analog_max * g.digital_max
-        if not isinstance(self.gain, (int, float)) or isinstance(self.gain, bool) or not 0 < self.gain <= max_gain:
+        slack = 1 + 1e-3  # doors that speak hundredths (UVC) round the maximum to the nearest one
+        if not isinstance(self.gain, (int, float)) or isinstance(self.gain, bool) \
+                or not 0 < self.gain <= max_gain * slack:
             raise ConfigError(f"gain {self.gain!r} is not in (0, {max_gain:g}] (sensor {self.sensor.name!r}: "
                               f"analog {g.analog_max:g} x digital {g.digital_max:g})")
         if self.exposure_ns is not None and not (isinstance(self.exposure_ns, int)
