@@ -93,11 +93,16 @@ class FirmwareCamera(DeviceStream):
 
     def set_options(self, options: Mapping[str, Any]) -> CameraSpec:
         """Change options by their text names (``rollcam.firmware.options``): ``scene``, ``seed``, ``gain``, ...;
-        a change of size, format, shutter, readout or flips is refused while streaming."""
-        if self.streaming:
-            warm_ahead(lambda: self.spec.with_options(options))
+        a change of size, format, shutter, readout or flips is refused while streaming. The new spec (and its
+        scene) is built before the camera is locked, so a scene change never holds up the frames."""
         with self.lock:
-            spec = self.spec.with_options(options)
+            base = self.spec
+        spec = base.with_options(options)  # builds a new scene off the lock: frames keep rendering meanwhile
+        if self.streaming:  # and compiles a new kind of frame off it too
+            warm_ahead(lambda: spec)
+        with self.lock:
+            if self.spec is not base:  # changed meanwhile: apply the options on top of that (scene cached now)
+                spec = self.spec.with_options(options)
             moved = [f for f in _IDLE_ONLY if getattr(spec, f) != getattr(self.spec, f)]
             if self.streaming and moved:
                 raise DeviceError(f"cannot change {moved} while streaming; stop first")

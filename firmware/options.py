@@ -5,6 +5,12 @@ Every front door that names camera settings in text reads this table: the ``emu:
 ``{name: text}`` into typed values (each parser is one of ``rollcam.common.values``' or a small one here),
 rejecting unknown names and options that do not apply to the chosen scene kind; ``CameraSpec.from_options``
 builds the validated spec from them. Defaults are the table's, whichever door the options came through.
+
+Every value is bounded, and the error names the bound (``LIMITS``): by the hardware where it has one (a
+64-bit seed, a USB string descriptor's serial number) and otherwise by what one frame may cost in memory
+and render time on an ordinary machine (``MAX_PIXELS``, ``MAX_PEDESTRIANS``, ``MAX_BLUR_PX``).
+``CameraSpec`` checks its typed fields against the same limits, so doors that do not go through this table
+(serial ``SIZE``, V4L2 ``S_FMT``, register writes) meet them too.
 """
 
 from __future__ import annotations
@@ -23,6 +29,61 @@ from rollcam.common.values import (
     positive_float,
     reject_unknown,
 )
+
+MAX_SIDE = 8192
+"""Widest and tallest output, pixels (a 16-bit UVC wWidth holds more; the renderer's buffers do not)."""
+MAX_PIXELS = 4096 * 4096
+"""Most pixels in one frame: a float32 RGB frame of 16.8 MP is ~200 MB, and the renderer keeps a few."""
+MAX_PEDESTRIANS = 1000
+"""Most street walkers: render time grows ~N^1.7 (1,000 cost ~0.4 s a 640x480 frame on two cores;
+20,000 took 64 s), and the scene is built when the option is set."""
+MAX_SEED = 2**64 - 1
+"""Largest scene or noise seed (a 64-bit seed, as numpy's generators take)."""
+MAX_SPEED = 100.0
+"""Largest street speed multiplier (100 x normal walkers is ~200 m/s)."""
+MAX_VX_PX_S = 1e6
+"""Fastest chart bar, px/s (it crosses the widest frame in 8 ms)."""
+MAX_LEVEL = 100.0
+"""Brightest flat radiance level (1 is the sensor's full range; 100 saturates any exposure)."""
+MAX_EXPOSURE_US = 1e9
+"""Longest exposure request, us (1000 s, the longest frame; it is clamped to the frame anyway)."""
+MAX_BLUR_PX = 256.0
+"""Largest motion-blur bound, px (time samples per line grow with it)."""
+MAX_DEVICE_NS = 2**62
+"""Latest device-clock start an ``emu:`` stream may be given, ns (146 years; int64 room for its frames)."""
+MAX_TEXT = 32
+"""Longest serial number or camera name, characters (a USB iSerialNumber string is short ASCII)."""
+
+
+def _num(value: float) -> str:
+    return str(value) if isinstance(value, int) else f"{value:g}"
+
+
+def bounded(parse: Callable[[str], Any], lo: float, hi: float) -> Callable[[str], Any]:
+    """``parse`` with the result checked to lie in ``lo..hi`` (the error names both bounds)."""
+    def check(text: str) -> Any:
+        value = parse(text)
+        if not lo <= value <= hi:
+            raise ValueError(f"must be in {_num(lo)}..{_num(hi)}")
+        return value
+    check.__doc__ = parse.__doc__
+    return check
+
+
+def check_size(size: tuple[int, int]) -> tuple[int, int]:
+    """``size`` (width, height) checked against ``MAX_SIDE`` and ``MAX_PIXELS`` (ConfigError naming them)."""
+    w, h = size
+    if w > MAX_SIDE or h > MAX_SIDE or w * h > MAX_PIXELS:
+        raise ConfigError(f"size {w}x{h} is larger than the emulator renders (at most {MAX_SIDE} a side and "
+                          f"{MAX_PIXELS:,} pixels)")
+    return size
+
+
+def check_text(value: str, what: str) -> str:
+    """``value`` checked to be 1..MAX_TEXT printable ASCII characters."""
+    if not value or len(value) > MAX_TEXT or not value.isascii() or not value.isprintable():
+        raise ConfigError(f"{what} {value[:MAX_TEXT + 8]!r} must be 1..{MAX_TEXT} printable ASCII characters")
+    return value
 
 # The value parsers import the simulator only when they run: the table also builds the ``rollcam emulate``
 # flags, and ``rollcam --help`` must not load numpy and numba.
@@ -43,7 +104,8 @@ def _choice(*allowed: str) -> Callable[[str], str]:
 def _speed(text: str) -> str:
     from rollcam.sim.scenegen import SPEED_PRESETS, parse_speed
 
-    parse_speed(text if str(text).lower() in SPEED_PRESETS else float(text))
+    if parse_speed(text if str(text).lower() in SPEED_PRESETS else float(text)) > MAX_SPEED:
+        raise ValueError(f"must be a preset or a multiplier in 0..{MAX_SPEED:g}")
     return str(text).lower()
 
 
@@ -72,9 +134,14 @@ def _noise(text: str) -> frozenset[str]:
 
 
 def _text(text: str) -> str:
-    if not str(text):
-        raise ValueError("must not be empty")
-    return str(text)
+    return check_text(str(text), "text")
+
+
+def _size(text: str) -> tuple[int, int]:
+    return check_size(parse_size(text))
+
+
+_seed = bounded(non_negative_int, 0, MAX_SEED)
 
 
 @dataclass(frozen=True)
@@ -91,34 +158,37 @@ class Option:
 
 OPTIONS: dict[str, Option] = {o.name: o for o in (
     Option("scene", _choice(*SCENE_KINDS), "street", "scene kind: street | chart | flat", SCENE_KINDS),
-    Option("seed", non_negative_int, 0, "scene seed (integer >= 0)", SCENE_KINDS),
+    Option("seed", _seed, 0, "scene seed (integer >= 0)", SCENE_KINDS),
     Option("camera", _text, "0", "scene camera: index or name", SCENE_KINDS),
     Option("time", _choice("dawn", "morning", "noon", "afternoon", "dusk"), "noon",
            "street: dawn | morning | noon | afternoon | dusk", ("street",), "time_of_day"),
     Option("speed", _speed, "normal", "street: static | normal | fast | a multiplier", ("street",)),
-    Option("pedestrians", non_negative_int, 20, "street: number of walkers", ("street",), "n_pedestrians"),
+    Option("pedestrians", bounded(non_negative_int, 0, MAX_PEDESTRIANS), 20, "street: number of walkers",
+           ("street",), "n_pedestrians"),
     Option("ego", _ego, "none", "street: camera motion none | pan | walk | vehicle | drone", ("street",)),
-    Option("vx", finite_float, 2000.0, "chart: bar speed, px/s",
+    Option("vx", bounded(finite_float, -MAX_VX_PX_S, MAX_VX_PX_S), 2000.0, "chart: bar speed, px/s",
            ("chart",), "vx_px_s"),
-    Option("level", non_negative_float, 0.5, "flat: radiance level (0..1 is the sensor's range)", ("flat",)),
-    Option("size", parse_size, None, "output WxH (default: the sensor's default mode; another size is a "
+    Option("level", bounded(non_negative_float, 0.0, MAX_LEVEL), 0.5,
+           "flat: radiance level (0..1 is the sensor's range)", ("flat",)),
+    Option("size", _size, None, "output WxH (default: the sensor's default mode; another size is a "
                                      "rescaled readout)"),
     Option("fps", positive_float, None, "frame rate: sets the frame length (default: the mode's); above the "
                                         "sensor's maximum for the size is an error"),
     Option("shutter", _choice(*SHUTTERS), None, "rolling | global (default: the sensor's)"),
     Option("readout", _readout, None, "readout direction tb | bt | lr | rl (default: the sensor's)"),
-    Option("exposure_us", non_negative_float, None, "exposure in us, whole lines, clamped to the frame "
-                                                    "(default: 10 ms)"),
+    Option("exposure_us", bounded(non_negative_float, 0.0, MAX_EXPOSURE_US), None,
+           "exposure in us, whole lines, clamped to the frame (default: 10 ms)"),
     Option("gain", positive_float, 1.0, "linear total gain (analog first, then digital, as drivers split it)"),
     Option("format", _fourcc, "BGR3", "pixel format: BGR3 | YUYV | NV12 | YU12 | RGB3 | GREY | MJPG or a raw "
                                       "fourcc of the sensor (RG10, pRAA, Y10, ...)"),
     Option("physics", parse_bool, None, "sensor model (exposure integration, EMVA noise, ADC): default on for "
                                         "every format but BGR3"),
-    Option("blur_px", non_negative_float, 0.5, "sensor model: motion-blur bound in px (0: mid-exposure only)"),
+    Option("blur_px", bounded(non_negative_float, 0.0, MAX_BLUR_PX), 0.5,
+           "sensor model: motion-blur bound in px (0: mid-exposure only)"),
     Option("noise", _noise, None, "sensor model: on | off | comma list of shot, dark, read, dsnu, prnu, "
                                   "saturation (default: on)"),
     Option("serial", _text, "0001", "device serial number (fixes the DSNU/PRNU patterns)"),
-    Option("noise_seed", non_negative_int, 0, "temporal noise seed"),
+    Option("noise_seed", _seed, 0, "temporal noise seed"),
     Option("hflip", parse_bool, False, "mirror left-right (raw: the Bayer order changes as the sensor's does)"),
     Option("vflip", parse_bool, False, "flip top-bottom: the scene is read bottom-up, first line still first"),
     Option("test_pattern", _text, "none", "sensor test pattern instead of the scene: none | bars | solid | "

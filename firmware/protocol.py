@@ -100,6 +100,10 @@ def _scene_query(cam: FirmwareCamera) -> str:
     return " ".join(f"{k}={v}" for k, v in cam.scene_options.items())
 
 
+def _or_ignored(start_ns: int | None) -> str:
+    return "IGNORED" if start_ns is None else str(start_ns)
+
+
 def _stats(cam: FirmwareCamera) -> str:
     return " ".join(f"{k}={v}" for k, v in dataclasses.asdict(cam.stats).items())
 
@@ -134,7 +138,9 @@ COMMANDS: dict[str, Command] = {
     "TRIGMODE": Command(("FREE|EXTERNAL",), lambda c, v: c.set_trigger_mode(v.lower()) or "OK",
                         "free-running or one frame per TRIGGER"),
     "TRIGMODE?": Command((), lambda c: c.trigger_mode.upper(), "trigger mode"),
-    "TRIGGER": Command((), lambda c: f"OK {c.trigger()}", "start one frame; replies with its start (device ns)"),
+    "TRIGGER": Command((), lambda c: f"OK {_or_ignored(c.trigger())}",
+                       "trigger pulse: starts a frame (or latches one during a frame); replies with its start "
+                       "(device ns) or IGNORED (one already latched)"),
     "CLOCK?": Command((), lambda c: str(c.clock_ns()), "device clock, integer ns since boot"),
     "INTERVAL?": Command((), lambda c: str(c.frame_interval_ns), "frame interval, ns"),
     "SIZE": Command(("WxH",), _size, "select the mode of this output size (not while streaming)"),
@@ -148,7 +154,7 @@ COMMANDS: dict[str, Command] = {
     "OPT": Command(("NAME", "VALUE"), _set_option, "set a camera option as the emu: URI names it (gain 2, "
                    "exposure_us 5000, format RG10, ...); replies with the value in effect"),
     "OPT?": Command(("NAME",), _get_option, "a camera option's value in effect"),
-    "STATS?": Command((), _stats, "frames made, skipped, triggers"),
+    "STATS?": Command((), _stats, "frames made, skipped, triggers taken and ignored"),
 }
 """The protocol: command word -> Command."""
 

@@ -29,9 +29,9 @@ from rollcam.sim.noise import parse_stages
 from rollcam.sim.scene import Scene
 from rollcam.sim.scenegen import ego_preset, make_scene
 from rollcam.sim.sensor import flipped_cfa
-from rollcam.sim.synthetic import StreamSettings, resolve_settings
+from rollcam.sim.synthetic import MIN_FPS, StreamSettings, resolve_settings
 
-from .options import OPTIONS, parse_options
+from .options import MAX_BLUR_PX, MAX_EXPOSURE_US, MAX_SEED, OPTIONS, check_size, check_text, parse_options
 from .pixfmt import FORMATS, raw_formats
 from .traits import traits_for
 
@@ -67,6 +67,7 @@ class CameraSpec:
     settings: StreamSettings = field(init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
+        self._check_limits()
         s = resolve_settings(self.sensor, size=self.size, shutter=self.shutter, readout=self.readout,
                              exposure_ns=self.exposure_ns, gain=self.gain,
                              frame_length_lines=self.frame_length_lines, line_length_pck=self.line_length_pck)
@@ -80,16 +81,38 @@ class CameraSpec:
         fix(self, "scene_options", tuple(sorted(dict(self.scene_options).items())))
         if self.physics is False and self.raw:
             raise ConfigError(f"pixel format {self.pixel_format!r} needs the sensor model (physics on)")
-        if not isinstance(self.blur_px, (int, float)) or not 0 <= self.blur_px < float("inf"):
-            raise ConfigError(f"blur_px must be a finite number >= 0 (0: no motion blur), got {self.blur_px!r}")
+        if not isinstance(self.blur_px, (int, float)) or not 0 <= self.blur_px <= MAX_BLUR_PX:
+            raise ConfigError(f"blur_px must be a number in 0..{MAX_BLUR_PX:g} (0: no motion blur), got "
+                              f"{self.blur_px!r}")
+        if s.timing.fps < MIN_FPS:
+            raise ConfigError(f"a frame of {s.timing.frame_length_lines} lines lasts {1 / s.timing.fps:.3g} s, longer "
+                              f"than the longest frame ({1 / MIN_FPS:g} s)")
         patterns = traits_for(self.sensor.name).test_pattern_codes
         if self.test_pattern not in patterns:
             raise ConfigError(f"test pattern {self.test_pattern!r} is not one of {list(patterns)}")
         for name in ("noise_seed", "seed"):
             value = getattr(self, name)
-            if isinstance(value, bool) or not isinstance(value, int) or value < 0:
-                raise ConfigError(f"{name} must be a whole number >= 0, got {value!r}")
+            if isinstance(value, bool) or not isinstance(value, int) or not 0 <= value <= MAX_SEED:
+                raise ConfigError(f"{name} must be a whole number in 0..{MAX_SEED}, got {value!r}")
         scene_of(self).camera(self.camera)  # the scene is built (and cached) now: bad options fail here
+
+    def _check_limits(self) -> None:
+        """The typed fields against the option table's limits (before anything is sized from them)."""
+        if self.size is not None:
+            check_size(self.size)
+        g = self.sensor.gain
+        max_gain = g.analog_max * g.digital_max
+        slack = 1 + 1e-3  # doors that speak hundredths (UVC) round the maximum to the nearest one
+        if not isinstance(self.gain, (int, float)) or isinstance(self.gain, bool) \
+                or not 0 < self.gain <= max_gain * slack:
+            raise ConfigError(f"gain {self.gain!r} is not in (0, {max_gain:g}] (sensor {self.sensor.name!r}: "
+                              f"analog {g.analog_max:g} x digital {g.digital_max:g})")
+        if self.exposure_ns is not None and not (isinstance(self.exposure_ns, int)
+                                                 and 0 <= self.exposure_ns <= MAX_EXPOSURE_US * 1000):
+            raise ConfigError(f"exposure {self.exposure_ns!r} ns is not a whole number in "
+                              f"0..{MAX_EXPOSURE_US * 1000:.0f}")
+        check_text(self.serial, "serial number")
+        check_text(self.camera, "scene camera")
 
     # -------------------------------------------------------------------------------------- building
     @classmethod

@@ -4,6 +4,12 @@
 of the device clock (the host clock passed in minus the boot time). It reads the frame timing from the
 camera's current ``CameraSpec``; timing changes apply from the next frame, whose schedule is re-anchored at
 that frame's start.
+
+External triggers follow a sensor's trigger input with one latch: a trigger while the sensor is idle starts
+a frame at once; a trigger while a triggered frame is exposing or being read out is latched, and its frame
+starts the moment that readout ends; further triggers while one is latched are ignored (counted in
+``stats.triggers_ignored``). So triggers cost nothing however fast they come: at most one frame in progress
+and one latched. A consumer that falls behind loses the oldest unmade frame (``stats.skipped``).
 """
 
 from __future__ import annotations
@@ -31,6 +37,7 @@ class CameraStats(Stats):
     frames: int = 0
     skipped: int = 0
     triggers: int = 0
+    triggers_ignored: int = 0
 
 
 @dataclass(frozen=True)
@@ -70,7 +77,9 @@ class DeviceStream:
         self.streaming = False
         self.trigger_mode = "free"
         self.stats = CameraStats()
-        self._triggers: collections.deque[int] = collections.deque()
+        self._triggers: collections.deque[int] = collections.deque()  # starts of triggered frames not yet planned
+        self._busy_until_ns = 0  # end of readout of the last triggered frame (device clock)
+        self._latched_start_ns = -1  # start of the latched frame, while one is latched
         self._schedule: FrameSchedule | None = None
         self._next_seq = 0
 
@@ -103,7 +112,7 @@ class DeviceStream:
         """Stop streaming; frames not yet planned are never made. Idempotent."""
         with self.changed:
             self.streaming = False
-            self._triggers.clear()
+            self._clear_triggers()
             self.changed.notify_all()
 
     def set_trigger_mode(self, mode: str) -> None:
@@ -112,23 +121,39 @@ class DeviceStream:
             raise ConfigError(f"trigger mode {mode!r} is not 'free' or 'external'")
         with self.changed:
             self.trigger_mode = mode
-            self._triggers.clear()
+            self._clear_triggers()
             if self.streaming:
                 self._schedule = schedule_of(self.spec, self.clock_ns(), self._next_seq)
             self.changed.notify_all()
 
-    def trigger(self) -> int:
-        """Start one frame now (external trigger mode, streaming); returns its exposure start (device ns)."""
+    def _clear_triggers(self) -> None:
+        self._triggers.clear()
+        self._busy_until_ns, self._latched_start_ns = 0, -1
+
+    def trigger(self) -> int | None:
+        """An external trigger pulse (trigger mode external, streaming): starts a frame now, or latches one to
+        start when the frame in progress is read out, or is ignored while one is latched. Returns the exposure
+        start of the frame it starts (device ns), or None when it was ignored."""
         with self.changed:
             if self.trigger_mode != "external":
                 raise DeviceError("trigger needs trigger mode 'external' (TRIGMODE EXTERNAL)")
             if not self.streaming:
                 raise DeviceError("trigger while not streaming (STREAM ON first)")
-            t = self.clock_ns()
-            self._triggers.append(t)
+            now = self.clock_ns()
+            if now < self._latched_start_ns:
+                self.stats.triggers_ignored += 1
+                return None
+            start = max(now, self._busy_until_ns)
+            if start > now:
+                self._latched_start_ns = start
+            self._busy_until_ns = schedule_of(self.spec, start, 0).frame_due_ns(0)
+            if len(self._triggers) >= 2:  # the consumer is two frames behind: the oldest is lost, as on a sensor
+                self._triggers.popleft()
+                self.stats.skipped += 1
+            self._triggers.append(start)
             self.stats.triggers += 1
             self.changed.notify_all()
-            return t
+            return start
 
     def current_schedule(self) -> FrameSchedule | None:
         """The schedule frames follow from the next one on (timing changes included), or None when idle."""

@@ -104,6 +104,20 @@ FirmwareCamera and the shared FramePump, and returns None when its option was no
 one entry here and its flags in ``rollcam.host.commands.emulate``."""
 
 
+def wait_until_stopped(stop: threading.Event, duration_s: float | None, pump: Any, poll_s: float = 0.5) -> None:
+    """Wait for ``stop`` or ``duration_s``, looking every ``poll_s`` whether the frame pump is still alive: a
+    pump that died raises its error (a DeviceError) here, so ``emulate`` ends with it instead of serving
+    silence."""
+    from rollcam.common.lifecycle import Deadline
+
+    deadline = Deadline(duration_s)
+    while not stop.wait(deadline.within(poll_s)):
+        pump.check()
+        if deadline.expired:
+            return
+    pump.check()
+
+
 def serve(args: argparse.Namespace, camera_options: dict[str, str]) -> int:
     """Run the emulator of ``args.sensor`` programmed by ``camera_options`` (text, as in an emu: URI) on the
     transports ``args`` asks for, until Ctrl-C, SIGTERM or ``args.duration`` (0: stop at once); every
@@ -135,7 +149,7 @@ def serve(args: argparse.Namespace, camera_options: dict[str, str]) -> int:
                     print(f"  {line}", flush=True)
             print("press Ctrl-C to stop", flush=True)
         with contextlib.suppress(KeyboardInterrupt):  # Ctrl-C is the normal way to stop a server
-            stop.wait(args.duration)
+            wait_until_stopped(stop, args.duration, pump)
     finally:
         pump.close()
         for r in reversed(running):

@@ -31,8 +31,13 @@ from .timing import LineTiming, Readout
 
 _PACKAGE = "rollcam.hw_configs"
 _REQUIRED = object()
-_short = reprlib.Repr()
+_short = reprlib.Repr()  # values in messages: a few items and levels, never a whole (aliased) structure
 _short.maxstring = _short.maxother = 60
+_short.maxlevel, _short.maxlist, _short.maxtuple, _short.maxdict = 3, 4, 4, 4
+MAX_YAML_BYTES = 1 << 20
+"""Largest sensor description read (the shipped ones are ~6 KB)."""
+MAX_YAML_NODES = 100_000
+"""Most values a description may expand to with its aliases resolved (an alias bomb expands to billions)."""
 
 BAYER_ORDERS = ("RGGB", "BGGR", "GRBG", "GBRG", "mono")
 REGISTER_ROLES = ("chip_id", "mode_select", "frame_length", "line_length", "exposure", "analog_gain",
@@ -120,7 +125,7 @@ class _Checked:
             if value is None and spec.default is None:
                 continue
             if not _is(spec.kind, value) or (spec.check is not None and not spec.check(value)):
-                raise _Invalid(key, f"expected {spec.form}, got {value!r}")
+                raise _Invalid(key, f"expected {spec.form}, got {_short.repr(value)}")
             if spec.kind is float:
                 object.__setattr__(self, key, float(value))
         for rule in self._rules:
@@ -131,7 +136,7 @@ class _Checked:
                     key = f"{field}[{i}]{sub}" if each else rule.key
                     path = sub.lstrip(".") if each else rule.key
                     shown = rule.shown(self, item, i) if rule.shown else _dotted(item, path)
-                    raise _Invalid(key, f"expected {rule.form(self, item, i)}, got {shown!r}")
+                    raise _Invalid(key, f"expected {rule.form(self, item, i)}, got {_short.repr(shown)}")
 
 
 def _f(kind: Any, form: str, check: Callable[[Any], Any] | None = None, default: Any = _REQUIRED) -> Any:
@@ -324,6 +329,10 @@ class SensorConfig(_Checked):
               lambda s, m, i: m.frame_length_lines >= s.exposure.min_lines + s.exposure.max_margin_lines,
               lambda s, m, i: f">= exposure.min_lines + max_margin_lines "
                               f"({s.exposure.min_lines} + {s.exposure.max_margin_lines}): room to expose"),
+        *(_Rule(f"modes[].{key}", lambda s, m, i, key=key, role=role: getattr(m, key) <= _reg_max(s, role),
+                lambda s, m, i, role=role: f"<= {_reg_max(s, role)}, the most its "
+                                           f"{_reg_bits(s, role)}-bit {role} register holds")
+          for key, role in (("frame_length_lines", "frame_length"), ("line_length_pck", "line_length"))),
         _Rule("default_mode", lambda s, _, i: s.default_mode in [m.name for m in s.modes],
               lambda s, _, i: f"one of {[m.name for m in s.modes]}"),
         _Rule("formats[]", lambda s, f, i: f in FOURCCS,
@@ -413,6 +422,15 @@ class SensorConfig(_Checked):
         raise ConfigError(f"sensor {self.name!r} has no register {key!r}")
 
 
+def _reg_bits(sensor: Any, role: str) -> int:
+    """Width of the sensor's register with ``role`` (16 bits, the usual, where the map has none)."""
+    return next((r.width_bits for r in sensor.registers if r.role == role), 16)
+
+
+def _reg_max(sensor: Any, role: str) -> int:
+    return (1 << _reg_bits(sensor, role)) - 1
+
+
 def _parse(kind: Any, raw: Any, key: str) -> Any:
     """Turn raw YAML data into what ``kind`` describes; scalars pass through for the class to check."""
     if isinstance(kind, _ListOf):
@@ -466,7 +484,36 @@ def _mapping_no_duplicates(loader: _StrictLoader, node: yaml.MappingNode) -> dic
 _StrictLoader.add_constructor(yaml.resolver.BaseResolver.DEFAULT_MAPPING_TAG, _mapping_no_duplicates)
 
 
+def _expanded_size(node: yaml.Node, memo: dict[int, int]) -> int:
+    """How many values ``node`` stands for once every alias is resolved (counted once per shared node)."""
+    key = id(node)
+    if key not in memo:
+        memo[key] = 0  # a node that contains itself is refused by the constructor; count it as nothing here
+        children = node.value if isinstance(node, (yaml.SequenceNode, yaml.MappingNode)) else ()
+        flat = [n for pair in children for n in pair] if isinstance(node, yaml.MappingNode) else children
+        memo[key] = 1 + sum(_expanded_size(n, memo) for n in flat)
+    return memo[key]
+
+
+def _check_size(text: str, label: str) -> None:
+    """Refuse a description too long, or whose aliases expand it beyond ``MAX_YAML_NODES`` values, before it is
+    built: validating (and printing) an expanded alias bomb costs gigabytes."""
+    if len(text) > MAX_YAML_BYTES:
+        raise ConfigError(f"{label}: {len(text):,} characters; a sensor description has at most {MAX_YAML_BYTES:,}")
+    try:
+        root = yaml.compose(text, Loader=_StrictLoader)
+        n = 0 if root is None else _expanded_size(root, {})
+    except yaml.YAMLError:
+        return  # the load below reports the syntax error with its position
+    except RecursionError:
+        raise ConfigError(f"{label}: values nested too deeply for a sensor description") from None
+    if n > MAX_YAML_NODES:
+        raise ConfigError(f"{label}: its aliases expand it to {n:,} values; a sensor description has at most "
+                          f"{MAX_YAML_NODES:,}")
+
+
 def _parse_text(text: str, label: str) -> SensorConfig:
+    _check_size(text, label)
     try:
         raw = yaml.load(text, Loader=_StrictLoader)  # a SafeLoader subclass: builds no arbitrary objects
     except yaml.YAMLError as e:

@@ -17,7 +17,7 @@ from rollcam.common.errors import DeviceError, ProtocolError
 from rollcam.common.lifecycle import Closeable
 
 from . import protocol as P
-from .server import DEFAULT_PORT, _recv_exact
+from .server import DEFAULT_PORT
 
 
 class UrbError(DeviceError):
@@ -38,7 +38,7 @@ def list_devices(host: str = "127.0.0.1", port: int = DEFAULT_PORT, timeout_s: f
     """The devices a server exports (``usbip list -r HOST``)."""
     with _connect(host, port, timeout_s) as sock:
         sock.sendall(P.op_header(P.OP_REQ_DEVLIST))
-        recv = _recv_exact(sock)
+        recv = P.socket_reader(sock)
         _v, code, status = P.read_op_header(recv)
         if code != P.OP_REP_DEVLIST or status != P.ST_OK:
             raise ProtocolError(f"device list answered with code {code:#06x} status {status}")
@@ -53,7 +53,7 @@ class ImportedDevice(Closeable):
 
     def __init__(self, host: str, port: int, busid: str, timeout_s: float = 10.0) -> None:
         self._sock = _connect(host, port, timeout_s)
-        self._recv = _recv_exact(self._sock)
+        self._recv = P.socket_reader(self._sock)
         self._seq = itertools.count(1)
         self._outstanding: dict[int, P.Submit] = {}
         self._early: dict[int, P.RetSubmit | P.RetUnlink] = {}

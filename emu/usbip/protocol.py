@@ -9,6 +9,7 @@ read through a ``recv_exact(n)`` callable and bound every length they are told, 
 
 from __future__ import annotations
 
+import socket
 import struct
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
@@ -53,6 +54,19 @@ _ISO = struct.Struct(">IIIi")
 URB_HEADER = 48
 
 RecvExact = Callable[[int], bytes]
+
+
+def socket_reader(sock: socket.socket) -> RecvExact:
+    """A ``RecvExact`` over a blocking socket (the socket's own timeout applies to each read)."""
+    def recv(n: int) -> bytes:
+        buf = bytearray()
+        while len(buf) < n:
+            chunk = sock.recv(min(n - len(buf), 1 << 20))
+            if not chunk:
+                raise ConnectionError("peer closed the connection")
+            buf += chunk
+        return bytes(buf)
+    return recv
 
 
 @dataclass(frozen=True)

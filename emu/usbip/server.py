@@ -1,49 +1,85 @@
 """A USB/IP server exporting emulated UVC functions, as Linux's ``usbip list -r`` and ``usbip attach`` expect.
 
 Each TCP connection starts with one operation: OP_REQ_DEVLIST (answered, then closed) or OP_REQ_IMPORT (on
-success the connection carries URBs for that device until the peer leaves). A device serves one importer at
-a time; others are told it is busy (``ST_DEV_BUSY``), and a busid nobody exports gets ``ST_NODEV``, the
-statuses Linux's ``usbip`` decodes. URBs run in order per endpoint (control, stream) on worker
-threads, so CMD_UNLINK can cancel one still queued; the queues are bounded, so a client that floods costs
-itself back-pressure, not server memory. A malformed message closes that connection only; the server keeps
-serving everyone else.
+success the connection carries URBs for that device until the peer leaves; ``rollcam.emu.usbip.session``).
+A device serves one importer at a time; others are told it is busy (``ST_DEV_BUSY``), and a busid nobody
+exports gets ``ST_NODEV``, the statuses Linux's ``usbip`` decodes. A malformed message closes that
+connection only; the server keeps serving everyone else.
+
+What peers can hold is bounded (``ServerLimits``): connections at once (one thread each, two more per
+import; at the limit the oldest connection still in its first message is dropped to make room, so stalled
+peers cannot lock real clients out), the time the first message may take, the time an importer has to send
+its first URB, how long an idle importer keeps a device another peer asks for, and the URBs and bytes an
+importer may have queued. When accepting fails (no descriptors left: EMFILE, ENFILE), the server says so
+once on the ``rollcam.usbip`` logger, backs off and accepts again as descriptors free.
 """
 
 from __future__ import annotations
 
 import contextlib
-import errno
+import logging
+import select
 import socket
 import struct
 import threading
-from collections import deque
-from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field
+import time
+from collections.abc import Sequence
+from dataclasses import dataclass
 
-from rollcam.common.errors import DeviceError, ProtocolError
-from rollcam.common.lifecycle import Closeable, Stats, Worker
+from rollcam.common.errors import ConfigError, DeviceError, ProtocolError
+from rollcam.common.lifecycle import Closeable, Deadline, Stats, Worker
 from rollcam.emu.uvc import constants as C
 from rollcam.emu.uvc.descriptors import split_descriptors
-from rollcam.emu.uvc.device import Setup, UVCFunction
-from rollcam.emu.uvc.requests import Stall
-from rollcam.emu.uvc.stream import TransferOverflow, TransferTimeout
+from rollcam.emu.uvc.device import UVCFunction
 
 from . import protocol as P
+from .session import UrbSession
 
 DEFAULT_PORT = 3240
-MAX_QUEUED_URBS = 64
-POLL_MS = 200  # how often a blocked bulk read looks whether the connection is closing
+POLL_S = 0.2  # how often a waiting read looks whether the server is closing
+BACKLOG = 128
+log = logging.getLogger("rollcam.usbip")
+
+
+@dataclass(frozen=True)
+class ServerLimits:
+    """What one server grants its peers, whatever they do (seconds, counts, bytes)."""
+
+    max_connections: int = 32  # connections at once
+    handshake_timeout_s: float = 5.0  # the whole first operation message (and any later message once begun)
+    import_timeout_s: float = 10.0  # from OP_REP_IMPORT to the importer's first URB
+    idle_timeout_s: float = 60.0  # an importer idle this long gives its device up to a peer asking for it
+    send_timeout_s: float = 30.0  # a reply the peer does not take within this ends its connection
+    max_queued_urbs: int = 64  # per importer
+    max_urb_bytes: int = 32 * 1024 * 1024  # transfer bytes queued or running per importer (one URB always fits)
+    max_backoff_s: float = 1.0  # longest pause between accept attempts while descriptors are exhausted
+
+    def __post_init__(self) -> None:
+        for name in ("max_connections", "max_queued_urbs", "max_urb_bytes"):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, int) or value < 1:
+                raise ConfigError(f"ServerLimits.{name} must be a whole number >= 1, got {value!r}")
+        for name in ("handshake_timeout_s", "import_timeout_s", "idle_timeout_s", "send_timeout_s",
+                     "max_backoff_s"):
+            value = getattr(self, name)
+            if not isinstance(value, (int, float)) or not 0 < value < float("inf"):
+                raise ConfigError(f"ServerLimits.{name} must be a finite number of seconds > 0, got {value!r}")
 
 
 @dataclass
 class ServerStats(Stats):
-    """Counts a server keeps: connections, lists, imports, refusals, malformed peers, URBs."""
+    """Counts a server keeps: connections, lists, imports, refusals, malformed and timed-out peers, URBs,
+    connections dropped to make room, idle importers evicted, failed accepts."""
 
     connections: int = 0
     devlists: int = 0
     imports: int = 0
     refused: int = 0
     malformed: int = 0
+    timed_out: int = 0
+    shed: int = 0
+    evicted: int = 0
+    accept_errors: int = 0
     urbs: int = 0
     unlinked: int = 0
 
@@ -52,7 +88,7 @@ class ServerStats(Stats):
 class _Export:
     function: UVCFunction
     info: P.ExportedDevice
-    owner: object | None = None
+    owner: _Conn | None = None
 
 
 def usbip_commands(host: str, port: int, busid: str) -> tuple[str, str]:
@@ -73,33 +109,71 @@ def describe(function: UVCFunction, busnum: int, devnum: int) -> P.ExportedDevic
                             dev[13], tuple(intfs))
 
 
-def _recv_exact(sock: socket.socket) -> Callable[[int], bytes]:
-    def recv(n: int) -> bytes:
+class _Conn:
+    """One peer's socket, read against deadlines: ``recv(n)`` (a protocol ``RecvExact``) raises TimeoutError
+    once ``deadline`` passes and ConnectionError when the peer or the server goes away."""
+
+    def __init__(self, sock: socket.socket, server: USBIPServer) -> None:
+        self.sock, self.server = sock, server
+        self.opened = time.monotonic()
+        self.phase = "handshake"  # then "devlist" or "import"
+        self.session: UrbSession | None = None
+        self.deadline = Deadline(server.limits.handshake_timeout_s)
+        self._poll = select.poll()
+        self._poll.register(sock, select.POLLIN)
+        sock.settimeout(server.limits.send_timeout_s)  # bounds sendall; reads wait in poll below
+
+    def wait_readable(self, deadline: Deadline) -> None:
+        """Block until the peer has sent something, ``deadline`` passes (TimeoutError) or the server closes."""
+        while not self._poll.poll(deadline.within(POLL_S) * 1000):
+            if self.server.closed:
+                raise ConnectionError("server closing")
+            if deadline.expired:
+                raise TimeoutError(f"nothing received within {deadline.seconds:g} s")
+
+    def recv(self, n: int) -> bytes:
         buf = bytearray()
         while len(buf) < n:
-            chunk = sock.recv(min(n - len(buf), 1 << 20))
+            self.wait_readable(self.deadline)
+            chunk = self.sock.recv(min(n - len(buf), 1 << 20))
             if not chunk:
                 raise ConnectionError("peer closed the connection")
             buf += chunk
         return bytes(buf)
-    return recv
+
+    def next_command(self) -> P.Submit | P.Unlink:
+        """The importer's next URB command: the first within the import timeout, later ones whenever they come;
+        once a message has begun, all of it within the handshake timeout."""
+        limits = self.server.limits
+        first = self.session is None or self.session.urbs_received == 0
+        self.wait_readable(Deadline(limits.import_timeout_s) if first else Deadline.forever())
+        self.deadline = Deadline(limits.handshake_timeout_s)
+        return P.read_command(self.recv)
+
+    def abort(self) -> None:
+        """Break the connection (its thread sees the peer gone and cleans up)."""
+        with contextlib.suppress(OSError):
+            self.sock.shutdown(socket.SHUT_RDWR)
 
 
 class USBIPServer(Closeable):
     """Serves ``functions`` as busids ``1-1``, ``1-2``, ... on ``host:port`` (port 0 picks a free one), from
-    construction until ``close()``; a context manager."""
+    construction until ``close()``, within ``limits``; a context manager."""
 
     def __init__(self, functions: Sequence[UVCFunction], host: str = "127.0.0.1", port: int = DEFAULT_PORT,
-                 *, busnum: int = 1) -> None:
+                 *, busnum: int = 1, limits: ServerLimits | None = None) -> None:
+        self.limits = limits or ServerLimits()
         self.exports = {}
         for i, f in enumerate(functions, 1):
             info = describe(f, busnum, i)
             self.exports[info.busid] = _Export(f, info)
         self.stats = ServerStats()
         self._lock = threading.Lock()
-        self._conns: set[socket.socket] = set()
+        self._released = threading.Condition(self._lock)
+        self._conns: dict[socket.socket, _Conn] = {}
         self._threads: list[threading.Thread] = []
-        self._sock = socket.create_server((host, port), reuse_port=False)
+        family = socket.AF_INET6 if ":" in host else socket.AF_INET
+        self._sock = socket.create_server((host, port), family=family, backlog=BACKLOG, reuse_port=False)
         self.address: tuple[str, int] = self._sock.getsockname()[:2]
         self._accept = Worker(self._accept_loop, name="usbip-accept", wrap=DeviceError, join_timeout_s=2)
         self._accept.start()
@@ -107,202 +181,136 @@ class USBIPServer(Closeable):
     def __repr__(self) -> str:
         return f"USBIPServer({self.address[0]}:{self.address[1]}, busids={sorted(self.exports)})"
 
+    @property
+    def connection_count(self) -> int:
+        """Connections being served now."""
+        with self._lock:
+            return len(self._conns)
+
     def _close(self) -> None:
         """Stop accepting, drop every connection, reset the devices."""
         with self._lock:
-            conns = list(self._conns)
+            conns = list(self._conns.values())
         with contextlib.suppress(OSError):
             self._sock.shutdown(socket.SHUT_RDWR)
         self._sock.close()
         for c in conns:
-            with contextlib.suppress(OSError):
-                c.shutdown(socket.SHUT_RDWR)
+            c.abort()
         for t in list(self._threads):
             t.join(timeout=2)
         self._accept.close()  # re-raises what stopped accepting early, if anything did
 
+    # ------------------------------------------------------------------------------------------ accepting
     def _accept_loop(self) -> None:
+        failing_since: float | None = None
+        pause = 0.01
         while not self.closed:
             try:
-                conn, _ = self._sock.accept()
-            except OSError:
-                return
-            conn.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
-            with self._lock:
+                sock, _peer = self._sock.accept()
+            except OSError as exc:
                 if self.closed:
-                    conn.close()
                     return
-                self._conns.add(conn)
-                self.stats.connections += 1
-                t = threading.Thread(target=self._serve, args=(conn,), name="usbip-conn", daemon=True)
-                self._threads = [x for x in self._threads if x.is_alive()] + [t]
-            t.start()
+                self.stats.accept_errors += 1
+                if failing_since is None:
+                    failing_since = time.monotonic()
+                    log.warning("USB/IP server %s:%s cannot accept connections (%s); retrying until it can",
+                                *self.address, exc)
+                self._accept.stop_event.wait(pause)  # back off: the pending connection stays in the backlog
+                pause = min(pause * 2, self.limits.max_backoff_s)
+                continue
+            if failing_since is not None:
+                log.warning("USB/IP server %s:%s accepting again after %.1f s", *self.address,
+                            time.monotonic() - failing_since)
+                failing_since, pause = None, 0.01
+            self._admit(sock)
 
-    def _serve(self, conn: socket.socket) -> None:
-        recv = _recv_exact(conn)
+    def _admit(self, sock: socket.socket) -> None:
+        with contextlib.suppress(OSError):
+            sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+        with self._lock:
+            if self.closed:
+                sock.close()
+                return
+            self.stats.connections += 1
+            if len(self._conns) >= self.limits.max_connections and not self._shed_one():
+                self.stats.refused += 1
+                sock.close()
+                return
+            conn = _Conn(sock, self)
+            self._conns[sock] = conn
+            t = threading.Thread(target=self._serve, args=(conn,), name="usbip-conn", daemon=True)
+            self._threads = [x for x in self._threads if x.is_alive()] + [t]
+        t.start()
+
+    def _shed_one(self) -> bool:
+        """Drop the oldest connection still sending its first message (lock held); False if there is none."""
+        waiting = [c for c in self._conns.values() if c.phase == "handshake"]
+        if not waiting:
+            return False
+        victim = min(waiting, key=lambda c: c.opened)
+        del self._conns[victim.sock]
+        victim.abort()
+        self.stats.shed += 1
+        return True
+
+    # ------------------------------------------------------------------------------------------ serving
+    def _serve(self, conn: _Conn) -> None:
         export = None
         try:
-            _version, code, _status = P.read_op_header(recv)
+            _version, code, _status = P.read_op_header(conn.recv)
             if code == P.OP_REQ_DEVLIST:
-                conn.sendall(P.rep_devlist([e.info for e in self.exports.values()]))
+                conn.phase = "devlist"
+                conn.sock.sendall(P.rep_devlist([e.info for e in self.exports.values()]))
                 self.stats.devlists += 1
             elif code == P.OP_REQ_IMPORT:
-                busid = P.read_busid(recv)
+                busid = P.read_busid(conn.recv)
+                conn.phase = "import"
                 export, status = self._claim(busid, conn)
                 if export is None:
                     self.stats.refused += 1
-                    conn.sendall(P.rep_import(None, status))
+                    conn.sock.sendall(P.rep_import(None, status))
                 else:
                     self.stats.imports += 1
-                    conn.sendall(P.rep_import(export.info))
-                    _UrbSession(conn, recv, export, self).run()
+                    conn.session = UrbSession(export.function, export.info.devid, conn.next_command,
+                                              conn.sock.sendall, conn.abort,
+                                              max_queued_urbs=self.limits.max_queued_urbs,
+                                              max_urb_bytes=self.limits.max_urb_bytes, stats=self.stats)
+                    conn.sock.sendall(P.rep_import(export.info))
+                    conn.session.run()
             else:
-                conn.sendall(P.op_header(code & 0x7FFF, P.ST_ERROR))
+                conn.sock.sendall(P.op_header(code & 0x7FFF, P.ST_ERROR))
                 raise ProtocolError(f"operation code {code:#06x} is not OP_REQ_DEVLIST or OP_REQ_IMPORT")
         except (ProtocolError, struct.error, UnicodeError):
             self.stats.malformed += 1
+        except TimeoutError:
+            self.stats.timed_out += 1
         except (ConnectionError, OSError):
             pass
         finally:
             if export is not None:
                 export.function.reset()
-                with self._lock:
-                    export.owner = None
             with self._lock:
-                self._conns.discard(conn)
+                if export is not None:
+                    export.owner = None
+                    self._released.notify_all()
+                self._conns.pop(conn.sock, None)
             with contextlib.suppress(OSError):
-                conn.close()
+                conn.sock.close()
 
-    def _claim(self, busid: str, conn: socket.socket) -> tuple[_Export | None, int]:
-        """The export ``busid`` names, now owned by ``conn``; or None and ST_NODEV / ST_DEV_BUSY."""
+    def _claim(self, busid: str, conn: _Conn) -> tuple[_Export | None, int]:
+        """The export ``busid`` names, now owned by ``conn``; or None and ST_NODEV / ST_DEV_BUSY. An owner idle
+        longer than the idle timeout is dropped for the new peer."""
         with self._lock:
             export = self.exports.get(busid)
             if export is None:
                 return None, P.ST_NODEV
+            owner = export.owner
+            if owner is not None and owner.session is not None \
+                    and owner.session.idle_s() >= self.limits.idle_timeout_s:
+                self.stats.evicted += 1
+                owner.abort()
+                self._released.wait_for(lambda: export.owner is None, timeout=2.0)
             if export.owner is not None:
                 return None, P.ST_DEV_BUSY
             export.owner = conn
             return export, P.ST_OK
-
-
-def _read_or_none(fn: UVCFunction, ep: int, length: int) -> bytes | None:
-    try:
-        return fn.read(ep, length, POLL_MS)
-    except TransferTimeout:
-        return None
-
-
-@dataclass
-class _UrbSession:
-    """The URB phase of one imported connection: a reader (this thread) and two in-order workers, one for
-    endpoint 0 and one for the streaming endpoint, so control requests are not held behind waiting reads."""
-
-    conn: socket.socket
-    recv: Callable[[int], bytes]
-    export: _Export
-    server: USBIPServer
-    queues: tuple[deque, deque] = field(default_factory=lambda: (deque(), deque()))
-    frame_number: int = 0
-
-    def __post_init__(self) -> None:
-        self.cond = threading.Condition()
-        self.send_lock = threading.Lock()
-        self.done = False
-
-    def send(self, data: bytes) -> None:
-        with self.send_lock:
-            self.conn.sendall(data)
-
-    def run(self) -> None:
-        workers = [threading.Thread(target=self._work, args=(q,), name="usbip-urbs", daemon=True)
-                   for q in self.queues]
-        for w in workers:
-            w.start()
-        try:
-            while True:
-                cmd = P.read_command(self.recv)
-                if isinstance(cmd, P.Unlink):
-                    self._unlink(cmd)
-                    continue
-                with self.cond:
-                    while sum(map(len, self.queues)) >= MAX_QUEUED_URBS and not self.done:
-                        self.cond.wait(0.5)
-                    self.queues[cmd.ep != 0].append(cmd)
-                    self.cond.notify_all()
-        finally:
-            with self.cond:
-                self.done = True
-                self.cond.notify_all()
-            for w in workers:
-                w.join(timeout=5)
-
-    def _unlink(self, cmd: P.Unlink) -> None:
-        with self.cond:
-            hit = next((u for q in self.queues for u in q if u.seqnum == cmd.unlink_seqnum), None)
-            if hit is not None:
-                self.queues[hit.ep != 0].remove(hit)
-                self.server.stats.unlinked += 1
-                self.cond.notify_all()
-        self.send(P.RetUnlink(cmd.seqnum, -errno.ECONNRESET if hit else 0).pack())
-
-    def _work(self, queue: deque) -> None:
-        while True:
-            with self.cond:
-                while not queue and not self.done:
-                    self.cond.wait()
-                if self.done:
-                    return
-                urb = queue.popleft()
-                self.cond.notify_all()
-            try:
-                self.send(self.execute(urb).pack())
-            except OSError:
-                return
-            self.server.stats.urbs += 1
-
-    def execute(self, urb: P.Submit) -> P.RetSubmit:
-        """Run one URB against the device; USB errors become negative errno statuses."""
-        fn = self.export.function
-        n_pkt = urb.number_of_packets
-        if urb.devid != self.export.info.devid:
-            return P.RetSubmit(urb.seqnum, -errno.ENODEV, number_of_packets=n_pkt)
-        try:
-            if urb.ep == 0:
-                setup = Setup.unpack(urb.setup)
-                data = fn.control(setup, urb.data)
-                actual = len(data) if setup.is_in else len(urb.data)
-                return P.RetSubmit(urb.seqnum, 0, actual, number_of_packets=n_pkt, data=data)
-            if urb.direction != P.DIR_IN:
-                return P.RetSubmit(urb.seqnum, -errno.EPIPE, number_of_packets=n_pkt)
-            if urb.is_iso:
-                return self._iso(fn, urb)
-            data = self._bulk(fn, urb)
-            return P.RetSubmit(urb.seqnum, 0, len(data), number_of_packets=n_pkt, data=data)
-        except Stall:
-            return P.RetSubmit(urb.seqnum, -errno.EPIPE, number_of_packets=n_pkt)
-        except TransferOverflow:
-            return P.RetSubmit(urb.seqnum, -errno.EOVERFLOW, number_of_packets=n_pkt)
-        except DeviceError:
-            return P.RetSubmit(urb.seqnum, -errno.ESHUTDOWN, number_of_packets=n_pkt)
-
-    def _bulk(self, fn: UVCFunction, urb: P.Submit) -> bytes:
-        data = None
-        while data is None:
-            if self.done:
-                raise DeviceError("connection closing")
-            data = _read_or_none(fn, 0x80 | urb.ep, urb.transfer_buffer_length)
-        return data
-
-    def _iso(self, fn: UVCFunction, urb: P.Submit) -> P.RetSubmit:
-        n = len(urb.iso)
-        size = min((p.length for p in urb.iso), default=0)
-        try:
-            data, lengths = fn.read_packets(0x80 | urb.ep, n, size)
-            status = [0] * n
-        except TransferOverflow:
-            data, lengths, status = b"", [0] * n, [-errno.EOVERFLOW] * n
-        packets = tuple(P.IsoPacket(p.offset, p.length, k, st)
-                        for p, k, st in zip(urb.iso, lengths, status, strict=True))
-        start = self.frame_number
-        self.frame_number = (self.frame_number + n) & 0x3FFF
-        return P.RetSubmit(urb.seqnum, 0, len(data), start, n, sum(st != 0 for st in status), data, packets)

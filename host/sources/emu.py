@@ -20,7 +20,7 @@ from rollcam.common.errors import SourceError
 from rollcam.common.values import non_negative_int, positive_int
 from rollcam.firmware.camera import FirmwareCamera, FramePlan
 from rollcam.firmware.imaging import encode
-from rollcam.firmware.options import OPTIONS
+from rollcam.firmware.options import MAX_DEVICE_NS, OPTIONS, bounded
 from rollcam.firmware.spec import CameraSpec
 from rollcam.sim.frame import Frame
 from rollcam.sim.synthetic import SyntheticCamera
@@ -37,7 +37,7 @@ def build_device(sensor_name: str, opts: SourceURI) -> tuple[FirmwareCamera, int
     opts.take(set(), set(OPTIONS) | SOURCE_OPTIONS)
     camera_opts = {k: v for k, v in opts.options.items() if k not in SOURCE_OPTIONS}
     spec = CameraSpec.from_options(sensor_name, camera_opts, owner, SourceError)
-    start_ns = opts.get("start_ns", non_negative_int, 0)
+    start_ns = opts.get("start_ns", bounded(non_negative_int, 0, MAX_DEVICE_NS), 0)
     return FirmwareCamera(spec, clock=lambda: 0), start_ns
 
 
