@@ -1,13 +1,14 @@
 """Attacks on ``rollcam emulate --http``, each measured while a normal client streams (loopback only).
 
-Run ``python -m rollcam.benchmarks.http_attacks [--quick]``: every attack starts a fresh emulator process, runs
+Run ``python -m rollcam.benchmarks.http_attacks [--quick]``: every attack starts a fresh server process, runs
 for a bounded time, and reports the server's threads, descriptors, RSS and CPU time at the attack's peak, and
 what a normal client (from 127.0.0.1; attackers come from 127.0.0.2 and up) saw: the HTTP status, the time
 to its first frame and the latency of its frames (arrival minus the frame's timestamp on the device
 clock; reported as the delay added over the best frame of an idle viewer of the same server, measured just
 before the attack, whose own median is ``idle``). The attacks are those of issue 11:
 
-- ``lockout``: 32 stream requests from 32 addresses that never read, reconnecting every 10 s;
+- ``lockout``: 32 stream requests from one address that never read, reconnecting every 10 s (the issue's);
+- ``lockout32``: the same from 32 addresses (per-address limits do not help; eviction of stalled readers must);
 - ``slowloris``: 1,000 connections sending one header byte every 5 s;
 - ``burst``: 200 snapshot requests connecting at once;
 - ``fdlimit``: the server under RLIMIT_NOFILE 128 while 200 connections are held open, then released.
@@ -33,19 +34,42 @@ from typing import Any
 CLK_TCK = os.sysconf("SC_CLK_TCK")
 
 
+SERVER = """
+import json, signal, threading
+from rollcam.emu.http_mjpeg import MjpegServer
+from rollcam.firmware.camera import FirmwareCamera
+cam = FirmwareCamera("imx219", scene={"scene": "chart"}, size=(640, 480))
+with MjpegServer(cam, "127.0.0.1", 0) as srv:
+    print(json.dumps({"http": {"url": srv.url}}), flush=True)
+    stop = threading.Event()
+    signal.signal(signal.SIGTERM, lambda *_: stop.set())
+    stop.wait()
+"""
+
+
 def serve(nofile: int | None = None) -> tuple[subprocess.Popen, str, int]:
-    """A fresh ``rollcam emulate`` on 127.0.0.1 (port chosen by the system): the process, host and port."""
+    """A fresh emulated camera (imx219, chart, 640x480) behind ``MjpegServer`` on 127.0.0.1, port chosen by the
+    system, in a process of its own (what ``rollcam emulate --http`` serves): the process, host and port."""
     def limit() -> None:
         if nofile is not None:
             resource.setrlimit(resource.RLIMIT_NOFILE, (nofile, nofile))
 
-    cmd = [sys.executable, "-m", "rollcam.host.cli", "emulate", "imx219", "--scene", "chart", "--size", "640x480",
-           "--http", "127.0.0.1:0", "--json"]
-    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True, preexec_fn=limit)
+    proc = subprocess.Popen([sys.executable, "-c", SERVER], stdout=subprocess.PIPE, stderr=subprocess.DEVNULL,
+                            text=True, preexec_fn=limit)
     assert proc.stdout is not None
     url = json.loads(proc.stdout.readline())["http"]["url"]
     host, port = url.split("//")[1].split("/")[0].rsplit(":", 1)
     return proc, host, int(port)
+
+
+def stop(proc: subprocess.Popen) -> None:
+    """End a server process (SIGTERM, then SIGKILL if it does not end within 10 s)."""
+    proc.terminate()
+    try:
+        proc.wait(10)
+    except subprocess.TimeoutExpired:
+        proc.kill()
+        proc.wait(10)
 
 
 def figures(pid: int) -> dict[str, Any]:
@@ -124,8 +148,9 @@ def _connect(port: int, source: str, rcvbuf: int | None = None) -> socket.socket
         return None
 
 
-def lockout(port: int, pid: int, base: float, seconds: float) -> dict[str, Any]:
-    """32 non-reading stream clients from 32 addresses, reconnecting every 10 s; a viewer joins after 2 s."""
+def lockout(port: int, pid: int, base: float, seconds: float, addresses: int) -> dict[str, Any]:
+    """32 non-reading stream clients from ``addresses`` addresses, reconnecting every 10 s; a viewer joins
+    after 2 s."""
     socks: list[socket.socket] = []
 
     def connect_all() -> None:
@@ -133,7 +158,7 @@ def lockout(port: int, pid: int, base: float, seconds: float) -> dict[str, Any]:
             s.close()
         socks.clear()
         for i in range(32):
-            s = _connect(port, f"127.0.0.{2 + i}")
+            s = _connect(port, f"127.0.0.{2 + i % addresses}")
             if s is not None:
                 with contextlib.suppress(OSError):
                     s.sendall(b"GET /stream.mjpg HTTP/1.1\r\nHost: x\r\n\r\n")
@@ -223,9 +248,11 @@ def fdlimit(seconds: float) -> dict[str, Any]:
     try:
         time.sleep(1)
         base = idle_base(port)
-        viewer = Viewer(port, seconds + 6)
+        viewer = Viewer(port, seconds + 8)
         viewer.start()
-        time.sleep(1)
+        cpu0, t0 = figures(proc.pid)["cpu_s"], time.monotonic()
+        time.sleep(3)
+        share_before = (figures(proc.pid)["cpu_s"] - cpu0) / (time.monotonic() - t0)
         socks = [s for i in range(200) if (s := _connect(port, f"127.0.2.{2 + i}")) is not None]
         cpu0, t0 = figures(proc.pid)["cpu_s"], time.monotonic()
         time.sleep(seconds)
@@ -238,11 +265,11 @@ def fdlimit(seconds: float) -> dict[str, Any]:
         after.start()
         after.join(20)
         viewer.join(20)
-        return {**peak, "cpu_share_during": round(cpu_share, 2), **viewer.result(base),
+        return {**peak, "cpu_share_before": round(share_before, 2), "cpu_share_during": round(cpu_share, 2),
+                **viewer.result(base),
                 "new_client_after": after.result(base)}
     finally:
-        proc.terminate()
-        proc.wait(10)
+        stop(proc)
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -253,7 +280,8 @@ def main(argv: list[str] | None = None) -> int:
     seconds = 12 if args.quick else 25
     resource.setrlimit(resource.RLIMIT_NOFILE, (4096, resource.getrlimit(resource.RLIMIT_NOFILE)[1]))
     results: dict[str, Any] = {}
-    attacks = {"lockout": lambda port, pid, base: lockout(port, pid, base, seconds),
+    attacks = {"lockout": lambda port, pid, base: lockout(port, pid, base, seconds, 1),
+               "lockout32": lambda port, pid, base: lockout(port, pid, base, seconds, 32),
                "slowloris": lambda port, pid, base: slowloris(port, pid, base, seconds),
                "burst": burst}
     for name, attack in attacks.items():
@@ -266,8 +294,7 @@ def main(argv: list[str] | None = None) -> int:
             idle = figures(proc.pid)
             results[name] = {"idle": idle, "attack": attack(port, proc.pid, base)}
         finally:
-            proc.terminate()
-            proc.wait(10)
+            stop(proc)
         print(name, json.dumps(results[name]), flush=True)
     if args.only is None or "fdlimit" in args.only:
         results["fdlimit"] = {"attack": fdlimit(seconds / 2)}

@@ -15,6 +15,7 @@ from __future__ import annotations
 import asyncio
 import dataclasses
 import json
+import socket
 import threading
 from collections.abc import AsyncIterator
 from dataclasses import dataclass
@@ -259,9 +260,9 @@ class MjpegServer(Closeable):
         conn = Connection.of(request)
         if conn is None:  # gone before its turn
             raise web.HTTPServiceUnavailable(text="the connection closed")
-        client = self.slots.join(conn)
+        client = await self.slots.admit(conn)
         if isinstance(client, str):
-            raise web.HTTPServiceUnavailable(text=client)
+            raise web.HTTPServiceUnavailable(text=client, headers={"Retry-After": "1"})
         resp: web.StreamResponse = web.Response(status=499)  # what aiohttp gets if the client is gone
         try:
             conn.streaming = True
@@ -271,6 +272,9 @@ class MjpegServer(Closeable):
                 "Content-Type": f"multipart/x-mixed-replace; boundary={BOUNDARY}",
                 "Cache-Control": "no-store", "Connection": "close"})
             resp.force_close()
+            sock = request.transport.get_extra_info("socket") if request.transport is not None else None
+            if sock is not None:  # a fixed buffer: a reader that stops reading stalls within about a frame
+                sock.setsockopt(socket.SOL_SOCKET, socket.SO_SNDBUF, self.limits.stream_sndbuf_bytes)
             await resp.prepare(request)
             while (part := await client.next()) is not None:
                 await client.send(resp.write, part.chunk, self.http.loop.time)

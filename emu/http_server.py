@@ -48,6 +48,8 @@ class HttpLimits:
     max_streams: int = 32  # long-lived responses (MJPEG streams) at once
     max_streams_per_peer: int = 8  # of those, from one address
     stall_s: float = 2.0  # a stream whose write has not drained for this long yields its slot to a newcomer
+    admit_wait_s: float = 5.0  # a newcomer finding every slot live waits this long for one to stall or free
+    stream_sndbuf_bytes: int = 262144  # a stream's kernel send buffer (fixed, so a silent reader stalls soon)
     send_timeout_s: float = 10.0  # a stream whose write has not drained for this long is closed anyway
 
     def __post_init__(self) -> None:
@@ -105,6 +107,7 @@ class Connection(asyncio.Protocol):
         self.transport: asyncio.Transport | None = None
         self.peer = ""
         self.admitted = self.in_request = self.streaming = self.eof = False
+        self._inner_open = False  # aiohttp's protocol saw connection_made, so it must see connection_lost
         self._head_bytes, self._line_bytes = 0, -1  # bytes of the request's head, of its first line (-1: open)
         self._timer: asyncio.TimerHandle | None = None
 
@@ -122,7 +125,7 @@ class Connection(asyncio.Protocol):
         if not self.host._admit(self):
             self.refuse("503 Service Unavailable")
             return
-        self.admitted = True
+        self.admitted = self._inner_open = True
         self.inner.connection_made(transport)
         self._arm()
 
@@ -155,7 +158,8 @@ class Connection(asyncio.Protocol):
     def connection_lost(self, exc: Exception | None) -> None:
         self._disarm()
         self.host._forget(self)
-        if self.admitted:
+        if self._inner_open:
+            self._inner_open = False
             self.inner.connection_lost(exc)
 
     def pause_writing(self) -> None:

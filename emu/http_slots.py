@@ -4,8 +4,9 @@ Every stream holds a ``StreamClient``: a one-item mailbox on the event loop (a n
 yet sent, and that counts as a drop, so a slow client skips frames and never queues them) and the time its
 current write began. A write that has not drained for ``stall_s`` marks the client *stalled*. ``StreamSlots``
 admits a newcomer under ``max_streams`` in all and ``max_streams_per_peer`` per address; when a limit is
-reached it evicts the longest-stalled client inside that limit, and refuses the newcomer only when none
-is stalled. ``sweep()`` closes clients stalled past ``send_timeout_s`` whoever is waiting. Items are
+reached it evicts the longest-stalled client inside that limit; when none is stalled the newcomer waits up
+to ``admit_wait_s`` (a silent reader stalls within about ``stall_s`` once its capped buffers are full) and
+is refused only then. ``sweep()`` closes clients stalled past ``send_timeout_s`` whoever is waiting. Items are
 shared by every client (the same bytes object is written to each transport), so a stalled client costs at
 most its transport's write buffer: the high-water mark plus one item.
 """
@@ -17,6 +18,8 @@ from collections.abc import Awaitable, Callable
 from typing import Any
 
 from .http_server import Connection, HttpLimits
+
+ADMIT_POLL_S = 0.1  # how often a waiting newcomer looks for a stalled or freed slot
 
 
 class StreamClient:
@@ -82,8 +85,15 @@ class StreamSlots:
     def __iter__(self) -> Any:
         return iter(list(self.clients.values()))
 
+    async def admit(self, conn: Connection) -> StreamClient | str:
+        """A slot for a stream on ``conn``, waiting up to ``admit_wait_s`` for one, or why there is none."""
+        end = self.clock() + self.limits.admit_wait_s
+        while isinstance(got := self.join(conn), str) and self.clock() < end and not conn.eof:
+            await asyncio.sleep(ADMIT_POLL_S)
+        return got
+
     def join(self, conn: Connection) -> StreamClient | str:
-        """A slot for a stream on ``conn``, or why there is none (for a 503)."""
+        """A slot for a stream on ``conn`` now, or why there is none (for a 503)."""
         lim, now = self.limits, self.clock()
         for limit, why, mine in ((lim.max_streams_per_peer, f"too many streams from {conn.peer}", True),
                                  (lim.max_streams, "too many clients", False)):

@@ -20,6 +20,7 @@ import serial
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from rollcam.emu.http_mjpeg import MjpegServer
+from rollcam.emu.http_server import HttpLimits
 from rollcam.emu.protocol_rollcam import register_camera
 from rollcam.emu.serial_pty import PtySerialServer
 from rollcam.firmware.camera import FirmwareCamera
@@ -270,11 +271,16 @@ def test_pty_client_that_never_reads_costs_dropped_replies_not_memory():
 
 
 def test_client_limit_answers_503_and_frees_the_slot():
-    with MjpegServer(camera(), max_clients=1) as srv:
+    with MjpegServer(camera(), limits=HttpLimits(max_streams=1, admit_wait_s=0.5)) as srv:
         first = urllib.request.urlopen(srv.url, timeout=5)
+        stop = threading.Event()
+        reading = threading.Thread(target=lambda: [first.read(4096) for _ in iter(stop.is_set, True)], daemon=True)
+        reading.start()  # a live reader keeps its slot (a silent one would yield it: tests/test_http_attacks.py)
         with pytest.raises(urllib.error.HTTPError) as info:
             urllib.request.urlopen(srv.url, timeout=5)
         assert info.value.code == 503
+        stop.set()
+        reading.join(10)
         first.close()
         deadline = time.monotonic() + 10
         while srv.clients and time.monotonic() < deadline:

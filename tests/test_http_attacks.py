@@ -124,10 +124,10 @@ def test_non_reading_streams_cannot_lock_out_a_reader():
     address holds at most its share."""
     limits = HttpLimits(max_streams=3, max_streams_per_peer=2, stall_s=0.3, send_timeout_s=60)
     with MjpegServer(camera(noise=True), quality=100, limits=limits) as srv, sockets() as held:
-        held += [attacker(srv.address, f"127.0.0.{2 + i % 2}") for i in range(3)]
+        held += [attacker(srv.address, f"127.0.0.{2 + i % 2}", rcvbuf=None) for i in range(3)]
         assert wait_for(lambda: len(srv.clients) == 3 and all(
             c.stalled_s(srv.http.loop.time()) >= 0.3 for c in srv.clients.values()))
-        third = attacker(srv.address, "127.0.0.2")  # the per-address limit: evicts its own stalled stream
+        third = attacker(srv.address, "127.0.0.2", rcvbuf=None)  # over the per-address limit: evicts its own
         held.append(third)
         assert wait_for(lambda: status(srv)["evicted_stalled"] >= 1)
         with Reader(srv.address) as reader:
@@ -135,7 +135,7 @@ def test_non_reading_streams_cannot_lock_out_a_reader():
             for round_ in range(2):  # the attackers reconnect; the reader keeps its slot and its frames
                 for s in held:
                     s.close()
-                held[:] = [attacker(srv.address, f"127.0.0.{2 + i}") for i in range(3)]
+                held[:] = [attacker(srv.address, f"127.0.0.{2 + i}", rcvbuf=None) for i in range(3)]
                 before = reader.parts
                 assert wait_for(lambda before=before: reader.parts >= before + 3), round_
         st = status(srv)
@@ -147,7 +147,7 @@ def test_non_reading_streams_cannot_lock_out_a_reader():
 
 
 def test_live_streams_are_refused_by_address_then_in_all():
-    limits = HttpLimits(max_streams=2, max_streams_per_peer=1, stall_s=30)
+    limits = HttpLimits(max_streams=2, max_streams_per_peer=1, stall_s=30, admit_wait_s=0.5)
     with MjpegServer(camera(), limits=limits) as srv, Reader(srv.address) as r1:
         assert wait_for(lambda: r1.parts >= 1)
         with pytest.raises(urllib.error.HTTPError) as info:  # a second live stream from 127.0.0.1
