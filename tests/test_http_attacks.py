@@ -313,3 +313,13 @@ def test_descriptor_limit_sheds_without_spinning_and_recovers():
             proc.stdin.close()
             proc.wait(30)
 
+
+
+def test_ffmpeg_reads_the_stream():
+    """The wire format is what real clients expect: ffmpeg (imageio-ffmpeg's binary) decodes the parts."""
+    ffmpeg = pytest.importorskip("imageio_ffmpeg").get_ffmpeg_exe()
+    with MjpegServer(camera()) as srv:
+        done = subprocess.run([ffmpeg, "-hide_banner", "-nostdin", "-f", "mpjpeg", "-i", srv.url, "-frames:v", "3",
+                               "-f", "null", "-"], capture_output=True, text=True, timeout=60)
+    assert done.returncode == 0, done.stderr[-2000:]
+    assert "frame=    3" in done.stderr or "frame=3" in done.stderr.replace(" ", ""), done.stderr[-2000:]
