@@ -2,42 +2,62 @@
 
 ``GET /stream.mjpg`` (also ``/``) answers ``multipart/x-mixed-replace`` with one JPEG part per frame; each
 part carries the frame's ``X-Sequence``, ``X-Timestamp-Ns`` (start of exposure, device clock),
-``X-Line-Time-Ns``, ``X-Exposure-Ns`` and ``X-Readout`` headers. ``GET /snapshot.jpg`` returns the next
-frame, ``GET /status.json`` the server's counters. Every client has a one-part mailbox: a client reading
-slower than the frame rate skips frames (counted per client and in total) and never grows memory. Bad
-requests get an HTTP error; the server keeps serving the others.
+``X-Line-Time-Ns``, ``X-Exposure-Ns``, ``X-Readout`` and ``X-Shutter`` headers. The body is not chunked: it
+ends when the connection does. ``GET /snapshot.jpg`` returns the next frame, ``GET /status.json`` the
+server's counters. One thread encodes each frame once; the event loop (emu/http_server.py, aiohttp) writes
+the same bytes to every client. Slots are fair (emu/http_slots.py): a client reading slower than the frame
+rate skips frames (counted) and never grows memory, and one that does not read at all yields its slot to a
+newcomer. Bad requests get an HTTP error; the server keeps serving the others.
 """
 
 from __future__ import annotations
 
+import asyncio
+import dataclasses
 import json
-import sys
+import socket
 import threading
+from collections.abc import AsyncIterator
 from dataclasses import dataclass
-from http import HTTPStatus
-from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
-from typing import Any, Generic, TypeVar
+from typing import Any
 
+from aiohttp import web
 from rollcam.common.errors import DeviceError
 from rollcam.common.lifecycle import Closeable, Stats, Worker
 from rollcam.firmware.camera import FirmwareCamera, FramePlan
 from rollcam.sim.codecs import JPEG_QUALITY, Levels, jpeg_quality, transcode
 from rollcam.sim.frame import Frame
 
+from .http_server import Connection, HttpHost, HttpLimits
+from .http_slots import StreamSlots
 from .pump import FramePump
 
 BOUNDARY = "rollcamframe"
 STREAM_PATHS = ("/", "/stream", "/stream.mjpg", "/video", "/video.mjpg")
-T = TypeVar("T")
+SNAPSHOT_WAIT_S = 5.0
+SWEEP_S = 0.5  # how often streams stalled past the send timeout are looked for
 
 
 @dataclass(frozen=True)
 class Part:
-    """One encoded frame with the headers that describe it."""
+    """One encoded frame with the headers that describe it, and its multipart chunk (built once, sent to all)."""
 
     sequence: int
     jpeg: bytes
     headers: tuple[tuple[str, str], ...]
+    chunk: bytes = dataclasses.field(default=b"", repr=False)
+
+    def __post_init__(self) -> None:
+        if not self.chunk:
+            object.__setattr__(self, "chunk", self.encode())
+
+    @classmethod
+    def of(cls, frame: Frame, jpeg: bytes) -> Part:
+        """The part for ``frame`` encoded as ``jpeg``."""
+        return cls(frame.sequence, jpeg, (
+            ("X-Sequence", str(frame.sequence)), ("X-Timestamp-Ns", str(frame.timestamp_ns)),
+            ("X-Line-Time-Ns", str(frame.line_time_ns)), ("X-Exposure-Ns", str(frame.exposure_ns)),
+            ("X-Readout", frame.readout.value), ("X-Shutter", frame.shutter)))
 
     def encode(self) -> bytes:
         """The multipart chunk: boundary, headers, JPEG."""
@@ -46,30 +66,25 @@ class Part:
         return ("\r\n".join(head) + "\r\n\r\n").encode() + self.jpeg + b"\r\n"
 
 
-class Mailbox(Generic[T]):
-    """The newest item (a part for a client, a frame for the encoder) not yet taken; a newer item replaces
-    it, and that counts as a drop."""
+class _Latest:
+    """The newest frame waiting for the encoder (a newer one replaces it): a one-slot handoff between threads."""
 
     def __init__(self) -> None:
         self.cond = threading.Condition()
-        self.part: T | None = None
+        self.frame: Frame | None = None
         self.closed = False
-        self.sent = 0
-        self.dropped = 0
 
-    def put(self, part: T) -> None:
+    def put(self, frame: Frame) -> None:
         with self.cond:
-            if self.part is not None:
-                self.dropped += 1
-            self.part = part
+            self.frame = frame
             self.cond.notify_all()
 
-    def get(self, timeout_s: float) -> T | None:
+    def get(self, timeout_s: float) -> Frame | None:
         with self.cond:
-            if self.part is None and not self.closed:
+            if self.frame is None and not self.closed:
                 self.cond.wait(timeout_s)
-            part, self.part = self.part, None
-            return part
+            frame, self.frame = self.frame, None
+            return frame
 
     def close(self) -> None:
         with self.cond:
@@ -79,56 +94,83 @@ class Mailbox(Generic[T]):
 
 @dataclass
 class ServerStats(Stats):
-    """What the HTTP server did: frames encoded, clients served, parts dropped for slow clients, bad requests."""
+    """What the MJPEG server did: frames encoded, clients served, parts dropped for slow clients, bad requests,
+    streams evicted (stalled, for a newcomer) and closed (stalled past the send timeout)."""
 
     frames_encoded: int = 0
     clients_served: int = 0
     dropped_total: int = 0
     bad_requests: int = 0
+    evicted_stalled: int = 0
+    send_timeouts: int = 0
+
+
+class _MultipartResponse(web.StreamResponse):
+    """A response whose body ends with the connection: no chunked framing around the parts (aiohttp's own
+    WebSocket response turns the same length check off)."""
+
+    _length_check = False
 
 
 class MjpegServer(Closeable):
-    """An HTTP server streaming one camera as MJPEG to any number of clients; a context manager (``with``
-    starts it)."""
+    """An HTTP server streaming one camera as MJPEG to many clients, fairly; a context manager (``with``
+    starts it). ``max_clients`` is ``limits.max_streams``."""
 
     def __init__(self, camera: FirmwareCamera, host: str = "127.0.0.1", port: int = 0, *,
-                 pump: FramePump | None = None, quality: int = JPEG_QUALITY, max_clients: int = 32) -> None:
+                 pump: FramePump | None = None, quality: int = JPEG_QUALITY, max_clients: int | None = None,
+                 limits: HttpLimits | None = None) -> None:
         self.camera = camera
         self.quality = jpeg_quality(quality)  # refused here, not in the encoder thread
-        self.max_clients = max_clients
+        limits = limits or HttpLimits()
+        if max_clients is not None:
+            limits = dataclasses.replace(limits, max_streams=max_clients)
+        self.limits = limits
+        self.max_clients = limits.max_streams
         self._own_pump = pump is None
         self.pump = pump or FramePump(camera, bands=1, name="rollcam-http-pump")
-        self.clients: dict[int, Mailbox[Part]] = {}
-        self._lock = threading.Lock()
-        self._latest: Mailbox[Frame] = Mailbox()  # the frame waiting for the encoder (newest only)
         self.stats = ServerStats()
-        self.httpd = _Server((host, port), _handler_class(self))
+        self._latest = _Latest()
+        self._snapshots: set[asyncio.Future[Part]] = set()
+        app = web.Application(middlewares=[self._count_errors])
+        for path in STREAM_PATHS:
+            app.router.add_get(path, self._stream, allow_head=False)
+        app.router.add_get("/snapshot.jpg", self._snapshot, allow_head=False)
+        app.router.add_get("/status.json", self._status, allow_head=False)
+        app.cleanup_ctx.append(self._sweeper)
+        self.http = HttpHost(app, host, port, limits=limits, name="rollcam-http")
+        self.slots = StreamSlots(limits, self.http.loop.time)
         self._encoder = Worker(self._encode_loop, name="rollcam-http-jpeg", wrap=DeviceError)
-        self._stop = self._encoder.stop_event
-        self._workers = (Worker(self.httpd.serve_forever, name="rollcam-http", wrap=DeviceError), self._encoder)
+
+    @property
+    def clients(self) -> dict[int, Any]:
+        """The streams being served, by key."""
+        return dict(self.slots.clients)
 
     @property
     def address(self) -> tuple[str, int]:
         """Bound host and port."""
-        host, port = self.httpd.server_address[:2]
-        return str(host), int(port)
+        return self.http.address
 
     @property
     def url(self) -> str:
         """The stream URL clients open."""
-        host, port = self.address
-        return f"http://{host}:{port}/stream.mjpg"
+        return f"{self.http.base_url}/stream.mjpg"
 
     def start(self) -> None:
         """Start serving (and streaming the camera)."""
         self._check_open()
+        self.http.start()
         self.pump.add_sink(self)
-        for w in self._workers:
-            w.start()
+        self._encoder.start()
         self.camera.stream_on()
         self.pump.start()
 
     _on_enter = start
+
+    def check(self) -> None:
+        """Raise (as a DeviceError) what stopped the server's loop or encoder thread, if anything did."""
+        self.http.check()
+        self._encoder.check()
 
     def _close(self) -> None:
         """Stop serving, disconnect clients, free the port; re-raises what stopped a thread early, if anything."""
@@ -139,160 +181,105 @@ class MjpegServer(Closeable):
                 self.pump.close()
         finally:
             self._latest.close()
-            with self._lock:
-                for box in self.clients.values():
-                    box.close()
-            if self._workers[0].alive:
-                self.httpd.shutdown()
-            self.httpd.server_close()
-            for w in self._workers:
-                w.close()
+            try:
+                self.http.close()
+            finally:
+                self._encoder.close()
 
     # --------------------------------------------------------------------------------- pump sink, encoder
     def on_band(self, frame: Frame, plan: FramePlan, band: int, n_bands: int) -> None:
         """Bands are not sent separately over HTTP."""
 
     def on_frame(self, frame: Frame, plan: FramePlan) -> None:
-        """A frame is complete: hand it to the encoder (only the newest waits)."""
-        if self.clients:  # nobody watching: nothing to encode
+        """A frame is complete: hand it to the encoder (only the newest waits) when anyone is watching."""
+        if len(self.slots) or self._snapshots:
             self._latest.put(frame)
 
     def _encode_loop(self) -> None:
-        while not self._stop.is_set():
+        levels = Levels.of_sensor(self.camera.sensor)
+        while not self._encoder.stopping:
             f = self._latest.get(0.2)
             if f is None:
                 continue
-            jpeg = transcode(f, "MJPG", Levels.of_sensor(self.camera.sensor), self.quality).tobytes()
-            part = Part(f.sequence, jpeg, (
-                ("X-Sequence", str(f.sequence)), ("X-Timestamp-Ns", str(f.timestamp_ns)),
-                ("X-Line-Time-Ns", str(f.line_time_ns)), ("X-Exposure-Ns", str(f.exposure_ns)),
-                ("X-Readout", f.readout.value), ("X-Shutter", f.shutter)))
+            part = Part.of(f, transcode(f, "MJPG", levels, self.quality).tobytes())
             self.stats.frames_encoded += 1
-            with self._lock:
-                boxes = list(self.clients.values())
-            for box in boxes:
-                box.put(part)
+            self.http.call_soon(self._publish, part)
+
+    def _publish(self, part: Part) -> None:
+        self.slots.offer(part)
+        for fut in self._snapshots:
+            if not fut.done():
+                fut.set_result(part)
+        self._snapshots.clear()
+
+    # --------------------------------------------------------------------------------- handlers (event loop)
+    @web.middleware
+    async def _count_errors(self, request: web.Request, handler: Any) -> web.StreamResponse:
+        try:
+            return await handler(request)
+        except web.HTTPException as exc:
+            self.stats.bad_requests += exc.status >= 400
+            raise
+
+    async def _sweeper(self, app: web.Application) -> AsyncIterator[None]:
+        async def sweep() -> None:
+            while True:
+                await asyncio.sleep(SWEEP_S)
+                self.slots.sweep()
+
+        task = asyncio.get_running_loop().create_task(sweep())
+        yield
+        task.cancel()
 
     def status(self) -> dict[str, Any]:
-        """Counters: frames encoded, clients now and served, per-client sent and dropped parts."""
-        with self._lock:
-            clients = {str(k): {"sent": b.sent, "dropped": b.dropped} for k, b in self.clients.items()}
-        return {**self.stats.to_json(), "clients": clients, "pump": self.pump.stats.to_json(),
-                "camera": self.camera.stats.to_json()}
+        """Counters: frames encoded, clients now and served, per-client sent and dropped parts; connections."""
+        s = self.slots
+        self.stats.clients_served, self.stats.dropped_total = s.served, s.dropped_total
+        self.stats.evicted_stalled, self.stats.send_timeouts = s.evicted, s.send_timeouts
+        doc = self.stats.to_json()
+        doc["bad_requests"] += self.http.stats.malformed_requests
+        return {**doc, "clients": s.to_json(), "http": self.http.stats.to_json(),
+                "pump": self.pump.stats.to_json(), "camera": self.camera.stats.to_json()}
 
-    def _join(self) -> tuple[int, Mailbox[Part]] | None:
-        with self._lock:
-            if len(self.clients) >= self.max_clients:
-                return None
-            key = self.stats.clients_served
-            self.stats.clients_served += 1
-            box = self.clients[key] = Mailbox()
-            return key, box
+    async def _status(self, request: web.Request) -> web.Response:
+        return web.Response(body=json.dumps(self.status()).encode(), content_type="application/json",
+                            headers={"Cache-Control": "no-store"})
 
-    def _leave(self, key: int) -> None:
-        with self._lock:
-            box = self.clients.pop(key, None)
-            if box is not None:
-                self.stats.dropped_total += box.dropped
-
-
-class _Server(ThreadingHTTPServer):
-    """A threading HTTP server that treats a client vanishing mid-reply as routine, not as a traceback."""
-
-    daemon_threads = True
-
-    def handle_error(self, request: Any, client_address: Any) -> None:
-        exc = sys.exc_info()[1]
-        if not isinstance(exc, OSError):
-            super().handle_error(request, client_address)
-
-
-def _handler_class(server: MjpegServer) -> type[BaseHTTPRequestHandler]:
-    class Handler(_Handler):
-        owner = server
-
-    return Handler
-
-
-class _Handler(BaseHTTPRequestHandler):
-    """One HTTP connection; ``owner`` is the MjpegServer."""
-
-    owner: MjpegServer
-    server_version = "rollcam-mjpeg/1.0"
-    default_request_version = "HTTP/1.0"  # error replies to unparsable request lines still get a status line
-    timeout = 10  # seconds a silent or stalled peer may hold a connection
-
-    def log_message(self, format: str, *args: Any) -> None:
-        """Quiet: the server reports through ``status()``."""
-
-    def send_error(self, code: int, message: str | None = None, explain: str | None = None) -> None:
-        """Count every error reply (malformed request lines and headers included)."""
-        self.owner.stats.bad_requests += 1
-        super().send_error(code, message, explain)
-
-    def do_GET(self) -> None:
-        path = self.path.split("?", 1)[0]
-        if path in STREAM_PATHS:
-            self._stream()
-        elif path == "/snapshot.jpg":
-            self._snapshot()
-        elif path == "/status.json":
-            self._reply(HTTPStatus.OK, "application/json", json.dumps(self.owner.status()).encode())
-        else:
-            self.send_error(HTTPStatus.NOT_FOUND, f"no resource {path!r}; try {STREAM_PATHS[2]}")
-
-    def do_HEAD(self) -> None:
-        self.send_error(HTTPStatus.METHOD_NOT_ALLOWED, "HEAD is not served; use GET")
-
-    def do_POST(self) -> None:
-        self.send_error(HTTPStatus.METHOD_NOT_ALLOWED, "the camera is read-only over HTTP; use GET")
-
-    do_PUT = do_DELETE = do_PATCH = do_POST
-
-    def _reply(self, status: int, ctype: str, body: bytes) -> None:
-        self.send_response(status)
-        self.send_header("Content-Type", ctype)
-        self.send_header("Content-Length", str(len(body)))
-        self.send_header("Cache-Control", "no-store")
-        self.end_headers()
-        self.wfile.write(body)
-
-    def _snapshot(self) -> None:
-        joined = self.owner._join()
-        if joined is None:
-            self.send_error(HTTPStatus.SERVICE_UNAVAILABLE, "too many clients")
-            return
-        key, box = joined
+    async def _snapshot(self, request: web.Request) -> web.Response:
+        fut: asyncio.Future[Part] = asyncio.get_running_loop().create_future()
+        self._snapshots.add(fut)
         try:
-            part = box.get(5.0)
-            if part is None:
-                self.send_error(HTTPStatus.SERVICE_UNAVAILABLE, "the camera is not streaming")
-                return
-            self._reply(HTTPStatus.OK, "image/jpeg", part.jpeg)
+            part = await asyncio.wait_for(fut, SNAPSHOT_WAIT_S)
+        except asyncio.TimeoutError:
+            raise web.HTTPServiceUnavailable(text="the camera is not streaming") from None
         finally:
-            self.owner._leave(key)
+            self._snapshots.discard(fut)
+        return web.Response(body=part.jpeg, content_type="image/jpeg", headers={"Cache-Control": "no-store"})
 
-    def _stream(self) -> None:
-        joined = self.owner._join()
-        if joined is None:
-            self.send_error(HTTPStatus.SERVICE_UNAVAILABLE, f"too many clients (max {self.owner.max_clients})")
-            return
-        key, box = joined
-        self.close_connection = True
+    async def _stream(self, request: web.Request) -> web.StreamResponse:
+        conn = Connection.of(request)
+        if conn is None:  # gone before its turn
+            raise web.HTTPServiceUnavailable(text="the connection closed")
+        client = await self.slots.admit(conn)
+        if isinstance(client, str):
+            raise web.HTTPServiceUnavailable(text=client, headers={"Retry-After": "1"})
+        resp: web.StreamResponse = web.Response(status=499)  # what aiohttp gets if the client is gone
         try:
-            self.send_response(HTTPStatus.OK)
-            self.send_header("Content-Type", f"multipart/x-mixed-replace; boundary={BOUNDARY}")
-            self.send_header("Cache-Control", "no-store")
-            self.send_header("Connection", "close")
-            self.end_headers()
-            while not box.closed:
-                part = box.get(0.5)
-                if part is None:
-                    continue
-                self.wfile.write(part.encode())
-                self.wfile.flush()
-                box.sent += 1
-        except (OSError, ValueError):
-            pass  # the client went away (reset, timeout, closed socket): its frames end here
+            conn.streaming = True
+            if conn.eof:  # the client left before its stream began
+                return resp
+            resp = _MultipartResponse(headers={
+                "Content-Type": f"multipart/x-mixed-replace; boundary={BOUNDARY}",
+                "Cache-Control": "no-store", "Connection": "close"})
+            resp.force_close()
+            sock = request.transport.get_extra_info("socket") if request.transport is not None else None
+            if sock is not None:  # a fixed buffer: a reader that stops reading stalls within about a frame
+                sock.setsockopt(socket.SOL_SOCKET, socket.SO_SNDBUF, self.limits.stream_sndbuf_bytes)
+            await resp.prepare(request)
+            while (part := await client.next()) is not None:
+                await client.send(resp.write, part.chunk, self.http.loop.time)
+            return resp
+        except (ConnectionError, RuntimeError):  # the client went away mid-write
+            return resp
         finally:
-            self.owner._leave(key)
+            self.slots.leave(client)
