@@ -12,6 +12,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from . import _actors as A
 from . import _body as B
 from . import _kernels as K
 from . import _world as Wd
@@ -82,7 +83,7 @@ class Painter:
         ``span_s[g]`` at pose ``k_first[g]``, where ``need[o, g]`` (other entries are not written)."""
         out = np.empty((*need.shape, 4))
         t = self.tables
-        K.actor_bounds_all(t.actors, t.world, cam, rot, pos, t_first, k_first, span_s, need, out)
+        A.actor_bounds_all(t.actors, t.world, cam, rot, pos, t_first, k_first, span_s, need, out)
         return out
 
     def speeds(self, by_column: bool, times_s: np.ndarray) -> np.ndarray:
@@ -90,20 +91,20 @@ class Painter:
         rot, pos = self.poses(by_column, times_s)
         t = self.tables
         out = np.zeros(self.n_actors)
-        K.actor_speeds(t.actors, t.world, t.building_lut, t.buildings, t.light, self.cams[by_column], rot, pos,
+        A.actor_speeds(t.actors, t.world, t.building_lut, t.buildings, t.light, self.cams[by_column], rot, pos,
                        times_s, out)
         return out
 
     def parts(self, by_column: bool, times_s: np.ndarray) -> np.ndarray:
-        """Render-space parts ``(actors, times, K.MAX_PARTS, K.PART_COLS)`` of every actor at every time."""
+        """Render-space parts ``(actors, times, A.MAX_PARTS, A.PART_COLS)`` of every actor at every time."""
         rot, pos = self.poses(by_column, times_s)
         n_t = times_s.shape[0]
         s_o, s_k = np.repeat(np.arange(self.n_actors), n_t), np.tile(np.arange(n_t), self.n_actors)
-        out = np.empty((self.n_actors * n_t, K.MAX_PARTS, K.PART_COLS))
+        out = np.empty((self.n_actors * n_t, A.MAX_PARTS, A.PART_COLS))
         t = self.tables
-        K.actor_parts_all(t.actors, t.world, t.building_lut, t.buildings, t.light, self.cams[by_column], rot, pos,
+        A.actor_parts_all(t.actors, t.world, t.building_lut, t.buildings, t.light, self.cams[by_column], rot, pos,
                           times_s, s_o, s_k, out)
-        return out.reshape(self.n_actors, n_t, K.MAX_PARTS, K.PART_COLS)
+        return out.reshape(self.n_actors, n_t, A.MAX_PARTS, A.PART_COLS)
 
     def prepare(self, by_column: bool, times_s: np.ndarray, entry_k: np.ndarray, include: np.ndarray, n_along: int,
                 *, exhaustive: bool = False, only: np.ndarray | None = None,
@@ -197,7 +198,7 @@ class Painter:
         slots[s_o, s_k] = np.arange(s_o.size)
         parts = self._parts_buffer(max(s_o.size, 1))
         if s_o.size:
-            K.actor_parts_all(t.actors, t.world, t.building_lut, t.buildings, t.light, cam, rot, pos, times_s, s_o,
+            A.actor_parts_all(t.actors, t.world, t.building_lut, t.buildings, t.light, cam, rot, pos, times_s, s_o,
                               s_k, parts)
         return slots, parts
 
@@ -208,5 +209,5 @@ class Painter:
         faults every time. This is why a Renderer renders one frame at a time.
         """
         if self._parts is None or self._parts.shape[0] < n_slots:
-            self._parts = np.empty((max(n_slots, 1024), K.MAX_PARTS, K.PART_COLS))
+            self._parts = np.empty((max(n_slots, 1024), A.MAX_PARTS, A.PART_COLS))
         return self._parts[:n_slots]

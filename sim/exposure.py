@@ -29,6 +29,7 @@ import numpy as np
 from numba import njit, prange
 from rollcam.common.errors import ConfigError
 
+from ._jitcache import guard
 from .render import LinearFrame, Renderer
 
 DEFAULT_BOUND_PX = 0.5
@@ -210,3 +211,6 @@ def integrate(renderer: Renderer, plan: SamplePlan, *, by_column: bool = False, 
         painted += got
     _finish(acc, static if static is not None else np.empty((0, n_along, 3), np.float32), hits, n)
     return Integrated(LinearFrame(static, acc, hits > 0, by_column), plan.evaluations, painted, passes)
+
+
+guard(__name__)  # after every kernel and import: see rollcam.sim._jitcache

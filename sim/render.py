@@ -205,7 +205,7 @@ class Renderer:
     def actor_image_speeds(self, times_s: np.ndarray, *, by_column: bool = False) -> np.ndarray:
         """Per actor, the fastest render-space displacement rate (px/s) of its parts between consecutive times.
 
-        Parts wholly off the image by more than half its size are ignored (see ``_kernels.actor_speeds``);
+        Parts wholly off the image by more than half its size are ignored (see ``_actors.actor_speeds``);
         a chart bar's rate is its speed.
         """
         return self._painter.speeds(by_column, np.asarray(times_s, np.float64))
@@ -213,7 +213,7 @@ class Renderer:
     def actor_parts(self, times_s: np.ndarray, *, by_column: bool = False) -> np.ndarray:
         """The render-space primitives the kernels draw: ``(actors, times, MAX_PARTS, PART_COLS)`` float64.
 
-        Row layout in ``rollcam.sim._kernels`` (``Q_KIND`` capsule, quad or none; geometry from ``Q_GEO``;
+        Row layout in ``rollcam.sim._actors`` (``Q_KIND`` capsule, quad or none; geometry from ``Q_GEO``;
         line range ``Q_YMIN``..``Q_YMAX``). For checks and studies; a render computes only the parts it needs.
         """
         return self._painter.parts(by_column, np.asarray(times_s, np.float64))
