@@ -30,7 +30,8 @@ from numba import njit, prange
 from rollcam.common.errors import ConfigError
 
 from ._jitcache import guard
-from .render import LinearFrame, Renderer
+from .render import Renderer
+from .render_result import LinearFrame
 
 DEFAULT_BOUND_PX = 0.5
 MAX_SAMPLES = 512

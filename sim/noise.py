@@ -46,7 +46,7 @@ from rollcam.common.errors import ConfigError
 
 from ._jitcache import guard
 from .hwconfig import NoiseParams
-from .render import LinearFrame
+from .render_result import LinearFrame
 
 STAGES = ("shot", "dark", "read", "dsnu", "prnu", "saturation", "quantization")
 """Switchable stages of the model (all on by default; ``NoiseParams.ideal`` turns the random ones off)."""
