@@ -1,4 +1,4 @@
-"""Photon transfer curve of an emulated sensor, measured from its frames alone: ``rollcam bench --ptc``.
+"""Photon transfer curve of an emulated sensor, measured from its frames alone: ``rollcam bench ptc``.
 
 The EMVA 1288 (release 4.0) method on ``emu:SENSOR?scene=flat&level=L&format=RAW`` frames at 1 fps, so the
 exposure reaches about a second and dark current shows: at each of a series of exposures a pair of dark
@@ -272,7 +272,7 @@ def plot_ptc(result: PtcResult, path: str | Path) -> None:
 
 
 def run_ptc(sensor: str, out_dir: str | Path) -> PtcResult:
-    """``rollcam bench --ptc``: measure, write ``ptc.json`` and ``ptc.png`` under ``out_dir``."""
+    """``rollcam bench ptc``: measure, write ``ptc.json`` and ``ptc.png`` under ``out_dir``."""
     import json
 
     out = Path(out_dir)
@@ -284,7 +284,7 @@ def run_ptc(sensor: str, out_dir: str | Path) -> PtcResult:
 
 
 def format_ptc(result: PtcResult) -> str:
-    """The comparison table ``rollcam bench --ptc`` prints."""
+    """The comparison table ``rollcam bench ptc`` prints."""
     e = result.errors()
     rows = [("system gain (DN/e-)", result.gain_dn_per_e, result.gain_configured, e["gain"]),
             ("read noise (e-)", result.read_noise_e, result.read_noise_configured, e["read_noise"]),

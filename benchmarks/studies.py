@@ -180,7 +180,7 @@ def _sensor_targets(doc: Doc) -> Targets:
 
 # ------------------------------------------------------------------------------------------------ uvc
 def _uvc(args: argparse.Namespace, progress: Any) -> tuple[Doc, str]:
-    require("usb.core", "pyusb", "usb", "rollcam bench uvc")  # before the codec half, not after it
+    require("usb.core", "pyusb", feature="rollcam bench uvc")  # before the codec half, not after it
     from .uvc import format_uvc, run_uvc_bench
 
     progress.status("UVC payload packing and parsing")

@@ -9,6 +9,9 @@ not plugged in is a ``DeviceNotFoundError`` (exit 1), not bad input: the same co
 
 from __future__ import annotations
 
+import re
+import shlex
+
 
 class RollcamError(Exception):
     """Root of every error rollcam raises on purpose."""
@@ -35,17 +38,45 @@ class ProtocolError(RollcamError):
 
 
 class MissingDependencyError(RollcamError, ImportError):
-    """An optional package a feature needs is not installed; the message names the package and its pip extra."""
+    """A package a feature needs is not installed; the message names the package and how to install it.
+
+    ``extra``: the pip extra that brings an optional package (``pip install 'rollcam[eval]'``). Without one, a
+    package that is one of rollcam's own install dependencies (pyusb, pyserial, depthai, ...) is named as
+    missing from a broken install; any other is named with its own ``pip install``.
+    """
 
     def __init__(self, package: str, extra: str | None = None, feature: str | None = None) -> None:
         self.package, self.extra, self.feature = package, extra, feature
         need = f"{feature} needs {package}" if feature else f"{package} is not installed"
-        fix = f"pip install 'rollcam[{extra}]'" if extra else f"pip install {package}"
+        fix = f"pip install {shlex.quote(package)}"
+        if extra:
+            fix = f"pip install 'rollcam[{extra}]'"
+        elif is_install_dependency(package):
+            need += ", an install dependency of rollcam missing from this broken install"
         super().__init__(f"{need} ({fix})")
 
 
+def _project_name(requirement: str) -> str:
+    """The normalised project name a requirement names (``'PyYAML>=6'`` -> ``'pyyaml'``)."""
+    name = re.match(r"\s*([A-Za-z0-9][A-Za-z0-9._-]*)", requirement)
+    return re.sub(r"[-_.]+", "-", name.group(1)).lower() if name else requirement
+
+
+def is_install_dependency(package: str) -> bool:
+    """True when ``package`` (a name or requirement) is one of the installed rollcam's own dependencies (not an
+    extra's), read from its metadata, the one list (pyproject.toml's); False when rollcam is not installed."""
+    from importlib.metadata import PackageNotFoundError, requires
+
+    try:
+        required = requires("rollcam") or []
+    except PackageNotFoundError:
+        return False
+    return _project_name(package) in {_project_name(r) for r in required if ";" not in r}
+
+
 def require(module: str, package: str | None = None, extra: str | None = None, feature: str | None = None):
-    """Import and return ``module``, or raise ``MissingDependencyError`` naming ``package`` and ``extra``."""
+    """Import and return ``module``, or raise ``MissingDependencyError`` naming ``package`` and ``extra`` (None
+    for an install dependency)."""
     import importlib
 
     try:

@@ -9,6 +9,7 @@ everywhere. A value parser takes the text and returns the value or raises ``Valu
 from __future__ import annotations
 
 import math
+import operator
 from collections.abc import Callable
 from typing import Any
 from urllib.parse import parse_qsl
@@ -85,6 +86,23 @@ def non_negative_int(text: str) -> int:
     if value < 0:
         raise ValueError("must be an integer >= 0")
     return value
+
+
+JPEG_QUALITY = 85
+"""The one JPEG quality default (1..100) of every MJPEG encoder: HTTP (``emulate --quality``), UVC (wCompQuality
+8500), V4L2 (``rollcam.sim.codecs`` re-exports it); here, beside its parser, because the CLI reads it numpy-free."""
+
+
+def jpeg_quality(value: str | int) -> int:
+    """A JPEG quality, an integer in 1..100, from text (an option) or an integer (numpy's too); ConfigError
+    naming the value otherwise."""
+    try:
+        quality = int(value, 10) if isinstance(value, str) else operator.index(value)
+    except (TypeError, ValueError):
+        quality = None
+    if quality is None or isinstance(value, bool) or not 1 <= quality <= 100:
+        raise ConfigError(f"JPEG quality {value!r} is not an integer in 1..100")
+    return quality
 
 
 TRUE_WORDS = ("1", "on", "true", "yes")

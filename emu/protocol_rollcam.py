@@ -23,7 +23,7 @@ from rollcam.firmware.camera import FirmwareCamera
 from rollcam.firmware.protocol import ProtocolSession
 from rollcam.firmware.spec import CameraSpec
 
-_serialutil = require("serial.serialutil", "pyserial", "serial", "the rollcam:// serial URL handler")
+_serialutil = require("serial.serialutil", "pyserial", feature="the rollcam:// serial URL handler")
 PortNotOpenError, SerialBase, SerialException = (_serialutil.PortNotOpenError, _serialutil.SerialBase,
                                                  _serialutil.SerialException)
 

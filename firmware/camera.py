@@ -19,9 +19,8 @@ from rollcam.sim.hwconfig import SensorConfig
 from rollcam.sim.synthetic import SyntheticCamera
 
 from . import controls as ctl
-from .imaging import Imager
+from .imaging import Imager, warm, warm_ahead
 from .options import SHUTTERS
-from .pixfmt import FORMATS, raw_formats
 from .registers import RegisterFile
 from .spec import CameraSpec
 from .stream import CameraStats, Clock, DeviceStream, FramePlan, schedule_of
@@ -79,28 +78,30 @@ class FirmwareCamera(DeviceStream):
                 raise ConfigError(f"a {spec.sensor.name} spec cannot program a {self.sensor.name} camera")
             if idle_only and self.streaming and spec != self.spec:
                 raise DeviceError(f"cannot change the {idle_only} while streaming; stop first")
+            if self.streaming:
+                warm(spec)  # a new kind of frame compiles now, before its frame is due
             self.spec = spec
             self.changed.notify_all()
             return spec
 
     def update(self, *, idle_only: str | None = None, **fields: Any) -> CameraSpec:
         """Replace fields of the spec (re-validated), as ``dataclasses.replace`` does."""
+        if self.streaming:  # compile a new kind of frame before taking the lock the frames being made need
+            warm_ahead(lambda: dataclasses.replace(self.spec, **fields))
         with self.lock:
             return self.reprogram(dataclasses.replace(self.spec, **fields), idle_only=idle_only)
 
     def set_options(self, options: Mapping[str, Any]) -> CameraSpec:
         """Change options by their text names (``rollcam.firmware.options``): ``scene``, ``seed``, ``gain``, ...;
         a change of size, format, shutter, readout or flips is refused while streaming."""
+        if self.streaming:
+            warm_ahead(lambda: self.spec.with_options(options))
         with self.lock:
             spec = self.spec.with_options(options)
             moved = [f for f in _IDLE_ONLY if getattr(spec, f) != getattr(self.spec, f)]
             if self.streaming and moved:
                 raise DeviceError(f"cannot change {moved} while streaming; stop first")
             return self.reprogram(spec)
-
-    def set_scene(self, **changes: Any) -> None:
-        """Change scene options (``scene``, ``seed`` and the kind's own); applies from the next frame."""
-        self.set_options(changes)
 
     @property
     def scene_options(self) -> dict[str, Any]:
@@ -119,10 +120,8 @@ class FirmwareCamera(DeviceStream):
 
     @property
     def formats(self) -> list[str]:
-        """Fourccs the camera streams: the ISP's processed ones, then the sensor's raw ones in the Bayer order
-        the current flips give (as a Linux sensor driver enumerates them)."""
-        spec = self.spec
-        return [*FORMATS, *(spec.flipped(f) for f in raw_formats(self.sensor))]
+        """Fourccs the camera streams (``CameraSpec.device_formats``: processed, then raw in the flips' order)."""
+        return self.spec.device_formats()
 
     @property
     def pixel_format(self) -> str:
@@ -132,14 +131,7 @@ class FirmwareCamera(DeviceStream):
     def resolve_format(self, fourcc: str) -> str:
         """The fourcc ``set_format(fourcc)`` would give (a raw one in the current Bayer order); ConfigError if
         the camera has no such format."""
-        want = fourcc.ljust(4) if len(fourcc) == 3 else fourcc
-        if want in FORMATS:
-            return want
-        spec = self.spec
-        for base in raw_formats(self.sensor):
-            if want in (base, spec.flipped(base)):
-                return spec.flipped(base)
-        raise ConfigError(f"pixel format {fourcc!r} is not one of this {self.sensor.name} camera's {self.formats}")
+        return self.spec.resolve_format(fourcc)
 
     def set_format(self, fourcc: str) -> str:
         """Select the output format (processed, or raw: sensor samples without the ISP); refused while
@@ -151,15 +143,6 @@ class FirmwareCamera(DeviceStream):
     def raw(self) -> bool:
         """True when the current format is raw sensor samples."""
         return self.spec.raw
-
-    @property
-    def blur_px(self) -> float:
-        """Motion-blur bound of sensor-model frames in pixels (0: each line sampled at mid-exposure)."""
-        return self.spec.blur_px
-
-    def set_blur_px(self, blur_px: float) -> None:
-        """Integrate sensor-model frames over each line's exposure with this blur bound (px); 0 turns it off."""
-        self.update(blur_px=blur_px)
 
     def set_size(self, width: int, height: int) -> None:
         """Switch to this output size (its default frame length); refused while streaming."""
@@ -181,21 +164,13 @@ class FirmwareCamera(DeviceStream):
     def set_frame_interval_ns(self, interval_ns: int) -> int:
         """Program the frame length nearest ``interval_ns`` (within the mode's limits); returns the new interval."""
         with self.lock:
-            t = self.spec.settings.timing
-            lines = round(interval_ns * t.pixel_rate_hz / (t.line_length_pck * 1_000_000_000))
-            self.set_control("vblank", lines - self.spec.settings.n_lines)
+            self.set_control("vblank", ctl.vblank_for_interval(self.spec, interval_ns))
             return self.frame_interval_ns
 
     # ---------------------------------------------------------------------------------------- controls
     def controls(self) -> dict[str, dict[str, Any]]:
         """Every control with its kind, unit, range, current value and menu items."""
-        state = self.state
-        out = {}
-        for name, c in ctl.CONTROLS.items():
-            lo, hi = c.limits(state)
-            out[name] = {"kind": c.kind, "unit": c.unit, "min": lo, "max": hi, "value": c.get(state),
-                         "read_only": c.set is None, "menu": c.menu(state) if c.menu else None}
-        return out
+        return ctl.describe(self.state)
 
     def get_control(self, name: str) -> int:
         """Current value of a control."""
@@ -230,8 +205,8 @@ class FirmwareCamera(DeviceStream):
         """The SyntheticCamera that renders the current spec."""
         return self.imager.camera(self.spec)
 
-    def _warm(self) -> None:
-        self.imager.camera(self.spec)
+    def _warm(self) -> None:  # at stream on, before the clock starts
+        warm(self.spec, self.imager)
 
     def schedule(self, epoch_ns: int = 0, first_seq: int = 0) -> Any:
         """A schedule of the current spec from ``epoch_ns`` on, for reading frames without pacing."""

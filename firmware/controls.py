@@ -228,6 +228,23 @@ CONTROLS: dict[str, Control] = {c.name: c for c in (
 """The controls every firmware camera offers, by V4L2-style name (V4L2_CID_<NAME upper>)."""
 
 
+def describe(state: SensorState) -> dict[str, dict[str, object]]:
+    """Every control with its kind, unit, range, current value and menu items (VIDIOC_QUERYCTRL's content)."""
+    out = {}
+    for name, c in CONTROLS.items():
+        lo, hi = c.limits(state)
+        out[name] = {"kind": c.kind, "unit": c.unit, "min": lo, "max": hi, "value": c.get(state),
+                     "read_only": c.set is None, "menu": c.menu(state) if c.menu else None}
+    return out
+
+
+def vblank_for_interval(spec: CameraSpec, interval_ns: int) -> int:
+    """The vertical blanking (lines) whose frame length is nearest a frame period of ``interval_ns``."""
+    t = spec.settings.timing
+    lines = round(interval_ns * t.pixel_rate_hz / (t.line_length_pck * 1_000_000_000))
+    return lines - spec.settings.n_lines
+
+
 def get_control(state: SensorState, name: str) -> int:
     """Current value of control ``name``."""
     return _control(name).get(state)

@@ -11,14 +11,21 @@ model's preview ISP when physics is on (the default for every format but BGR3), 
 ``encode`` turns it into the processed layout (YUYV, NV12, ...), and transports encode it to their wire
 formats. A test pattern in a raw format is the BGR pattern sampled through the colour filter
 (``rollcam.sim.formats.mosaic``) at full scale of the format's bits, without noise or black level.
+
+``warm`` makes the first frame of a new kind of programming once, before a device's clock starts: the render
+and sensor kernels are compiled by numba on first use (about 16 s on a cold cache, more than a client's
+DQBUF or HTTP timeout), and a real-time stream must not open by waiting for that.
 """
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import threading
+from collections.abc import Callable
 
 import numpy as np
+from rollcam.common.errors import ConfigError
 from rollcam.sim import formats as sf
 from rollcam.sim.codecs import codec
 from rollcam.sim.frame import Frame
@@ -28,6 +35,32 @@ from .patterns import render_pattern
 from .spec import CameraSpec, scene_of
 
 _PATTERN_ONLY = ("test_pattern",)  # spec fields that change frames without a new SyntheticCamera
+_WARM_KINDS: set[tuple] = set()  # process-wide, as numba's compiled kernels are
+
+
+def kernel_kind(spec: CameraSpec) -> tuple:
+    """What decides which compiled kernels a spec's frames run (the path through renderer, sensor model and
+    packing), leaving out values that only change numbers: size, timing, exposure, gain, seeds."""
+    return (spec.sensor.name, spec.pixel_format, spec.uses_physics, spec.blur_px > 0, spec.noise, spec.hflip,
+            spec.vflip, spec.shutter, spec.readout, spec.scene, spec.test_pattern != "none")
+
+
+def warm(spec: CameraSpec, imager: Imager | None = None) -> None:
+    """Compile what ``spec``'s frames need, once per kind (``kernel_kind``) and process: render one frame and
+    throw it away (frames are a function of spec, sequence and start, so none changes). ``imager``: the
+    device's own, whose camera keeps the static layers it built; default a throwaway one, so frames being
+    made meanwhile do not wait for it."""
+    kind = kernel_kind(spec)
+    if kind not in _WARM_KINDS:
+        (imager or Imager()).render(spec, 0, 0)
+        _WARM_KINDS.add(kind)
+
+
+def warm_ahead(make: Callable[[], CameraSpec]) -> None:
+    """``warm`` the spec ``make()`` builds, ahead of the change that commits it (outside the device's lock, so
+    frames being made meanwhile do not wait); a spec that does not build is left for that change to refuse."""
+    with contextlib.suppress(ConfigError):
+        warm(make())
 
 
 def synthetic_camera(spec: CameraSpec) -> SyntheticCamera:

@@ -32,7 +32,7 @@ from rollcam.sim.sensor import flipped_cfa
 from rollcam.sim.synthetic import StreamSettings, resolve_settings
 
 from .options import OPTIONS, parse_options
-from .pixfmt import FORMATS
+from .pixfmt import FORMATS, raw_formats
 from .traits import traits_for
 
 _SENSOR_PROCESSED = ("NV12", "YU12")  # processed formats the sensor model's ISP makes besides the device's
@@ -168,6 +168,23 @@ class CameraSpec:
         if not f.is_raw or f.cfa == "mono":
             return fourcc
         return sf.bayer_fourcc(self.bayer_order, f.bits, f.packing == "csi2")
+
+    def device_formats(self) -> list[str]:
+        """Fourccs a camera of this spec streams: the ISP's processed ones, then the sensor's raw ones in the
+        Bayer order the flips give (as a Linux sensor driver enumerates them)."""
+        return [*FORMATS, *(self.flipped(f) for f in raw_formats(self.sensor))]
+
+    def resolve_format(self, fourcc: str) -> str:
+        """The fourcc selecting ``fourcc`` gives (a raw one in the current Bayer order, given in either);
+        ConfigError when the camera has no such format."""
+        want = fourcc.ljust(4) if len(fourcc) == 3 else fourcc
+        if want in FORMATS:
+            return want
+        for base in raw_formats(self.sensor):
+            if want in (base, self.flipped(base)):
+                return self.flipped(base)
+        raise ConfigError(f"pixel format {fourcc!r} is not one of this {self.sensor.name} camera's "
+                          f"{self.device_formats()}")
 
     @property
     def bayer_order(self) -> str:

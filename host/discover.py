@@ -52,7 +52,7 @@ def usb_video_devices(usb_find: Callable[..., Any] | None = None) -> tuple[Rows,
     """USB devices with a video-class interface (UVC cameras), through pyusb."""
     if usb_find is None:
         try:
-            usb_find = require("usb.core", "pyusb", "usb", "USB discovery").find
+            usb_find = require("usb.core", "pyusb", feature="USB discovery").find
         except MissingDependencyError as exc:
             return [], f"{exc}; real cameras also need libusb-1.0 from the OS"
     try:

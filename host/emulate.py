@@ -5,8 +5,8 @@ transport asked for: ``--http HOST:PORT`` (MJPEG for ``cv2.VideoCapture``, brows
 ``--serial`` (the control protocol on a pseudo-terminal) and ``--usbip HOST:PORT`` (a UVC camera that
 ``usbip attach`` or rollcam's USB/IP client imports; the UVC host's commit programs the camera's mode and
 frame rate, as on a real device). With no transport option, HTTP on 127.0.0.1:8080. A transport is one
-entry of ``TRANSPORTS``: its option and a starter that returns the running server (something with
-``close()``) and the lines telling a user where to connect.
+entry of ``TRANSPORTS``: a starter that returns the running server (something with ``close()``) and the
+lines telling a user where to connect; its flags are in ``rollcam.host.commands.emulate``, the command line.
 """
 
 from __future__ import annotations
@@ -22,19 +22,6 @@ from dataclasses import dataclass
 from typing import Any
 
 LOOPBACK = ("127.0.0.1", "localhost", "::1")
-DEFAULT_HTTP = "127.0.0.1:8080"
-
-
-def host_port(text: str) -> tuple[str, int]:
-    """``HOST:PORT``, ``:PORT`` or ``PORT`` -> (host, port) for argparse; the host defaults to 127.0.0.1."""
-    from rollcam.common.errors import ConfigError
-
-    from .sources.base import parse_host_port
-
-    try:
-        return parse_host_port(text)
-    except ConfigError as exc:
-        raise argparse.ArgumentTypeError(str(exc)) from None
 
 
 @dataclass
@@ -110,94 +97,28 @@ def start_usbip(args: argparse.Namespace, camera: Any, pump: Any) -> Running | N
                    {"host": addr_host, "port": addr_port, "busids": busids}, uses_pump=False)
 
 
-def _http_option(g: argparse._ArgumentGroup) -> None:
-    g.add_argument("--http", type=host_port, default=None, metavar="HOST:PORT",
-                   help=f"serve MJPEG over HTTP (default when no transport is given: {DEFAULT_HTTP})")
-    g.add_argument("--quality", type=int, default=85, help="JPEG quality for HTTP (default: 85)")
-
-
-def _serial_option(g: argparse._ArgumentGroup) -> None:
-    g.add_argument("--serial", action="store_true", help="serve the control protocol on a pseudo-terminal")
-
-
-def _usbip_option(g: argparse._ArgumentGroup) -> None:
-    g.add_argument("--usbip", type=host_port, default=None, metavar="HOST:PORT",
-                   help="serve the camera as a UVC device over USB/IP (the usbip protocol port is 3240)")
-    g.add_argument("--usb-transfer", choices=("iso", "bulk"), default="iso",
-                   help="UVC streaming endpoint type for --usbip (default: iso)")
-
-
 Starter = Callable[[argparse.Namespace, Any, Any], "Running | None"]
-TRANSPORTS: list[tuple[str, Callable[[argparse._ArgumentGroup], None], Starter]] = [
-    ("http", _http_option, start_http),
-    ("serial", _serial_option, start_serial),
-    ("usbip", _usbip_option, start_usbip),
-]
-"""Transports in start order: (name = the option's dest, add its options, starter). A starter gets the parsed
-arguments, the FirmwareCamera and the shared FramePump, and returns None when its option was not given. A new
-transport (``--usbip HOST:PORT``) is one entry here."""
+TRANSPORTS: list[tuple[str, Starter]] = [("http", start_http), ("serial", start_serial), ("usbip", start_usbip)]
+"""Transports in start order: (name = the option's dest, starter). A starter gets the parsed arguments, the
+FirmwareCamera and the shared FramePump, and returns None when its option was not given. A new transport is
+one entry here and its flags in ``rollcam.host.commands.emulate``."""
 
 
-def register(sub: argparse._SubParsersAction) -> None:
-    """Add the ``emulate`` command."""
-    p = sub.add_parser("emulate", help="serve an emulated camera over HTTP (MJPEG), a serial pty and USB/IP (UVC)",
-                       description="Stream an emulated sensor in real time and serve it until Ctrl-C: MJPEG over "
-                                   "HTTP (--http, default 127.0.0.1:8080), the serial control protocol on a "
-                                   "pseudo-terminal (--serial) and a UVC camera over USB/IP (--usbip).",
-                       epilog="Example: rollcam emulate imx219 --scene street --speed fast --http 127.0.0.1:8080 "
-                              "--serial")
-    p.add_argument("sensor", metavar="SENSOR", help="sensor name (see 'rollcam list') or a .yaml path")
-    _camera_flags(p)
-    g = p.add_argument_group("transports")
-    for _name, add_options, _start in TRANSPORTS:
-        add_options(g)
-    p.add_argument("--duration", type=float, default=None, metavar="SECONDS", help="stop after this long")
-    p.add_argument("--json", action="store_true", help="print the endpoints as one JSON line")
-    p.set_defaults(func=cmd_emulate)
-
-
-FLAG_NAMES = {"serial": "serial-number"}
-"""Camera options whose flag is not ``--<name>`` (``--serial`` is the serial transport)."""
-
-
-def _flag(name: str) -> str:
-    return "--" + FLAG_NAMES.get(name, name.replace("_", "-"))
-
-
-def _camera_flags(p: argparse.ArgumentParser) -> None:
-    """One flag per camera option of ``rollcam.firmware.options.OPTIONS`` (the emu: URI's options), taken as
-    text and parsed by the option table, so a value means and is checked the same as in an emu: URI."""
-    from rollcam.firmware.options import OPTIONS, as_text
-
-    scene = p.add_argument_group("scene (the emu: URI's scene options)")
-    camera = p.add_argument_group("camera (the emu: URI's options)")
-    for name, o in OPTIONS.items():
-        group = scene if o.scenes is not None else camera
-        default = "" if o.default is None else f" (default: {as_text(o.default)})"
-        group.add_argument(_flag(name), dest=f"camera_{name}", default=None, metavar=name.upper(),
-                           help=o.doc + default)
-
-
-def camera_options(args: argparse.Namespace) -> dict[str, str]:
-    """The camera options given as flags, by option name."""
-    return {k.removeprefix("camera_"): v for k, v in vars(args).items() if k.startswith("camera_") and v is not None}
-
-
-def cmd_emulate(args: argparse.Namespace) -> int:
-    """Run the emulator until Ctrl-C, SIGTERM or ``--duration``; every transport is closed on the way out."""
+def serve(args: argparse.Namespace, camera_options: dict[str, str]) -> int:
+    """Run the emulator of ``args.sensor`` programmed by ``camera_options`` (text, as in an emu: URI) on the
+    transports ``args`` asks for, until Ctrl-C, SIGTERM or ``args.duration`` (0: stop at once); every
+    transport is closed on the way out."""
     from rollcam.emu.pump import FramePump
     from rollcam.firmware.camera import FirmwareCamera
     from rollcam.firmware.spec import CameraSpec
 
-    if not any(getattr(args, name, None) for name, _add, _start in TRANSPORTS):
-        args.http = host_port(DEFAULT_HTTP)
-    camera = FirmwareCamera(CameraSpec.from_options(args.sensor, camera_options(args), "rollcam emulate"))
+    camera = FirmwareCamera(CameraSpec.from_options(args.sensor, camera_options, "rollcam emulate"))
     stop = threading.Event()
     previous = signal.signal(signal.SIGTERM, lambda *_: stop.set())
     running: list[Running] = []
     pump = FramePump(camera, bands=1, name="rollcam-emulate")
     try:
-        for _name, _add, starter in TRANSPORTS:
+        for _name, starter in TRANSPORTS:
             started = starter(args, camera, pump)
             if started is not None:
                 running.append(started)

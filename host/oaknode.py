@@ -7,11 +7,15 @@ an OAK's camera can take its frames from any rollcam source instead::
     from rollcam.host.oaknode import EmulatedCamera
 
     with dai.Pipeline(False) as pipeline:
-        cam = pipeline.create(EmulatedCamera).build("emu:imx378?size=1280x720&scene=street", frames=100)
+        cam = pipeline.create(EmulatedCamera).build("emu:imx378?size=640x360&scene=street", frames=10)
         queue = cam.out.createOutputQueue()
         pipeline.start()
+        images = []
         while pipeline.isRunning():
-            img = queue.get().getCvFrame()          # BGR888i, device sequence and timestamp set
+            frame = queue.get()                     # a dai.ImgFrame: BGR888i, device sequence and timestamp
+            images.append(frame.getCvFrame())       # all 10, then the loop ends
+
+(tests/test_oaknode.py runs this example as written.)
 
 Each ImgFrame carries the source frame's sequence number, exposure time and device timestamp (depthai keeps
 whole microseconds). As on an OAK, the timestamp is the end of exposure: ``getTimestampDevice()`` is the
@@ -24,7 +28,7 @@ by ``cam.out.createOutputQueue()`` stops it as it hands out the last frame (so t
 and then ends, where depthai's own ReplayVideo makes ``get`` raise ``MessageQueue was closed``); a node fed
 only through ``cam.out.link(...)`` stops it after sending the last frame. If the node fails, the queue's
 ``get`` raises its error as SourceError (also kept in ``cam.error``).
-``EmulatedCamera`` is built on first access, because depthai is an optional dependency (``rollcam[oak]``).
+``EmulatedCamera`` is built on first access, so importing this module does not load depthai.
 Import depthai before ``faster_coco_eval`` (used by ``rollcam eval``) in one process: the other order breaks
 depthai's host-node subclassing, and ``EmulatedCamera`` then refuses with an error saying so.
 """

@@ -28,13 +28,11 @@ from typing import Any
 
 import numpy as np
 from rollcam.common.errors import ConfigError, ProtocolError
+from rollcam.common.values import JPEG_QUALITY, jpeg_quality
 
 from .formats import FORMATS, PixelFormat, pack_csi2, unpack_csi2
 from .frame import Frame
 from .isp import IspParams, preview
-
-JPEG_QUALITY = 85
-"""The one JPEG quality default (1..100) of every MJPEG encoder: HTTP, UVC (wCompQuality 8500), V4L2."""
 
 
 @dataclass(frozen=True)
@@ -66,13 +64,6 @@ class Levels:
         white = float((1 << layout.bits) - 1)
         black = self.black_level_dn / (1 << max(self.bit_depth - layout.bits, 0))
         return IspParams(black_level_dn=min(black, white - 1), white_level_dn=white)
-
-
-def jpeg_quality(quality: int) -> int:
-    """``quality`` checked to be a JPEG quality, 1..100 (ConfigError naming it otherwise)."""
-    if isinstance(quality, bool) or not isinstance(quality, (int, np.integer)) or not 1 <= quality <= 100:
-        raise ConfigError(f"JPEG quality {quality!r} is not an integer in 1..100")
-    return int(quality)
 
 
 def _cv2() -> Any:

@@ -10,6 +10,7 @@ import importlib.util
 import io
 import json
 import os
+import re
 import signal
 import subprocess
 import sys
@@ -214,7 +215,12 @@ def test_every_command_is_a_module_registered_the_same_way():
     (["bench", "soak", "--minutes", "-1"], "bench soak: argument --minutes: '-1' is invalid: must be greater than 0"),
     (["bench", "dataset", "--size", "10x"], "bench dataset: argument --size: size '10x' is not WIDTHxHEIGHT"),
     (["bench", "render", "--size", "big"], "--size"),
-    (["emulate", "imx219", "--duration", "-1"], "emulate: argument --duration: -1 is invalid: must be a number >= 0"),
+    (["emulate", "imx219", "--duration", "-1"], "emulate: argument --duration: '-1' is invalid: must be a number >= 0"),
+    (["emulate", "imx219", "--quality", "0"], "argument --quality: JPEG quality '0' is not an integer in 1..100"),
+    (["emulate", "imx219", "--quality", "101"], "argument --quality: JPEG quality '101' is not"),
+    (["emulate", "imx219", "--fps", "fast"], "emulate: argument --fps: 'fast' is invalid: expected a number > 0"),
+    (["emulate", "imx219", "--speed", "3x"], "argument --speed: '3x' is invalid: expected static | normal | fast"),
+    (["emulate", "imx219", "--usbip", "host"], "emulate: argument --usbip: expected HOST:PORT, got 'host'"),
 ])
 def test_usage_errors_are_one_error_line_and_exit_2(capsys, argv, words):
     assert main(argv) == 2
@@ -222,6 +228,44 @@ def test_usage_errors_are_one_error_line_and_exit_2(capsys, argv, words):
     lines = captured.err.splitlines()
     assert len(lines) == 1 and lines[0].startswith("rollcam: error: ") and words in lines[0], captured.err
     assert "usage:" not in captured.err and not captured.out
+
+
+@pytest.mark.parametrize("argv, new", [
+    (["--quick"], "rollcam bench render --quick"), (["--hog"], "rollcam bench hog"),
+    (["--detect"], "rollcam bench detect"), (["--ptc"], "rollcam bench ptc"),
+    (["--ptc", "imx477"], "rollcam bench ptc imx477"), (["--sensor"], "rollcam bench sensor"),
+    (["--uvc"], "rollcam bench uvc"), (["--soak", "--minutes", "1"], "rollcam bench soak"),
+    (["--dataset", "--size", "10x"], "rollcam bench dataset"),
+])
+def test_old_bench_flags_name_their_subcommand(capsys, tmp_path: Path, argv, new):
+    assert main(["bench", *argv, "--out", str(tmp_path / "b")]) == 2
+    captured = capsys.readouterr()
+    assert captured.err == f"rollcam: error: bench: {argv[0]} is now {new!r}\n" and not captured.out
+    assert not (tmp_path / "b").exists()
+
+
+def test_emulate_options_are_the_command_modules_and_quality_defaults_to_the_codec_tables():
+    from rollcam.common.values import JPEG_QUALITY
+    from rollcam.host.cli import build_parser
+    from rollcam.sim import codecs
+
+    parser, _ = build_parser()
+    args = parser.parse_args(["emulate", "imx219", "--fps", "15", "--serial-number", "X1", "--serial"])
+    assert args.quality == JPEG_QUALITY == codecs.JPEG_QUALITY
+    assert args.run.__module__ == "rollcam.host.commands.emulate"
+    assert (args.http, args.usbip, args.duration) == (None, None, None) and args.serial
+    from rollcam.host.commands.emulate import camera_options
+
+    assert camera_options(args) == {"fps": "15", "serial": "X1"}  # text, parsed by the option table as in emu:
+    assert parser.parse_args(["emulate", "imx219", "--http", ":0", "--quality", "40"]).http == ("127.0.0.1", 0)
+
+
+def test_emulate_duration_0_stops_as_soon_as_the_servers_are_up():
+    res = run("emulate", "imx219", "--size", "640x480", "--scene", "flat", "--http", "127.0.0.1:0", "--duration", "0",
+              "--json")
+    assert res.returncode == 0, res.stderr
+    assert json.loads(res.stdout)["http"]["url"].startswith("http://127.0.0.1:")
+    assert "stopped;" in res.stderr
 
 
 @pytest.mark.parametrize("uri, words", [
@@ -249,10 +293,57 @@ def test_a_missing_optional_package_is_one_line_and_exit_1(monkeypatch, capsys, 
     monkeypatch.setitem(sys.modules, "usb.core", None)
     assert main(["capture", "uvc:1d6b:0102?backend=emu", "--frames", "1", "--out", str(tmp_path / "x")]) == 1
     err = capsys.readouterr().err
-    assert err == "rollcam: error: the uvc: source needs pyusb (pip install 'rollcam[usb]')\n"
+    broken = "an install dependency of rollcam missing from this broken install (pip install pyusb)"
+    assert err == f"rollcam: error: the uvc: source needs pyusb, {broken}\n"
     assert main(["bench", "uvc", "--out", str(tmp_path / "b")]) == 1
-    assert capsys.readouterr().err == "rollcam: error: rollcam bench uvc needs pyusb (pip install 'rollcam[usb]')\n"
+    assert capsys.readouterr().err == f"rollcam: error: rollcam bench uvc needs pyusb, {broken}\n"
     assert not (tmp_path / "b").exists()
+
+
+def test_install_hints_follow_pyproject():
+    from rollcam.common.errors import MissingDependencyError
+
+    # An extra's package names the extra; an install dependency's says the install is broken; anything else
+    # (a user's choice such as the GPU runtime) names its own pip install, quoted for the shell.
+    assert str(MissingDependencyError("faster-coco-eval", "eval", "rollcam eval")) == (
+        "rollcam eval needs faster-coco-eval (pip install 'rollcam[eval]')")
+    assert str(MissingDependencyError("pyserial", feature="x")) == (
+        "x needs pyserial, an install dependency of rollcam missing from this broken install (pip install pyserial)")
+    assert str(MissingDependencyError("depthai>=3,<4")).endswith("broken install (pip install 'depthai>=3,<4')")
+    assert str(MissingDependencyError("onnxruntime-gpu", feature="y")) == (
+        "y needs onnxruntime-gpu (pip install onnxruntime-gpu)")
+
+
+def _install_hints(root: Path) -> list[tuple[str, str | None, str | None]]:
+    """(where, package, extra) of every literal ``require(...)`` / ``MissingDependencyError(...)`` call."""
+    import ast
+
+    out = []
+    for folder in ("common", "host", "emu", "firmware", "sim", "benchmarks"):
+        for path in (root / folder).rglob("*.py"):
+            for node in ast.walk(ast.parse(path.read_text())):
+                name = getattr(getattr(node, "func", None), "id", None)
+                if not isinstance(node, ast.Call) or name not in ("require", "MissingDependencyError"):
+                    continue
+                names = ("module", "package", "extra") if name == "require" else ("package", "extra")
+                given = dict(zip(names, node.args, strict=False)) | {k.arg: k.value for k in node.keywords}
+                value = {k: v.value for k, v in given.items() if isinstance(v, ast.Constant)}
+                package = value.get("package") or value.get("module", "").split(".")[0]
+                out.append((f"{path.relative_to(root)}:{node.lineno}", package, value.get("extra")))
+    return out
+
+
+def test_every_install_hint_names_an_extra_that_exists_and_holds_the_package():
+    import tomllib
+
+    root = Path(__file__).resolve().parents[1]
+    extras = tomllib.loads((root / "pyproject.toml").read_text())["project"]["optional-dependencies"]
+    hints = _install_hints(root)
+    assert len(hints) >= 8 and {p for _, p, e in hints if e is None} >= {"pyusb", "pyserial", "depthai", "onnxruntime"}
+    for where, package, extra in hints:
+        if extra is not None:
+            held = {re.split(r"[<>=\[;]", r)[0] for r in extras.get(extra, [])}
+            assert package.split("[")[0] in held, f"{where}: extra {extra!r} does not hold {package!r}"
 
 
 def test_no_hand_written_install_hints_outside_the_one_error_type():

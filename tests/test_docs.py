@@ -70,6 +70,9 @@ def test_every_block_says_what_it_is() -> None:
     assert not bad, "fences need an info string: sh or python [norun|slow], or text/json/console/yaml:\n" + \
         "\n".join(bad)
     assert len(RUN) >= 20  # the parser found the examples
+    unpaired = [doc.relative_to(ROOT).as_posix() for doc in DOCS
+                if sum(line.startswith("```") for line in doc.read_text().splitlines()) != 2 * len(blocks(doc))]
+    assert not unpaired, f"a fence line that opens or closes no block (text after a closing ```?): {unpaired}"
 
 
 @pytest.fixture(scope="module")
@@ -123,13 +126,22 @@ def test_unrun_example_matches_the_cli(block: Block) -> None:
     for words in _rollcam_lines(block.code):
         command = words[:1]
         help_text = _help(command, block)
-        sub = re.search(r"\{([\w,-]+)\}", help_text.split("\n\n")[0])  # a command with subcommands
-        if sub and len(words) > 1 and words[1] in sub.group(1).split(","):
+        subcommands = _subcommands(help_text)
+        if subcommands:
+            assert len(words) > 1 and words[1] in subcommands, \
+                f"{block.where}: 'rollcam {' '.join(words[:2])}': no such subcommand (one of {sorted(subcommands)})"
             command = words[:2]
             help_text = _help(command, block)
         for flag in (w.split("=")[0] for w in words if w.startswith("--")):
             assert re.search(rf"{re.escape(flag)}\b", help_text), \
                 f"{block.where}: 'rollcam {' '.join(command)}' has no {flag}"
+
+
+def _subcommands(help_text: str) -> set[str]:
+    """The subcommands a ``--help`` text lists (``usage: rollcam bench [-h] STUDY ...``), or none."""
+    if not re.search(r" \.\.\.\s*$", help_text.split("\n\n")[0]):
+        return set()
+    return set(re.findall(r"^    ([\w-]+)(?: |$)", help_text, re.M))  # argparse indents choices by four
 
 
 def _help(command: list[str], block: Block) -> str:
@@ -168,3 +180,60 @@ def test_relative_links_resolve() -> None:
            for target in re.findall(r"\]\(([^)#\s]+)(?:#[^)]*)?\)", doc.read_text())
            if "://" not in target and not (doc.parent / target).exists()]
     assert not bad, bad
+
+
+def _anchors(doc: Path) -> set[str]:
+    """The fragment ids of a Markdown page's headings, as GitHub makes them (repeats get -1, -2, ...)."""
+    text = FENCE.sub("", doc.read_text())  # a '# comment' in a code block is no heading
+    seen: dict[str, int] = {}
+    for heading in re.findall(r"^#{1,6} +(.+?) *#* *$", text, re.M):
+        slug = re.sub(r"[^\w\- ]", "", heading.lower()).replace(" ", "-")
+        n = seen.get(slug, 0)
+        seen[slug] = n + 1
+        if n:
+            seen[f"{slug}-{n}"] = 1
+    return set(seen)
+
+
+def test_links_to_sections_find_them() -> None:
+    bad = []
+    for doc in DOCS:
+        for target, fragment in re.findall(r"\]\(([^)#\s]*)#([^)\s]+)\)", doc.read_text()):
+            page = (doc.parent / target) if target else doc
+            if "://" not in target and page.suffix == ".md" and fragment not in _anchors(page):
+                bad.append(f"{doc.relative_to(ROOT)}: {target}#{fragment}")
+    assert not bad, f"links to sections that do not exist: {bad}"
+
+
+def _table_after(doc: Path, heading: str) -> dict[str, list[str]]:
+    """The first table under ``heading`` in ``doc``: first cell's code name -> the other cells."""
+    lines = doc.read_text().splitlines()
+    start = lines.index(heading)
+    rows: dict[str, list[str]] = {}
+    for line in lines[start + 1:]:
+        if line.startswith("|"):
+            cells = [c.strip() for c in line.strip("|").split(" | ")]
+            name = re.fullmatch(r"`(\w+)`", cells[0])
+            if name:
+                assert name.group(1) not in rows, f"{doc.name}: {name.group(1)} listed twice"
+                rows[name.group(1)] = cells[1:]
+        elif rows:
+            break
+    return rows
+
+
+def test_emu_option_table_is_the_firmware_option_table() -> None:
+    from rollcam.firmware.options import OPTIONS, as_text
+    from rollcam.host.sources.emu import SOURCE_OPTIONS
+
+    rows = _table_after(ROOT / "docs" / "sources.md", "### Options of `emu:`")
+    known = set(OPTIONS) | SOURCE_OPTIONS
+    assert set(rows) == known, (f"docs/sources.md's emu: options differ from firmware/options.py: not listed "
+                                f"{sorted(known - set(rows))}, listed but unknown {sorted(set(rows) - known)}")
+    for name, option in OPTIONS.items():
+        default = rows[name][0]
+        if option.default is None:  # decided by the sensor or the format: said in words, not as a value
+            assert not default.startswith("`"), f"{name}: the table has no default value, the doc says {default}"
+        else:
+            want = f"`{as_text(option.default)}`"
+            assert default.split(" ")[0] == want, f"{name}: default {want} in firmware/options.py, {default} in the doc"

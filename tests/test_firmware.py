@@ -185,10 +185,10 @@ def test_external_trigger_makes_one_frame_per_trigger():
 
 def test_scene_controls_validate_and_apply():
     c = cam()
-    c.set_scene(level=0.9)
+    c.set_options({"level": 0.9})
     with pytest.raises(ConfigError, match="does not apply"):
-        c.set_scene(speed="fast")
-    c.set_scene(scene="street", speed="fast", seed=3)
+        c.set_options({"speed": "fast"})
+    c.set_options({"scene": "street", "speed": "fast", "seed": 3})
     assert c.scene_options == {"seed": 3, "scene": "street", "speed": "fast"}
 
 

@@ -65,6 +65,22 @@ def test_readme_loop_ends_after_the_last_frame(limit):
         assert cam.error is None and len(seqs) == limit and seqs == sorted(seqs) and img.shape == (180, 320, 3)
 
 
+def test_the_module_docstring_example_runs_as_written():
+    """host/oaknode.py's example, taken from its docstring and run unchanged: every frame, then the loop ends."""
+    import textwrap
+
+    import rollcam.host.oaknode as oaknode
+
+    lines = oaknode.__doc__.split("::\n\n", 1)[1].splitlines()
+    end = next(i for i, line in enumerate(lines) if line and not line.startswith(" "))  # the indented block
+    block = "\n".join(lines[:end])
+    assert "while pipeline.isRunning():" in block and "queue.get()" in block
+    ns: dict = {}
+    exec(compile(textwrap.dedent(block), "host/oaknode.py docstring", "exec"), ns)
+    assert ns["cam"].error is None and len(ns["images"]) == 10
+    assert all(img.shape == (360, 640, 3) for img in ns["images"])
+
+
 def test_a_failing_node_raises_its_error_from_get():
     from rollcam.host.oaknode import EmulatedCamera
 

@@ -158,5 +158,6 @@ def test_missing_runtimes_name_the_install(monkeypatch, yolo_model):
         with pytest.raises(MissingDependencyError, match="onnxruntime-gpu"):
             load_detector(f"onnx:{yolo_model}?device=cuda")
     monkeypatch.setitem(__import__("sys").modules, "onnxruntime", None)
-    with pytest.raises(MissingDependencyError, match=r"pip install 'rollcam\[onnx\]'"):
+    with pytest.raises(MissingDependencyError, match=r"needs onnxruntime, an install dependency of rollcam missing "
+                                                     r"from this broken install \(pip install onnxruntime\)$"):
         load_detector("ssdlite")

@@ -217,7 +217,8 @@ def test_oak_with_real_depthai_and_no_device():
 
 def test_oak_without_depthai_names_the_install(monkeypatch):
     monkeypatch.setitem(sys.modules, "depthai", None)
-    with pytest.raises(MissingDependencyError, match=r"pip install 'rollcam\[oak\]'"):
+    broken = r"an install dependency of rollcam missing from this broken install \(pip install depthai\)"
+    with pytest.raises(MissingDependencyError, match=r"the oak: source needs depthai, " + broken):
         open_camera("oak:")
 
 

@@ -147,8 +147,8 @@ def test_blur_option_integrates_raw_frames_over_the_exposure():
     cam = FirmwareCamera("imx219", scene={"scene": "street"}, size=(640, 480), pixel_format="RG10", blur_px=0)
     cam.stream_on()
     assert cam.next_frame().meta["blur_samples_max"] == 1
-    cam.set_blur_px(0.5)
-    assert cam.blur_px == 0.5 and "blur_bound_px" in cam.next_frame().meta
+    cam.update(blur_px=0.5)
+    assert cam.spec.blur_px == 0.5 and "blur_bound_px" in cam.next_frame().meta
 
 
 def test_serial_fmt_commands():
@@ -185,3 +185,93 @@ def test_streamon_refuses_buffers_too_small_for_a_format_changed_elsewhere():
         assert info.value.errno == errno.EINVAL
         fn.request_buffers(d.driver, 0)
         assert next(d.stream(frames=1)).fourcc == "RG10"
+
+
+# ------------------------------------------------------------------------------------- compiled before the clock
+class _SlowClock:
+    """A device clock the warm-up render moves on by 20 s, as a cold numba cache would."""
+
+    def __init__(self) -> None:
+        self.t_ns = 0
+
+    def __call__(self) -> int:
+        return self.t_ns
+
+
+def test_stream_on_renders_a_new_kind_of_frame_before_the_clock_starts(monkeypatch):
+    from rollcam.firmware import imaging
+
+    monkeypatch.setattr(imaging, "_WARM_KINDS", set())  # as in a fresh process
+    clock = _SlowClock()
+    cam = FirmwareCamera("imx219", scene={"scene": "flat"}, size=(640, 480), pixel_format="RG10", hflip=True,
+                         clock=clock)
+    render = cam.imager.render
+    warmed = []
+
+    def slow_render(spec, seq, start_ns, shutter=None):
+        clock.t_ns += 20 * 10**9
+        warmed.append(seq)
+        return render(spec, seq, start_ns, shutter)
+
+    monkeypatch.setattr(cam.imager, "render", slow_render)
+    cam.stream_on()
+    assert warmed == [0] and imaging.kernel_kind(cam.spec) in imaging._WARM_KINDS
+    # The stream starts after the warm-up: its first frame is due a frame from now, not 20 s ago (skipped).
+    plan = cam.plan_next(now_ns=cam.clock_ns())
+    assert plan.seq == 0 and plan.start_ns == cam.clock_ns() and cam.stats.skipped == 0
+    cam.stream_off()
+    cam.stream_on()  # the same kind again: nothing more to compile
+    assert warmed == [0]
+    # Warming changes no frame: frames are a function of spec, sequence and start.
+    fresh = FirmwareCamera("imx219", scene={"scene": "flat"}, size=(640, 480), pixel_format="RG10", hflip=True)
+    assert np.array_equal(cam.render(plan).data, fresh.render(plan).data)
+
+
+def test_a_new_kind_of_frame_while_streaming_compiles_outside_the_device_lock(monkeypatch):
+    import threading
+
+    from rollcam.firmware import imaging
+
+    cam = FirmwareCamera("imx219", scene={"scene": "flat"}, size=(640, 480), pixel_format="RG10")
+    cam.stream_on()
+    monkeypatch.setattr(imaging, "_WARM_KINDS", set())
+    lock_free = []
+    render = imaging.Imager.render
+
+    def probing_render(self, spec, seq, start_ns, shutter=None):
+        probe = threading.Thread(target=lambda: lock_free.append(cam.lock.acquire(timeout=0) and
+                                                                 (cam.lock.release() or True)))
+        probe.start()
+        probe.join()
+        return render(self, spec, seq, start_ns, shutter)
+
+    monkeypatch.setattr(imaging.Imager, "render", probing_render)
+    cam.set_options({"scene": "street", "speed": "fast"})  # e.g. SCENE over the serial line, mid-stream
+    assert lock_free == [True] and imaging.kernel_kind(cam.spec) in imaging._WARM_KINDS
+    cam.update(gain=2.0)  # same kind: nothing rendered ahead
+    assert lock_free == [True]
+
+
+_COLD_STREAM = """
+from rollcam.emu.v4l2 import Device
+with Device.open("imx219", scene={"scene": "street"}, size=(640, 480), realtime=True) as d:
+    d.set_format(640, 480, "RG10")
+    d.controls["hflip"].value = 1
+    bufs = list(d.stream(frames=2))  # DQBUF's default 5 s timeout
+print(len(bufs), bufs[0].fourcc)
+"""
+
+
+@pytest.mark.slow
+def test_a_real_time_raw_stream_on_a_cold_numba_cache_delivers_within_its_timeout(tmp_path):
+    """A fresh machine (empty numba cache): the kernels compile at STREAMON, before the device clock starts,
+    so the first DQBUF does not time out waiting for them (a functional check; no speed target)."""
+    import os
+    import subprocess
+    import sys
+
+    env = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path / "numba")}
+    res = subprocess.run([sys.executable, "-c", _COLD_STREAM], env=env, capture_output=True, text=True, timeout=900)
+    assert res.returncode == 0, res.stderr[-2000:]
+    assert res.stdout.split() == ["2", "BA10"]
+    assert any((tmp_path / "numba").rglob("*.nbc"))  # it did compile afresh

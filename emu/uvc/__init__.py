@@ -4,8 +4,8 @@ then the transports that drive it (``pyusb_backend`` here, ``rollcam.emu.usbip``
 
 Typical use::
 
-    producer = SyntheticProducer(load_sensor("imx219"), make_scene("street", 0), sizes=[(640, 480)])
-    function = UVCFunction(producer)                 # iso by default; transfer="bulk" for a bulk camera
+    camera = FirmwareCamera("imx219", scene="street", size=(640, 480))   # rollcam.firmware.camera
+    function = UVCFunction(FirmwareProducer(camera))  # iso by default; transfer="bulk" for a bulk camera
     dev = usb.core.find(idVendor=0x1D6B, idProduct=0x0102, backend=EmulatedBackend([function]))
 """
 
@@ -16,7 +16,7 @@ from .device import Setup, UVCFunction
 from .firmware_producer import FirmwareProducer
 from .payload import ParsedFrame, PayloadBatch, PayloadPacker, PayloadParser, pack_header, parse_header
 from .probe import Probe
-from .producer import ControlRange, FrameProducer, SyntheticProducer, offered_intervals_ns
+from .producer import ControlRange, FrameProducer, offered_intervals_ns
 from .requests import Stall
 from .stream import StreamStats, TransferOverflow, TransferTimeout
 
@@ -36,7 +36,6 @@ __all__ = [
     "Stall",
     "StreamFormat",
     "StreamStats",
-    "SyntheticProducer",
     "TransferOverflow",
     "TransferTimeout",
     "UVCFunction",

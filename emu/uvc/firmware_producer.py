@@ -13,7 +13,7 @@ from __future__ import annotations
 import dataclasses
 from collections.abc import Sequence
 
-from rollcam.common.errors import DeviceError
+from rollcam.common.errors import ConfigError, DeviceError
 from rollcam.firmware.camera import FirmwareCamera, FramePlan
 from rollcam.firmware.pixfmt import is_raw
 from rollcam.firmware.scheduler import FrameSchedule
@@ -49,11 +49,16 @@ class FirmwareProducer:
 
     def configure(self, width: int, height: int, interval_ns: int) -> None:
         cam = self.camera
+        if (width, height) not in self.sizes():  # what the descriptors offered: the modes and the current size
+            raise DeviceError(f"{self.name}: size {width}x{height} is not one of {self.sizes()}")
         cam.stream_off()
-        cam.set_size(width, height)
-        cam.set_frame_interval_ns(int(interval_ns))
+        try:
+            cam.set_size(width, height)
+            cam.set_frame_interval_ns(int(interval_ns))
+        except ConfigError as exc:
+            raise DeviceError(f"{self.name}: cannot program {width}x{height} at {interval_ns} ns: {exc}") from None
         self._base = cam.next_seq
-        cam.stream_on()
+        cam.stream_on()  # renders once before the clock starts (compiled kernels, static layers): no opening drops
 
     def _schedule(self) -> FrameSchedule:
         sched = self.camera.current_schedule()

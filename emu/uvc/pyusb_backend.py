@@ -23,7 +23,7 @@ from .device import Setup, UVCFunction
 from .requests import Stall
 from .stream import TransferOverflow, TransferTimeout
 
-require("usb.core", "pyusb", "usb", "the emulated USB backend")
+require("usb.core", "pyusb", feature="the emulated USB backend")
 import usb.backend  # noqa: E402
 import usb.core  # noqa: E402
 

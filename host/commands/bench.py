@@ -8,6 +8,22 @@ from __future__ import annotations
 
 import argparse
 import json
+from typing import Any
+
+from rollcam.common.errors import ConfigError
+
+OLD_FLAGS = {"--quick": "render --quick", "--hog": "hog", "--detect": "detect", "--ptc": "ptc", "--sensor": "sensor",
+             "--uvc": "uvc", "--soak": "soak", "--dataset": "dataset"}
+"""The flags that picked a study before ``rollcam bench STUDY`` -> the subcommand that replaces each."""
+
+
+class _OldFlag(argparse.Action):
+    """An old study flag: refused at once with the new spelling (``--ptc S`` -> ``rollcam bench ptc S``)."""
+
+    def __call__(self, parser: argparse.ArgumentParser, namespace: argparse.Namespace, values: Any,
+                 option_string: str | None = None) -> None:
+        new = " ".join([f"rollcam bench {OLD_FLAGS[option_string or '']}", *([values] if values else [])])
+        raise ConfigError(f"bench: {option_string} is now {new!r}")
 
 
 def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
@@ -16,6 +32,8 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
 
     p = sub.add_parser("bench", help="speed-versus-error studies, one per call ('rollcam bench STUDY --help')",
                        description="Run one of rollcam's benchmark studies: " + ", ".join(STUDIES) + ".")
+    for flag in OLD_FLAGS:  # hidden; they only say what replaced them
+        p.add_argument(flag, action=_OldFlag, nargs="?" if flag == "--ptc" else 0, help=argparse.SUPPRESS)
     studies = p.add_subparsers(dest="study", metavar="STUDY", required=True)
     for study in STUDIES.values():
         sp = studies.add_parser(study.name, help=study.help, description=study.help[0].upper() + study.help[1:] + ".")

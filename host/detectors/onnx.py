@@ -58,8 +58,8 @@ COCO_NAMES = (
 
 
 def import_onnxruntime() -> Any:
-    """onnxruntime, or a MissingDependencyError naming the extra to install."""
-    return require("onnxruntime", "onnxruntime", "onnx", "the onnx detector")
+    """onnxruntime (an install dependency), or a MissingDependencyError saying the install is broken."""
+    return require("onnxruntime", feature="the onnx detector")
 
 
 def _fraction(text: str) -> float:

@@ -69,10 +69,10 @@ def import_depthai() -> Any:
     except ImportError as exc:
         if exc.name is not None and exc.name.split(".")[0] != "depthai":
             raise
-        raise MissingDependencyError("depthai", "oak", "the oak: source") from None
+        raise MissingDependencyError("depthai", feature="the oak: source") from None
     version = getattr(dai, "__version__", "0")
     if not str(version).split(".")[0].isdigit() or int(str(version).split(".")[0]) < 3:
-        raise MissingDependencyError("depthai>=3,<4", "oak", f"the oak: source (found depthai {version})")
+        raise MissingDependencyError("depthai>=3,<4", feature=f"the oak: source (found depthai {version})")
     return dai
 
 

@@ -58,7 +58,7 @@ FORMAT_NAMES = {"yuyv": "YUYV", "nv12": "NV12", "mjpeg": "MJPG", "mjpg": "MJPG"}
 
 
 def _usb():
-    require("usb.core", "pyusb", "usb", "the uvc: source")
+    require("usb.core", "pyusb", feature="the uvc: source")
     import usb.core
 
     return usb
