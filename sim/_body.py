@@ -1,6 +1,6 @@
 """Articulated walker model (numba): where a pedestrian is and how its body parts are posed at time t.
 
-Also defines the actor table layout shared by the render kernels (``rollcam.sim._kernels``). Proportions
+Also defines the actor table layout shared by the render kernels (``rollcam.sim._actors``). Proportions
 follow standard anthropometric ratios of body height; the gait is a sinusoidal hip/knee/shoulder/elbow
 model whose phase follows distance walked (so stride frequency follows speed).
 """
@@ -10,6 +10,8 @@ from __future__ import annotations
 import math
 
 from numba import njit
+
+from ._jitcache import guard
 
 # ---- actor table ------------------------------------------------------------------------------------------
 A_TYPE, A_STATIC, A_SPEED, A_ID = 0, 1, 2, 3
@@ -142,3 +144,4 @@ def pedestrian_skeleton(act, t, seg, rad, col_idx, root, joints):
     return n
 
 
+guard(__name__)  # after every kernel and import: see rollcam.sim._jitcache

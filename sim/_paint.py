@@ -12,10 +12,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from . import _actors as A
 from . import _body as B
 from . import _kernels as K
 from . import _world as Wd
 from .compile import compile_camera, compile_scene
+from .render_result import LineTruth
 from .scene import Camera, Scene
 
 BOUND_GROUPS = 32
@@ -57,12 +59,18 @@ class Painter:
         self.tables = compile_scene(scene)
         self.cams = {False: compile_camera(camera, False), True: compile_camera(camera, True)}
         self.camera_moving = camera.ego.moving
+        self._size = (camera.width, camera.height)
         actors = self.tables.actors
         self.n_actors = int(actors.shape[0])
         self.actor_static = actors[:, B.A_STATIC] != 0.0 if self.n_actors else np.zeros(0, np.bool_)
         # Fixed in render space: a static actor seen from a static camera.
         self.fixed = self.actor_static & (not self.camera_moving)
         self._parts: np.ndarray | None = None
+
+    def shape(self, by_column: bool) -> tuple[int, int]:
+        """(lines, pixels per line) of a render: (height, width), or (width, height) by column."""
+        w, h = self._size
+        return (w, h) if by_column else (h, w)
 
     def poses(self, by_column: bool, times_s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Camera rotation ``(n, 3, 3)`` and position ``(n, 3)`` at each time (seconds)."""
@@ -82,7 +90,7 @@ class Painter:
         ``span_s[g]`` at pose ``k_first[g]``, where ``need[o, g]`` (other entries are not written)."""
         out = np.empty((*need.shape, 4))
         t = self.tables
-        K.actor_bounds_all(t.actors, t.world, cam, rot, pos, t_first, k_first, span_s, need, out)
+        A.actor_bounds_all(t.actors, t.world, cam, rot, pos, t_first, k_first, span_s, need, out)
         return out
 
     def speeds(self, by_column: bool, times_s: np.ndarray) -> np.ndarray:
@@ -90,20 +98,20 @@ class Painter:
         rot, pos = self.poses(by_column, times_s)
         t = self.tables
         out = np.zeros(self.n_actors)
-        K.actor_speeds(t.actors, t.world, t.building_lut, t.buildings, t.light, self.cams[by_column], rot, pos,
+        A.actor_speeds(t.actors, t.world, t.building_lut, t.buildings, t.light, self.cams[by_column], rot, pos,
                        times_s, out)
         return out
 
     def parts(self, by_column: bool, times_s: np.ndarray) -> np.ndarray:
-        """Render-space parts ``(actors, times, K.MAX_PARTS, K.PART_COLS)`` of every actor at every time."""
+        """Render-space parts ``(actors, times, A.MAX_PARTS, A.PART_COLS)`` of every actor at every time."""
         rot, pos = self.poses(by_column, times_s)
         n_t = times_s.shape[0]
         s_o, s_k = np.repeat(np.arange(self.n_actors), n_t), np.tile(np.arange(n_t), self.n_actors)
-        out = np.empty((self.n_actors * n_t, K.MAX_PARTS, K.PART_COLS))
+        out = np.empty((self.n_actors * n_t, A.MAX_PARTS, A.PART_COLS))
         t = self.tables
-        K.actor_parts_all(t.actors, t.world, t.building_lut, t.buildings, t.light, self.cams[by_column], rot, pos,
+        A.actor_parts_all(t.actors, t.world, t.building_lut, t.buildings, t.light, self.cams[by_column], rot, pos,
                           times_s, s_o, s_k, out)
-        return out.reshape(self.n_actors, n_t, K.MAX_PARTS, K.PART_COLS)
+        return out.reshape(self.n_actors, n_t, A.MAX_PARTS, A.PART_COLS)
 
     def prepare(self, by_column: bool, times_s: np.ndarray, entry_k: np.ndarray, include: np.ndarray, n_along: int,
                 *, exhaustive: bool = False, only: np.ndarray | None = None,
@@ -131,7 +139,7 @@ class Painter:
         slots, parts = self._shared_parts(cam, times_s, rot, pos, obj_k)
         return Pass(cam, times_s, entry_k, rot, pos, obj_k, slots, parts, ~fixed, n_along)
 
-    def paint(self, p: Pass, include: np.ndarray, lines: np.ndarray, gt, *, bg: np.ndarray | None,
+    def paint(self, p: Pass, include: np.ndarray, lines: np.ndarray, gt: LineTruth, *, bg: np.ndarray | None,
               out_u8: np.ndarray | None = None, out_lin: np.ndarray | None = None, full_lines: bool,
               gt_only: bool = False, seed: np.ndarray | None = None, hits: np.ndarray | None = None,
               line_hit: np.ndarray | None = None, e_start: np.ndarray | None = None,
@@ -153,6 +161,17 @@ class Painter:
             full_lines, _EMPTY_LIN if seed is None else seed,
             np.empty(0, np.int64) if hits is None else hits,
             np.zeros(0, np.bool_) if line_hit is None else line_hit)
+
+    def whole(self, p: Pass, include: np.ndarray, bg: np.ndarray | None, by_column: bool, linear: bool
+              ) -> tuple[np.ndarray, np.ndarray | None, LineTruth]:
+        """Every line painted whole, over ``bg`` (or the background at each line's pose, for a moving camera):
+        8-bit, linear when asked, and truth, in render orientation."""
+        n_lines, n_along = self.shape(by_column)
+        u8 = np.empty((n_lines, n_along, 3), np.uint8)
+        lin = np.empty((n_lines, n_along, 3), np.float32) if linear else None
+        gt = LineTruth.empty(self.n_actors, n_lines, by_column)
+        self.paint(p, include, np.arange(n_lines), gt, bg=bg, out_u8=u8, out_lin=lin, full_lines=True)
+        return u8, lin, gt
 
     # ------------------------------------------------------------------ internals
     def _touch(self, cam, times_s, rot, pos, k_line, moving, include, n_along, obj_k, only, line_of) -> None:
@@ -197,7 +216,7 @@ class Painter:
         slots[s_o, s_k] = np.arange(s_o.size)
         parts = self._parts_buffer(max(s_o.size, 1))
         if s_o.size:
-            K.actor_parts_all(t.actors, t.world, t.building_lut, t.buildings, t.light, cam, rot, pos, times_s, s_o,
+            A.actor_parts_all(t.actors, t.world, t.building_lut, t.buildings, t.light, cam, rot, pos, times_s, s_o,
                               s_k, parts)
         return slots, parts
 
@@ -208,5 +227,5 @@ class Painter:
         faults every time. This is why a Renderer renders one frame at a time.
         """
         if self._parts is None or self._parts.shape[0] < n_slots:
-            self._parts = np.empty((max(n_slots, 1024), K.MAX_PARTS, K.PART_COLS))
+            self._parts = np.empty((max(n_slots, 1024), A.MAX_PARTS, A.PART_COLS))
         return self._parts[:n_slots]

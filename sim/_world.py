@@ -1,7 +1,8 @@
 """Numba kernels of the static world: camera poses and background ray casting (street, facades, sky).
 
-Part of the per-line renderer (``rollcam.sim._kernels`` holds actors and line painting); table layouts are
-filled by ``rollcam.sim.compile``. Every function is pure, so every render path shades identically.
+Part of the per-line renderer (``rollcam.sim._actors`` holds the actors, ``rollcam.sim._kernels`` the line
+painting); table layouts are filled by ``rollcam.sim.compile``. Every function is pure, so every render path
+shades identically.
 """
 
 from __future__ import annotations
@@ -10,6 +11,8 @@ import math
 
 import numpy as np
 from numba import njit, prange
+
+from ._jitcache import guard
 
 # ---- camera table columns -------------------------------------------------------------------------------
 C_FX, C_FY, C_CX, C_CY, C_W, C_H, C_TRANSPOSED = 0, 1, 2, 3, 4, 5, 6
@@ -307,3 +310,6 @@ def background_image(world, lut_b, bld, light, cam, t, out):
     camera_pose(cam, t, rot, pos)
     for line in prange(out.shape[0]):
         background_line(world, lut_b, bld, light, cam, rot, pos, line, out[line])
+
+
+guard(__name__)  # after every kernel and import: see rollcam.sim._jitcache

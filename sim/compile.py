@@ -1,4 +1,4 @@
-"""Scene data to the flat float64 tables the render kernels read (layouts in ``rollcam.sim._kernels``)."""
+"""Scene data to the flat float64 tables the render kernels read (layouts in ``rollcam.sim._world`` and ``._body``)."""
 
 from __future__ import annotations
 

@@ -29,7 +29,9 @@ import numpy as np
 from numba import njit, prange
 from rollcam.common.errors import ConfigError
 
-from .render import LinearFrame, Renderer
+from ._jitcache import guard
+from .render import Renderer
+from .render_result import LinearFrame
 
 DEFAULT_BOUND_PX = 0.5
 MAX_SAMPLES = 512
@@ -210,3 +212,6 @@ def integrate(renderer: Renderer, plan: SamplePlan, *, by_column: bool = False, 
         painted += got
     _finish(acc, static if static is not None else np.empty((0, n_along, 3), np.float32), hits, n)
     return Integrated(LinearFrame(static, acc, hits > 0, by_column), plan.evaluations, painted, passes)
+
+
+guard(__name__)  # after every kernel and import: see rollcam.sim._jitcache

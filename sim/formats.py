@@ -27,6 +27,8 @@ import numpy as np
 from numba import njit
 from rollcam.common.errors import ConfigError
 
+from ._jitcache import guard
+
 BAYER_ORDERS = ("RGGB", "BGGR", "GRBG", "GBRG")
 _BAYER_FOURCCS = {  # order -> fourcc of 8, 10, 10 packed, 12, 12 packed, 16 bits (V4L2_PIX_FMT_S*)
     "RGGB": ("RGGB", "RG10", "pRAA", "RG12", "pRCC", "RG16"),
@@ -246,3 +248,6 @@ def unpack_csi2(packed: np.ndarray, bits: int, width: int) -> np.ndarray:
     out = np.empty((p.shape[0], width), np.uint16)
     (_unpack10 if bits == 10 else _unpack12)(p, out)
     return out
+
+
+guard(__name__)  # after every kernel and import: see rollcam.sim._jitcache

@@ -44,8 +44,9 @@ import numpy as np
 from numba import njit, prange
 from rollcam.common.errors import ConfigError
 
+from ._jitcache import guard
 from .hwconfig import NoiseParams
-from .render import LinearFrame
+from .render_result import LinearFrame
 
 STAGES = ("shot", "dark", "read", "dsnu", "prnu", "saturation", "quantization")
 """Switchable stages of the model (all on by default; ``NoiseParams.ideal`` turns the random ones off)."""
@@ -425,3 +426,6 @@ def split_gain(total: float, analog: tuple[float, float], digital: tuple[float, 
     a = min(max(total, analog[0]), analog[1])
     d = min(max(total / a, digital[0]), digital[1])
     return a, d, not math.isclose(a * d, total, rel_tol=1e-9)
+
+
+guard(__name__)  # after every kernel and import: see rollcam.sim._jitcache

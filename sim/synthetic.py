@@ -28,7 +28,8 @@ from .exposure import DEFAULT_BOUND_PX, integrate, plan_samples
 from .formats import pixel_format as fourcc_of
 from .frame import Box, Frame, ObjectTruth
 from .hwconfig import SensorConfig, SensorMode
-from .render import LineTruth, Renderer
+from .render import Renderer
+from .render_result import LineTruth
 from .scene import Scene
 from .sensor import SensorPipeline, flip
 from .timing import LineTiming, Readout, line_sample_times_ns

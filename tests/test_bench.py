@@ -8,7 +8,7 @@ import json
 
 import numpy as np
 import pytest
-from rollcam.benchmarks import bench
+from rollcam.benchmarks import bench, render_cases
 from rollcam.benchmarks.studies import STUDIES, missed
 from rollcam.common.errors import ConfigError
 from rollcam.host.cli import main
@@ -72,10 +72,10 @@ def test_plot_is_written(tiny) -> None:
 
 def test_banded_times_hold_each_band_at_its_middle() -> None:
     t = np.arange(8, dtype=np.int64) * 10
-    assert bench.banded_times_ns(t, 1).tolist() == [35] * 8
-    assert bench.banded_times_ns(t, 2).tolist() == [15] * 4 + [55] * 4
-    assert bench.banded_times_ns(t, 8).tolist() == t.tolist()
-    assert bench.banded_times_ns(t, 100).tolist() == t.tolist()
+    assert render_cases.banded_times_ns(t, 1).tolist() == [35] * 8
+    assert render_cases.banded_times_ns(t, 2).tolist() == [15] * 4 + [55] * 4
+    assert render_cases.banded_times_ns(t, 8).tolist() == t.tolist()
+    assert render_cases.banded_times_ns(t, 100).tolist() == t.tolist()
 
 
 def test_quick_config_and_bad_options(capsys) -> None:

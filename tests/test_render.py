@@ -157,7 +157,7 @@ def test_times_must_match_lines():
 def _bounds_and_parts(cases, n_times):
     """(bounds box, parts table, live-part mask) of every walker of every camera of ``cases`` (seed, speed,
     ego) at ``n_times`` instants over 40 s: the actor bounds and the parts the kernels would draw."""
-    from rollcam.sim import _kernels as K
+    from rollcam.sim import _actors as A
 
     for seed, speed, ego in cases:
         scene = make_street_scene(seed, speed=speed, width=320, height=180, n_pedestrians=25, ego=ego_preset(ego))
@@ -168,17 +168,17 @@ def _bounds_and_parts(cases, n_times):
             boxes = r.actor_bounds(times, np.zeros(n_times), np.ones((r.n_actors, n_times), np.bool_))
             for i in range(n_times):
                 for o in range(r.n_actors):
-                    yield boxes[o, i], parts[o, i], parts[o, i, :, K.Q_KIND] != K.PART_NONE
+                    yield boxes[o, i], parts[o, i], parts[o, i, :, A.Q_KIND] != A.PART_NONE
 
 
 def _assert_parts_inside(box, parts, live):
-    from rollcam.sim import _kernels as K
+    from rollcam.sim import _actors as A
 
-    geo = parts[live, K.Q_GEO : K.Q_GEO + 5]
+    geo = parts[live, A.Q_GEO : A.Q_GEO + 5]
     x_lo = np.minimum(geo[:, 0], geo[:, 2]) - geo[:, 4]
     x_hi = np.maximum(geo[:, 0], geo[:, 2]) + geo[:, 4]
-    assert box[0] <= parts[live, K.Q_YMIN].min() + 1e-9
-    assert parts[live, K.Q_YMAX].max() <= box[1] + 1e-9
+    assert box[0] <= parts[live, A.Q_YMIN].min() + 1e-9
+    assert parts[live, A.Q_YMAX].max() <= box[1] + 1e-9
     assert box[2] <= x_lo.min() + 1e-9 and x_hi.max() <= box[3] + 1e-9
 
 
@@ -200,14 +200,14 @@ def test_actor_bounds_contain_every_part():
 def test_bounds_of_walkers_straddling_the_camera_plane_are_finite_and_contain_every_part():
     """A walker partly behind the camera is bounded by its box cut at the near plane (plus the largest part
     radius there), not by the whole image; every part it draws must still lie inside."""
-    from rollcam.sim import _kernels as K
+    from rollcam.sim import _actors as A
 
     near_cases = 0
     for box, parts, live in _bounds_and_parts(((1, "fast", "none"), (3, "fast", "vehicle"), (6, "normal", "pan")), 81):
         if box[0] > box[1] or not live.any():
             continue
         assert np.isfinite(box).all() and np.abs(box).max() < 1e29
-        if parts[live, K.Q_DEPTH].min() < 0.5:
+        if parts[live, A.Q_DEPTH].min() < 0.5:
             near_cases += 1
         _assert_parts_inside(box, parts, live)
     assert near_cases > 50  # the cases this is about occur

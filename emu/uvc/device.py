@@ -1,5 +1,5 @@
-"""The emulated UVC 1.5 camera as a USB function: standard and class requests on endpoint 0, and the streaming
-endpoint (``stream.py``) that turns the producer's frames into payloads.
+"""The emulated UVC 1.5 camera as a USB function: standard and class requests on endpoint 0, over the streaming
+endpoint's transfers (``transfers.py``) and payload source (``stream.py``).
 
 ``UVCFunction`` is what every USB transport drives (the pyusb backend in process, the USB/IP server over TCP):
 ``control(setup, data)`` answers a control transfer or raises ``Stall``; ``read(endpoint, max_len, timeout_ms)``
@@ -19,7 +19,7 @@ import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
-from rollcam.common.lifecycle import Closeable, Deadline
+from rollcam.common.lifecycle import Closeable
 
 from . import constants as C
 from .descriptors import (
@@ -34,7 +34,8 @@ from .descriptors import (
 )
 from .producer import FrameProducer
 from .requests import Stall, VideoControls
-from .stream import BusSchedule, StreamEndpoint, TransferTimeout, service_interval_ns
+from .stream import BusSchedule, StreamEndpoint, service_interval_ns
+from .transfers import StreamTransfers
 
 DEFAULT_BULK_PAYLOAD = 512 * 1024
 MICROFRAMES_PER_S = 8000
@@ -73,7 +74,6 @@ class UVCFunction(Closeable):
         self.producer = producer
         self.realtime = realtime
         self.transfer = transfer
-        self._sleep = sleep
         self._lock = threading.RLock()
         intervals: dict[tuple[int, int], tuple[tuple[int, int], ...]] = {}
         frames = []
@@ -95,7 +95,8 @@ class UVCFunction(Closeable):
         self.alt = {0: 0, 1: 0}
         self.stream = StreamEndpoint(producer, clock_hz, realtime, sleep, render_ahead)
         self.stats = self.stream.stats
-        self.bus = BusSchedule()
+        self._transfers = StreamTransfers(self.stream, self.controls, transfer, self._lock, producer.now_ns, sleep,
+                                          lambda: bool(self.configuration))
 
     def __repr__(self) -> str:
         c = self.controls.committed
@@ -185,8 +186,8 @@ class UVCFunction(Closeable):
                 if alt:
                     if self.controls.committed is None:
                         raise Stall("alternate setting selected before commit", C.ERR_WRONG_STATE)
-                    self.bus = BusSchedule(service_interval_ns(self._iso_endpoint(alt)))
-                    self._start_stream(self.descriptors.iso_packet_sizes[alt - 1])
+                    self._transfers.start(self.descriptors.iso_packet_sizes[alt - 1],
+                                          service_interval_ns(self._iso_endpoint(alt)))
 
     def _iso_endpoint(self, alt: int) -> bytes:
         """The endpoint descriptor of the streaming interface's alternate setting ``alt``."""
@@ -207,15 +208,16 @@ class UVCFunction(Closeable):
     # ------------------------------------------------------------------------------------- stream
     @property
     def streaming(self) -> bool:
-        return self.stream.active
+        """Whether the streaming endpoint is running."""
+        return self._transfers.active
 
-    def _start_stream(self, payload_size: int) -> None:
-        self.stream.start(self.controls.committed, payload_size)
-        self.controls.streaming = True
+    @property
+    def bus(self) -> BusSchedule:
+        """The service intervals of the isochronous endpoint on the bus (of the selected alternate setting)."""
+        return self._transfers.bus
 
     def _stop_stream(self) -> None:
-        self.stream.stop()
-        self.controls.streaming = False
+        self._transfers.stop()
 
     def mark_errors(self, n_frames: int) -> None:
         """Fault injection: the next ``n_frames`` frames go out with ERR set in their payload headers."""
@@ -233,63 +235,14 @@ class UVCFunction(Closeable):
         """Stop streaming (and the renderer thread of real-time mode)."""
         self.reset()
 
-    def _clock_s(self) -> float:
-        return self.producer.now_ns() / 1e9
-
-    def _bus_time(self, n_packets: int) -> None:
-        """Real-time mode: wait (on the device clock) until ``n_packets`` more packets have had their service
-        intervals on the bus."""
-        if not self.realtime:
-            return
-        now = self.producer.now_ns()
-        end = self.bus.book(n_packets, now)
-        if end > now:
-            self._sleep((end - now) / 1e9)
-
     def read(self, endpoint: int, max_len: int, timeout_ms: int | None = None) -> bytes:
-        """One payload from the streaming endpoint; b'' (a zero-length packet) when an isochronous stream has
-        nothing due. A bulk read waits for the next frame up to ``timeout_ms`` (None or 0: forever), on the
-        device clock. Waiting happens outside the function's lock, so control requests are answered meanwhile."""
-        deadline = Deadline(timeout_ms / 1000 if timeout_ms else None, self._clock_s)
-        while True:
-            got = self._try_read(endpoint, max_len)
-            if self.transfer == "iso":  # one packet, with or without data, per service interval
-                self._bus_time(1)
-                return got if isinstance(got, bytes) else b""
-            if isinstance(got, bytes):
-                return got
-            left = deadline.remaining()
-            if left is not None and got / 1e9 > left:
-                self._sleep(left)
-                raise TransferTimeout(f"no frame within {timeout_ms} ms")
-            self._sleep(got / 1e9)
+        """One payload from the streaming endpoint (see ``transfers.StreamTransfers.read``): b'' when an
+        isochronous stream has nothing due; a bulk read waits up to ``timeout_ms`` (None or 0: forever)."""
+        return self._transfers.read(endpoint, max_len, timeout_ms)
 
     def read_packets(self, endpoint: int, n_packets: int, max_len: int) -> tuple[bytes, list[int]]:
-        """An isochronous URB's worth of packets: their data back to back and their lengths. Packets for which
-        no frame is due yet are zero-length; in real-time mode every packet takes its service interval."""
-        if self.transfer != "iso":
-            raise Stall("packets are read from an isochronous endpoint", C.ERR_INVALID_REQUEST)
-        with self._lock:
-            self._check_stream(endpoint)
-            data, lengths, _wait_ns = self.stream.next_payloads(n_packets, max_len)
-        self._bus_time(n_packets)
-        return data, lengths + [0] * (n_packets - len(lengths))
-
-    def _check_stream(self, endpoint: int) -> None:
-        if endpoint != STREAM_EP:
-            raise Stall(f"endpoint {endpoint:#04x} is not an IN endpoint of this device", C.ERR_INVALID_UNIT)
-        if self.transfer == "bulk" and not self.streaming and self.controls.committed is not None \
-                and self.configuration:
-            self._start_stream(self.controls.committed.payload_size)
-        if not self.streaming:
-            raise Stall("the streaming endpoint is not active (commit, then select an alternate setting)",
-                        C.ERR_WRONG_STATE)
-
-    def _try_read(self, endpoint: int, max_len: int) -> bytes | int:
-        """The next payload, or the ns until the next frame is due."""
-        with self._lock:
-            self._check_stream(endpoint)
-            return self.stream.next_payload(max_len)
+        """An isochronous URB's worth of packets: their data back to back and their lengths."""
+        return self._transfers.read_packets(endpoint, n_packets, max_len)
 
 
 def _units(interval_ns: int) -> int:

@@ -1,0 +1,335 @@
+"""Numba kernels of the renderer's actors: render-space bounds, parts and image speeds of walkers and chart bars.
+
+The walker model is ``rollcam.sim._body``, camera poses and the street's shading ``rollcam.sim._world``; the
+line kernels of ``rollcam.sim._kernels`` intersect and paint the parts these functions produce, whose table
+(one actor at one time) is laid out here. Every function is pure, so every render path draws identical parts.
+Render space as in ``rollcam.sim._kernels``: a transposed camera (column readout) swaps x and y.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit, prange
+
+from ._body import (
+    A_TYPE,
+    P_BUILD,
+    P_H,
+    P_SKIN,
+    P_SPEED,
+    R_PERIOD,
+    R_RGB,
+    R_VX,
+    R_WIDTH,
+    R_X0,
+    TYPE_BAR,
+    pedestrian_root,
+    pedestrian_skeleton,
+)
+from ._jitcache import guard
+from ._world import (
+    C_CX,
+    C_CY,
+    C_FX,
+    C_FY,
+    C_H,
+    C_TRANSPOSED,
+    C_W,
+    KIND_STREET,
+    L_AMB,
+    L_SUN,
+    L_SUN_RGB,
+    W_KIND,
+    W_YHALF,
+    _sun_blocked,
+    to_camera,
+)
+
+# ---- part table (one actor at one time) ---------------------------------------------------------------------
+Q_KIND, Q_DEPTH, Q_AMB, Q_DIR, Q_LX, Q_LZ, Q_GEO, Q_YMIN, Q_YMAX = 0, 1, 2, 5, 8, 9, 10, 18, 19
+PART_COLS = 20
+MAX_PARTS = 16
+PART_CAPSULE, PART_QUAD, PART_NONE = 0, 1, -1
+NEAR_M = 0.05
+BODY_LATERAL, BODY_FORWARD, BODY_TOP = 0.25, 0.40, 1.02  # walker bounds, fractions of height (see actor_bounds)
+PART_RADIUS_MAX = 0.1  # walker part radii, fraction of height x build (the largest in _body is 0.08)
+N_CHUNKS = 16  # parallel work units; scratch buffers are allocated once per unit, not per item
+
+
+@njit(cache=True, inline="always")
+def _project(cam, x, y, z, out):
+    """Camera-frame point to render-space pixel coordinates (x, y swapped when transposed)."""
+    u = cam[C_FX] * x / z + cam[C_CX]
+    v = cam[C_FY] * y / z + cam[C_CY]
+    if cam[C_TRANSPOSED] != 0.0:
+        out[0], out[1] = v, u
+    else:
+        out[0], out[1] = u, v
+
+
+@njit(cache=True, inline="always")
+def _lane_shift(world, pos, y):
+    """Street-period shift that brings a walker at ``y`` to its copy nearest the camera.
+
+    The street repeats every ``length`` along Y (facades wrap), and so does the crowd: a camera travelling
+    down the street keeps meeting walkers instead of leaving them behind. Copies swap half a period away.
+    """
+    if world[W_KIND] != KIND_STREET:
+        return 0.0
+    period = 2.0 * world[W_YHALF]
+    return period * math.floor((pos[1] - y) / period + 0.5)
+
+
+@njit(cache=True)
+def actor_bounds(act, world, cam, rot, pos, t, dt, out, root, pc, uv):
+    """Conservative render-space box (ymin, ymax, xmin, xmax) of an actor over times [t, t + dt].
+
+    ``rot, pos`` is the camera pose, which must hold over the whole interval (dt = 0 for a moving camera).
+    Empty when ymin > ymax.
+    """
+    out[0], out[1], out[2], out[3] = 1e30, -1e30, 1e30, -1e30
+    typ = int(act[A_TYPE])
+    if typ == TYPE_BAR:
+        x0 = _bar_x0(act, t)
+        xs0, xs1 = x0, x0 + act[R_WIDTH]
+        big = 1e6
+        if dt > 0.0:
+            xs0, xs1 = -big, big  # may wrap within the interval
+        if cam[C_TRANSPOSED] != 0.0:
+            out[0], out[1], out[2], out[3] = xs0, xs1, -big, big
+        else:
+            out[0], out[1], out[2], out[3] = -big, big, xs0, xs1
+        return
+    pedestrian_root(act, t, root)
+    root[1] += _lane_shift(world, pos, root[1])
+    h = act[P_H]
+    # Body reach from the root, with margin: arms and hips at most 0.18 h x build sideways, feet and hands
+    # at most 0.32 h forward or back, head top at 1.007 h (tests/test_render.py checks the containment).
+    lat = BODY_LATERAL * h * max(act[P_BUILD], 1.0)
+    e = BODY_FORWARD * h
+    n_behind = 0
+    ey = e + abs(act[P_SPEED]) * dt  # walkers move along Y only, at most speed * dt either way
+    corners = np.empty((8, 3))
+    for i in range(8):
+        x = root[0] + (lat if i & 1 else -lat)
+        y = root[1] + (ey if i & 2 else -ey)
+        z = BODY_TOP * h if i & 4 else -0.02 * h  # feet dip a little below the ground plane
+        to_camera(rot, pos, x, y, z, pc)
+        corners[i, 0], corners[i, 1], corners[i, 2] = pc[0], pc[1], pc[2]
+        if pc[2] < NEAR_M:
+            n_behind += 1
+            continue
+        _project(cam, pc[0], pc[1], pc[2], uv)
+        out[2], out[3] = min(out[2], uv[0]), max(out[3], uv[0])
+        out[0], out[1] = min(out[0], uv[1]), max(out[1], uv[1])
+    if n_behind == 8:
+        out[0], out[1] = 1e30, -1e30
+    elif n_behind > 0:
+        # Straddles the camera plane. Parts are clipped at the near plane, so what can be drawn lies in the box
+        # cut there: a convex solid whose vertices are the corners in front (projected above) and the points
+        # where box edges cross the plane, and whose image is the hull of theirs. A part's pixel radius
+        # (fx * r / its mean depth, at least NEAR_M) can exceed that hull near the plane: pad by the largest.
+        for i in range(8):
+            for bit in (1, 2, 4):
+                j = i ^ bit
+                za, zb = corners[i, 2], corners[j, 2]
+                if j < i or (za < NEAR_M) == (zb < NEAR_M):
+                    continue
+                f = (NEAR_M - za) / (zb - za)
+                _project(cam, corners[i, 0] + f * (corners[j, 0] - corners[i, 0]),
+                         corners[i, 1] + f * (corners[j, 1] - corners[i, 1]), NEAR_M, uv)
+                out[2], out[3] = min(out[2], uv[0]), max(out[3], uv[0])
+                out[0], out[1] = min(out[0], uv[1]), max(out[1], uv[1])
+        pad = cam[C_FX] * PART_RADIUS_MAX * h * max(act[P_BUILD], 1.0) / NEAR_M
+        out[0], out[1], out[2], out[3] = out[0] - pad, out[1] + pad, out[2] - pad, out[3] + pad
+
+
+@njit(cache=True, inline="always")
+def _bar_x0(act, t):
+    period = act[R_PERIOD]
+    x = act[R_X0] + act[R_VX] * t
+    if period > 0.0:
+        # Wrap inside [-pitch, period - pitch): off-image on both sides, so wrapping is never seen.
+        x = (x + act[R_WIDTH] + 1.0) % period - act[R_WIDTH] - 1.0
+    return x
+
+
+@njit(cache=True)
+def _set_quad(parts, p, x0, y0, x1, y1, x2, y2, x3, y3):
+    g = Q_GEO
+    parts[p, g], parts[p, g + 1], parts[p, g + 2], parts[p, g + 3] = x0, y0, x1, y1
+    parts[p, g + 4], parts[p, g + 5], parts[p, g + 6], parts[p, g + 7] = x2, y2, x3, y3
+    parts[p, Q_YMIN] = min(min(y0, y1), min(y2, y3))
+    parts[p, Q_YMAX] = max(max(y0, y1), max(y2, y3))
+
+
+@njit(cache=True)
+def actor_parts(act, world, lut, bld, light, cam, rot, pos, t, parts, scratch):
+    """Fill ``parts`` (MAX_PARTS x PART_COLS) with the render-space primitives of an actor at time ``t``."""
+    seg, rad, col_idx, root, joints, a, b, ua, ub = scratch
+    for p in range(MAX_PARTS):
+        parts[p, Q_KIND] = PART_NONE
+    typ = int(act[A_TYPE])
+    if typ == TYPE_BAR:
+        x0 = _bar_x0(act, t)
+        x1 = x0 + act[R_WIDTH]
+        big = 1e6
+        parts[0, Q_KIND] = PART_QUAD
+        parts[0, Q_DEPTH] = 1.0
+        for c in range(3):
+            parts[0, Q_AMB + c] = act[R_RGB + c]
+            parts[0, Q_DIR + c] = 0.0
+        parts[0, Q_LX], parts[0, Q_LZ] = 0.0, 0.0
+        if cam[C_TRANSPOSED] != 0.0:
+            _set_quad(parts, 0, -big, x0, big, x0, big, x1, -big, x1)
+        else:
+            _set_quad(parts, 0, x0, -big, x1, -big, x1, big, x0, big)
+        return
+    n = pedestrian_skeleton(act, t, seg, rad, col_idx, root, joints)
+    shift = _lane_shift(world, pos, root[1])
+    if shift != 0.0:
+        root[1] += shift
+        for p in range(n):
+            seg[p, 1] += shift
+            seg[p, 4] += shift
+    # Sun on the walker: blocked by the street canyon at chest height.
+    lit = 0.0 if _sun_blocked(world, lut, bld, root[0], root[1], 0.7 * act[P_H], light, -1) else 1.0
+    # Sun direction in camera frame, reduced to the image-plane x / viewing-axis z for cylinder shading.
+    sx = rot[0, 0] * light[L_SUN] + rot[0, 1] * light[L_SUN + 1] + rot[0, 2] * light[L_SUN + 2]
+    sz = -(rot[2, 0] * light[L_SUN] + rot[2, 1] * light[L_SUN + 1] + rot[2, 2] * light[L_SUN + 2])
+    sy_up = light[L_SUN + 2]
+    nrm = math.sqrt(sx * sx + sz * sz) + 1e-12
+    horiz = math.sqrt(max(0.0, 1.0 - sy_up * sy_up))
+    lxv, lzv = sx / nrm * horiz, sz / nrm * horiz
+    for p in range(n):
+        to_camera(rot, pos, seg[p, 0], seg[p, 1], seg[p, 2], a)
+        to_camera(rot, pos, seg[p, 3], seg[p, 4], seg[p, 5], b)
+        if a[2] < NEAR_M and b[2] < NEAR_M:
+            continue
+        # Clip the segment at the near plane so parts crossing the camera plane stay finite.
+        if a[2] < NEAR_M:
+            f = (NEAR_M - a[2]) / (b[2] - a[2])
+            for c in range(3):
+                a[c] = a[c] + f * (b[c] - a[c])
+        elif b[2] < NEAR_M:
+            f = (NEAR_M - b[2]) / (a[2] - b[2])
+            for c in range(3):
+                b[c] = b[c] + f * (a[c] - b[c])
+        zm = 0.5 * (a[2] + b[2])
+        _project(cam, a[0], a[1], a[2], ua)
+        _project(cam, b[0], b[1], b[2], ub)
+        r_px = cam[C_FX] * rad[p] / zm
+        ci = col_idx[p]
+        base = P_SKIN + 3 * ci
+        parts[p, Q_KIND] = PART_CAPSULE
+        parts[p, Q_DEPTH] = zm
+        for c in range(3):
+            alb = act[base + c]
+            parts[p, Q_AMB + c] = alb * light[L_AMB + c]
+            parts[p, Q_DIR + c] = alb * light[L_SUN_RGB + c] * lit
+        parts[p, Q_LX], parts[p, Q_LZ] = lxv, lzv
+        if cam[C_TRANSPOSED] != 0.0:
+            parts[p, Q_LX] = 0.0  # a transposed line runs along the image's y axis
+        g = Q_GEO
+        parts[p, g], parts[p, g + 1], parts[p, g + 2], parts[p, g + 3] = ua[0], ua[1], ub[0], ub[1]
+        parts[p, g + 4] = r_px
+        parts[p, Q_YMIN] = min(ua[1], ub[1]) - r_px
+        parts[p, Q_YMAX] = max(ua[1], ub[1]) + r_px
+
+
+@njit(cache=True, inline="always")
+def _clamped(v, lo, hi):
+    return min(max(v, lo), hi)
+
+
+@njit(cache=True)
+def actor_speeds(actors, world, lut, bld, light, cam, rot_tab, pos_tab, times, out):
+    """out[o] = fastest render-space displacement rate (px/s) of any part end point of actor o.
+
+    Parts wholly off the image (beyond half its size) at both times cannot move a pixel and are skipped;
+    end points are clamped to that margin, so a part clipped at the camera's near plane (whose clipped end
+    point races across image space far outside the frame) counts only its motion near the image.
+    """
+    w, h = cam[C_W], cam[C_H]
+    if cam[C_TRANSPOSED] != 0.0:
+        w, h = h, w
+    x_lo, x_hi, y_lo, y_hi = -0.5 * w, 1.5 * w, -0.5 * h, 1.5 * h
+    scratch = parts_scratch()
+    pa = np.empty((MAX_PARTS, PART_COLS))
+    pb = np.empty((MAX_PARTS, PART_COLS))
+    g = Q_GEO
+    for o in range(actors.shape[0]):
+        best = 0.0
+        if int(actors[o, A_TYPE]) == TYPE_BAR:
+            out[o] = abs(actors[o, R_VX])
+            continue
+        if not actors[o, P_H] > 0.0:  # a zero-size walker shows no pixel (and has no stride to walk by)
+            out[o] = 0.0
+            continue
+        actor_parts(actors[o], world, lut, bld, light, cam, rot_tab[0], pos_tab[0], times[0], pa, scratch)
+        for k in range(1, times.shape[0]):
+            actor_parts(actors[o], world, lut, bld, light, cam, rot_tab[k], pos_tab[k], times[k], pb, scratch)
+            dt = times[k] - times[k - 1]
+            for p in range(MAX_PARTS):
+                if pa[p, Q_KIND] != PART_CAPSULE or pb[p, Q_KIND] != PART_CAPSULE:
+                    continue
+                off = True
+                for q in (pa, pb):
+                    r = q[p, g + 4]
+                    if not (max(q[p, g], q[p, g + 2]) + r < x_lo or min(q[p, g], q[p, g + 2]) - r > x_hi
+                            or q[p, Q_YMAX] < y_lo or q[p, Q_YMIN] > y_hi):
+                        off = False
+                if off:
+                    continue
+                c = np.empty(8)
+                for i in range(2):
+                    c[4 * i] = _clamped(pa[p, g + 2 * i], x_lo, x_hi)
+                    c[4 * i + 1] = _clamped(pa[p, g + 2 * i + 1], y_lo, y_hi)
+                    c[4 * i + 2] = _clamped(pb[p, g + 2 * i], x_lo, x_hi)
+                    c[4 * i + 3] = _clamped(pb[p, g + 2 * i + 1], y_lo, y_hi)
+                da = math.hypot(c[2] - c[0], c[3] - c[1])
+                db = math.hypot(c[6] - c[4], c[7] - c[5])
+                d = max(da, db) + abs(pb[p, g + 4] - pa[p, g + 4])
+                best = max(best, d / dt)
+            pa, pb = pb, pa
+        out[o] = best
+
+
+@njit(cache=True)
+def parts_scratch():
+    """Scratch buffers ``actor_parts`` needs, allocated once per parallel work unit."""
+    return (np.empty((MAX_PARTS, 6)), np.empty(MAX_PARTS), np.empty(MAX_PARTS, np.int64), np.empty(4),
+            np.empty((5, 3)), np.empty(3), np.empty(3), np.empty(2), np.empty(2))
+
+
+@njit(cache=True, parallel=True)
+def actor_bounds_all(actors, world, cam, rot_tab, pos_tab, t_first, k_first, t_span, need, out):
+    """out[o, g] = bounds of actor o over time group g (from t_first[g], lasting t_span[g]) where need[o, g]."""
+    n_obj, n_g = need.shape
+    for ch in prange(N_CHUNKS):
+        root = np.empty(4)
+        pc = np.empty(3)
+        uv = np.empty(2)
+        for o in range(n_obj):
+            for g in range(ch, n_g, N_CHUNKS):
+                if need[o, g]:
+                    k = k_first[g]
+                    actor_bounds(actors[o], world, cam, rot_tab[k], pos_tab[k], t_first[g], t_span[g], out[o, g],
+                                 root, pc, uv)
+
+
+@njit(cache=True, parallel=True)
+def actor_parts_all(actors, world, lut, bld, light, cam, rot_tab, pos_tab, times, slot_o, slot_k, parts_tab):
+    """parts_tab[s] = parts of actor slot_o[s] at times[slot_k[s]]."""
+    n = slot_o.shape[0]
+    for ch in prange(N_CHUNKS):
+        scratch = parts_scratch()
+        for s in range(ch, n, N_CHUNKS):
+            k = slot_k[s]
+            actor_parts(actors[slot_o[s]], world, lut, bld, light, cam, rot_tab[k], pos_tab[k], times[k],
+                        parts_tab[s], scratch)
+
+
+guard(__name__)  # after every kernel and import: see rollcam.sim._jitcache
