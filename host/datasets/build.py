@@ -18,8 +18,8 @@ from pathlib import Path
 from typing import Any, TextIO
 
 from rollcam.common.errors import ConfigError, RollcamError
+from rollcam.common.files import write_atomic
 
-from ..capture import write_atomic
 from ..progress import Progress
 from ..sources import open_camera
 from .executors import open_executor

@@ -14,9 +14,10 @@ from pathlib import Path
 from typing import Any
 
 from rollcam.common.errors import SourceError
+from rollcam.common.files import write_atomic
 from rollcam.sim.frame import Frame
 
-from ..capture import encode_image, write_atomic
+from ..capture import encode_image
 from ..sources import open_camera
 from .plan import DatasetConfig, LabelPolicy, Sample, Task, sample_uri, speed_tag, subset_name
 
