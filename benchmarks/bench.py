@@ -171,7 +171,7 @@ def run_bench(width: int = 1920, height: int = 1080, quick: bool = False, out_di
         "notes": _notes(cfg),
     }
     if out_dir is not None:
-        from rollcam.host.capture import write_atomic
+        from rollcam.common.files import write_atomic
 
         from .render_report import plot
 

@@ -267,18 +267,26 @@ def plot_ptc(result: PtcResult, path: str | Path) -> None:
     ax.grid(True, which="both", alpha=0.3)
     ax.legend(fontsize=8)
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
+    import io
+
+    from rollcam.common.files import write_atomic
+
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png", dpi=110)
     plt.close(fig)
+    write_atomic(path, buf.getvalue())
 
 
 def run_ptc(sensor: str, out_dir: str | Path) -> PtcResult:
     """``rollcam bench ptc``: measure, write ``ptc.json`` and ``ptc.png`` under ``out_dir``."""
     import json
 
+    from rollcam.common.files import write_atomic
+
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     result = measure_ptc(sensor)
-    (out / "ptc.json").write_text(json.dumps(result.to_json(), indent=1))
+    write_atomic(out / "ptc.json", json.dumps(result.to_json(), indent=1).encode())
     plot_ptc(result, out / "ptc.png")
     return result
 

@@ -39,7 +39,7 @@ def plot(rows: list[dict[str, Any]], path: Path, floor_ms: float) -> None:
     buf = io.BytesIO()
     fig.savefig(buf, format="png", dpi=110)
     plt.close(fig)
-    from rollcam.host.capture import write_atomic
+    from rollcam.common.files import write_atomic
 
     write_atomic(Path(path), buf.getvalue())
 

@@ -46,7 +46,7 @@ class Study:
 
 def write_json(out: str | Path, name: str, doc: Doc) -> Path:
     """``doc`` as ``out/name``, written atomically (the folder is created)."""
-    from rollcam.host.capture import write_atomic
+    from rollcam.common.files import write_atomic
 
     path = Path(out) / name
     path.parent.mkdir(parents=True, exist_ok=True)

@@ -1,11 +1,15 @@
 """``rollcam capture``: frames of any source to image files and ``frames.jsonl``, without losing any.
 
-Each image is written under a temporary name and moved into place with ``os.replace``; its ``frames.jsonl``
-record is appended (and flushed) only once the image is there, and the two frames of a GS/RS pair go in as
-one write. However a capture stops (Ctrl-C, an error, a finite source running out), ``frames.jsonl`` holds
-complete records of images that exist, and no temporary file is left behind. ``capture.json`` beside it
-records the source's ``info()``, the command line and whether the capture completed. Nothing is written
-(not even the folder) before the options are accepted and the first frames are known to fit the image format,
+Each image is written durably under a temporary name and moved into place (``rollcam.common.files``); only
+then is its ``frames.jsonl`` record appended, the records of a GS/RS pair in one write, and a failed append
+is cut back to the last whole line. So however a capture stops (Ctrl-C, a full disk, an I/O error, ``kill
+-9``, a finite source running out), ``frames.jsonl`` holds whole records of images that exist, an image
+whose record did not go in is removed, and no temporary file is left behind; after a power cut or a kill
+in the middle of an append, the torn last line that may remain is skipped by ``read_capture``.
+``capture.json`` beside it records the source's ``info()``, the command line and, once the capture has
+ended, how it ended and what it kept (``frames``, ``images``, ``complete``; ``error`` after a failure);
+``read_capture`` counts from ``frames.jsonl`` itself, so the two never disagree. Nothing is written (not
+even the folder) before the options are accepted and the first frames are known to fit the image format,
 so a refused capture leaves nothing that would refuse the corrected command.
 
 Images are named by instant and shutter: ``NNNNNN_rs.png`` / ``NNNNNN_gs.png``, or ``NNNNNN.png`` for a camera
@@ -14,6 +18,7 @@ whose shutter is unknown (a webcam through ``opencv:`` without ``sensor=``).
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 import re
@@ -26,6 +31,7 @@ from typing import Any, TextIO
 
 import numpy as np
 from rollcam.common.errors import ConfigError, SourceError
+from rollcam.common.files import OS_FS, AppendLog, FileSystem, part_target, read_jsonl, write_atomic
 from rollcam.sim.codecs import codec
 from rollcam.sim.formats import FORMATS
 from rollcam.sim.frame import Frame
@@ -39,9 +45,13 @@ IMAGE_FORMATS = ("png", "jpg", "npy")
 SHUTTER_CHOICES = ("rolling", "global", "both")
 SUFFIX = {"rolling": "_rs", "global": "_gs"}
 """File-name suffix of each shutter; any other (``unknown``) gets none."""
-_TMP_SUFFIX = ".part"
-# Files a capture writes; --overwrite removes only these, never anything else the folder holds.
-_CAPTURE_FILE = re.compile(r"\d{6,}(_rs|_gs)?\.(png|jpg|npy)(\.part)?|\.?(frames\.jsonl|capture\.json)(\.part)?")
+# Files a capture writes (and their temporary files); --overwrite removes only these, nothing else the folder holds.
+_CAPTURE_FILE = re.compile(r"\d{6,}(_rs|_gs)?\.(png|jpg|npy)|\.?(frames\.jsonl|capture\.json)")
+_INSTANT = re.compile(r"\d+")
+
+
+def _is_capture_file(name: str) -> bool:
+    return bool(_CAPTURE_FILE.fullmatch(part_target(name) or name))
 
 
 @dataclass
@@ -67,18 +77,6 @@ class CaptureInterrupted(KeyboardInterrupt):
     def __init__(self, result: CaptureResult) -> None:
         super().__init__(f"capture interrupted after {result.frames} frame(s)")
         self.result = result
-
-
-def write_atomic(path: Path, data: bytes) -> None:
-    """Write ``data`` to ``path`` via a temporary name and ``os.replace``; never leaves a partial file."""
-    tmp = path.with_name(path.name + _TMP_SUFFIX)
-    try:
-        with open(tmp, "wb") as f:
-            f.write(data)
-        os.replace(tmp, path)
-    except BaseException:
-        tmp.unlink(missing_ok=True)
-        raise
 
 
 _PICTURES = ("BGR3", "RGB3", "GREY")
@@ -143,7 +141,7 @@ def prepare_out_dir(out_dir: Path, overwrite: bool) -> None:
     out_dir.mkdir(parents=True, exist_ok=True)
     if (out_dir / FRAMES_LOG).exists():
         for p in out_dir.iterdir():
-            if p.is_file() and _CAPTURE_FILE.fullmatch(p.name):
+            if p.is_file() and _is_capture_file(p.name):
                 p.unlink()
 
 
@@ -183,52 +181,51 @@ def frame_reader(source: CameraSource, shutter: str | None) -> Callable[[], Sequ
 
 
 class CaptureWriter:
-    """Image files plus ``frames.jsonl`` records, written so that an interruption loses nothing recorded."""
+    """Image files plus ``frames.jsonl`` records, written so that a record is whole or absent after any failure,
+    and an image is there for every record (see the module docstring). ``fs`` is the file-system seam."""
 
-    def __init__(self, out_dir: Path, fmt: str = "png") -> None:
+    def __init__(self, out_dir: Path, fmt: str = "png", *, fs: FileSystem = OS_FS) -> None:
         if fmt not in IMAGE_FORMATS:
             raise ConfigError(f"image format {fmt!r} is not one of {list(IMAGE_FORMATS)}")
-        self.out_dir, self.fmt = out_dir, fmt
+        self.out_dir, self.fmt, self.fs = out_dir, fmt, fs
         self.frames = self.images = 0
-        self._log: TextIO | None = open(out_dir / FRAMES_LOG, "w", encoding="utf-8")  # noqa: SIM115
+        self._log: AppendLog | None = AppendLog(out_dir / FRAMES_LOG, truncate=True, fs=fs)
 
     def write(self, frames: Sequence[Frame]) -> None:
-        """Store the frames of one instant: images first, then their records as one flushed write."""
-        assert self._log is not None, "writer is closed"
+        """Store the frames of one instant: durable images first, then their records in one append."""
+        if self._log is None:
+            raise ValueError("capture writer is closed")
         records: list[str] = []
         written: list[Path] = []
-        start = self._log.tell()
+        start = self._log.size
         try:
             for frame in frames:
                 path = self.out_dir / f"{self.frames:06d}{SUFFIX.get(frame.shutter, '')}.{self.fmt}"
+                data = encode_image(frame, self.fmt)
                 written.append(path)  # listed before it exists, so an interrupt mid-write still removes it
-                write_atomic(path, encode_image(frame, self.fmt))
+                write_atomic(path, data, self.fs)
                 records.append(json.dumps(frame.to_json(path.name), default=_json_default))
-            self._log.write("".join(r + "\n" for r in records))
+            self._log.append("".join(r + "\n" for r in records).encode("utf-8"))
         except BaseException:
-            # An interrupt can land anywhere, even just after the records went into the log's buffer: then the
-            # images stay (close() flushes their records); otherwise half a pair is no record, so the folder
-            # is left exactly as the log says.
-            if self._log.tell() == start:
+            # The log's committed size says whether the records went in, wherever an error or interrupt landed:
+            # if they did, the images stay; if not, the images go (half a pair is no record). An unknown tail
+            # (the cut-back itself failed) keeps the images: never a record without its image.
+            if self._log.size == start:
                 for path in written:
-                    path.unlink(missing_ok=True)
-            else:
+                    with contextlib.suppress(OSError):
+                        self.fs.unlink(path)
+            elif self._log.size is not None:
                 self.frames += 1
                 self.images += len(records)
             raise
-        self._log.flush()
         self.frames += 1
         self.images += len(records)
 
     def close(self) -> None:
-        """Flush the log to disk and close it; safe to call twice."""
+        """fsync the log and close it; safe to call twice."""
         if self._log is not None:
             log, self._log = self._log, None
-            try:
-                log.flush()
-                os.fsync(log.fileno())
-            finally:
-                log.close()
+            log.close()
 
 
 def _json_default(value: Any) -> Any:
@@ -239,10 +236,24 @@ def _json_default(value: Any) -> Any:
     return str(value)
 
 
-def write_capture_info(out_dir: Path, info: dict[str, Any]) -> None:
+def write_capture_info(out_dir: Path, info: dict[str, Any], fs: FileSystem = OS_FS) -> None:
     """Store ``capture.json`` atomically."""
     text = json.dumps(info, indent=2, default=_json_default) + "\n"
-    write_atomic(out_dir / CAPTURE_INFO, text.encode("utf-8"))
+    write_atomic(out_dir / CAPTURE_INFO, text.encode("utf-8"), fs)
+
+
+def read_capture(out_dir: str | os.PathLike[str]) -> tuple[dict[str, Any], list[dict[str, Any]]]:
+    """A capture folder's ``capture.json`` and its ``frames.jsonl`` records (a torn last line left out).
+
+    ``frames`` and ``images`` in the returned info are counted from the records, which are the truth: a
+    capture stopped before it could rewrite ``capture.json`` (a full disk, a kill) still reads right.
+    """
+    out = Path(out_dir)
+    info = json.loads((out / CAPTURE_INFO).read_text(encoding="utf-8"))
+    records = read_jsonl(out / FRAMES_LOG)
+    instants = {m.group() for r in records if (m := _INSTANT.match(str(r.get("file", ""))))}
+    info.update(frames=len(instants), images=len(records))
+    return info, records
 
 
 def capture(
@@ -257,11 +268,14 @@ def capture(
     command: Sequence[str] | None = None,
     stream: TextIO | None = None,
     clock: Callable[[], float] = time.monotonic,
+    fs: FileSystem = OS_FS,
 ) -> CaptureResult:
     """Capture ``frames`` instants of ``source`` into ``out_dir`` (see the module docstring).
 
     ``progress`` None shows progress on ``stream`` (stderr) only when it is a terminal. Ends early, and
-    reports it, when a finite source runs out. Ctrl-C raises ``CaptureInterrupted`` after cleanup.
+    reports it, when a finite source runs out. Ctrl-C raises ``CaptureInterrupted`` after cleanup; a write
+    error (a full disk) propagates after it, with every record already written kept whole. ``fs``: the
+    file-system seam (tests make its calls fail).
     """
     if isinstance(frames, bool) or not isinstance(frames, int) or frames <= 0:
         raise ConfigError(f"frames must be a positive integer, got {frames!r}")
@@ -284,15 +298,14 @@ def capture(
         "image_format": fmt,
         "frames_requested": frames,
         "started_utc": datetime.now(timezone.utc).isoformat(timespec="seconds"),
-        "frames": 0,
-        "images": 0,
-        "complete": False,
+        "complete": False,  # frames/images/complete are added when the capture ends (read_capture counts them)
     }
-    write_capture_info(out, info)
-    writer = CaptureWriter(out, fmt)
+    write_capture_info(out, info, fs)
+    writer = CaptureWriter(out, fmt, fs=fs)
     bar = Progress(frames, label="capture", stream=stream, enabled=progress, unit="frame")
     start = clock()
     interrupted = False
+    error: BaseException | None = None
     try:
         pending = first
         while pending is not None:
@@ -301,13 +314,24 @@ def capture(
             pending = read() if writer.frames < frames else None
     except KeyboardInterrupt:
         interrupted = True
+    except BaseException as exc:
+        error = exc
+        raise
     finally:
         bar.close()
-        writer.close()
-        result = CaptureResult(out, writer.frames, writer.images, clock() - start, writer.frames == frames)
-        info.update(frames=result.frames, images=result.images, seconds=round(result.seconds, 3),
-                    complete=result.complete, interrupted=interrupted)
-        write_capture_info(out, info)
+        try:
+            writer.close()
+            result = CaptureResult(out, writer.frames, writer.images, clock() - start, writer.frames == frames)
+            info.update(frames=result.frames, images=result.images, seconds=round(result.seconds, 3),
+                        complete=result.complete, interrupted=interrupted)
+            if error is not None:
+                info["error"] = f"{type(error).__name__}: {error}"
+            write_capture_info(out, info, fs)
+        except OSError:
+            # After a failure (a full disk) the first error is the one to report; capture.json then still
+            # says the capture never finished, and read_capture counts frames.jsonl.
+            if error is None:
+                raise
     if interrupted:
         raise CaptureInterrupted(result)
     return result

@@ -23,11 +23,11 @@ from typing import TextIO
 
 import numpy as np
 from rollcam.common.errors import ConfigError, RollcamError
+from rollcam.common.files import write_atomic
 from rollcam.common.lifecycle import Stats
 from rollcam.sim.frame import Frame
 from rollcam.sim.hwconfig import load_sensor
 
-from .capture import write_atomic
 from .progress import Progress
 from .sources import open_camera
 from .video import VideoWriter

@@ -5,8 +5,9 @@ and shows fps, capture latency and detector latency on one status line. With ``-
 
 - ``detections.jsonl``: one record per frame (sequence, timestamps, line time, exposure, latencies,
   detections with box/score/class, and for synthetic sources the ground-truth objects and per-frame match
-  counts). Each record goes to the file in one ``write`` on an ``O_APPEND`` descriptor, so the log always
-  ends on a whole record, whenever the run stops.
+  counts). Each record goes to the file in one ``write`` on an ``O_APPEND`` descriptor, cut back if that
+  write fails, so the log ends on a whole record whenever the run stops (a kill or power cut mid-write can
+  leave a torn last line, which ``rollcam.common.files.read_jsonl`` skips).
 - ``detections.mp4``: the frames with detections (green), RS truth (red) and GS truth (blue) drawn; encoded
   on a writer thread so encoding does not stall the loop, written as ``.part`` and renamed when complete
   (also after Ctrl-C).
@@ -20,7 +21,6 @@ command exits with status 130. The command line is ``rollcam.host.commands.detec
 from __future__ import annotations
 
 import json
-import os
 import queue
 import threading
 import time
@@ -32,6 +32,7 @@ from typing import Any, TextIO
 
 import numpy as np
 from rollcam.common.errors import SourceError
+from rollcam.common.files import AppendLog
 from rollcam.sim.frame import Frame
 
 from .detectors import Detections, Detector
@@ -45,27 +46,19 @@ COLORS = {"det": (0, 255, 0), "rs": (0, 0, 255), "gs": (255, 128, 0)}
 
 
 class DetectionLog:
-    """``detections.jsonl`` opened for appending; each record is one ``os.write`` of one whole line."""
+    """``detections.jsonl``: each record one whole line in one append, cut back if the write fails
+    (``rollcam.common.files.AppendLog``)."""
 
     def __init__(self, path: Path) -> None:
         self.path = path
-        self._fd: int | None = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC | os.O_APPEND, 0o644)
+        self._log = AppendLog(path, truncate=True)
 
     def write(self, record: dict[str, Any]) -> None:
-        data = (json.dumps(record, separators=(",", ":")) + "\n").encode("utf-8")
-        assert self._fd is not None, "log is closed"
-        written = os.write(self._fd, data)
-        if written != len(data):  # a short write to a regular file means a full disk: say so
-            raise OSError(f"short write to {self.path} ({written} of {len(data)} bytes)")
+        self._log.append((json.dumps(record, separators=(",", ":")) + "\n").encode("utf-8"))
 
     def close(self) -> None:
         """Flush to disk and close; safe to call twice."""
-        if self._fd is not None:
-            fd, self._fd = self._fd, None
-            try:
-                os.fsync(fd)
-            finally:
-                os.close(fd)
+        self._log.close()
 
 
 class VideoSink:
@@ -248,7 +241,7 @@ def run_detect(source: CameraSource, detector: Detector, *, frames: int | None =
 
 def _write_summary(out_dir: Path, result: DetectResult, source: CameraSource, detector: Detector,
                    meta: dict[str, Any]) -> None:
-    from .capture import write_atomic
+    from rollcam.common.files import write_atomic
 
     info = {"source": source.info(), "detector": {"name": detector.name, "repr": repr(detector)}, **meta,
             **result.to_json()}

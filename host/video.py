@@ -6,9 +6,10 @@ executable instead: the one that the ``imageio-ffmpeg`` package ships (or ``IMAG
 libx264 (else libopenh264) to yuv420p H.264 in an MP4 whose index sits at the front (``+faststart``), so it
 plays while it downloads. ffmpeg runs as its own process, so no GPL code is loaded into rollcam's.
 
-The file is written under a temporary name beside ``path`` (``.NAME.part``) and renamed into place by
-``close()``; ``abort()`` (or an exception inside ``with``) removes it, so a half-written video is never left
-under its final name. A video that got no frames is not written at all.
+The file is written under a temporary name beside ``path`` (``.NAME.<token>.part``) and moved into place
+durably (fsynced, renamed, directory fsynced: ``rollcam.common.files.commit``) by ``close()``; ``abort()``
+(or an exception inside ``with``) removes it, so a half-written video is never left under its final name.
+A video that got no frames is not written at all.
 """
 
 from __future__ import annotations
@@ -25,6 +26,7 @@ from typing import IO
 
 import numpy as np
 from rollcam.common.errors import ConfigError, RollcamError, require
+from rollcam.common.files import commit, part_path
 
 ENCODERS = ("libx264", "libopenh264")
 """H.264 encoders in order of preference (x264 gives better pictures per bit; OpenH264 is the BSD fallback)."""
@@ -65,7 +67,7 @@ class VideoWriter:
         if len(size) != 2 or not all(isinstance(v, (int, np.integer)) and v > 0 for v in size):
             raise ConfigError(f"video size must be (width, height) in positive pixels, got {size!r}")
         self.path = Path(path)
-        self.part = self.path.with_name(f".{self.path.name}.part")
+        self.part = part_path(self.path)
         self.fps = float(fps)
         self.size = (int(size[0]), int(size[1]))
         self.encoded_size = (self.size[0] + self.size[0] % 2, self.size[1] + self.size[1] % 2)
@@ -128,7 +130,7 @@ class VideoWriter:
             self.abort()
             raise OSError(f"writing {self.path} failed (ffmpeg exit status {rc}): {self._error}")
         self._log.close()
-        os.replace(self.part, self.path)
+        commit(self.part, self.path)
 
     def abort(self) -> None:
         """Stop encoding and remove the unfinished file; safe to call twice, and after close()."""

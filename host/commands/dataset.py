@@ -96,6 +96,8 @@ def run(args: argparse.Namespace) -> int:
         return 0
     rate = f", {result.rendered / result.seconds:.2f} pairs/s" if result.rendered and result.seconds > 0 else ""
     resumed = f" ({result.resumed} already done)" if result.resumed else ""
+    if result.redone:
+        resumed += f" ({result.redone} redone: their files no longer matched their records)"
     print(f"dataset: {result.pairs} GS/RS pairs in {result.out_dir}/{resumed}; rendered {result.rendered} in "
           f"{result.seconds:.1f} s{rate} on {result.executor} x{result.workers}")
     for name, sub in result.card["subsets"].items():

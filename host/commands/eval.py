@@ -53,7 +53,8 @@ def result_stem(detector: str | None, detections: str | None, split: str, subset
 
 def run(args: argparse.Namespace) -> int:
     """Evaluate, write the result JSON and chart atomically, print the table (or the JSON)."""
-    from ..capture import write_atomic
+    from rollcam.common.files import write_atomic
+
     from ..evaluation.report import format_table, plot
     from ..evaluation.run import evaluate_dataset
 

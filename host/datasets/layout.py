@@ -12,7 +12,8 @@ from collections import defaultdict
 from pathlib import Path
 from typing import Any
 
-from ..capture import write_atomic
+from rollcam.common.files import write_atomic
+
 from .plan import SHUTTERS, SPLITS, DatasetConfig, subset_name
 from .sample import CLASS_NAMES
 

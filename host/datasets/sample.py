@@ -1,8 +1,10 @@
 """Rendering one planned sample into its files (two images, two YOLO label files) and its record.
 
-A record is the sample's commit marker: ``records/<speed>/<name>.json`` is written (atomically) only after
-every file of the sample is in place, so a sample without a record is incomplete and is redone on resume.
-It holds the full ground truth of both images, from which the COCO files and the dataset card are built.
+A record is the sample's commit marker: ``records/<speed>/<name>.json`` is written (atomically, durably) only
+after every file of the sample is durably in place, so a sample without a record is incomplete and is redone
+on resume. It holds the size and SHA-256 of each of the sample's files (``files``), so a resume also redoes a
+sample whose files were cut short or changed behind its record (a power cut, a damaged disk), and the full
+ground truth of both images, from which the COCO files and the dataset card are built.
 """
 
 from __future__ import annotations
@@ -14,9 +16,10 @@ from pathlib import Path
 from typing import Any
 
 from rollcam.common.errors import SourceError
+from rollcam.common.files import file_digest, file_matches, write_atomic
 from rollcam.sim.frame import Frame
 
-from ..capture import encode_image, write_atomic
+from ..capture import encode_image
 from ..sources import open_camera
 from .plan import DatasetConfig, LabelPolicy, Sample, Task, sample_uri, speed_tag, subset_name
 
@@ -100,7 +103,8 @@ def render_sample(cfg: DatasetConfig, s: Sample) -> SampleResult:
                            "format": frame.format, "objects": labels}
     record = {"name": s.name, "speed": s.speed, "speed_tag": speed_tag(s.speed), "split": s.split,
               "scene": s.scene, "scene_seed": s.scene_seed, "time_of_day": s.time, "camera": s.camera,
-              "start_ns": s.start_ns, "uri": uri, "images": images}
+              "start_ns": s.start_ns, "uri": uri, "images": images,
+              "files": {rel: file_digest(data) for rel, data in sorted(files.items())}}
     return SampleResult(s.key, record, files)
 
 
@@ -147,6 +151,15 @@ def read_records(root: Path) -> dict[tuple[str, str], dict[str, Any]]:
             if rec is not None:
                 records[(tag_dir.name, path.stem)] = rec
     return records
+
+
+def files_intact(root: Path, record: dict[str, Any]) -> bool:
+    """Whether every file a record lists is there with its recorded size and SHA-256 (a record from before
+    records carried checksums cannot be checked, and counts as not intact)."""
+    files = record.get("files")
+    if not isinstance(files, dict) or not files:
+        return False
+    return all(isinstance(d, dict) and file_matches(root / rel, d) for rel, d in files.items())
 
 
 def _read_json(path: Path) -> dict[str, Any] | None:

@@ -78,6 +78,6 @@ def plot(doc: dict[str, Any], path: Path) -> None:
     buf = io.BytesIO()
     fig.savefig(buf, format="png", dpi=110)
     plt.close(fig)
-    from ..capture import write_atomic
+    from rollcam.common.files import write_atomic
 
     write_atomic(Path(path), buf.getvalue())

@@ -15,7 +15,7 @@ from .report import build_document
 
 
 def _save(path: Path, sets: list[EvalSet], dets: list[list[Dets]]) -> None:
-    from ..capture import write_atomic
+    from rollcam.common.files import write_atomic
 
     lines = []
     for s, ds in zip(sets, dets, strict=True):
