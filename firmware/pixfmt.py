@@ -21,6 +21,10 @@ _PROCESSED = (  # the emulated ISP's formats, in the order devices enumerate the
     ("RGB3", "24-bit RGB 8-8-8"),
     ("GREY", "8-bit Greyscale"),
     ("MJPG", "Motion-JPEG"),
+    ("UYVY", "UYVY 4:2:2"),
+    ("NV12", "Y/UV 4:2:0"),
+    ("YU12", "Planar YUV 4:2:0"),
+    ("XR24", "32-bit BGRX 8-8-8-8"),
 )
 COMPRESSED = frozenset({"MJPG"})
 """Processed fourccs whose frames vary in size; ``rollcam.sim.formats`` has no layout for them."""

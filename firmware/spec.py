@@ -35,8 +35,6 @@ from .options import MAX_BLUR_PX, MAX_EXPOSURE_US, MAX_SEED, OPTIONS, check_size
 from .pixfmt import FORMATS, raw_formats
 from .traits import traits_for
 
-_SENSOR_PROCESSED = ("NV12", "YU12")  # processed formats the sensor model's ISP makes besides the device's
-
 
 @dataclass(frozen=True)
 class CameraSpec:
@@ -185,7 +183,7 @@ class CameraSpec:
 
     def flipped(self, fourcc: str) -> str:
         """A processed fourcc as it is; a raw one (given in the sensor's order) in the order the flips give."""
-        if fourcc in FORMATS or fourcc in _SENSOR_PROCESSED:
+        if fourcc in FORMATS:
             return fourcc
         f = sf.pixel_format(fourcc)
         if not f.is_raw or f.cfa == "mono":
@@ -234,7 +232,7 @@ class CameraSpec:
     def _base_format(self, fourcc: str) -> str:
         """``fourcc`` as stored: processed as is, raw in the sensor's own (unflipped) Bayer order."""
         want = fourcc.ljust(4) if len(fourcc) == 3 else fourcc
-        if want in FORMATS or want in _SENSOR_PROCESSED:
+        if want in FORMATS:
             return want
         f = sf.pixel_format(want)  # ConfigError naming the fourcc when unknown
         if not f.is_raw:

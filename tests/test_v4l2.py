@@ -14,6 +14,7 @@ from hypothesis import strategies as st
 from rollcam.common.errors import DeviceError
 from rollcam.emu.v4l2 import Device, Faults, V4L2Error, raw
 from rollcam.emu.v4l2 import functions as fn
+from rollcam.sim import formats as sim_formats
 
 
 def dev(**kw) -> Device:
@@ -221,3 +222,16 @@ def test_fuzz_ioctl_sequences_keep_the_queue_consistent():
     _fuzz_ioctl_sequences()
     assert FUZZ_COUNTS["ioctl"] >= 100
     print(f"V4L2 ioctl-sequence fuzz: {FUZZ_COUNTS['ioctl']} sequences")
+
+
+@pytest.mark.parametrize("fourcc", [f for f, p in sim_formats.FORMATS.items() if not p.is_raw])
+def test_every_processed_format_the_camera_takes_is_one_v4l2_describes_and_streams(fourcc):
+    """A format the camera spec accepts (``emu:...&format=NV12``) is one the V4L2 device enumerates, sets and
+    streams in buffers of its sizeimage (NV12 was accepted by the spec but unknown to the device)."""
+    with Device.open("imx219", realtime=False) as dev:
+        fmt = dev.set_format(640, 480, fourcc)
+        assert fmt.pixelformat == fourcc
+        assert fourcc in dev.driver.camera.formats
+        buf = next(iter(dev.stream(frames=1)))
+        assert len(buf.data) == fmt.sizeimage
+        assert buf.image().shape == (480, 640, 3)
