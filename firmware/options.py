@@ -179,8 +179,8 @@ OPTIONS: dict[str, Option] = {o.name: o for o in (
     Option("exposure_us", bounded(non_negative_float, 0.0, MAX_EXPOSURE_US), None,
            "exposure in us, whole lines, clamped to the frame (default: 10 ms)"),
     Option("gain", positive_float, 1.0, "linear total gain (analog first, then digital, as drivers split it)"),
-    Option("format", _fourcc, "BGR3", "pixel format: BGR3 | YUYV | UYVY | NV12 | YU12 | RGB3 | XR24 | GREY | MJPG or a raw "
-                                      "fourcc of the sensor (RG10, pRAA, Y10, ...)"),
+    Option("format", _fourcc, "BGR3", "pixel format: BGR3 | YUYV | UYVY | NV12 | YU12 | RGB3 | XR24 | GREY | MJPG "
+                                      "or a raw fourcc of the sensor (RG10, pRAA, Y10, ...)"),
     Option("physics", parse_bool, None, "sensor model (exposure integration, EMVA noise, ADC): default on for "
                                         "every format but BGR3"),
     Option("blur_px", bounded(non_negative_float, 0.0, MAX_BLUR_PX), 0.5,
