@@ -31,7 +31,7 @@ from typing import Any, Literal
 
 import numpy as np
 from rollcam.common.errors import ConfigError, MissingDependencyError, require
-from rollcam.common.values import parse_bool, positive_int
+from rollcam.common.values import fraction, parse_bool, positive_int
 
 from .base import Detections, DetectorSpec
 from .ops import Placement, letterbox, nms, stretch, tile_windows
@@ -60,13 +60,6 @@ COCO_NAMES = (
 def import_onnxruntime() -> Any:
     """onnxruntime (an install dependency), or a MissingDependencyError saying the install is broken."""
     return require("onnxruntime", feature="the onnx detector")
-
-
-def _fraction(text: str) -> float:
-    value = float(text)
-    if not 0.0 <= value <= 1.0:
-        raise ValueError("must be between 0 and 1")
-    return value
 
 
 def _overlap(text: str) -> float:
@@ -278,7 +271,7 @@ def detector_options(spec: DetectorSpec) -> dict[str, Any]:
     """Keyword arguments of ``OnnxDetector`` from a spec's options (shared with ``ssdlite``)."""
     spec.check(OPTIONS)
     kw: dict[str, Any] = {
-        "conf": spec.get("conf", _fraction, 0.25), "iou": spec.get("iou", _fraction, 0.45),
+        "conf": spec.get("conf", fraction, 0.25), "iou": spec.get("iou", fraction, 0.45),
         "classes": spec.get("classes", _int_list), "class_offset": spec.get("class_offset", int, 0),
         "size": spec.get("size", _pair), "letterbox_input": spec.get("letterbox", parse_bool),
         "bgr": spec.get("bgr", parse_bool, False), "max_det": spec.get("max_det", positive_int, 300),
