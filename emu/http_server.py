@@ -272,13 +272,14 @@ class HttpHost(Closeable):
             self.loop.call_soon_threadsafe(fn, *args)
 
     def _close(self) -> None:
-        if self._worker.alive:
-            self.call_soon(self._request_stop)
-            self._worker.close()
-        else:
-            self._worker.close()
+        try:
+            if self._worker.alive:
+                self.call_soon(self._request_stop)
+            self._worker.close()  # re-raises what stopped the loop thread, if anything did
+        finally:  # the port is freed even then
             self.sock.close()
-            self.loop.close()
+            if not self.loop.is_running() and not self.loop.is_closed():
+                self.loop.close()
 
     def _request_stop(self) -> None:
         if self._stop is not None:

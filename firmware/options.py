@@ -233,7 +233,8 @@ def as_text(value: Any) -> str:
     if isinstance(value, (set, frozenset)):
         return ",".join(sorted(value)) or "off"
     if isinstance(value, float):
-        return f"{value:.6g}"
+        short = f"{value:.6g}"
+        return short if float(short) == value else repr(value)  # never round a value away
     return str(value).strip()
 
 

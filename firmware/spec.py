@@ -65,7 +65,7 @@ class CameraSpec:
     settings: StreamSettings = field(init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
-        self._check_limits()
+        _check_limits(self)
         s = resolve_settings(self.sensor, size=self.size, shutter=self.shutter, readout=self.readout,
                              exposure_ns=self.exposure_ns, gain=self.gain,
                              frame_length_lines=self.frame_length_lines, line_length_pck=self.line_length_pck)
@@ -77,40 +77,7 @@ class CameraSpec:
         fix(self, "gain", float(self.gain))
         fix(self, "pixel_format", self._base_format(self.pixel_format))
         fix(self, "scene_options", tuple(sorted(dict(self.scene_options).items())))
-        if self.physics is False and self.raw:
-            raise ConfigError(f"pixel format {self.pixel_format!r} needs the sensor model (physics on)")
-        if not isinstance(self.blur_px, (int, float)) or not 0 <= self.blur_px <= MAX_BLUR_PX:
-            raise ConfigError(f"blur_px must be a number in 0..{MAX_BLUR_PX:g} (0: no motion blur), got "
-                              f"{self.blur_px!r}")
-        if s.timing.fps < MIN_FPS:
-            raise ConfigError(f"a frame of {s.timing.frame_length_lines} lines lasts {1 / s.timing.fps:.3g} s, longer "
-                              f"than the longest frame ({1 / MIN_FPS:g} s)")
-        patterns = traits_for(self.sensor.name).test_pattern_codes
-        if self.test_pattern not in patterns:
-            raise ConfigError(f"test pattern {self.test_pattern!r} is not one of {list(patterns)}")
-        for name in ("noise_seed", "seed"):
-            value = getattr(self, name)
-            if isinstance(value, bool) or not isinstance(value, int) or not 0 <= value <= MAX_SEED:
-                raise ConfigError(f"{name} must be a whole number in 0..{MAX_SEED}, got {value!r}")
-        scene_of(self).camera(self.camera)  # the scene is built (and cached) now: bad options fail here
-
-    def _check_limits(self) -> None:
-        """The typed fields against the option table's limits (before anything is sized from them)."""
-        if self.size is not None:
-            check_size(self.size)
-        g = self.sensor.gain
-        max_gain = g.analog_max * g.digital_max
-        slack = 1 + 1e-3  # doors that speak hundredths (UVC) round the maximum to the nearest one
-        if not isinstance(self.gain, (int, float)) or isinstance(self.gain, bool) \
-                or not 0 < self.gain <= max_gain * slack:
-            raise ConfigError(f"gain {self.gain!r} is not in (0, {max_gain:g}] (sensor {self.sensor.name!r}: "
-                              f"analog {g.analog_max:g} x digital {g.digital_max:g})")
-        if self.exposure_ns is not None and not (isinstance(self.exposure_ns, int)
-                                                 and 0 <= self.exposure_ns <= MAX_EXPOSURE_US * 1000):
-            raise ConfigError(f"exposure {self.exposure_ns!r} ns is not a whole number in "
-                              f"0..{MAX_EXPOSURE_US * 1000:.0f}")
-        check_text(self.serial, "serial number")
-        check_text(self.camera, "scene camera")
+        _check_values(self)
 
     # -------------------------------------------------------------------------------------- building
     @classmethod
@@ -128,7 +95,8 @@ class CameraSpec:
         if fps is not None:
             if "frame_length_lines" in fields:
                 raise ConfigError("give fps or frame_length_lines, not both")
-            probe = resolve_settings(sensor, size=fields.get("size"), readout=fields.get("readout"), fps=fps)
+            probe = resolve_settings(sensor, size=fields.get("size"), readout=fields.get("readout"), fps=fps,
+                                     line_length_pck=fields.get("line_length_pck"))
             fields["frame_length_lines"] = probe.timing.frame_length_lines
         return cls(sensor, **fields)
 
@@ -253,6 +221,47 @@ class CameraSpec:
 
 _SCENE_NAMES = {n for n, o in OPTIONS.items() if o.scenes is not None}
 _FIELD_OF = {"format": "pixel_format", "noise": "noise", "size": "size"}
+
+
+def _check_limits(spec: CameraSpec) -> None:
+    """The typed fields against the option table's limits (before anything is sized from them)."""
+    if spec.size is not None:
+        check_size(spec.size)
+    g = spec.sensor.gain
+    max_gain = g.analog_max * g.digital_max
+    slack = 1 + 1e-3  # doors that speak hundredths (UVC) round the maximum to the nearest one
+    if not isinstance(spec.gain, (int, float)) or isinstance(spec.gain, bool) \
+            or not 0 < spec.gain <= max_gain * slack:
+        raise ConfigError(f"gain {spec.gain!r} is not in (0, {max_gain:g}] (sensor {spec.sensor.name!r}: "
+                          f"analog {g.analog_max:g} x digital {g.digital_max:g})")
+    if spec.exposure_ns is not None and not (isinstance(spec.exposure_ns, int)
+                                             and 0 <= spec.exposure_ns <= MAX_EXPOSURE_US * 1000):
+        raise ConfigError(f"exposure {spec.exposure_ns!r} ns is not a whole number in "
+                          f"0..{MAX_EXPOSURE_US * 1000:.0f}")
+    check_text(spec.serial, "serial number")
+    check_text(spec.camera, "scene camera")
+
+
+def _check_values(spec: CameraSpec) -> None:
+    """The normalised spec's values that no single field decides (format and physics, frame length, seeds, the
+    test pattern, the scene and its camera)."""
+    if spec.physics is False and spec.raw:
+        raise ConfigError(f"pixel format {spec.pixel_format!r} needs the sensor model (physics on)")
+    if not isinstance(spec.blur_px, (int, float)) or not 0 <= spec.blur_px <= MAX_BLUR_PX:
+        raise ConfigError(f"blur_px must be a number in 0..{MAX_BLUR_PX:g} (0: no motion blur), got "
+                          f"{spec.blur_px!r}")
+    t = spec.settings.timing
+    if t.fps < MIN_FPS:
+        raise ConfigError(f"a frame of {t.frame_length_lines} lines lasts {1 / t.fps:.3g} s, longer than the longest "
+                          f"frame ({1 / MIN_FPS:g} s)")
+    patterns = traits_for(spec.sensor.name).test_pattern_codes
+    if spec.test_pattern not in patterns:
+        raise ConfigError(f"test pattern {spec.test_pattern!r} is not one of {list(patterns)}")
+    for name in ("noise_seed", "seed"):
+        value = getattr(spec, name)
+        if isinstance(value, bool) or not isinstance(value, int) or not 0 <= value <= MAX_SEED:
+            raise ConfigError(f"{name} must be a whole number in 0..{MAX_SEED}, got {value!r}")
+    scene_of(spec).camera(spec.camera)  # the scene is built (and cached) now: bad options fail here
 
 
 def _fields(values: dict[str, Any]) -> dict[str, Any]:

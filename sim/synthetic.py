@@ -108,9 +108,9 @@ def resolve_settings(
         frame_pck = base.frame_period_pck * n_out
         line_pck = base.line_length_pck * mode.height
         timing = _reduced(base.pixel_rate_hz * n_out, line_pck, -(-frame_pck // line_pck), frame_pck)
-    if frame_length_lines is not None or line_length_pck is not None:
-        if fps is not None:
-            raise ConfigError("give fps or a frame length, not both")
+    if fps is not None and frame_length_lines is not None:
+        raise ConfigError("give fps or a frame length, not both")
+    if frame_length_lines is not None or line_length_pck is not None:  # fps, if given, then uses this line length
         for name, value in (("frame_length_lines", frame_length_lines), ("line_length_pck", line_length_pck)):
             if value is not None and (isinstance(value, bool) or not isinstance(value, (int, np.integer))
                                       or value < 1):

@@ -158,3 +158,14 @@ def test_the_option_table_names_the_simulators_shutters():
     from rollcam.sim import synthetic
 
     assert options.SHUTTERS == synthetic.SHUTTERS  # kept apart so the table loads without numpy
+
+
+def test_create_with_fps_keeps_the_line_length_it_is_given():
+    spec = CameraSpec.create("imx219", size=(640, 480), fps=30, line_length_pck=5000)
+    assert spec.line_length_pck == 5000 or spec.settings.timing.line_length_pck == 5000
+    assert abs(spec.settings.timing.fps - 30) < 0.05
+
+
+def test_typed_scene_values_keep_their_precision():
+    spec = CameraSpec.create("imx219", size=(640, 480), scene={"scene": "street", "speed": 12.3456789})
+    assert dict(spec.scene_options)["speed"] == "12.3456789"

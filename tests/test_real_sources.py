@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import io
 import sys
 
 import cv2
@@ -272,3 +273,13 @@ def test_luxonis_style_example_on_the_mock(mock_depthai):
             if n == 2:
                 break
     assert full.size == (1920, 1080)
+
+
+def test_a_part_without_content_length_and_no_next_boundary_is_bounded(monkeypatch):
+    """A server that never sends the next boundary cannot grow the reader's memory without bound."""
+    import rollcam.host.sources.http as http_source
+
+    monkeypatch.setattr(http_source, "MAX_PART_BYTES", 4096)
+    endless = io.BytesIO(b"--abc\r\nContent-Type: image/jpeg\r\n\r\n" + (b"x" * 100 + b"\r\n") * 1000)
+    with pytest.raises(ProtocolError, match="without Content-Length"):
+        MjpegParser(endless, b"abc").next_part()

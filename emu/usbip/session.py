@@ -13,6 +13,7 @@ vhci-hcd reads ``number_of_packets`` descriptors after every isochronous RET_SUB
 from __future__ import annotations
 
 import errno
+import logging
 import threading
 import time
 from collections import deque
@@ -24,6 +25,8 @@ from rollcam.emu.uvc.requests import Stall
 from rollcam.emu.uvc.stream import TransferOverflow, TransferTimeout
 
 from . import protocol as P
+
+log = logging.getLogger("rollcam.usbip")
 
 POLL_MS = 200  # how often a blocked bulk read looks whether the connection is closing
 
@@ -168,6 +171,9 @@ class UrbSession:
             return failed(urb, -errno.EOVERFLOW)
         except DeviceError:
             return failed(urb, -errno.ESHUTDOWN)
+        except Exception:  # a fault of the emulated function: answer the URB so the importer stays in step
+            log.exception("URB %d on endpoint %d failed in the emulated device", urb.seqnum, urb.ep)
+            return failed(urb, -errno.EPROTO)
 
     def _bulk(self, urb: P.Submit) -> bytes:
         while True:

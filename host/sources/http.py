@@ -153,12 +153,17 @@ class MjpegParser:
                 return None
             return headers, body
         chunks: list[bytes] = []  # no length: the body runs to the next delimiter line
+        size = 0
         while True:
             line = self._line()
             if line is None or self._is_delimiter(line):
                 self._pending = line
                 body = b"".join(chunks)
                 return (headers, body[:-2] if body.endswith(b"\r\n") else body) if chunks or line else None
+            size += len(line)
+            if size > MAX_PART_BYTES:  # a server that never sends the next boundary must not grow us forever
+                raise ProtocolError(f"MJPEG part without Content-Length runs past {MAX_PART_BYTES} bytes with no "
+                                    "boundary")
             chunks.append(line)
 
 
