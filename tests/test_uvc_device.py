@@ -36,6 +36,18 @@ def _commit(dev, fmt=1, frame=1, interval=333333, length=48):
     return probe
 
 
+def _realtime_iso_stream():
+    """A real-time function on a fake clock (its sleeps move it), committed and streaming isochronously."""
+    clock = ManualClock()
+    producer = FakeProducer(clock=clock)
+    fn = UVCFunction(producer, realtime=True, sleep=clock.sleep, render_ahead=False)
+    dev = usb.core.find(idVendor=0x1D6B, backend=EmulatedBackend([fn]))
+    dev.set_configuration()
+    probe = _commit(dev)
+    dev.set_interface_altsetting(VS, 4)
+    return clock, producer, fn, dev, probe
+
+
 def _error_code(dev) -> int:
     return dev.ctrl_transfer(0xA1, C.GET_CUR, C.VC_REQUEST_ERROR_CODE_CONTROL << 8, 0, 1)[0]
 
@@ -172,13 +184,7 @@ def test_commit_while_streaming_is_refused():
 
 
 def test_realtime_slow_host_drops_frames_and_counts_them():
-    clock = ManualClock()
-    producer = FakeProducer(clock=clock)
-    fn = UVCFunction(producer, realtime=True, sleep=clock.sleep, render_ahead=False)
-    dev = usb.core.find(idVendor=0x1D6B, backend=EmulatedBackend([fn]))
-    dev.set_configuration()
-    probe = _commit(dev)
-    dev.set_interface_altsetting(VS, 4)
+    clock, producer, fn, dev, probe = _realtime_iso_stream()
     parser = PayloadParser(probe.dwClockFrequency, 64 * 48 * 2)
     assert bytes(dev.read(0x81, 3072)) == b""  # nothing read out yet: a zero-length packet
     clock.t_ns += 40_000_000  # frame 0 is due
@@ -254,13 +260,7 @@ def test_realtime_isochronous_endpoint_keeps_the_bus_pace():
     """A high-speed bus serves an isochronous endpoint once per service interval (125 us at bInterval 1):
     however fast the host asks, packets (full or empty) arrive at no more than 8,000 a second of device time,
     and frames still get through. Fake clock: the function's sleeps move it."""
-    clock = ManualClock()
-    producer = FakeProducer(clock=clock)
-    fn = UVCFunction(producer, realtime=True, sleep=clock.sleep, render_ahead=False)
-    dev = usb.core.find(idVendor=0x1D6B, backend=EmulatedBackend([fn]))
-    dev.set_configuration()
-    probe = _commit(dev)
-    dev.set_interface_altsetting(VS, 4)
+    clock, _producer, fn, dev, probe = _realtime_iso_stream()
     assert fn.bus.interval_ns == 125_000
     parser = PayloadParser(probe.dwClockFrequency, 64 * 48 * 2)
     t0, packets, frames = clock.t_ns, 0, []
