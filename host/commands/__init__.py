@@ -25,6 +25,7 @@ COMMANDS: dict[str, str] = {
     "emulate": "emulate",
     "dataset": "dataset",
     "eval": "eval",
+    "train": "train",
     "bench": "bench",
 }
 """Command name -> module under ``rollcam.host.commands``, in the order ``rollcam --help`` lists them."""

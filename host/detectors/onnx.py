@@ -19,7 +19,9 @@ C x R overlapping tiles and merge, for small pedestrians in large frames), ``ove
 fraction, 0.2), ``full`` (1/0: with tiles, also run the whole frame; 1),
 ``input`` (``bgr`` or ``raw``: a raw model gets the sensor mosaic, scaled to 0..1 by ``bits``, the mosaic's
 bit depth; default the full range of its dtype. Give raw models frames at their input size, or use tiles of
-it: resizing a mosaic blends its colour sites).
+it: resizing a mosaic blends its colour sites). A model's metadata may set the defaults of ``input`` and
+``bits`` (``rollcam_input``, ``rollcam_bits``, as ``rollcam train`` writes them) and its class names
+(``names``, a dict literal as Ultralytics writes it).
 """
 
 from __future__ import annotations
@@ -88,6 +90,39 @@ def _choice(*values: str) -> Callable[[str], str]:
     return parse
 
 
+def fit_image(image: np.ndarray, width: int, height: int, *, input: str = "bgr", letterbox_input: bool = True,
+              bgr: bool = False, channels: int = 3) -> tuple[np.ndarray, Placement]:
+    """An image fitted to a ``width`` x ``height`` network input, H x W x C in its own scale, with its placement.
+
+    A raw mosaic stays one channel in its own dtype; a picture (BGR, grey or BGRA) becomes RGB (BGR with
+    ``bgr``), or its channel mean for a one-channel model. ``rollcam train`` fits its images with this same
+    function, so a model sees in training exactly what this detector feeds it.
+    """
+    img = np.asarray(image)
+    if input == "raw":
+        fitted, place = (letterbox if letterbox_input else stretch)(img, width, height)
+        return (fitted[..., None] if fitted.ndim == 2 else fitted), place
+    if img.ndim == 2:
+        img = np.repeat(img[..., None], 3, axis=2)
+    elif img.shape[2] == 4:
+        img = img[..., :3]
+    fitted, place = (letterbox if letterbox_input else stretch)(img, width, height)
+    if not bgr:
+        fitted = fitted[..., ::-1]
+    if channels == 1:
+        fitted = fitted.mean(axis=2, keepdims=True)
+    return fitted, place
+
+
+def input_scale(dtype: np.dtype, input: str = "bgr", bits: int | None = None) -> float:
+    """The factor that maps fitted samples to the 0..1 a float model takes: 1/255 for pictures; for a raw mosaic
+    one over its full scale (``bits`` wide, by default the whole range of its dtype)."""
+    if input != "raw":
+        return 1 / 255
+    dt = np.dtype(dtype)
+    return 1.0 / ((1 << bits) - 1 if bits else (np.iinfo(dt).max if dt.kind in "ui" else 1.0))
+
+
 class OnnxDetector:
     """A detection model run by onnxruntime, with its pre- and post-processing chosen from its tensors."""
 
@@ -96,7 +131,7 @@ class OnnxDetector:
                  letterbox_input: bool | None = None, bgr: bool = False, max_det: int = 300,
                  threads: int | None = None, tiles: tuple[int, int] | None = None,
                  overlap: float = 0.2, full: bool = True, layout: str = "auto", box: str = "yxyx",
-                 norm: bool | None = None, input: Literal["bgr", "raw"] = "bgr", bits: int | None = None,
+                 norm: bool | None = None, input: Literal["bgr", "raw"] | None = None, bits: int | None = None,
                  device: str = "cpu", name: str = "onnx", class_names: dict[int, str] | None = None) -> None:
         ort = import_onnxruntime()
         self.path = Path(path)
@@ -115,6 +150,13 @@ class OnnxDetector:
             self._session = ort.InferenceSession(str(self.path), opts, providers=providers)
         except Exception as exc:  # onnxruntime raises its own untyped errors for unreadable models
             raise ConfigError(f"ONNX model {str(self.path)!r} cannot be loaded: {exc}") from None
+        meta = self._session.get_modelmeta().custom_metadata_map
+        # A model may say what it takes (rollcam train writes these): the spec's own options still win.
+        input = input or meta.get("rollcam_input", "bgr")
+        if input not in ("bgr", "raw"):
+            raise ConfigError(f"ONNX model {str(self.path)!r}: metadata rollcam_input={input!r} is not bgr or raw")
+        if bits is None and meta.get("rollcam_bits", "").isdigit():
+            bits = int(meta["rollcam_bits"])
         self.name, self.input, self.bits = name, input, bits
         self.conf, self.iou, self.max_det = conf, iou, max_det
         self.keep_classes = None if classes is None else np.asarray(classes, np.int32)
@@ -171,26 +213,14 @@ class OnnxDetector:
 
     # ------------------------------------------------------------------------------------------ inference
     def _prepare(self, image: np.ndarray) -> tuple[np.ndarray, Placement]:
-        img = np.asarray(image)
-        if self.input == "raw":
-            full = (1 << self.bits) - 1 if self.bits else (np.iinfo(img.dtype).max if img.dtype.kind in "ui" else 1.0)
-            scale = 1.0 / full
-            fitted, place = (letterbox if self.letterbox else stretch)(img, self.width, self.height)
-            arr = fitted.astype(np.float32) * scale
-            arr = arr[..., None] if arr.ndim == 2 else arr
+        fitted, place = fit_image(image, self.width, self.height, input=self.input, letterbox_input=self.letterbox,
+                                  bgr=self.bgr, channels=self._channels)
+        if self._uint8 and self.input != "raw":
+            arr = fitted.astype(np.uint8)
         else:
-            if img.ndim == 2:
-                img = np.repeat(img[..., None], 3, axis=2)
-            elif img.shape[2] == 4:
-                img = img[..., :3]
-            fitted, place = (letterbox if self.letterbox else stretch)(img, self.width, self.height)
-            if not self.bgr:
-                fitted = fitted[..., ::-1]
-            if self._channels == 1:
-                fitted = fitted.mean(axis=2, keepdims=True)
-            arr = fitted.astype(np.uint8) if self._uint8 else fitted.astype(np.float32) * np.float32(1 / 255)
-        if self._uint8 and self.input == "raw":
-            arr = np.clip(arr * 255, 0, 255).astype(np.uint8)
+            arr = fitted.astype(np.float32) * np.float32(input_scale(fitted.dtype, self.input, self.bits))
+            if self._uint8:
+                arr = np.clip(arr * 255, 0, 255).astype(np.uint8)
         arr = arr.transpose(2, 0, 1) if self._nchw else arr
         return np.ascontiguousarray(arr[None]), place
 
@@ -279,7 +309,7 @@ def detector_options(spec: DetectorSpec) -> dict[str, Any]:
         "overlap": spec.get("overlap", _overlap, 0.2), "full": spec.get("full", parse_bool, True),
         "layout": spec.get("layout", _choice(*LAYOUTS), "auto"),
         "box": spec.get("box", _choice("yxyx", "xyxy"), "yxyx"),
-        "norm": spec.get("norm", parse_bool), "input": spec.get("input", _choice("bgr", "raw"), "bgr"),
+        "norm": spec.get("norm", parse_bool), "input": spec.get("input", _choice("bgr", "raw")),
         "bits": spec.get("bits", positive_int), "device": spec.get("device", _choice("cpu", "cuda"), "cpu"),
     }
     return kw

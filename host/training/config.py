@@ -1,0 +1,65 @@
+"""What a training run is: its validated, frozen configuration (the key a resumed run must match)."""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass
+from typing import Any
+
+from rollcam.common.errors import ConfigError
+
+from .model import model_size
+
+INPUTS = ("rgb", "raw")
+
+
+@dataclass(frozen=True)
+class TrainConfig:
+    """Everything that decides a run's weights: dataset, subsets, model, schedule, seed, input, threads.
+
+    ``subsets``/``val_subsets`` empty: every subset of the dataset (validation: the training subsets).
+    ``steps`` caps the optimiser steps of each epoch (None: the whole training split), for tiny runs and tests.
+    """
+
+    dataset: str
+    subsets: tuple[str, ...] = ()
+    val_subsets: tuple[str, ...] = ()
+    model: str = "nano"
+    epochs: int = 30
+    imgsz: tuple[int, int] = (640, 360)
+    batch: int = 16
+    lr: float = 2e-3
+    weight_decay: float = 5e-4
+    seed: int = 0
+    input: str = "rgb"
+    init: str | None = None
+    threads: int = 1
+    steps: int | None = None
+    val_every: int = 1
+
+    def __post_init__(self) -> None:
+        model_size(self.model)
+        for name, value in (("--epochs", self.epochs), ("--batch", self.batch), ("--threads", self.threads),
+                            ("--val-every", self.val_every)):
+            if not isinstance(value, int) or value < 1:
+                raise ConfigError(f"{name} must be an integer >= 1, got {value!r}")
+        if self.steps is not None and self.steps < 1:
+            raise ConfigError(f"--steps must be an integer >= 1, got {self.steps!r}")
+        w, h = self.imgsz
+        if w < 32 or h < 32 or w % 4 or h % 4:
+            raise ConfigError(f"--imgsz {w}x{h}: both sides must be >= 32 and multiples of 4")
+        if self.input not in INPUTS:
+            raise ConfigError(f"--input {self.input!r} is not one of {list(INPUTS)}")
+        if not (0 < self.lr < 1):
+            raise ConfigError(f"--lr must be in (0, 1), got {self.lr!r}")
+
+    def to_json(self) -> dict[str, Any]:
+        """Plain-JSON form, stored in checkpoints and the run card."""
+        d = asdict(self)
+        d["imgsz"] = f"{self.imgsz[0]}x{self.imgsz[1]}"
+        d["subsets"], d["val_subsets"] = list(self.subsets), list(self.val_subsets)
+        return d
+
+    @property
+    def detector_input(self) -> str:
+        """The ``onnx:`` detector's name for this input (``bgr`` pictures or the ``raw`` mosaic)."""
+        return "raw" if self.input == "raw" else "bgr"

@@ -1,0 +1,137 @@
+"""rollcam train: a tiny run end to end (train, export, evaluate through onnx:), resume, determinism, bad input."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+from rollcam.common.errors import ConfigError
+from rollcam.host.cli import main
+
+torch = pytest.importorskip("torch", reason="rollcam train needs the 'train' extra (torch)")
+pytest.importorskip("onnx")
+pytest.importorskip("faster_coco_eval")
+
+from rollcam.host.datasets import DatasetConfig, build_dataset  # noqa: E402
+from rollcam.host.training.config import TrainConfig  # noqa: E402
+from rollcam.host.training.loss import build_targets  # noqa: E402
+from rollcam.host.training.trainer import train  # noqa: E402
+
+TINY = DatasetConfig(size=(192, 108), scenes=5, cameras=2, times=("noon",), speeds=("normal",), frames=6,
+                     pedestrians=10, seed=4)
+
+
+@pytest.fixture(scope="module")
+def tiny_dataset(tmp_path_factory):
+    return build_dataset(TINY, tmp_path_factory.mktemp("train") / "ds").out_dir
+
+
+def _cfg(ds, **kw):
+    base = {"dataset": str(ds), "model": "pico", "epochs": 2, "imgsz": (96, 56), "batch": 2, "threads": 1,
+            "steps": 2, "seed": 3}
+    return TrainConfig(**(base | kw))
+
+
+def _weights(run_dir):
+    state = torch.load(str(run_dir / "last.pt"), map_location="cpu", weights_only=True)
+    return {k: v.clone() for k, v in state["model"].items()}
+
+
+def test_train_exports_onnx_that_eval_reads(tiny_dataset, tmp_path, capsys):
+    out = tmp_path / "run"
+    code = main(["train", str(tiny_dataset), "--subset", "normal_rs", "--model", "pico", "--epochs", "2",
+                 "--imgsz", "96x56", "--batch", "2", "--threads", "1", "--out", str(out), "--json"])
+    assert code == 0
+    card = json.loads(capsys.readouterr().out)
+    for name in ("model.onnx", "last.pt", "train.json", "README.md", "curves.png"):
+        assert (out / name).is_file(), name
+    assert not (out / ".val.onnx").exists()
+    assert card["subsets"] == ["normal_rs"] and card["val_subsets"] == ["normal_rs"]
+    assert card["config"]["seed"] == 0 and len(card["history"]) == 2
+    assert set(card["final"]) == {"P", "R", "mAP50", "mAP50_95"}
+    assert "rollcam train" in card["command"] and card["git"].keys() == {"commit", "dirty"}
+    assert (out / "curves.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+    from rollcam.host.detectors import load_detector
+
+    det = load_detector(f"onnx:{out / 'model.onnx'}?conf=0.01")
+    assert (det.width, det.height, det.layout, det.input) == (96, 56, "yolo", "bgr")
+    assert det.class_names == {0: "person"}
+    assert len(det.detect(np.full((108, 192, 3), 90, np.uint8)).boxes.shape) == 2
+    det.close()
+    code = main(["eval", str(tiny_dataset), "--detector", f"onnx:{out / 'model.onnx'}?conf=0.01", "--split", "test",
+                 "--json", "--out", str(tmp_path / "eval")])
+    assert code == 0
+    doc = json.loads(capsys.readouterr().out)
+    assert set(doc["results"]["normal"]) >= {"gs", "rs", "gs_to_rs"}
+    assert 0.0 <= doc["results"]["normal"]["rs"]["mAP50"] <= 1.0
+
+
+def test_same_seed_same_weights_and_resume_matches_an_uninterrupted_run(tiny_dataset, tmp_path):
+    a = train(_cfg(tiny_dataset), tmp_path / "a")
+    b = train(_cfg(tiny_dataset), tmp_path / "b")
+    wa, wb = _weights(tmp_path / "a"), _weights(tmp_path / "b")
+    assert all(torch.equal(wa[k], wb[k]) for k in wa)
+    assert a.history[-1]["loss"] == b.history[-1]["loss"]
+
+    class Stop(KeyboardInterrupt):
+        pass
+
+    def stop_after_first(epoch):
+        if epoch == 1:
+            raise Stop
+
+    with pytest.raises(Stop):
+        train(_cfg(tiny_dataset), tmp_path / "c", on_epoch=stop_after_first)
+    assert not (tmp_path / "c" / "model.onnx").exists()
+    c = train(_cfg(tiny_dataset), tmp_path / "c")
+    assert c.resumed_after == 1
+    wc = _weights(tmp_path / "c")
+    assert all(torch.equal(wa[k], wc[k]) for k in wa)
+    assert [h["loss"] for h in c.history] == [h["loss"] for h in a.history]
+
+    d = train(_cfg(tiny_dataset, seed=4), tmp_path / "d")
+    assert not all(torch.equal(wa[k], _weights(tmp_path / "d")[k]) for k in wa)
+    assert d.history[0]["loss"] != a.history[0]["loss"]
+
+
+def test_resume_with_other_options_is_refused_and_init_loads_weights(tiny_dataset, tmp_path):
+    train(_cfg(tiny_dataset, epochs=1), tmp_path / "a")
+    with pytest.raises(ConfigError, match=r"differing: \['lr'\]"):
+        train(_cfg(tiny_dataset, epochs=1, lr=1e-3), tmp_path / "a")
+    fine = train(_cfg(tiny_dataset, epochs=1, init=str(tmp_path / "a" / "last.pt"), lr=1e-9), tmp_path / "b")
+    assert fine.card["config"]["init"].endswith("last.pt")
+    with pytest.raises(ConfigError, match="does not fit"):
+        train(_cfg(tiny_dataset, epochs=1, model="nano", init=str(tmp_path / "a" / "last.pt")), tmp_path / "c")
+
+
+@pytest.mark.parametrize(("argv", "message"), [
+    (["--model", "huge"], "--model 'huge' is not one of"),
+    (["--subset", "fast_rs"], "--subset 'fast_rs' is not a subset"),
+    (["--val", "nope"], "--val 'nope' is not a subset"),
+    (["--imgsz", "30x30"], "multiples of 4"),
+    (["--epochs", "0"], "--epochs"),
+    (["--input", "raw"], "--input raw needs a dataset of raw mosaics"),
+    (["--init", "/nonexistent.pt"], "does not exist"),
+])
+def test_bad_arguments_exit_2_with_one_clear_line(tiny_dataset, tmp_path, capsys, argv, message):
+    code = main(["train", str(tiny_dataset), *argv, "--out", str(tmp_path / "run")])
+    err = capsys.readouterr().err
+    assert code == 2
+    assert message in err and err.count("\n") == 1 and err.startswith("rollcam: error:")
+
+
+def test_not_a_dataset_exits_2(tmp_path, capsys):
+    assert main(["train", str(tmp_path), "--out", str(tmp_path / "run")]) == 2
+    assert "is not a rollcam dataset folder" in capsys.readouterr().err
+
+
+def test_targets_put_a_peak_on_each_box_centre_and_mask_ignore_regions():
+    boxes = np.array([[8, 8, 24, 56], [60, 4, 64, 12]], np.float32)
+    t = build_targets(boxes, np.array([False, True]), 16, 20)
+    assert t["heat"].shape == (1, 16, 20) and t["n_pos"] == 1
+    assert t["heat"][0, 8, 4] == 1.0  # centre (16, 32) / stride 4
+    assert t["mask"][0, 1, 15] == 0.0 and t["mask"][0, 8, 4] == 1.0  # the ignore region's cells carry no loss
+    assert np.isclose(t["weight"].sum(), np.log(16 * 48), rtol=1e-4)
+    assert (t["reg"][:, 8, 4] == boxes[0]).all()
