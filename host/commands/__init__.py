@@ -26,6 +26,7 @@ COMMANDS: dict[str, str] = {
     "dataset": "dataset",
     "eval": "eval",
     "train": "train",
+    "study": "study",
     "bench": "bench",
 }
 """Command name -> module under ``rollcam.host.commands``, in the order ``rollcam --help`` lists them."""

@@ -11,8 +11,8 @@ from rollcam.common.values import parse_size, positive_float, positive_int
 from . import value_type
 
 DESCRIPTION = """\
-Train rollcam's own small anchor-free person detector (plain PyTorch, MIT; the 'train' extra:
-pip install 'rollcam[train]') from scratch on the chosen subsets of a rollcam dataset, or fine-tune it from a
+Train rollcam's own small anchor-free person detector (plain PyTorch, MIT; needs the 'train' extra,
+rollcam[train]) from scratch on the chosen subsets of a rollcam dataset, or fine-tune it from a
 checkpoint (--init). Every epoch writes DIR/last.pt atomically: interrupt the run and rerun the same command to
 continue. Deterministic for a seed and --threads on CPU. Writes DIR/model.onnx (read by
 --detector onnx:DIR/model.onnx in rollcam eval and rollcam detect), the loss and validation-mAP curves
@@ -54,6 +54,10 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
                    help="torch threads; part of what makes a run reproducible (default: min(8, cores))")
     p.add_argument("--device", choices=("auto", "cpu", "cuda"), default="auto",
                    help="auto: a CUDA GPU when torch sees one, else the CPU (default: auto)")
+    p.add_argument("--scenes", type=_COUNT, default=None, metavar="N",
+                   help="train on the images of the first N training scenes only (default: all)")
+    p.add_argument("--cameras", type=_COUNT, default=None, metavar="N",
+                   help="train on camera views 0..N-1 only (default: all)")
     p.add_argument("--val-every", type=_COUNT, default=1, metavar="N", help="validate every N epochs (default: 1)")
     p.add_argument("--out", required=True, metavar="DIR", help="run folder (rerun to resume)")
     p.add_argument("--json", action="store_true", help="print the run card as JSON on stdout")
@@ -61,7 +65,7 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
     return p
 
 
-def config_from_args(args: argparse.Namespace):  # noqa: ANN201 (TrainConfig, imported lazily)
+def config_from_args(args: argparse.Namespace):
     """The TrainConfig the options describe."""
     from ..training.config import TrainConfig
 
@@ -69,7 +73,7 @@ def config_from_args(args: argparse.Namespace):  # noqa: ANN201 (TrainConfig, im
                        model=args.model, epochs=args.epochs, imgsz=args.imgsz, batch=args.batch, lr=args.lr,
                        seed=args.seed, input=args.input, init=args.init,
                        threads=args.threads or min(8, os.cpu_count() or 1), steps=args.steps,
-                       val_every=args.val_every)
+                       val_every=args.val_every, scenes=args.scenes, cameras=args.cameras)
 
 
 def run(args: argparse.Namespace) -> int:

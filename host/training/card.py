@@ -50,6 +50,7 @@ def rebuild_command(cfg: TrainConfig, out: Path) -> str:
              "--threads", str(cfg.threads)]
     if cfg.steps:
         args += ["--steps", str(cfg.steps)]
+    args += [a for flag, v in (("--scenes", cfg.scenes), ("--cameras", cfg.cameras)) if v for a in (flag, str(v))]
     if cfg.val_every != 1:
         args += ["--val-every", str(cfg.val_every)]
     if cfg.init:

@@ -18,6 +18,8 @@ class TrainConfig:
 
     ``subsets``/``val_subsets`` empty: every subset of the dataset (validation: the training subsets).
     ``steps`` caps the optimiser steps of each epoch (None: the whole training split), for tiny runs and tests.
+    ``scenes``/``cameras`` keep the training images of the first N training scenes / camera views only (the
+    study's Fig. 4: accuracy against the diversity of the training set).
     """
 
     dataset: str
@@ -35,6 +37,8 @@ class TrainConfig:
     threads: int = 1
     steps: int | None = None
     val_every: int = 1
+    scenes: int | None = None
+    cameras: int | None = None
 
     def __post_init__(self) -> None:
         model_size(self.model)
@@ -42,8 +46,9 @@ class TrainConfig:
                             ("--val-every", self.val_every)):
             if not isinstance(value, int) or value < 1:
                 raise ConfigError(f"{name} must be an integer >= 1, got {value!r}")
-        if self.steps is not None and self.steps < 1:
-            raise ConfigError(f"--steps must be an integer >= 1, got {self.steps!r}")
+        for name, value in (("--steps", self.steps), ("--scenes", self.scenes), ("--cameras", self.cameras)):
+            if value is not None and value < 1:
+                raise ConfigError(f"{name} must be an integer >= 1, got {value!r}")
         w, h = self.imgsz
         if w < 32 or h < 32 or w % 4 or h % 4:
             raise ConfigError(f"--imgsz {w}x{h}: both sides must be >= 32 and multiples of 4")

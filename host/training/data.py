@@ -15,6 +15,7 @@ column, which keeps its colour sites where the sensor has them.
 from __future__ import annotations
 
 import json
+import re
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -72,10 +73,33 @@ def check_subsets(info: DatasetInfo, names: tuple[str, ...], flag: str) -> tuple
     return names
 
 
-def load_split(info: DatasetInfo, subsets: tuple[str, ...], split: str) -> list[EvalSet]:
-    """The evaluation sets of ``subsets`` at ``split`` (in the order given)."""
+def load_split(info: DatasetInfo, subsets: tuple[str, ...], split: str, *, scenes: int | None = None,
+               cameras: int | None = None) -> list[EvalSet]:
+    """The evaluation sets of ``subsets`` at ``split`` (in the order given), keeping only the images of the first
+    ``scenes`` scenes and ``cameras`` camera views of the split when given."""
     sets = {s.name: s for s in load_rollcam(info.root, split)}
-    return [sets[n] for n in subsets]
+    chosen = [sets[n] for n in subsets]
+    if scenes is None and cameras is None:
+        return chosen
+    views = [(e, _view(e.key)) for s in chosen for e in s.images]
+    keep_scenes = sorted({v[0] for _e, v in views})[:scenes] if scenes else None
+    out = []
+    for s in chosen:
+        kept = [e for e in s.images if (keep_scenes is None or _view(e.key)[0] in keep_scenes)
+                and (cameras is None or _view(e.key)[1] < cameras)]
+        out.append(EvalSet(s.name, kept, s.class_names, s.speed, s.shutter))
+    return out
+
+
+def _view(key: str) -> tuple[int, int]:
+    """(scene, camera) of a dataset image from its name (``s012_noon_c3.png``, ``plan.Sample.name``)."""
+    m = _NAME.search(key)
+    if m is None:
+        raise ConfigError(f"image {key!r} is not named like a rollcam dataset sample (sNNN_TIME_cN)")
+    return int(m.group(1)), int(m.group(2))
+
+
+_NAME = re.compile(r"s(\d+)_[a-z]+_c(\d+)\.[a-z]+$")
 
 
 class FittedImages:

@@ -90,7 +90,8 @@ def giou_loss(box: torch.Tensor, reg: torch.Tensor, weight: torch.Tensor) -> tor
     px0, py0, px1, py1 = pred.unbind(1)
     tx0, ty0, tx1, ty1 = reg.unbind(1)
     w = weight[:, 0]
-    inter = (torch.min(px1, tx1) - torch.max(px0, tx0)).clamp(min=0) * (torch.min(py1, ty1) - torch.max(py0, ty0)).clamp(min=0)
+    iw = (torch.min(px1, tx1) - torch.max(px0, tx0)).clamp(min=0)
+    inter = iw * (torch.min(py1, ty1) - torch.max(py0, ty0)).clamp(min=0)
     union = (px1 - px0) * (py1 - py0) + (tx1 - tx0) * (ty1 - ty0) - inter
     iou = inter / union.clamp(min=1e-6)
     hull = (torch.max(px1, tx1) - torch.min(px0, tx0)) * (torch.max(py1, ty1) - torch.min(py0, ty0))

@@ -256,7 +256,8 @@ def _train(cfg: TrainConfig, out: Path, info: DatasetInfo, subsets: tuple[str, .
         net.load_state_dict(state["model"])
         opt.load_state_dict(state["optimizer"])
         history = list(state["history"])
-    images = FittedImages(load_split(info, subsets, "train"), *cfg.imgsz, cfg.detector_input)
+    images = FittedImages(load_split(info, subsets, "train", scenes=cfg.scenes, cameras=cfg.cameras), *cfg.imgsz,
+                          cfg.detector_input)
     if not len(images):
         raise ConfigError(f"the train split of {list(subsets)} in {cfg.dataset!r} holds no images")
     steps = max(1, math.ceil(len(images) / cfg.batch))

@@ -1,0 +1,240 @@
+"""The study's report from its runs' test results: tables beside the study's numbers, statistics, charts.
+
+Every cell is the mean and sample standard deviation over the training seeds. A GS->RS difference is RS minus
+GS (absolute, and relative to GS); it counts as *larger than the seed-to-seed spread* when its magnitude
+exceeds twice its standard error, ``sqrt(s_gs^2 / n_gs + s_rs^2 / n_rs)`` (about a 95 % Welch test for
+normal seeds; with 3 seeds a rough one, said in the report). Files: ``report.json``, ``report.md``,
+``report.png``.
+"""
+
+from __future__ import annotations
+
+import io
+import json
+import math
+from pathlib import Path
+from typing import Any
+
+from rollcam.common.files import write_atomic
+
+from .study import SHUTTERS, StudySettings, subset
+
+METRICS = ("P", "R", "mAP50", "mAP50_95")
+STUDY_REFERENCE = {
+    "table1": "YOLOv8 fine-tuned per subset: mAP@0.5 within 2 % between shutters; mAP@0.5:0.95 lower under RS "
+              "by up to 24 %",
+    "table3_mAP50": {"train RS / test RS": 0.82, "train GS / test RS": 0.63, "train RS / test GS+RS": 0.80},
+}
+"""What the study reports (as its issue summarises it), printed beside rollcam's numbers."""
+SPEED_X = {"normal": 1.0, "fast": 10.0}
+
+
+def _stats(values: list[float]) -> dict[str, Any]:
+    n = len(values)
+    mean = sum(values) / n if n else float("nan")
+    std = math.sqrt(sum((v - mean) ** 2 for v in values) / (n - 1)) if n > 1 else 0.0
+    return {"mean": round(mean, 6), "std": round(std, 6), "n": n, "values": [round(v, 6) for v in values]}
+
+
+def difference(gs: dict[str, Any], rs: dict[str, Any]) -> dict[str, Any]:
+    """RS minus GS of two seed groups: absolute, relative to GS, its standard error and whether it exceeds
+    twice that (``beyond_spread``)."""
+    delta = rs["mean"] - gs["mean"]
+    se = math.sqrt(gs["std"] ** 2 / max(gs["n"], 1) + rs["std"] ** 2 / max(rs["n"], 1))
+    rel = delta / gs["mean"] if gs["mean"] else float("nan")
+    return {"delta": round(delta, 6), "relative": round(rel, 6) if math.isfinite(rel) else None,
+            "se": round(se, 6), "beyond_spread": bool(abs(delta) > 2 * se) if se > 0 else bool(delta != 0)}
+
+
+def _cell(results: list[dict[str, Any]], group: str, train: tuple[str, ...], test: str,
+          metric: str, **match: Any) -> dict[str, Any]:
+    vals = [r["test"][test][metric] for r in results if r["job"]["group"] == group
+            and tuple(r["job"]["train"]) == train and all(r["job"].get(k) == v for k, v in match.items())]
+    return _stats(vals)
+
+
+def aggregate(s: StudySettings, results: list[dict[str, Any]]) -> dict[str, Any]:
+    """The report's numbers: Table 1, Table 3, the RS penalty per speed (RGB and raw), Fig. 4."""
+    def shutter_pair(group: str, speed: str, **match: Any) -> dict[str, Any]:
+        row = {}
+        for sh in SHUTTERS:
+            row[sh] = {m: _cell(results, group, (subset(speed, sh),), sh, m, **match) for m in METRICS}
+        row["gs_to_rs"] = {m: difference(row["gs"][m], row["rs"][m]) for m in METRICS}
+        return row
+
+    table1 = {sp: shutter_pair("t1", sp, scenes=None, cameras=None) for sp in s.speeds if sp in SPEED_X}
+    speed = {sp: shutter_pair("t1" if sp in SPEED_X else "speed", sp, scenes=None, cameras=None) for sp in s.speeds}
+    raw = {sp: shutter_pair("raw", sp) for sp in s.raw_speeds}
+    table3 = {}
+    for sp in sorted(set(s.t3_speeds) | set(table1), key=list(s.speeds).index):
+        rows = {}
+        for label, group, train in (("GS", "t1", (subset(sp, "gs"),)), ("RS", "t1", (subset(sp, "rs"),)),
+                                    ("GS+RS", "t3", (subset(sp, "gs"), subset(sp, "rs")))):
+            if group == "t3" and sp not in s.t3_speeds:
+                continue
+            rows[label] = {test: {m: _cell(results, group, train, test, m, scenes=None, cameras=None)
+                                  for m in ("mAP50", "mAP50_95")} for test in ("gs", "rs", "gsrs")}
+        table3[sp] = rows
+    f4 = [r for r in results if r["job"]["group"] == "fig4"]
+    sh = s.fig4_subset.rsplit("_", 1)[1]
+    full = [r for r in results if r["job"]["group"] == "t1" and tuple(r["job"]["train"]) == (s.fig4_subset,)
+            and r["job"]["seed"] == s.seeds[0]]
+    fig4: dict[str, list[dict[str, Any]]] = {"scenes": [], "cameras": []}
+    for r in f4 + full:
+        point = {k: r["test"][sh][k] for k in ("mAP50", "mAP50_95")}
+        if r["job"]["cameras"] is None:
+            fig4["scenes"].append({"n": r["job"]["scenes"] or n_train_scenes(s), **point})
+        if r["job"]["scenes"] is None:
+            fig4["cameras"].append({"n": r["job"]["cameras"] or s.cameras, **point})
+    for k in fig4:
+        fig4[k].sort(key=lambda p: p["n"])
+    return {"table1": table1, "table3": table3, "speed": speed, "raw": raw, "fig4": fig4}
+
+
+def n_train_scenes(s: StudySettings) -> int:
+    """Training scenes of the study's dataset (its split of scenes)."""
+    from ..datasets.plan import split_of_scenes
+
+    return split_of_scenes(s.scenes, (0.8, 0.1, 0.1)).count("train")
+
+
+def _ms(c: dict[str, Any]) -> str:
+    return f"{c['mean']:.3f} ± {c['std']:.3f}"
+
+
+def _diff(d: dict[str, Any]) -> str:
+    rel = f" ({d['relative']:+.1%})" if d["relative"] is not None else ""
+    return f"{d['delta']:+.3f}{rel}{' *' if d['beyond_spread'] else ''}"
+
+
+def _speed_label(sp: str) -> str:
+    return f"{SPEED_X.get(sp) or float(sp):g}x ({sp})"
+
+
+def statements(agg: dict[str, Any]) -> list[str]:
+    """The plain answers: per speed, is mAP@0.5 within 2 % between shutters, how far mAP@0.5:0.95 moves."""
+    out = []
+    for name, table in (("RGB", agg["speed"]), ("raw mosaic", agg["raw"])):
+        for sp, row in table.items():
+            d50, d95 = row["gs_to_rs"]["mAP50"], row["gs_to_rs"]["mAP50_95"]
+            if d50["relative"] is None or d95["relative"] is None:
+                out.append(f"{name}, walkers at {_speed_label(sp)}: not measurable (the GS models find nothing: "
+                           "mAP 0; train longer)")
+                continue
+            within = abs(d50["relative"]) <= 0.02
+            out.append(f"{name}, walkers at {_speed_label(sp)}: mAP@0.5 {row['gs']['mAP50']['mean']:.3f} (GS) vs "
+                       f"{row['rs']['mAP50']['mean']:.3f} (RS), {d50['relative']:+.1%}: "
+                       f"{'within' if within else 'NOT within'} 2 %; mAP@0.5:0.95 {d95['relative']:+.1%} "
+                       f"({'beyond' if d95['beyond_spread'] else 'within'} the seed-to-seed spread).")
+    return out
+
+
+def report_markdown(s: StudySettings, agg: dict[str, Any], timing: dict[str, Any], command: str) -> str:
+    """The report people read."""
+    n = len(s.seeds)
+    lines = [f"# rollcam study, `{s.name}` setting", "",
+             f"Paired GS/RS datasets with exact labels ({s.size[0]}x{s.size[1]}, {s.frames_per_speed} pairs per "
+             f"speed, {s.scenes} scenes x {s.cameras} cameras x {len(s.times)} times of day), rollcam's "
+             f"`{s.model}` detector trained from scratch for {s.epochs} epochs per run, {n} seeds per cell "
+             f"(mean ± sample std). `*`: the GS->RS difference exceeds twice its standard error over seeds "
+             f"(with {n} seeds a rough test). Time: {timing['total_s'] / 60:.1f} min on {timing['workers']} "
+             f"worker(s) ({timing['datasets_s']:.0f} s of it rendering).", "",
+             "Made by:", "", "```sh norun", command, "```", "", "## Answers", ""]
+    lines += [f"- {t}" for t in statements(agg)]
+    lines += ["", "## Table 1 analogue: train and test on the same subset", "",
+              f"Study: {STUDY_REFERENCE['table1']}.", "",
+              "| Validation | P | R | mAP@0.5 | mAP@0.5:0.95 |", "|---|---:|---:|---:|---:|"]
+    for sp, row in agg["table1"].items():
+        name = {"normal": "Normal", "fast": "Faster"}[sp]
+        for sh in SHUTTERS:
+            lines.append(f"| {name}_{sh.upper()} | " + " | ".join(_ms(row[sh][m]) for m in METRICS) + " |")
+        lines.append("| GS->RS | " + " | ".join(_diff(row["gs_to_rs"][m]) for m in METRICS) + " |")
+    lines += ["", "## Table 3 analogue: cross training (mAP@0.5 / mAP@0.5:0.95)", "",
+              "Study (mAP@0.5): " + ", ".join(f"{k} {v}" for k, v in STUDY_REFERENCE["table3_mAP50"].items()) + ".",
+              ""]
+    for sp, rows in agg["table3"].items():
+        lines += [f"Walkers {_speed_label(sp)}:", "", "| train \\ test | GS | RS | GS+RS |", "|---|---:|---:|---:|"]
+        for label, cells in rows.items():
+            lines.append(f"| {label} | " + " | ".join(f"{_ms(cells[t]['mAP50'])} / {_ms(cells[t]['mAP50_95'])}"
+                                                       for t in ("gs", "rs", "gsrs")) + " |")
+        lines.append("")
+    lines += ["## RS penalty against walking speed", "",
+              "| input | speed | GS mAP@0.5 | RS mAP@0.5 | GS->RS | GS mAP@0.5:0.95 | RS mAP@0.5:0.95 | GS->RS |",
+              "|---|---|---:|---:|---:|---:|---:|---:|"]
+    for name, table in (("RGB", agg["speed"]), ("raw", agg["raw"])):
+        for sp, row in table.items():
+            lines.append(f"| {name} | {_speed_label(sp)} | " + " | ".join(
+                f"{_ms(row['gs'][m])} | {_ms(row['rs'][m])} | {_diff(row['gs_to_rs'][m])}"
+                for m in ("mAP50", "mAP50_95")) + " |")
+    lines += ["", f"## Fig. 4 analogue: training-set diversity ({s.fig4_subset}, seed {s.seeds[0]})", "",
+              "| varied | n | mAP@0.5 | mAP@0.5:0.95 |", "|---|---:|---:|---:|"]
+    for k, pts in agg["fig4"].items():
+        lines += [f"| {k} | {p['n']} | {p['mAP50']:.3f} | {p['mAP50_95']:.3f} |" for p in pts]
+    lines += ["", "Charts: `report.png`. Numbers: `report.json`. Each run: `runs/<name>/` (a `rollcam train` "
+              "folder with its card and curves, and `test.json`).", ""]
+    return "\n".join(lines)
+
+
+def plot_report(s: StudySettings, agg: dict[str, Any], path: Path) -> None:
+    """Three panels: Table 1 bars, the RS penalty against speed (RGB and raw), Fig. 4; written atomically."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, (a, b, c) = plt.subplots(1, 3, figsize=(14, 4))
+    labels, x = [], 0
+    for sp, row in agg["table1"].items():
+        for sh in SHUTTERS:
+            for j, m in enumerate(("mAP50", "mAP50_95")):
+                cell = row[sh][m]
+                a.bar(x + 0.4 * j, cell["mean"], 0.4, yerr=cell["std"], color=("C0", "C1")[j], capsize=3,
+                      label=("mAP@0.5", "mAP@0.5:0.95")[j] if x == 0 else None)
+            labels.append(f"{sp}_{sh}")
+            x += 1
+    a.set_xticks([i + 0.2 for i in range(len(labels))], labels, fontsize=8)
+    a.set_ylim(0, 1)
+    a.set_title("Table 1: train = test subset")
+    a.legend(fontsize=8)
+    for name, table, style in (("RGB", agg["speed"], "o-"), ("raw", agg["raw"], "s--")):
+        xs = [SPEED_X.get(sp) or float(sp) for sp in table]
+        for m in ("mAP50", "mAP50_95"):
+            ys = [100 * (row["gs_to_rs"][m]["relative"] or 0.0) for row in table.values()]
+            err = [100 * row["gs_to_rs"][m]["se"] / max(row["gs"][m]["mean"], 1e-9) for row in table.values()]
+            b.errorbar(xs, ys, yerr=err, fmt=style, capsize=3, label=f"{name} {m}")
+    b.axhline(0, color="grey", lw=0.8)
+    b.axhspan(-2, 2, color="grey", alpha=0.15)
+    b.set_xscale("log")
+    b.set_xlabel("walker speed (x normal)")
+    b.set_ylabel("RS - GS (% of GS)")
+    b.set_title("RS penalty against speed")
+    b.legend(fontsize=7)
+    for k, style in (("scenes", "o-"), ("cameras", "s--")):
+        pts = agg["fig4"][k]
+        for m in ("mAP50", "mAP50_95"):
+            c.plot([p["n"] for p in pts], [p[m] for p in pts], style, label=f"{m} vs {k}")
+    c.set_xlabel("training scenes / camera views")
+    c.set_ylim(0, 1)
+    c.set_title(f"Fig. 4: diversity ({s.fig4_subset})")
+    c.legend(fontsize=7)
+    for ax in (a, b, c):
+        ax.grid(alpha=0.3)
+    fig.tight_layout()
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png", dpi=100)
+    plt.close(fig)
+    write_atomic(path, buf.getvalue())
+
+
+def write_report(root: Path, s: StudySettings, results: list[dict[str, Any]], timing: dict[str, Any],
+                 command: str | None = None) -> dict[str, Any]:
+    """Write ``report.json``, ``report.md`` and ``report.png`` under ``root``; return the JSON document."""
+    agg = aggregate(s, results)
+    command = command or f"rollcam study --setting {s.name} --out {root}"
+    doc = {"kind": "rollcam-study", "settings": s.to_json(), "timing": timing, "command": command,
+           "study_reference": STUDY_REFERENCE, "answers": statements(agg), **agg,
+           "runs": sorted(results, key=lambda r: r["job"]["key"])}
+    write_atomic(root / "report.json", (json.dumps(doc, indent=1) + "\n").encode())
+    write_atomic(root / "report.md", report_markdown(s, agg, timing, command).encode())
+    plot_report(s, agg, root / "report.png")
+    return doc

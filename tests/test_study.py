@@ -1,0 +1,77 @@
+"""rollcam study: the statistics of its report (fast), and the quick setting end to end (slow)."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+from rollcam.host.cli import main
+from rollcam.host.training.study import QUICK, REDUCED, plan_jobs
+from rollcam.host.training.study_report import aggregate, difference, statements
+
+
+def _result(key, group, speed, train, seed, test, **kw):
+    job = {"key": key, "group": group, "speed": speed, "train": list(train), "seed": seed, "raw": False,
+           "scenes": None, "cameras": None} | kw
+    return {"job": job, "test": test}
+
+
+def _test(gs, rs):
+    cell = lambda v: {"P": v, "R": v, "mAP50": v, "mAP50_95": v / 2}  # noqa: E731
+    return {"gs": cell(gs), "rs": cell(rs), "gsrs": cell((gs + rs) / 2)}
+
+
+def test_difference_is_flagged_only_beyond_twice_its_standard_error():
+    gs = {"mean": 0.80, "std": 0.01, "n": 3}
+    assert difference(gs, {"mean": 0.70, "std": 0.01, "n": 3})["beyond_spread"] is True
+    small = difference(gs, {"mean": 0.79, "std": 0.02, "n": 3})
+    assert small["beyond_spread"] is False and small["relative"] == pytest.approx(-0.0125)
+
+
+def test_plan_has_three_seeds_per_headline_cell_and_no_duplicate_runs():
+    for s in (QUICK, REDUCED):
+        jobs = plan_jobs(s)
+        assert len({j.key for j in jobs}) == len(jobs)
+        cells = {}
+        for j in jobs:
+            if j.group != "fig4":
+                cells.setdefault((j.group, j.train, j.raw), set()).add(j.seed)
+        assert all(len(seeds) >= 3 for seeds in cells.values())
+    assert {j.speed for j in plan_jobs(REDUCED) if j.group == "speed"} == {"5", "20"}
+
+
+def test_aggregate_tables_and_plain_answers():
+    s = QUICK
+    results = []
+    for seed, (g, r) in enumerate([(0.80, 0.79), (0.81, 0.80), (0.79, 0.78)]):
+        for sp in ("normal", "fast"):
+            gs, rs = (g, r) if sp == "normal" else (g, r - 0.2)
+            results.append(_result(f"{sp}_gs_s{seed}", "t1", sp, (f"{sp}_gs",), seed, _test(gs, gs - 0.3)))
+            results.append(_result(f"{sp}_rs_s{seed}", "t1", sp, (f"{sp}_rs",), seed, _test(rs - 0.1, rs)))
+    agg = aggregate(s, results)
+    normal = agg["table1"]["normal"]
+    assert normal["gs"]["mAP50"]["mean"] == pytest.approx(0.80)
+    assert normal["rs"]["mAP50"]["mean"] == pytest.approx(0.79)
+    assert normal["gs_to_rs"]["mAP50"]["beyond_spread"] is False
+    assert agg["table1"]["fast"]["gs_to_rs"]["mAP50"]["beyond_spread"] is True
+    assert agg["table3"]["normal"]["GS"]["rs"]["mAP50"]["mean"] == pytest.approx(0.50)
+    text = statements(agg)
+    assert any("1x (normal)" in t and "-1.2%: within 2 %" in t for t in text)
+    assert any("10x (fast)" in t and "NOT within 2 %" in t and "beyond" in t for t in text)
+
+
+@pytest.mark.slow
+def test_quick_study_end_to_end(tmp_path, capsys):
+    pytest.importorskip("torch")
+    out = tmp_path / "study"
+    assert main(["study", "--quick", "--out", str(out), "--json"]) == 0
+    doc = json.loads(capsys.readouterr().out)
+    assert len(doc["runs"]) == len(plan_jobs(QUICK))
+    for name in ("report.md", "report.json", "report.png"):
+        assert (out / name).is_file()
+    assert set(doc["table1"]) == {"normal", "fast"} and "raw" in doc and doc["fig4"]["scenes"]
+    assert all(len(row["gs"]["mAP50"]["values"]) == 3 for row in doc["table1"].values())
+    # a rerun finds every run finished and rewrites the same tables
+    assert main(["study", "--quick", "--out", str(out), "--json"]) == 0
+    again = json.loads(capsys.readouterr().out)
+    assert again["table1"] == doc["table1"]
