@@ -78,9 +78,9 @@ FULL = StudySettings(
     epochs=100, steps=None, batch=16, lr=2e-3, seeds=(0, 1, 2, 3, 4), t3_speeds=("normal", "fast"),
     raw_speeds=("normal", "fast"), fig4_subset="fast_rs", fig4_scenes=(4, 8, 16), fig4_cameras=(1, 2, 3))
 SETTINGS = {s.name: s for s in (QUICK, REDUCED, FULL)}
-"""``--setting`` names. ``full`` is the study's design (1,000 pairs per speed, at half its 1080p so the fitted images fit in memory) for
-a GPU; ``reduced`` the
-CPU setting documented to finish in 2 hours on 2 cores (``--workers 2``); ``quick`` the CI-sized check."""
+"""``--setting`` names. ``full`` is the study's design (1,000 pairs per speed; at half its 1080p, so the fitted
+images of a run fit in memory) for a GPU; ``reduced`` the CPU setting documented to finish in 2 hours on 2
+cores (``--workers 2``); ``quick`` the CI-sized check."""
 
 
 @dataclass(frozen=True)
