@@ -158,3 +158,10 @@ class CaptureMixin:
         self.switch_mode_and_capture_file(capture_mode, name)
         self.stop()
 
+
+    def start_recording(self, *args: Any, **kwargs: Any) -> None:
+        """Not emulated (no encoders): RuntimeError saying so."""
+        raise RuntimeError("rollcam's picamera2 stand-in has no encoders: recording is not emulated "
+                           "(capture frames with capture_array/capture_request and encode them yourself)")
+
+    start_encoder = start_recording

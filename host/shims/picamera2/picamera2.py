@@ -28,6 +28,14 @@ _OPEN: dict[int, Any] = {}  # camera number -> the Picamera2 holding it (libcame
 _OPEN_LOCK = threading.Lock()
 
 
+def close_all() -> None:
+    """Close every camera this process has open (rollcam's extra; the pytest fixture calls it)."""
+    with _OPEN_LOCK:
+        cams = list(_OPEN.values())
+    for cam in cams:
+        cam.close()
+
+
 class Preview(enum.Enum):
     """Preview kinds; rollcam shows none (every kind runs as NULL: no window)."""
 
@@ -122,6 +130,12 @@ class Picamera2(ConfigMixin, CaptureMixin):
     def sensor_modes(self) -> list[dict[str, Any]]:
         """The sensor's raw modes: format, unpacked, bit_depth, size, fps, crop_limits, exposure_limits."""
         return [self._cam.mode_info(m) for m in self._cam.modes]
+
+    @property
+    def rollcam_device(self) -> Any:
+        """The ``rollcam.firmware.FirmwareCamera`` behind this camera (rollcam's extra): its controls and spec
+        are what every other door of the device reads."""
+        return self._cam.device
 
     @property
     def is_mono(self) -> bool:
