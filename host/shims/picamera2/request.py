@@ -151,18 +151,22 @@ def _format_of(file_output: Any, format: str | None) -> str:
 
 
 def write_image(file_output: Any, bgr: np.ndarray, ext: str, quality: int = 90) -> None:
-    """Encode a BGR picture with OpenCV (``ext``: jpg, jpeg, png, bmp, ...) to a path (atomically) or a
-    writable file object."""
+    """Encode a BGR picture (``ext``: jpg/jpeg through the codec table's one JPEG encoder; png, bmp, ... with
+    OpenCV) to a path (atomically) or a writable file object."""
     import cv2
     from rollcam.common.files import write_atomic
+    from rollcam.sim.codecs import codec
 
-    params = [cv2.IMWRITE_JPEG_QUALITY, quality] if ext in ("jpg", "jpeg") else []
-    ok, data = cv2.imencode(f".{ext}", bgr, params)
-    if not ok:
-        raise RuntimeError(f"Cannot save an image as {ext!r}")
+    if ext in ("jpg", "jpeg"):
+        data = codec("MJPG").encode(bgr, quality=quality).tobytes()
+    else:
+        ok, buf = cv2.imencode(f".{ext}", bgr)
+        if not ok:
+            raise RuntimeError(f"Cannot save an image as {ext!r}")
+        data = buf.tobytes()
     if isinstance(file_output, (str, os.PathLike)):
-        write_atomic(file_output, data.tobytes())
+        write_atomic(file_output, data)
     elif isinstance(file_output, io.IOBase) or hasattr(file_output, "write"):
-        file_output.write(data.tobytes())
+        file_output.write(data)
     else:
         raise RuntimeError(f"Cannot save to {file_output!r}")
