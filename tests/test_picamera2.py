@@ -242,3 +242,14 @@ def test_recording_says_it_is_not_emulated(rollcam_picamera2):
     picamera2 = rollcam_picamera2()
     with picamera2.Picamera2() as cam, pytest.raises(RuntimeError, match="recording is not emulated"):
         cam.start_recording(object(), "video.h264")
+
+
+def test_a_bad_control_value_is_logged_and_the_frames_go_on(rollcam_picamera2, caplog):
+    picamera2 = rollcam_picamera2()
+    with picamera2.Picamera2() as cam:
+        cam.start(cam.create_preview_configuration(main={"size": (320, 240)}, controls={"FrameRate": 10}))
+        cam.set_controls({"ExposureTime": "long"})
+        first = cam.capture_metadata()["RollcamSequence"]
+        assert cam.capture_metadata()["RollcamSequence"] > first
+        assert cam.capture_metadata()["ExposureTime"] == 9999
+    assert "cannot take 'long'" in caplog.text

@@ -235,19 +235,26 @@ class PiCamera:
                 raise RuntimeError(f"Control {name} is not advertised by libcamera")
         sensor_side = {"ExposureTime", "AnalogueGain", "FrameDurationLimits"}
         for name, value in changes.items():
+            self._set_one(name, value)
+        if sensor_side & set(changes) or not changes:
+            self._program_sensor()
+
+    def _set_one(self, name: str, value: Any) -> None:
+        try:
             if name == "ExposureTime":
                 self.exposure_us = max(int(value), 0)
             elif name == "AnalogueGain":
                 self.analogue_gain = max(float(value), 0.0)
             elif name == "FrameDurationLimits":
                 lo, hi = (int(v) for v in value)
-                self.frame_limits_us = (min(lo, hi), max(lo, hi))
+                self.frame_limits_us = (max(min(lo, hi), 1), max(lo, hi, 1))
             elif name == "ScalerCrop":
-                self.scaler_crop = tuple(int(v) for v in value)  # type: ignore[assignment]
+                x, y, w, h = (int(v) for v in value)
+                self.scaler_crop = (x, y, max(w, 2), max(h, 2))
             else:
                 self.extra[name] = value
-        if sensor_side & set(changes) or not changes:
-            self._program_sensor()
+        except (TypeError, ValueError):
+            raise ValueError(f"control {name} cannot take {value!r}") from None
 
     def _program_sensor(self) -> None:
         dev = self.device

@@ -11,6 +11,7 @@ returns at once, as picamera2's is; otherwise a capture waits for the next frame
 from __future__ import annotations
 
 import collections
+import logging
 import threading
 import time
 from collections.abc import Callable
@@ -19,6 +20,8 @@ from typing import Any
 from rollcam.common.lifecycle import Worker
 
 from .request import CompletedRequest
+
+_log = logging.getLogger("picamera2")
 
 
 class RequestQueue:
@@ -132,7 +135,10 @@ class Engine:
             while not stop.is_set():
                 changes = self.take_controls()
                 if changes:
-                    self.camera.apply(changes)
+                    try:
+                        self.camera.apply(changes)
+                    except (ValueError, RuntimeError) as exc:  # as libcamera does: the frames go on
+                        _log.error("controls %r not applied: %s", changes, exc)
                 plan = dev.plan_next(dev.clock_ns())
                 if plan is None:
                     dev.wait_changed(0.05)
