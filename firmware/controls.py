@@ -238,6 +238,43 @@ def describe(state: SensorState) -> dict[str, dict[str, object]]:
     return out
 
 
+def line_ns(state: SensorState) -> int:
+    """One line of the programmed timing in whole ns (at least 1)."""
+    return max(int(state.timing.line_offset_ns(1)), 1)
+
+
+def frame_duration_range_ns(state: SensorState) -> tuple[int, int]:
+    """Shortest and longest frame period the mode allows (frame length limits times the line)."""
+    t = state.timing
+    return (int(LineTiming(t.pixel_rate_hz, t.line_length_pck, state.min_frame_length).frame_period_ns),
+            int(LineTiming(t.pixel_rate_hz, t.line_length_pck, MAX_FRAME_LENGTH).frame_period_ns))
+
+
+def program_exposure(state: SensorState, exposure_ns: int, frame_ns: tuple[int, int]) -> None:
+    """Program an exposure in ns within a frame-period range in ns, as a camera's exposure control does: the
+    frame is the shortest in the range that holds the exposure (plus the sensor's margin), and the exposure
+    is then clamped to what that frame allows. Both are whole lines (rounded to the nearest)."""
+    line = line_ns(state)
+    lines = max(round(int(exposure_ns) / line), 1)
+    lo, hi = (max(round(int(ns) / line), 1) for ns in frame_ns)
+    state.set_frame_length(min(max(lines + state.sensor.exposure.max_margin_lines, lo), max(hi, lo)))
+    state.set_exposure(lines)
+
+
+def set_linear_gain(state: SensorState, which: str, gain: float) -> float:
+    """Set the ``analog`` or ``digital`` gain to the code nearest a linear ``gain`` (clamped); returns the gain
+    in effect."""
+    codec = getattr(state.traits, which)
+    code = _clamp(codec.to_code(max(float(gain), 1e-6)), *state.gain_range(which))
+    setattr(state, f"{which}_code", code)
+    return codec.to_gain(code)
+
+
+def linear_gain(state: SensorState, which: str) -> float:
+    """The ``analog`` or ``digital`` gain the current code gives, linear."""
+    return getattr(state.traits, which).to_gain(getattr(state, f"{which}_code"))
+
+
 def vblank_for_interval(spec: CameraSpec, interval_ns: int) -> int:
     """The vertical blanking (lines) whose frame length is nearest a frame period of ``interval_ns``."""
     t = spec.settings.timing

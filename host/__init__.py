@@ -1,5 +1,6 @@
 """Host side: camera sources, detectors, CLI. ``from rollcam.host import open_camera`` opens any source URI;
-``VideoCapture`` is a drop-in for ``cv2.VideoCapture`` that also takes those URIs."""
+``VideoCapture`` is a drop-in for ``cv2.VideoCapture`` that also takes those URIs; ``shims_path()`` is the folder
+of stand-in modules (``picamera2``) for unmodified programs, ``standin_env()`` a child's environment for them."""
 
 from rollcam.common.errors import (
     ConfigError,
@@ -23,8 +24,12 @@ def __getattr__(name: str) -> object:
         from .videocapture import VideoCapture
 
         return VideoCapture
+    if name in ("shims_path", "standin_env"):
+        from . import standins
+
+        return getattr(standins, name)
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
 __all__ = ["ConfigError", "DeviceError", "DeviceNotFoundError", "MissingDependencyError", "ProtocolError",
-           "RollcamError", "SourceError", "VideoCapture", "open_camera"]
+           "RollcamError", "SourceError", "VideoCapture", "open_camera", "shims_path", "standin_env"]

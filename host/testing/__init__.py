@@ -10,6 +10,9 @@ Installed with rollcam (a ``pytest11`` entry point), so any project's tests can 
   cameras (the firmware camera behind a UVC 1.5 function).
 - ``rollcam_serial_port(sensor, **scene)``: a pseudo-terminal that ``serial.Serial(port.path)`` opens, speaking
   the emulated firmware's control protocol.
+- ``rollcam_picamera2(*sources)``: rollcam's stand-in ``picamera2`` (and ``libcamera``) importable for the
+  test, on emulated cameras (sensor names or ``emu:`` URIs; default one imx219); cameras left open are closed
+  and ``sys.path``/``sys.modules`` restored after it.
 - ``mock_depthai``: a stand-in ``depthai`` module (``rollcam.host.testing.depthai_mock``) installed in
   ``sys.modules`` for the test, so an OAK capture script runs without hardware on emulated sensors.
 
@@ -77,6 +80,44 @@ def mock_depthai(monkeypatch: pytest.MonkeyPatch) -> Any:
     mod = make_depthai()
     monkeypatch.setitem(sys.modules, "depthai", mod)
     return mod
+
+
+_STANDINS = ("picamera2", "libcamera")
+
+
+def _is_standin(module_name: str) -> bool:
+    return any(module_name == n or module_name.startswith(n + ".") for n in _STANDINS)
+
+
+@pytest.fixture
+def rollcam_picamera2(monkeypatch: pytest.MonkeyPatch) -> Iterator[Callable[..., Any]]:
+    """Factory that makes ``import picamera2`` find rollcam's stand-in for this test and returns the module:
+    ``picamera2 = rollcam_picamera2("imx477", "emu:imx708?scene=flat")`` (camera N is the N-th source; none
+    given: one imx219). Code under test imports it as usual. A real picamera2 already imported is put back
+    afterwards."""
+    from rollcam.host.standins import PICAMERA2_ENV, shims_path
+
+    saved = {k: sys.modules.pop(k) for k in [k for k in sys.modules if _is_standin(k)]}
+    monkeypatch.syspath_prepend(str(shims_path()))
+
+    def make(*sources: str) -> Any:
+        if sources:
+            monkeypatch.setenv(PICAMERA2_ENV, ";".join(sources))
+        else:
+            monkeypatch.delenv(PICAMERA2_ENV, raising=False)
+        import picamera2
+
+        return picamera2
+
+    try:
+        yield make
+    finally:
+        module = sys.modules.get("picamera2.picamera2")
+        if module is not None and hasattr(module, "close_all"):
+            module.close_all()
+        for k in [k for k in sys.modules if _is_standin(k)]:
+            del sys.modules[k]
+        sys.modules.update(saved)
 
 
 @pytest.fixture

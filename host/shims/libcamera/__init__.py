@@ -1,0 +1,119 @@
+"""A small stand-in for libcamera's Python bindings, enough for picamera2 scripts run on rollcam.
+
+It exists beside rollcam's ``picamera2`` stand-in (``rollcam.host.shims_path()``) because picamera2 scripts
+import from it: ``from libcamera import Transform, ColorSpace, controls`` (``controls.AfModeEnum.Continuous``,
+``controls.draft.NoiseReductionModeEnum.Fast``). It has no cameras of its own: the camera is picamera2's.
+"""
+
+from __future__ import annotations
+
+import enum
+from types import SimpleNamespace
+from typing import Any, NamedTuple
+
+__all__ = ["ColorSpace", "Rectangle", "Size", "Transform", "controls"]
+
+
+class Size(NamedTuple):
+    """A width and height in pixels."""
+
+    width: int
+    height: int
+
+    def to_tuple(self) -> tuple[int, int]:
+        return (self.width, self.height)
+
+
+class Rectangle(NamedTuple):
+    """A rectangle: top-left corner and size, in pixels."""
+
+    x: int
+    y: int
+    width: int
+    height: int
+
+    def to_tuple(self) -> tuple[int, int, int, int]:
+        return (self.x, self.y, self.width, self.height)
+
+
+class Transform:
+    """An image transform: horizontal and vertical flips (``transpose`` is accepted but no Pi sensor has it)."""
+
+    def __init__(self, other: Transform | None = None, *, hflip: int = 0, vflip: int = 0, transpose: int = 0,
+                 rotation: int = 0) -> None:
+        if other is not None:
+            hflip, vflip, transpose = other.hflip, other.vflip, other.transpose
+        if rotation not in (0, 180):
+            raise ValueError(f"rotation {rotation!r} is not 0 or 180")
+        if rotation == 180:
+            hflip, vflip = not hflip, not vflip
+        self.hflip, self.vflip, self.transpose = bool(hflip), bool(vflip), bool(transpose)
+
+    def __eq__(self, other: object) -> bool:
+        return isinstance(other, Transform) and (self.hflip, self.vflip, self.transpose) == (
+            other.hflip, other.vflip, other.transpose)
+
+    def __hash__(self) -> int:
+        return hash((self.hflip, self.vflip, self.transpose))
+
+    def __repr__(self) -> str:
+        flags = [n for n in ("hflip", "vflip", "transpose") if getattr(self, n)]
+        return f"<libcamera.Transform '{'/'.join(flags) or 'identity'}'>"
+
+
+class ColorSpace:
+    """A colour space by name (``Sycc``, ``Smpte170m``, ``Rec709``, ``Raw``); rollcam's ISP has one look."""
+
+    def __init__(self, name: str | ColorSpace = "Sycc") -> None:
+        self.name = name.name if isinstance(name, ColorSpace) else str(name)
+
+    def __eq__(self, other: object) -> bool:
+        return isinstance(other, ColorSpace) and other.name == self.name
+
+    def __hash__(self) -> int:
+        return hash(self.name)
+
+    def __repr__(self) -> str:
+        return f"<libcamera.ColorSpace '{self.name}'>"
+
+    @classmethod
+    def Sycc(cls) -> ColorSpace:
+        return cls("Sycc")
+
+    @classmethod
+    def Smpte170m(cls) -> ColorSpace:
+        return cls("Smpte170m")
+
+    @classmethod
+    def Rec709(cls) -> ColorSpace:
+        return cls("Rec709")
+
+    @classmethod
+    def Raw(cls) -> ColorSpace:
+        return cls("Raw")
+
+
+def _enum(name: str, *members: str) -> type[enum.IntEnum]:
+    return enum.IntEnum(name, {m: i for i, m in enumerate(members)})
+
+
+_CONTROL_ENUMS: dict[str, Any] = {
+    "AeMeteringModeEnum": _enum("AeMeteringModeEnum", "CentreWeighted", "Spot", "Matrix", "Custom"),
+    "AeConstraintModeEnum": _enum("AeConstraintModeEnum", "Normal", "Highlight", "Shadows", "Custom"),
+    "AeExposureModeEnum": _enum("AeExposureModeEnum", "Normal", "Short", "Long", "Custom"),
+    "AwbModeEnum": _enum("AwbModeEnum", "Auto", "Incandescent", "Tungsten", "Fluorescent", "Indoor", "Daylight",
+                         "Cloudy", "Custom"),
+    "AfModeEnum": _enum("AfModeEnum", "Manual", "Auto", "Continuous"),
+    "AfRangeEnum": _enum("AfRangeEnum", "Normal", "Macro", "Full"),
+    "AfSpeedEnum": _enum("AfSpeedEnum", "Normal", "Fast"),
+    "AfTriggerEnum": _enum("AfTriggerEnum", "Start", "Cancel"),
+    "AfStateEnum": _enum("AfStateEnum", "Idle", "Scanning", "Focused", "Failed"),
+    "ExposureTimeModeEnum": _enum("ExposureTimeModeEnum", "Auto", "Manual"),
+    "AnalogueGainModeEnum": _enum("AnalogueGainModeEnum", "Auto", "Manual"),
+    "HdrModeEnum": _enum("HdrModeEnum", "Off", "MultiExposureUnmerged", "MultiExposure", "SingleExposure",
+                         "Night"),
+}
+
+controls = SimpleNamespace(**_CONTROL_ENUMS, draft=SimpleNamespace(
+    NoiseReductionModeEnum=_enum("NoiseReductionModeEnum", "Off", "Fast", "HighQuality", "Minimal", "ZSL")))
+"""libcamera's control enumerations, by libcamera's names (``controls.AfModeEnum.Continuous``, ...)."""

@@ -1,0 +1,167 @@
+"""Captures: the part of ``Picamera2`` that hands frames to the application.
+
+Every capture takes the next completed request (with ``queue``, the newest one already waiting), as
+picamera2's do, and each takes ``wait`` and ``signal_function`` with picamera2's meaning (``job.dispatch``).
+A capture on a camera that is not started is a RuntimeError at once (picamera2 would wait for ever).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import time
+from collections.abc import Iterator
+from typing import Any
+
+from .job import Job, dispatch
+from .request import CompletedRequest
+
+
+class CaptureMixin:
+    """``capture_request``, ``capture_array(s)``, ``capture_buffer(s)``, ``capture_metadata``,
+    ``capture_image``, ``capture_file``, ``drop_frames``, ``switch_mode*``, ``wait``."""
+
+    _queue: Any
+    started: bool
+
+    def _take(self, timeout_s: float | None, flush: Any = None) -> CompletedRequest:
+        if not self.started or self._queue is None:
+            raise RuntimeError("Camera is not running (start() it before capturing)")
+        accept = None
+        if flush:
+            after = time.monotonic_ns() if flush is True else int(flush)
+            accept = lambda r: r.metadata["SensorTimestamp"] >= after  # noqa: E731
+        return self._queue.take(timeout_s, accept=accept)
+
+    def _with_request(self, use: Any, wait: Any, signal_function: Any) -> Any:
+        def call(timeout_s: float | None) -> Any:
+            req = self._take(timeout_s)
+            try:
+                return use(req)
+            finally:
+                req.release()
+        return dispatch(call, wait, signal_function)
+
+    def wait(self, job: Job, timeout: float | None = None) -> Any:
+        """The result of a job from a call made with ``wait=False``."""
+        return job.get_result(timeout)
+
+    def capture_request(self, wait: Any = None, signal_function: Any = None, flush: Any = None) -> Any:
+        """The next completed request; the caller must ``release()`` it (``flush``: one that started exposing
+        after now (True) or after a time.monotonic_ns() value)."""
+        return dispatch(lambda t: self._take(t, flush), wait, signal_function)
+
+    @contextlib.contextmanager
+    def captured_request(self, wait: Any = None, flush: Any = None) -> Iterator[CompletedRequest]:
+        """``with picam2.captured_request() as request:`` (released at the end of the block)."""
+        req = self.capture_request(wait=wait, flush=flush)
+        try:
+            yield req
+        finally:
+            req.release()
+
+    def capture_metadata(self, wait: Any = None, signal_function: Any = None) -> Any:
+        """The next frame's metadata."""
+        return self._with_request(lambda r: r.get_metadata(), wait, signal_function)
+
+    def capture_array(self, name: str = "main", wait: Any = None, signal_function: Any = None) -> Any:
+        """The next frame's image of stream ``name`` as an array."""
+        return self._with_request(lambda r: r.make_array(name), wait, signal_function)
+
+    def capture_arrays(self, names: list[str] | None = None, wait: Any = None, signal_function: Any = None) -> Any:
+        """Arrays of several streams of one frame, and its metadata: ``(arrays, metadata)``."""
+        names = names or ["main"]
+        return self._with_request(lambda r: ([r.make_array(n) for n in names], r.get_metadata()), wait,
+                                  signal_function)
+
+    def capture_buffer(self, name: str = "main", wait: Any = None, signal_function: Any = None) -> Any:
+        """The next frame's buffer of stream ``name`` as 1-D bytes."""
+        return self._with_request(lambda r: r.make_buffer(name), wait, signal_function)
+
+    def capture_buffers(self, names: list[str] | None = None, wait: Any = None, signal_function: Any = None) -> Any:
+        """Buffers of several streams of one frame, and its metadata."""
+        names = names or ["main"]
+        return self._with_request(lambda r: ([r.make_buffer(n) for n in names], r.get_metadata()), wait,
+                                  signal_function)
+
+    def capture_image(self, name: str = "main", wait: Any = None, signal_function: Any = None) -> Any:
+        """The next frame's image of stream ``name`` as a PIL image."""
+        return self._with_request(lambda r: r.make_image(name), wait, signal_function)
+
+    def capture_file(self, file_output: Any, name: str = "main", format: str | None = None,
+                     wait: Any = None, signal_function: Any = None, exif_data: Any = None) -> Any:
+        """Save the next frame's stream ``name`` (JPEG, PNG, ...) to a path or file object; returns its
+        metadata."""
+        def use(r: CompletedRequest) -> dict[str, Any]:
+            r.save(name, file_output, format=format, exif_data=exif_data)
+            return r.get_metadata()
+        return self._with_request(use, wait, signal_function)
+
+    def drop_frames(self, num_frames: int, wait: Any = None, signal_function: Any = None) -> Any:
+        """Discard the next ``num_frames`` frames."""
+        def call(timeout_s: float | None) -> None:
+            for _ in range(int(num_frames)):
+                self._take(timeout_s).release()
+        return dispatch(call, wait, signal_function)
+
+    def switch_mode(self, camera_config: Any, wait: Any = None, signal_function: Any = None) -> Any:
+        """Stop, configure with ``camera_config`` and start again; returns the configuration in effect."""
+        def call(_: float | None) -> dict[str, Any]:
+            self.stop()
+            self.configure(camera_config)
+            self.start()
+            return self.camera_config
+        return dispatch(call, wait, signal_function)
+
+    def _switch_and(self, camera_config: Any, use: Any, wait: Any, signal_function: Any, back: bool = True) -> Any:
+        def call(timeout_s: float | None) -> Any:
+            previous = self.camera_config
+            self.switch_mode(camera_config)
+            try:
+                req = self._take(timeout_s)
+                try:
+                    return use(req)
+                finally:
+                    req.release()
+            finally:
+                if back and previous:
+                    self.switch_mode(previous)
+        return dispatch(call, wait, signal_function)
+
+    def switch_mode_and_capture_array(self, camera_config: Any, name: str = "main", wait: Any = None,
+                                      signal_function: Any = None, delay: int = 0) -> Any:
+        """Switch mode, capture an array of stream ``name``, switch back."""
+        return self._switch_and(camera_config, lambda r: r.make_array(name), wait, signal_function)
+
+    def switch_mode_and_capture_file(self, camera_config: Any, file_output: Any, name: str = "main",
+                                     format: str | None = None, wait: Any = None,
+                                     signal_function: Any = None, delay: int = 0, exif_data: Any = None) -> Any:
+        """Switch mode, save stream ``name`` to a file, switch back; returns the frame's metadata."""
+        def use(r: CompletedRequest) -> dict[str, Any]:
+            r.save(name, file_output, format=format)
+            return r.get_metadata()
+        return self._switch_and(camera_config, use, wait, signal_function)
+
+    def switch_mode_and_capture_request(self, camera_config: Any, wait: Any = None, signal_function: Any = None,
+                                        delay: int = 0) -> Any:
+        """Switch mode and capture a request (its arrays stay valid after the switch back)."""
+        def use(r: CompletedRequest) -> CompletedRequest:
+            r.acquire()
+            return r
+        return self._switch_and(camera_config, use, wait, signal_function)
+
+    def start_and_capture_file(self, name: str = "image.jpg", delay: float = 1, preview_mode: Any = "preview",
+                               capture_mode: Any = "still", show_preview: bool = False) -> None:
+        """Start in ``preview_mode``, wait ``delay`` seconds, save a still in ``capture_mode``, stop."""
+        self.configure(preview_mode)
+        self.start(show_preview=show_preview)
+        time.sleep(delay)
+        self.switch_mode_and_capture_file(capture_mode, name)
+        self.stop()
+
+
+    def start_recording(self, *args: Any, **kwargs: Any) -> None:
+        """Not emulated (no encoders): RuntimeError saying so."""
+        raise RuntimeError("rollcam's picamera2 stand-in has no encoders: recording is not emulated "
+                           "(capture frames with capture_array/capture_request and encode them yourself)")
+
+    start_encoder = start_recording
