@@ -107,7 +107,8 @@ def with_imu(frame: Any, spec: Any, camera: Any, tap: FrameImu, seq: int, start_
     samples = tap.samples(spec, camera, seq, start_ns)
     times = frame.row_times_ns
     poses = row_poses(camera, times)
-    meta = frame.meta
+    k = intrinsics(camera)
+    meta = {**frame.meta, "intrinsics": list(k)}
     data = frame.data
     if spec.rs_correct == "gyro":
         from rollcam.sim.rscorrect import correct_image
@@ -116,8 +117,35 @@ def with_imu(frame: Any, spec: Any, camera: Any, tap: FrameImu, seq: int, start_
         margin = 2 * (10**9 // p.rate_hz)
         cover = tap.imu(spec, camera).samples(int(times.min()) + p.time_offset_ns - margin,
                                               int(times.max()) + p.time_offset_ns + margin)
-        k = (camera.fx_px, camera.fx_px, camera.width / 2.0, camera.height / 2.0)
         data, _ = correct_image(frame.data, cover, times, int(times.min()), k,
                                 by_column=frame.readout.by_column)
-        meta = {**meta, "rs_correct": "gyro"}
+        meta["rs_correct"] = "gyro"
     return dataclasses.replace(frame, data=data, imu=samples, poses=poses, meta=meta)
+
+
+def intrinsics(camera: Any) -> tuple[float, float, float, float]:
+    """Pinhole ``(fx, fy, cx, cy)`` of a scene camera in OpenCV's convention (pixel centres at integers)."""
+    return (float(camera.fx_px), float(camera.fx_px), camera.width / 2.0 - 0.5, camera.height / 2.0 - 0.5)
+
+
+IMU_BUFFER_NS = 2 * 10**9
+"""How far back the device's IMU buffer reaches (a reader asking for older samples is refused)."""
+
+
+def device_samples(camera: Any, t0_ns: int, limit: int, now_ns: int | None = None) -> ImuSamples:
+    """At most ``limit`` samples of ``camera``'s IMU stamped from ``t0_ns`` up to its device clock now (the
+    serial ``IMU?`` command and the HTTP ``/imu.jsonl`` stream); DeviceError when the IMU is off, ConfigError
+    for a start older than the buffer (``IMU_BUFFER_NS``)."""
+    from rollcam.common.errors import ConfigError, DeviceError
+
+    spec = camera.spec
+    if spec.imu is None:
+        raise DeviceError("the IMU is off (imu=on turns it on)")
+    now = camera.clock_ns() if now_ns is None else int(now_ns)
+    if t0_ns < now - IMU_BUFFER_NS:
+        raise ConfigError(f"IMU samples from {t0_ns} ns are gone: the buffer holds the last "
+                          f"{IMU_BUFFER_NS // 10**6} ms (from {now - IMU_BUFFER_NS} ns)")
+    imu = camera.imager.imu.imu(spec, camera.synthetic.camera)
+    idx = imu.indices(t0_ns, now)
+    end = spec.imu.stamp_ns(idx.start + limit) if len(idx) > limit else now
+    return imu.samples(t0_ns, end)

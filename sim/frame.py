@@ -121,6 +121,8 @@ class Frame:
             "dtype": str(self.data.dtype),
             "file": file,
         }
+        if self.imu is not None:
+            rec["imu_samples"] = len(self.imu)
         if self.objects is not None:
             rec["objects"] = [o.to_json() for o in self.objects]
         rec.update(self.meta)

@@ -10,7 +10,8 @@ only: parallax from camera translation and the motion of objects stay as the rol
 ``gyro_line_rotations`` is the integration (camera angular rate = ``R_cam_imu`` times the gyro, at stamp
 minus the camera-IMU time offset; orientation by the trapezoid rule between samples, exact for a rate that
 is linear between them); ``unwarp`` the resampling; ``correct_image`` both. Pixels whose rays leave the frame
-are black, and ``valid`` says which.
+are black, and ``valid`` says which. Intrinsics ``(fx, fy, cx, cy)`` are OpenCV's (and Kalibr's): pixel
+centres at integer coordinates (``Frame.meta["intrinsics"]`` of a synthetic frame with an IMU).
 """
 
 from __future__ import annotations
@@ -70,7 +71,7 @@ def _maps(line_rot, fx, fy, cx, cy, by_column, map_x, map_y):
     n = line_rot.shape[0]
     for v in prange(h):
         for u in range(w):
-            dx, dy = (u + 0.5 - cx) / fx, (v + 0.5 - cy) / fy
+            dx, dy = (u - cx) / fx, (v - cy) / fy
             line = float(u if by_column else v)
             us, vs = float(u), float(v)
             for _ in range(FIXED_POINT_STEPS):
@@ -86,8 +87,8 @@ def _maps(line_rot, fx, fy, cx, cy, by_column, map_x, map_y):
                 if p[2] <= 1e-9:
                     us, vs = -1e6, -1e6
                     break
-                us = fx * p[0] / p[2] + cx - 0.5
-                vs = fy * p[1] / p[2] + cy - 0.5
+                us = fx * p[0] / p[2] + cx
+                vs = fy * p[1] / p[2] + cy
                 line = us if by_column else vs
             map_x[v, u] = us
             map_y[v, u] = vs
@@ -127,7 +128,7 @@ def forward_points(points_xy: np.ndarray, line_rotations: np.ndarray,
     fx, fy, cx, cy = intrinsics
     pts = np.asarray(points_xy, np.float64)
     n = line_rotations.shape[0]
-    line = np.clip(np.round((pts[:, 0] if by_column else pts[:, 1]) - 0.5), 0, n - 1).astype(np.int64)
+    line = np.clip(np.round(pts[:, 0] if by_column else pts[:, 1]), 0, n - 1).astype(np.int64)
     d = np.stack([(pts[:, 0] - cx) / fx, (pts[:, 1] - cy) / fy, np.ones(len(pts))], axis=1)
     ref = np.einsum("nji,nj->ni", line_rotations[line], d)  # reference <- line: the transpose
     return np.stack([fx * ref[:, 0] / ref[:, 2] + cx, fy * ref[:, 1] / ref[:, 2] + cy], axis=1)
