@@ -4,7 +4,8 @@
 part carries the frame's ``X-Sequence``, ``X-Timestamp-Ns`` (start of exposure, device clock),
 ``X-Line-Time-Ns``, ``X-Exposure-Ns``, ``X-Readout`` and ``X-Shutter`` headers. The body is not chunked: it
 ends when the connection does. ``GET /snapshot.jpg`` returns the next frame, ``GET /status.json`` the
-server's counters, ``GET /imu.jsonl`` the IMU's samples as JSON lines (emu/http_imu.py). One thread encodes each frame once; the event loop (emu/http_server.py, aiohttp) writes
+server's counters, ``GET /imu.jsonl`` the IMU's samples as JSON lines (emu/http_imu.py).
+One thread encodes each frame once; the event loop (emu/http_server.py, aiohttp) writes
 the same bytes to every client. Slots are fair (emu/http_slots.py): a client reading slower than the frame
 rate skips frames (counted) and never grows memory, and one that does not read at all yields its slot to a
 newcomer. Bad requests get an HTTP error; the server keeps serving the others.

@@ -228,9 +228,10 @@ class CaptureWriter:
     def _write_imu(self, frames: Sequence[Frame]) -> None:
         """The instant's IMU and per-line pose rows (before its records: a sample row may outlive a failed
         record, never a record its samples)."""
-        first = next((f for f in frames if f.imu is not None), None)
-        if first is None:
+        with_imu = [f for f in frames if f.imu is not None]
+        if not with_imu:
             return
+        first = next((f for f in with_imu if f.shutter == "rolling"), with_imu[0])  # its line delay
         if self._imu is None:
             self._imu = ImuLog(self.out_dir, first, {"fps": self.fps}, fs=self.fs)
         self._imu.write(frames)

@@ -22,7 +22,19 @@ from typing import Any, ClassVar
 
 from rollcam.common.errors import ConfigError
 
-from .configschema import _Checked, _dotted, _f, _Invalid, _ListOf, _nonempty, _nonneg, _one_of, _parse_section, _pos, _Rule
+from .configschema import (
+    _Checked,
+    _dotted,
+    _f,
+    _Invalid,
+    _ListOf,
+    _nonempty,
+    _nonneg,
+    _one_of,
+    _parse_section,
+    _pos,
+    _Rule,
+)
 from .configschema import _schema as _schema  # re-exported: tests read a class's schema rows from here
 from .formats import FORMATS
 from .imu import ImuParams

@@ -73,12 +73,12 @@ class ImuParams(_Checked):
     )
 
     @property
-    def R_cam_imu(self) -> np.ndarray:  # noqa: N802 (the calibration literature's name)
+    def R_cam_imu(self) -> np.ndarray:
         """Rotation taking IMU coordinates to camera coordinates (3, 3)."""
         return rotation_vector_to_matrix(np.radians(np.asarray(self.rotation_cam_imu_deg, np.float64)))
 
     @property
-    def T_cam_imu(self) -> np.ndarray:  # noqa: N802
+    def T_cam_imu(self) -> np.ndarray:
         """The 4x4 transform from IMU to camera coordinates, as Kalibr's camchain writes it."""
         t = np.eye(4)
         t[:3, :3] = self.R_cam_imu

@@ -27,6 +27,9 @@ from .imu import ImuSamples
 from .pose import rotation_vector_to_matrix
 
 FIXED_POINT_STEPS = 4
+GRID_PX = 8
+"""Spacing of the solved resampling map (interpolated between): the map of a rotation a few degrees a frame
+is smooth, so 8 px departs from the per-pixel map by well under 0.01 px (``tests/test_imu.py`` checks it)."""
 
 
 def gyro_line_rotations(samples: ImuSamples, line_times_ns: np.ndarray, reference_ns: int) -> np.ndarray:
@@ -66,11 +69,13 @@ def _orientation_at(q: np.ndarray, tau: np.ndarray, omega: np.ndarray, t_ns: np.
 
 
 @njit(cache=True, parallel=True)
-def _maps(line_rot, fx, fy, cx, cy, by_column, map_x, map_y):
+def _maps(line_rot, fx, fy, cx, cy, by_column, step, map_x, map_y):
+    """Source coordinates of output pixels (u, v) = (j * step, i * step) into ``map_x[i, j]``, ``map_y[i, j]``."""
     h, w = map_x.shape
     n = line_rot.shape[0]
-    for v in prange(h):
-        for u in range(w):
+    for i in prange(h):
+        for j in range(w):
+            u, v = j * step, i * step
             dx, dy = (u - cx) / fx, (v - cy) / fy
             line = float(u if by_column else v)
             us, vs = float(u), float(v)
@@ -79,26 +84,46 @@ def _maps(line_rot, fx, fy, cx, cy, by_column, map_x, map_y):
                 i0 = min(int(math.floor(lf)), n - 2) if n > 1 else 0
                 a = lf - i0 if n > 1 else 0.0
                 i1 = i0 + 1 if n > 1 else 0
-                p = np.zeros(3)
-                for r in range(3):
-                    m0 = line_rot[i0, r, 0] * dx + line_rot[i0, r, 1] * dy + line_rot[i0, r, 2]
-                    m1 = line_rot[i1, r, 0] * dx + line_rot[i1, r, 1] * dy + line_rot[i1, r, 2]
-                    p[r] = m0 + a * (m1 - m0)
-                if p[2] <= 1e-9:
+                r0, r1 = line_rot[i0], line_rot[i1]
+                p0 = r0[0, 0] * dx + r0[0, 1] * dy + r0[0, 2]
+                p1 = r0[1, 0] * dx + r0[1, 1] * dy + r0[1, 2]
+                p2 = r0[2, 0] * dx + r0[2, 1] * dy + r0[2, 2]
+                p0 += a * (r1[0, 0] * dx + r1[0, 1] * dy + r1[0, 2] - p0)
+                p1 += a * (r1[1, 0] * dx + r1[1, 1] * dy + r1[1, 2] - p1)
+                p2 += a * (r1[2, 0] * dx + r1[2, 1] * dy + r1[2, 2] - p2)
+                if p2 <= 1e-9:  # behind the camera: no source
                     us, vs = -1e6, -1e6
                     break
-                us = fx * p[0] / p[2] + cx
-                vs = fy * p[1] / p[2] + cy
+                us = fx * p0 / p2 + cx
+                vs = fy * p1 / p2 + cy
                 line = us if by_column else vs
-            map_x[v, u] = us
-            map_y[v, u] = vs
+            map_x[i, j] = us
+            map_y[i, j] = vs
+
+
+@njit(cache=True, parallel=True)
+def _upsample(coarse, step, out):
+    """Bilinear interpolation of a map sampled every ``step`` pixels (grid point k at pixel k * step)."""
+    h, w = out.shape
+    for v in prange(h):
+        gi = v // step
+        fy = (v - gi * step) / step
+        gi1 = min(gi + 1, coarse.shape[0] - 1)
+        for u in range(w):
+            gj = u // step
+            fx = (u - gj * step) / step
+            gj1 = min(gj + 1, coarse.shape[1] - 1)
+            top = coarse[gi, gj] + fx * (coarse[gi, gj1] - coarse[gi, gj])
+            bot = coarse[gi1, gj] + fx * (coarse[gi1, gj1] - coarse[gi1, gj])
+            out[v, u] = top + fy * (bot - top)
 
 
 def unwarp(image: np.ndarray, line_rotations: np.ndarray, intrinsics: tuple[float, float, float, float], *,
-           by_column: bool = False) -> tuple[np.ndarray, np.ndarray]:
+           by_column: bool = False, grid_px: int = GRID_PX) -> tuple[np.ndarray, np.ndarray]:
     """``image`` seen from the reference orientation: per-line rotations (``gyro_line_rotations``, one per
     row, or per column with ``by_column``) and pinhole ``(fx, fy, cx, cy)``. Returns the image and the mask
-    of pixels whose source lies inside the frame."""
+    of pixels whose source lies inside the frame. The resampling map is solved every ``grid_px`` pixels and
+    interpolated between (1: at every pixel; the map is smooth, see ``GRID_PX``)."""
     import cv2
 
     h, w = image.shape[:2]
@@ -106,9 +131,21 @@ def unwarp(image: np.ndarray, line_rotations: np.ndarray, intrinsics: tuple[floa
     if line_rotations.shape != (n_lines, 3, 3):
         raise ConfigError(f"need one rotation per line: {n_lines} lines, got {line_rotations.shape}")
     fx, fy, cx, cy = (float(v) for v in intrinsics)
-    map_x = np.empty((h, w), np.float32)
-    map_y = np.empty((h, w), np.float32)
-    _maps(np.ascontiguousarray(line_rotations, np.float64), fx, fy, cx, cy, bool(by_column), map_x, map_y)
+    step = int(grid_px)
+    if step < 1:
+        raise ConfigError(f"grid_px must be a whole number >= 1, got {grid_px!r}")
+    gh, gw = -(-(h - 1) // step) + 1, -(-(w - 1) // step) + 1
+    coarse_x = np.empty((gh, gw), np.float32)
+    coarse_y = np.empty((gh, gw), np.float32)
+    _maps(np.ascontiguousarray(line_rotations, np.float64), fx, fy, cx, cy, bool(by_column), step, coarse_x,
+          coarse_y)
+    if step == 1:
+        map_x, map_y = coarse_x, coarse_y
+    else:
+        map_x = np.empty((h, w), np.float32)
+        map_y = np.empty((h, w), np.float32)
+        _upsample(coarse_x, step, map_x)
+        _upsample(coarse_y, step, map_y)
     out = cv2.remap(image, map_x, map_y, cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT, borderValue=0)
     valid = (map_x >= 0) & (map_x <= w - 1) & (map_y >= 0) & (map_y <= h - 1)
     return out, valid
