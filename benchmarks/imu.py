@@ -84,13 +84,15 @@ def _mapped_box(box: Any, rot: np.ndarray, k: tuple, w: int, h: int) -> tuple[fl
 
     x0, y0, x1, y1 = box
     s = np.linspace(0.0, 1.0, 16)
-    # the box's edge (pixel-centre coordinates) through the correction's forward map
-    pts = np.concatenate([np.stack([x0 + (x1 - x0) * s, np.full_like(s, y0)], 1),
-                          np.stack([x0 + (x1 - x0) * s, np.full_like(s, y1 - 1)], 1),
-                          np.stack([np.full_like(s, x0), y0 + (y1 - 1 - y0) * s], 1),
-                          np.stack([np.full_like(s, x1 - 1), y0 + (y1 - 1 - y0) * s], 1)])
+    # x extents are continuous (pixel i spans [i, i + 1)), y whole rows: both to OpenCV's pixel-centre coordinates
+    xa, xb, ya, yb = x0 - 0.5, x1 - 0.5, y0, y1 - 1
+    pts = np.concatenate([np.stack([xa + (xb - xa) * s, np.full_like(s, ya)], 1),
+                          np.stack([xa + (xb - xa) * s, np.full_like(s, yb)], 1),
+                          np.stack([np.full_like(s, xa), ya + (yb - ya) * s], 1),
+                          np.stack([np.full_like(s, xb), ya + (yb - ya) * s], 1)])
     m = forward_points(pts, rot, k)
-    return (max(m[:, 0].min(), 0.0), max(m[:, 1].min(), 0.0), min(m[:, 0].max() + 1, w), min(m[:, 1].max() + 1, h))
+    return (max(m[:, 0].min() + 0.5, 0.0), max(m[:, 1].min(), 0.0), min(m[:, 0].max() + 0.5, w),
+            min(m[:, 1].max() + 1, h))
 
 
 def correction_case(options: str, size: tuple[int, int], frames: int, detector: Any = None) -> dict[str, Any]:
