@@ -1,7 +1,7 @@
 """The studies behind ``rollcam bench STUDY``: one entry each, with its options, run, report and targets.
 
 Each study's code lives in its own module of ``rollcam.benchmarks`` (``bench`` renders, ``hog_recall``,
-``detect``, ``ptc``, ``sensor_bench``, ``uvc``, ``soak``, ``dataset``); an entry here is the thin layer the
+``detect``, ``ptc``, ``sensor_bench``, ``uvc``, ``soak``, ``dataset``, ``imu``); an entry here is the thin layer the
 command line needs. ``run(args, progress)`` does the work, writes its files under ``args.out`` and returns the
 JSON document with its plain-text report; ``targets(doc)`` reads the document's targets as ``{name: {"value",
 "op", "limit", "pass"}}`` (``pass`` None when a target did not apply). This module imports only the standard
@@ -231,6 +231,21 @@ def _dataset(args: argparse.Namespace, progress: Any) -> tuple[Doc, str]:
     return doc, format_report(doc)
 
 
+# ------------------------------------------------------------------------------------------------ imu
+def _imu_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--quick", action="store_true", help="half an hour of IMU, 640x480 frames (< 1 min)")
+    p.add_argument("--detector", default=None, metavar="NAME",
+                   help="also compare this detector's recall on GS, RS and corrected RS (e.g. hog)")
+
+
+def _imu(args: argparse.Namespace, progress: Any) -> tuple[Doc, str]:
+    from .imu import format_report, run_imu_bench
+
+    doc = run_imu_bench(quick=args.quick, detector=args.detector, say=progress.status)
+    write_json(args.out, "imu_bench.json", doc)
+    return doc, format_report(doc)
+
+
 STUDIES: dict[str, Study] = {s.name: s for s in (
     Study("render", "speed versus error of the ways to make an RS frame (bench.json, bench.png)",
           _render_arguments, _render, _render_targets),
@@ -247,5 +262,7 @@ STUDIES: dict[str, Study] = {s.name: s for s in (
           _soak_arguments, _soak, _doc_targets),
     Study("dataset", "dataset generation (vs render+encode, 1 vs 2 workers) and evaluation metric speed",
           _dataset_arguments, _dataset, _doc_targets),
+    Study("imu", "IMU noise (Allan fit against the config) and gyro RS correction (error vs GS, time per frame)",
+          _imu_arguments, _imu, _doc_targets),
 )}
 """Study name -> study, in the order ``rollcam bench --help`` lists them."""

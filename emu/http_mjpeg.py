@@ -4,7 +4,8 @@
 part carries the frame's ``X-Sequence``, ``X-Timestamp-Ns`` (start of exposure, device clock),
 ``X-Line-Time-Ns``, ``X-Exposure-Ns``, ``X-Readout`` and ``X-Shutter`` headers. The body is not chunked: it
 ends when the connection does. ``GET /snapshot.jpg`` returns the next frame, ``GET /status.json`` the
-server's counters. One thread encodes each frame once; the event loop (emu/http_server.py, aiohttp) writes
+server's counters, ``GET /imu.jsonl`` the IMU's samples as JSON lines (emu/http_imu.py).
+One thread encodes each frame once; the event loop (emu/http_server.py, aiohttp) writes
 the same bytes to every client. Slots are fair (emu/http_slots.py): a client reading slower than the frame
 rate skips frames (counted) and never grows memory, and one that does not read at all yields its slot to a
 newcomer. Bad requests get an HTTP error; the server keeps serving the others.
@@ -28,6 +29,7 @@ from rollcam.firmware.camera import FirmwareCamera, FramePlan
 from rollcam.sim.codecs import JPEG_QUALITY, Levels, jpeg_quality, transcode
 from rollcam.sim.frame import Frame
 
+from .http_imu import ImuStreams
 from .http_server import Connection, HttpHost, HttpLimits
 from .http_slots import StreamSlots
 from .pump import FramePump
@@ -136,6 +138,8 @@ class MjpegServer(Closeable):
             app.router.add_get(path, self._stream, allow_head=False)
         app.router.add_get("/snapshot.jpg", self._snapshot, allow_head=False)
         app.router.add_get("/status.json", self._status, allow_head=False)
+        self.imu = ImuStreams(camera)  # GET /imu.jsonl: the IMU as JSON lines
+        self.imu.add_to(app)
         app.cleanup_ctx.append(self._sweeper)
         self.http = HttpHost(app, host, port, limits=limits, name="rollcam-http")
         self.slots = StreamSlots(limits, self.http.loop.time)

@@ -31,6 +31,7 @@ from rollcam.sim.codecs import codec
 from rollcam.sim.frame import Frame
 from rollcam.sim.synthetic import SyntheticCamera
 
+from .imu import FrameImu, with_imu
 from .patterns import render_pattern
 from .spec import CameraSpec, scene_of
 
@@ -42,7 +43,8 @@ def kernel_kind(spec: CameraSpec) -> tuple:
     """What decides which compiled kernels a spec's frames run (the path through renderer, sensor model and
     packing), leaving out values that only change numbers: size, timing, exposure, gain, seeds."""
     return (spec.sensor.name, spec.pixel_format, spec.uses_physics, spec.blur_px > 0, spec.noise, spec.hflip,
-            spec.vflip, spec.shutter, spec.readout, spec.scene, spec.test_pattern != "none")
+            spec.vflip, spec.shutter, spec.readout, spec.scene, spec.test_pattern != "none", spec.imu is not None,
+            spec.rs_correct)
 
 
 def warm(spec: CameraSpec, imager: Imager | None = None) -> None:
@@ -80,6 +82,7 @@ class Imager:
         # One frame at a time: the renderer's scratch buffers are shared, and two transports (HTTP's pump,
         # UVC's render-ahead) may ask for frames at once.
         self._render_lock = threading.Lock()
+        self.imu = FrameImu()
 
     def camera(self, spec: CameraSpec) -> SyntheticCamera:
         """The SyntheticCamera for ``spec``."""
@@ -95,6 +98,8 @@ class Imager:
         with self._render_lock:
             cam = self.camera(spec)
             frame = cam.render(seq, start_ns, shutter)
+        if spec.imu is not None:
+            frame = with_imu(frame, spec, cam.camera, self.imu, seq, start_ns)
         pattern = spec.test_pattern
         meta = {**frame.meta, "bayer_order": spec.bayer_order, "test_pattern": pattern,
                 "pixel_format": spec.output_format}

@@ -51,6 +51,10 @@ MAX_BLUR_PX = 256.0
 """Largest motion-blur bound, px (time samples per line grow with it)."""
 MAX_DEVICE_NS = 2**62
 """Latest device-clock start an ``emu:`` stream may be given, ns (146 years; int64 room for its frames)."""
+MAX_IMU_DENSITY = 10.0
+"""Largest IMU noise density or random walk (SI units; consumer MEMS are ~1e-2 and below)."""
+MAX_IMU_OFFSET_US = 1e6
+"""Largest camera-IMU time offset, us (one second either way)."""
 MAX_TEXT = 32
 """Longest serial number or camera name, characters (a USB iSerialNumber string is short ASCII)."""
 
@@ -133,6 +137,13 @@ def _noise(text: str) -> frozenset[str]:
     return parse_stages(str(text))
 
 
+def _vector3(text: str) -> tuple[float, float, float]:
+    parts = str(text).replace(" ", "").split(",")
+    if len(parts) != 3:
+        raise ValueError("expected three numbers x,y,z")
+    return tuple(finite_float(p) for p in parts)  # type: ignore[return-value]
+
+
 def _text(text: str) -> str:
     return check_text(str(text), "text")
 
@@ -191,6 +202,24 @@ OPTIONS: dict[str, Option] = {o.name: o for o in (
     Option("noise_seed", _seed, 0, "temporal noise seed"),
     Option("hflip", parse_bool, False, "mirror left-right (raw: the Bayer order changes as the sensor's does)"),
     Option("vflip", parse_bool, False, "flip top-bottom: the scene is read bottom-up, first line still first"),
+    Option("imu", parse_bool, False, "IMU beside the camera (gyro + accelerometer on the device clock): on | off; "
+                                     "any imu_ option turns it on"),
+    Option("imu_rate", bounded(non_negative_int, 100, 2000), None, "IMU rate, Hz 100..2000 (default: the "
+                                                                    "hw_config's imu section, else 400)"),
+    Option("imu_gyro_noise", bounded(non_negative_float, 0.0, MAX_IMU_DENSITY), None,
+           "gyro white-noise density, rad/s/sqrt(Hz) (Kalibr gyroscope_noise_density)"),
+    Option("imu_gyro_walk", bounded(non_negative_float, 0.0, MAX_IMU_DENSITY), None,
+           "gyro bias random walk, rad/s^2/sqrt(Hz) (Kalibr gyroscope_random_walk)"),
+    Option("imu_accel_noise", bounded(non_negative_float, 0.0, MAX_IMU_DENSITY), None,
+           "accelerometer white-noise density, m/s^2/sqrt(Hz) (Kalibr accelerometer_noise_density)"),
+    Option("imu_accel_walk", bounded(non_negative_float, 0.0, MAX_IMU_DENSITY), None,
+           "accelerometer bias random walk, m/s^3/sqrt(Hz) (Kalibr accelerometer_random_walk)"),
+    Option("imu_offset_us", bounded(finite_float, -MAX_IMU_OFFSET_US, MAX_IMU_OFFSET_US), None,
+           "camera-IMU time offset, us (Kalibr timeshift_cam_imu: t_imu = t_cam + offset)"),
+    Option("imu_rotation_deg", _vector3, None, "R_cam_imu as a rotation vector x,y,z in degrees"),
+    Option("imu_translation_m", _vector3, None, "the IMU's origin in camera coordinates x,y,z, m"),
+    Option("rs_correct", _choice("none", "gyro"), "none", "ISP rolling-shutter correction: none | gyro (per-row "
+                                                          "rotational unwarp from the IMU; processed formats)"),
     Option("test_pattern", _text, "none", "sensor test pattern instead of the scene: none | bars | solid | "
                                           "fade_bars | pn9 | walking_ones (as the sensor has them)"),
 )}
@@ -230,6 +259,8 @@ def as_text(value: Any) -> str:
         return "on" if value else "off"
     if isinstance(value, tuple) and len(value) == 2:
         return f"{value[0]}x{value[1]}"
+    if isinstance(value, tuple) and len(value) == 3:
+        return ",".join(as_text(float(v)) for v in value)
     if isinstance(value, (set, frozenset)):
         return ",".join(sorted(value)) or "off"
     if isinstance(value, float):

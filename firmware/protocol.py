@@ -16,9 +16,12 @@ from rollcam.common.errors import ConfigError, DeviceError, ProtocolError
 from rollcam.common.values import parse_bool
 
 from .camera import FirmwareCamera
+from .imu import device_samples
 from .options import OPTIONS, SCENE_OPTIONS, as_text
 
 MAX_LINE = 256
+MAX_IMU_REPLY = 32
+"""Most IMU samples one ``IMU?`` reply holds (ask again from its ``next=`` for more)."""
 ERRORS = {100: "unknown command", 101: "wrong arguments", 102: "invalid value", 103: "refused by the device",
           104: "malformed line"}
 
@@ -104,6 +107,15 @@ def _or_ignored(start_ns: int | None) -> str:
     return "IGNORED" if start_ns is None else str(start_ns)
 
 
+def _imu(cam: FirmwareCamera, since: str) -> str:
+    """``n=N next=T t,wx,wy,wz,ax,ay,az;...``: samples stamped from ``since`` to the device clock now."""
+    t0 = parse_int(since, "start time")
+    s = device_samples(cam, t0, MAX_IMU_REPLY)
+    nxt = int(s.t_ns[-1]) + 1 if len(s) else t0
+    rows = ";".join(",".join([str(r[0]), *(f"{v:.9g}" for v in r[1:])]) for r in s.to_rows())
+    return f"n={len(s)} next={nxt} {rows}".rstrip()
+
+
 def _stats(cam: FirmwareCamera) -> str:
     return " ".join(f"{k}={v}" for k, v in dataclasses.asdict(cam.stats).items())
 
@@ -154,6 +166,8 @@ COMMANDS: dict[str, Command] = {
     "OPT": Command(("NAME", "VALUE"), _set_option, "set a camera option as the emu: URI names it (gain 2, "
                    "exposure_us 5000, format RG10, ...); replies with the value in effect"),
     "OPT?": Command(("NAME",), _get_option, "a camera option's value in effect"),
+    "IMU?": Command(("SINCE_NS",), _imu, f"IMU samples stamped from SINCE_NS (device ns) until now, at most "
+                    f"{MAX_IMU_REPLY}: n=N next=T t,wx,wy,wz,ax,ay,az;... (rad/s, m/s^2)"),
     "STATS?": Command((), _stats, "frames made, skipped, triggers taken and ignored"),
 }
 """The protocol: command word -> Command."""

@@ -25,12 +25,14 @@ from typing import Any
 from rollcam.common.errors import ConfigError, RollcamError
 from rollcam.sim import formats as sf
 from rollcam.sim.hwconfig import SensorConfig, load_sensor
+from rollcam.sim.imu import ImuParams
 from rollcam.sim.noise import parse_stages
 from rollcam.sim.scene import Scene
 from rollcam.sim.scenegen import ego_preset, make_scene
 from rollcam.sim.sensor import flipped_cfa
 from rollcam.sim.synthetic import MIN_FPS, StreamSettings, resolve_settings
 
+from .imu import IMU_OPTIONS, imu_option_values, resolve_imu
 from .options import MAX_BLUR_PX, MAX_EXPOSURE_US, MAX_SEED, OPTIONS, check_size, check_text, parse_options
 from .pixfmt import FORMATS, raw_formats
 from .traits import traits_for
@@ -62,6 +64,8 @@ class CameraSpec:
     seed: int = 0
     scene_options: tuple[tuple[str, Any], ...] = ()
     camera: str = "0"
+    imu: ImuParams | None = None
+    rs_correct: str = "none"
     settings: StreamSettings = field(init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
@@ -87,6 +91,8 @@ class CameraSpec:
         (values as text or typed, parsed by the option table), ``fps`` sets the frame length; other keywords
         are fields."""
         sensor = load_sensor(sensor) if isinstance(sensor, str) else sensor
+        if "imu_values" in fields:
+            fields["imu"] = resolve_imu(sensor, fields.get("imu"), fields.pop("imu_values"))
         if isinstance(scene, str):
             fields["scene"], scene = scene, None
         if scene:
@@ -123,6 +129,8 @@ class CameraSpec:
         merged = {**current, **options}
         values = parse_options(merged, owner, ConfigError)
         changes = _fields(values)
+        if "imu_values" in changes:
+            changes["imu"] = resolve_imu(self.sensor, self.imu, changes.pop("imu_values"))
         fps = changes.pop("fps", None)
         if "size" in changes:
             changes.setdefault("frame_length_lines", None)
@@ -195,7 +203,8 @@ class CameraSpec:
                 "physics": self.uses_physics, "blur_px": self.blur_px, "serial": self.serial,
                 "noise": (parse_stages(None) if self.noise is None else self.noise) - {"quantization"},
                 "noise_seed": self.noise_seed, "hflip": self.hflip, "vflip": self.vflip,
-                "test_pattern": self.test_pattern}
+                "test_pattern": self.test_pattern, **imu_option_values(self.sensor, self.imu),
+                "rs_correct": self.rs_correct}
 
     def _base_format(self, fourcc: str) -> str:
         """``fourcc`` as stored: processed as is, raw in the sensor's own (unflipped) Bayer order."""
@@ -261,14 +270,23 @@ def _check_values(spec: CameraSpec) -> None:
         value = getattr(spec, name)
         if isinstance(value, bool) or not isinstance(value, int) or not 0 <= value <= MAX_SEED:
             raise ConfigError(f"{name} must be a whole number in 0..{MAX_SEED}, got {value!r}")
+    if spec.imu is not None and not isinstance(spec.imu, ImuParams):
+        raise ConfigError(f"imu must be an ImuParams or None, got {spec.imu!r}")
+    if spec.rs_correct not in ("none", "gyro"):
+        raise ConfigError(f"rs_correct {spec.rs_correct!r} is not one of ['none', 'gyro']")
+    if spec.rs_correct == "gyro" and (spec.imu is None or spec.raw or spec.hflip or spec.vflip):
+        raise ConfigError("rs_correct=gyro needs the IMU on (imu=on), a processed format and no flips")
     scene_of(spec).camera(spec.camera)  # the scene is built (and cached) now: bad options fail here
 
 
 def _fields(values: dict[str, Any]) -> dict[str, Any]:
     """Parsed option values -> ``create`` keywords."""
     out = _scene_fields({k: v for k, v in values.items() if k in _SCENE_NAMES})
+    imu = {k: v for k, v in values.items() if k in IMU_OPTIONS}
+    if imu:
+        out["imu_values"] = imu
     for name, value in values.items():
-        if name in _SCENE_NAMES:
+        if name in _SCENE_NAMES or name in IMU_OPTIONS:
             continue
         if name == "exposure_us":
             out["exposure_ns"] = round(value * 1000)

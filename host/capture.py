@@ -36,6 +36,7 @@ from rollcam.sim.codecs import codec
 from rollcam.sim.formats import FORMATS
 from rollcam.sim.frame import Frame
 
+from .imu_export import ImuLog
 from .progress import Progress
 from .sources import CameraSource
 
@@ -46,7 +47,8 @@ SHUTTER_CHOICES = ("rolling", "global", "both")
 SUFFIX = {"rolling": "_rs", "global": "_gs"}
 """File-name suffix of each shutter; any other (``unknown``) gets none."""
 # Files a capture writes (and their temporary files); --overwrite removes only these, nothing else the folder holds.
-_CAPTURE_FILE = re.compile(r"\d{6,}(_rs|_gs)?\.(png|jpg|npy)|\.?(frames\.jsonl|capture\.json)")
+_CAPTURE_FILE = re.compile(r"\d{6,}(_rs|_gs)?\.(png|jpg|npy)|\.?(frames\.jsonl|capture\.json|imu\.csv|camera_poses\.csv"
+                           r"|imu\.yaml|camchain\.yaml|camera\.yaml)")
 _INSTANT = re.compile(r"\d+")
 
 
@@ -184,10 +186,11 @@ class CaptureWriter:
     """Image files plus ``frames.jsonl`` records, written so that a record is whole or absent after any failure,
     and an image is there for every record (see the module docstring). ``fs`` is the file-system seam."""
 
-    def __init__(self, out_dir: Path, fmt: str = "png", *, fs: FileSystem = OS_FS) -> None:
+    def __init__(self, out_dir: Path, fmt: str = "png", *, fs: FileSystem = OS_FS, fps: float | None = None) -> None:
         if fmt not in IMAGE_FORMATS:
             raise ConfigError(f"image format {fmt!r} is not one of {list(IMAGE_FORMATS)}")
-        self.out_dir, self.fmt, self.fs = out_dir, fmt, fs
+        self.out_dir, self.fmt, self.fs, self.fps = out_dir, fmt, fs, fps
+        self._imu: ImuLog | None = None  # IMU files, from the first frame that carries samples
         self.frames = self.images = 0
         self._log: AppendLog | None = AppendLog(out_dir / FRAMES_LOG, truncate=True, fs=fs)
 
@@ -205,6 +208,7 @@ class CaptureWriter:
                 written.append(path)  # listed before it exists, so an interrupt mid-write still removes it
                 write_atomic(path, data, self.fs)
                 records.append(json.dumps(frame.to_json(path.name), default=_json_default))
+            self._write_imu(frames)
             self._log.append("".join(r + "\n" for r in records).encode("utf-8"))
         except BaseException:
             # The log's committed size says whether the records went in, wherever an error or interrupt landed:
@@ -221,8 +225,22 @@ class CaptureWriter:
         self.frames += 1
         self.images += len(records)
 
+    def _write_imu(self, frames: Sequence[Frame]) -> None:
+        """The instant's IMU and per-line pose rows (before its records: a sample row may outlive a failed
+        record, never a record its samples)."""
+        with_imu = [f for f in frames if f.imu is not None]
+        if not with_imu:
+            return
+        first = next((f for f in with_imu if f.shutter == "rolling"), with_imu[0])  # its line delay
+        if self._imu is None:
+            self._imu = ImuLog(self.out_dir, first, {"fps": self.fps}, fs=self.fs)
+        self._imu.write(frames)
+
     def close(self) -> None:
-        """fsync the log and close it; safe to call twice."""
+        """fsync the logs and close them; safe to call twice."""
+        if self._imu is not None:
+            imu, self._imu = self._imu, None
+            imu.close()
         if self._log is not None:
             log, self._log = self._log, None
             log.close()
@@ -301,7 +319,7 @@ def capture(
         "complete": False,  # frames/images/complete are added when the capture ends (read_capture counts them)
     }
     write_capture_info(out, info, fs)
-    writer = CaptureWriter(out, fmt, fs=fs)
+    writer = CaptureWriter(out, fmt, fs=fs, fps=info["source"].get("fps"))
     bar = Progress(frames, label="capture", stream=stream, enabled=progress, unit="frame")
     start = clock()
     interrupted = False

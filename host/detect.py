@@ -176,12 +176,18 @@ def _reader(source: CameraSource, shutter: str | None) -> Callable[[], Frame | N
 def run_detect(source: CameraSource, detector: Detector, *, frames: int | None = None, out_dir: Path | None = None,
                shutter: str | None = None, video: bool = True, truth: RunningPR | None = None,
                status: Callable[[DetectResult, Detections], None] | None = None,
-               clock: Callable[[], float] = time.perf_counter, meta: dict[str, Any] | None = None) -> DetectResult:
-    """Detect on up to ``frames`` frames of ``source`` (all when None), logging to ``out_dir`` if given."""
+               clock: Callable[[], float] = time.perf_counter, meta: dict[str, Any] | None = None,
+               correct: str | None = None) -> DetectResult:
+    """Detect on up to ``frames`` frames of ``source`` (all when None), logging to ``out_dir`` if given;
+    ``correct='gyro'`` unwarps each rolling-shutter frame from its IMU samples first (``rollcam.host.correct``)."""
     from .preview import frame_bgr
 
     result = DetectResult(truth=truth if truth is not None else RunningPR(), out_dir=out_dir)
     read = _reader(source, shutter)
+    if correct is not None:
+        from .correct import correcting_reader
+
+        read = correcting_reader(read, correct)
     log = sink = None
     if out_dir is not None:
         out_dir.mkdir(parents=True, exist_ok=True)

@@ -3,11 +3,15 @@
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from .timing import Readout
+
+if TYPE_CHECKING:
+    from .imu import ImuSamples
+    from .pose import Kinematics
 
 Box = tuple[float, float, float, float]
 """An axis-aligned box ``(x0, y0, x1, y1)`` in pixels; x1 and y1 are exclusive edges."""
@@ -57,6 +61,8 @@ class Frame:
     holds the sample time of every image line (row, or column when ``readout`` is by column) in int64 ns;
     ``line_time_ns`` is the nominal line time rounded to whole ns (0 for a global shutter). ``data`` is laid
     out as ``format`` says (``rollcam.sim.formats``); ``size`` (width, height) is the image size in pixels.
+    With an IMU (``rollcam.sim.imu``), ``imu`` holds the samples the device delivered with this frame and, for
+    synthetic frames, ``poses`` the camera's true kinematics at every line's sample time (``rollcam.sim.pose``).
     """
 
     data: np.ndarray
@@ -71,6 +77,8 @@ class Frame:
     objects: tuple[ObjectTruth, ...] | None = field(default=None, repr=False)
     meta: dict[str, Any] = field(default_factory=dict, repr=False)
     size: tuple[int, int] | None = field(default=None, repr=False)
+    imu: ImuSamples | None = field(default=None, repr=False)
+    poses: Kinematics | None = field(default=None, repr=False)
 
     @property
     def height(self) -> int:
@@ -113,6 +121,8 @@ class Frame:
             "dtype": str(self.data.dtype),
             "file": file,
         }
+        if self.imu is not None:
+            rec["imu_samples"] = len(self.imu)
         if self.objects is not None:
             rec["objects"] = [o.to_json() for o in self.objects]
         rec.update(self.meta)
