@@ -48,6 +48,7 @@ import numpy as np
 from rollcam.sim.hwconfig import load_sensor
 
 from .render_cases import LINE_RATE, SCENES, SENSOR, BenchConfig, SceneBench, make_config
+from .render_scaling import scaling_table
 
 
 # ------------------------------------------------------------------------------------------------ floor
@@ -82,6 +83,10 @@ def memcpy_floor(height: int, width: int, repeats: int = 200) -> dict[str, Any]:
 
 
 # ------------------------------------------------------------------------------------------- targets
+STATIC_X_MEMCPY = 8.0
+"""Largest exact static-camera RS frame time, in frame copies of the same run (warm and cold each)."""
+
+
 def evaluate_targets(rows: list[dict[str, Any]], checks: dict[str, dict[str, Any]],
                      frame_period_ms: float) -> dict[str, dict[str, Any]]:
     """The project's speed and fidelity targets, from this run's numbers (worst scene decides)."""
@@ -97,15 +102,17 @@ def evaluate_targets(rows: list[dict[str, Any]], checks: dict[str, dict[str, Any
         return by[(s, "exact")]["max_abs_err_dn"]
 
     specs = [
-        ("exact_static_x_memcpy", "exact RS, static camera, in frame copies", static, "<=", 15.0, "x",
-         lambda s: by[(s, "exact")]["x_memcpy"]),
+        ("exact_static_x_memcpy", "exact RS, static camera, in cache-warm frame copies", static, "<=",
+         STATIC_X_MEMCPY, "x", lambda s: by[(s, "exact")]["x_memcpy"]),
+        ("exact_static_x_memcpy_cold", "exact RS, static camera, in cache-cold frame copies", static, "<=",
+         STATIC_X_MEMCPY, "x", lambda s: by[(s, "exact")]["x_memcpy_cold"]),
         ("exact_static_half_period", "exact RS, static camera, <= half the frame period", static, "<=",
          frame_period_ms / 2, "ms", lambda s: by[(s, "exact")]["ms_per_frame"]),
         ("exact_vs_reference_max_abs_diff", "exact RS equals the brute-force reference", scenes, "<=", 1.0, "DN",
          exact_vs_ref),
         ("exact_speedup_vs_reference", "exact RS faster than the brute-force reference", scenes, ">=", 300.0, "x",
          lambda s: by[(s, "exact")]["speedup_vs_reference"]),
-        ("rs_gs_time_ratio", "exact RS frame time / GS frame time", scenes, "<=", 1.5, "x",
+        ("rs_gs_time_ratio", "exact RS frame time / GS frame time, static camera", static, "<=", 1.5, "x",
          lambda s: round(by[(s, "exact")]["ms_per_frame"] / by[(s, "gs")]["ms_per_frame"], 3)),
         ("exact_ego_frame_period", "exact RS with ego-motion within one frame period", ego, "<=",
          frame_period_ms, "ms", lambda s: by[(s, "exact")]["ms_per_frame"]),
@@ -151,14 +158,17 @@ def run_bench(width: int = 1920, height: int = 1080, quick: bool = False, out_di
         if not cfg.full_reference:
             say(f"{scene}: exact == reference check on the full {cfg.check_size[0]}x{cfg.check_size[1]} frame")
             bench.checks["full_image_max_abs_diff_dn"] = bench.full_image_check()
-        rows += bench.rows(floor["ms"])
+        rows += bench.rows(floor["ms"], floor["cold_ms"])
         checks[scene] = bench.checks
         skipped += bench.skipped
         del bench  # drops the scene's footage (6.7 GB at the line rate) before the next one
+    scaling = scaling_table(cfg.scaling_sizes, cfg.scaling_walkers, cfg.scaling_frames, say) if (
+        cfg.scaling_sizes and cfg.scaling_walkers) else None
     frame_period_ms = timing.frame_period_ns / 1e6
     doc = {
         "rows": rows,
         "floor": floor,
+        "scaling": scaling,
         "targets": evaluate_targets(rows, checks, frame_period_ms),
         "machine": machine,
         "config": dataclasses.asdict(cfg),

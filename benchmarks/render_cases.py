@@ -31,8 +31,11 @@ SCENES: dict[str, tuple[str, str]] = {
     "fast": ("fast", "none"),
     "normal_ego": ("normal", "vehicle"),
     "fast_ego": ("fast", "vehicle"),
+    "pan_ego": ("normal", "pan"),
+    "walk_ego": ("normal", "walk"),
+    "drone_ego": ("normal", "drone"),
 }
-"""Scene name -> (walker speed preset, camera ego-motion preset)."""
+"""Scene name -> (walker speed preset, camera ego-motion preset); every ego-motion preset has a scene."""
 
 LINE_RATE = "line"
 """Footage rate meaning "one frame per line time" (32,400 fps on the study's camera)."""
@@ -65,6 +68,9 @@ class BenchConfig:
     first_frame: int = 10
     frame_step: int = 7
     memcpy_repeats: int = 200
+    scaling_sizes: tuple[tuple[int, int], ...] = ((640, 360), (1280, 720), (1920, 1080), (3840, 2160))
+    scaling_walkers: tuple[int, ...] = (0, 20, 200)
+    scaling_frames: int = 3
     quick: bool = False
 
     def __post_init__(self) -> None:
@@ -84,9 +90,10 @@ def make_config(quick: bool = False, width: int = 1920, height: int = 1080, **ov
     base = BenchConfig(width=width, height=height)
     if quick:
         base = dataclasses.replace(
-            base, quick=True, scenes=("normal", "normal_ego"), bands=(1, 4, 16, 64), footage_fps=(240, 960),
+            base, quick=True, scenes=("normal", "normal_ego", "pan_ego", "walk_ego", "drone_ego"),
+            bands=(1, 4, 16, 64), footage_fps=(240, 960),
             footage_scenes=("normal",), n_frames=3, n_frames_other=1, compose_repeats=3, full_reference=False,
-            memcpy_repeats=100,
+            memcpy_repeats=100, scaling_sizes=((640, 360), (1920, 1080), (3840, 2160)), scaling_frames=2,
         )
     try:
         return dataclasses.replace(base, **overrides)
@@ -170,17 +177,18 @@ class SceneBench:
         return self.renderer.render_lines(times, by_column=self.by_column)
 
     def _timed_render(self, name: str, times_of: Callable[[int], np.ndarray], n: int, **extra: Any) -> None:
-        samples, kept = [], None
+        samples, cpu, kept = [], [], None
         for i in self.frames[:n]:
             times = times_of(i)
-            t0 = time.perf_counter()
+            c0, t0 = time.process_time(), time.perf_counter()
             res = self._render(times)
             samples.append(time.perf_counter() - t0)
+            cpu.append(time.process_time() - c0)
             if i == self.cfg.first_frame:
                 kept = res
         assert kept is not None
-        self.results[name] = {"ms": _median_ms(samples), "n_timed": len(samples), "image": kept.image,
-                              "boxes": kept.truth.boxes(), **extra}
+        self.results[name] = {"ms": _median_ms(samples), "cpu_ms": _median_ms(cpu), "n_timed": len(samples),
+                              "image": kept.image, "boxes": kept.truth.boxes(), **extra}
 
     def run(self) -> None:
         cfg, cam = self.cfg, self.cam
@@ -312,7 +320,7 @@ class SceneBench:
         ref = cam.renderer.reference_lines(times, by_column=bc).image
         return composition_error(exact, ref)["max_abs_err_dn"]
 
-    def rows(self, floor_ms: float) -> list[dict[str, Any]]:
+    def rows(self, floor_ms: float, cold_ms: float) -> list[dict[str, Any]]:
         """The table rows of this scene, errors against the baseline image and the exact RS boxes."""
         ref = self.results["reference"]
         baseline = ref["image"] if ref["image"] is not None else self.results["exact"]["image"]
@@ -327,7 +335,9 @@ class SceneBench:
             out.append({
                 "scene": self.scene, "method": name, "kind": r["kind"],
                 "ms_per_frame": round(r["ms"], 4),
+                "cpu_ms_per_frame": None if r.get("cpu_ms") is None else round(r["cpu_ms"], 4),
                 "x_memcpy": round(r["ms"] / floor_ms, 2),
+                "x_memcpy_cold": round(r["ms"] / cold_ms, 2),
                 "speedup_vs_reference": round(ref["ms"] / r["ms"], 2),
                 "mean_abs_err_dn": round(err["mean_abs_err_dn"], 5),
                 "max_abs_err_dn": err["max_abs_err_dn"],

@@ -46,17 +46,23 @@ def plot(rows: list[dict[str, Any]], path: Path, floor_ms: float) -> None:
 
 def format_table(doc: dict[str, Any]) -> str:
     """The rows, the floor and the targets as plain text."""
-    head = f"{'scene':<11}{'method':<24}{'ms/frame':>11}{'x_memcpy':>10}{'vs_ref':>9}{'mean_err':>10}" \
-           f"{'max_err':>8}{'box_px':>8}  note"
+    head = f"{'scene':<11}{'method':<24}{'ms/frame':>11}{'cpu_ms':>9}{'x_memcpy':>10}{'x_cold':>8}{'vs_ref':>9}" \
+           f"{'mean_err':>10}{'max_err':>8}{'box_px':>8}  note"
     lines = [head, "-" * len(head)]
     for r in doc["rows"]:
         box = "-" if r["max_box_err_px"] is None else f"{r['max_box_err_px']:.2f}"
-        lines.append(f"{r['scene']:<11}{r['method']:<24}{r['ms_per_frame']:>11.2f}{r['x_memcpy']:>10.1f}"
-                     f"{r['speedup_vs_reference']:>9.1f}{r['mean_abs_err_dn']:>10.4f}{r['max_abs_err_dn']:>8.0f}"
+        cpu = "-" if r.get("cpu_ms_per_frame") is None else f"{r['cpu_ms_per_frame']:.2f}"
+        lines.append(f"{r['scene']:<11}{r['method']:<24}{r['ms_per_frame']:>11.2f}{cpu:>9}{r['x_memcpy']:>10.1f}"
+                     f"{r['x_memcpy_cold']:>8.1f}{r['speedup_vs_reference']:>9.1f}{r['mean_abs_err_dn']:>10.4f}{r['max_abs_err_dn']:>8.0f}"
                      f"{box:>8}  {r['note']}")
     f = doc["floor"]
     lines += ["", f"floor: {f['what']}: {f['ms']:.3f} ms ({f['gb_per_s']:.1f} GB/s; cache-cold {f['cold_ms']:.3f} ms)",
-              f"baseline: {doc['baseline']}", "", "targets:"]
+              f"baseline: {doc['baseline']}", ""]
+    if doc.get("scaling"):
+        from .render_scaling import format_scaling
+
+        lines += [*format_scaling(doc["scaling"]), ""]
+    lines.append("targets:")
     for name, t in doc["targets"].items():
         verdict = {True: "PASS", False: "FAIL", None: "n/a"}[t["pass"]]
         lines.append(f"  {verdict:<5}{name}: {t['value']} {t['op']} {t['limit']} {t['unit']}  {t['per_scene']}")

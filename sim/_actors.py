@@ -304,32 +304,57 @@ def parts_scratch():
             np.empty((5, 3)), np.empty(3), np.empty(3), np.empty(2), np.empty(2))
 
 
-@njit(cache=True, parallel=True)
+@njit(cache=True)
+def _bounds_chunk(ch, n_chunks, actors, world, cam, rot_tab, pos_tab, t_first, k_first, t_span, need, out):
+    """Work unit ``ch`` of ``n_chunks`` of ``actor_bounds_all``: time groups ch, ch + n_chunks, ..."""
+    n_obj, n_g = need.shape
+    root = np.empty(4)
+    pc = np.empty(3)
+    uv = np.empty(2)
+    for o in range(n_obj):
+        for g in range(ch, n_g, n_chunks):
+            if need[o, g]:
+                k = k_first[g]
+                actor_bounds(actors[o], world, cam, rot_tab[k], pos_tab[k], t_first[g], t_span[g], out[o, g],
+                             root, pc, uv)
+
+
+@njit(cache=True)
 def actor_bounds_all(actors, world, cam, rot_tab, pos_tab, t_first, k_first, t_span, need, out):
     """out[o, g] = bounds of actor o over time group g (from t_first[g], lasting t_span[g]) where need[o, g]."""
-    n_obj, n_g = need.shape
-    for ch in prange(N_CHUNKS):
-        root = np.empty(4)
-        pc = np.empty(3)
-        uv = np.empty(2)
-        for o in range(n_obj):
-            for g in range(ch, n_g, N_CHUNKS):
-                if need[o, g]:
-                    k = k_first[g]
-                    actor_bounds(actors[o], world, cam, rot_tab[k], pos_tab[k], t_first[g], t_span[g], out[o, g],
-                                 root, pc, uv)
+    _bounds_chunk(0, 1, actors, world, cam, rot_tab, pos_tab, t_first, k_first, t_span, need, out)
 
 
 @njit(cache=True, parallel=True)
+def actor_bounds_par(actors, world, cam, rot_tab, pos_tab, t_first, k_first, t_span, need, out):
+    """``actor_bounds_all`` over the numba threads (worth their start-up only for many bounds)."""
+    for ch in prange(N_CHUNKS):
+        _bounds_chunk(ch, N_CHUNKS, actors, world, cam, rot_tab, pos_tab, t_first, k_first, t_span, need, out)
+
+
+@njit(cache=True)
+def _parts_chunk(ch, n_chunks, actors, world, lut, bld, light, cam, rot_tab, pos_tab, times, slot_o, slot_k,
+                 parts_tab):
+    """Work unit ``ch`` of ``n_chunks`` of ``actor_parts_all``: slots ch, ch + n_chunks, ..."""
+    scratch = parts_scratch()
+    for s in range(ch, slot_o.shape[0], n_chunks):
+        k = slot_k[s]
+        actor_parts(actors[slot_o[s]], world, lut, bld, light, cam, rot_tab[k], pos_tab[k], times[k],
+                    parts_tab[s], scratch)
+
+
+@njit(cache=True)
 def actor_parts_all(actors, world, lut, bld, light, cam, rot_tab, pos_tab, times, slot_o, slot_k, parts_tab):
     """parts_tab[s] = parts of actor slot_o[s] at times[slot_k[s]]."""
-    n = slot_o.shape[0]
+    _parts_chunk(0, 1, actors, world, lut, bld, light, cam, rot_tab, pos_tab, times, slot_o, slot_k, parts_tab)
+
+
+@njit(cache=True, parallel=True)
+def actor_parts_par(actors, world, lut, bld, light, cam, rot_tab, pos_tab, times, slot_o, slot_k, parts_tab):
+    """``actor_parts_all`` over the numba threads (worth their start-up only for many slots)."""
     for ch in prange(N_CHUNKS):
-        scratch = parts_scratch()
-        for s in range(ch, n, N_CHUNKS):
-            k = slot_k[s]
-            actor_parts(actors[slot_o[s]], world, lut, bld, light, cam, rot_tab[k], pos_tab[k], times[k],
-                        parts_tab[s], scratch)
+        _parts_chunk(ch, N_CHUNKS, actors, world, lut, bld, light, cam, rot_tab, pos_tab, times, slot_o, slot_k,
+                     parts_tab)
 
 
 guard(__name__)  # after every kernel and import: see rollcam.sim._jitcache

@@ -259,7 +259,7 @@ def _add_line(dst, lin, seed_lin, line, seed, ia, ib, n_runs, first):
                 dst[i, c] = lin[i, c] if first else dst[i, c] + lin[i, c]
 
 
-@njit(cache=True, parallel=True)
+@njit(cache=True)
 def render_lines_kernel(world, lut_b, bld, light, cam, rot_tab, pos_tab, actors, times, line_k, obj_line_k, slots,
                         parts_tab, include, lines, e_start, ents, w, bg_lin, out_u8, out_lin, gain, lut, gt_l, gt_r,
                         gt_tot, gt_vis, gt_only, full_lines, seed_lin, acc_hits, line_hit):
@@ -280,6 +280,28 @@ def render_lines_kernel(world, lut_b, bld, light, cam, rot_tab, pos_tab, actors,
     a line on which no actor has a span equals the composite and is left alone; ``line_hit`` (bool per line,
     when non-empty) records which lines were written.
     """
+    _render_chunk(0, 1, world, lut_b, bld, light, cam, rot_tab, pos_tab, actors, times, line_k, obj_line_k,
+                  slots, parts_tab, include, lines, e_start, ents, w, bg_lin, out_u8, out_lin, gain, lut, gt_l, gt_r,
+                  gt_tot, gt_vis, gt_only, full_lines, seed_lin, acc_hits, line_hit)
+
+
+@njit(cache=True, parallel=True)
+def render_lines_par(world, lut_b, bld, light, cam, rot_tab, pos_tab, actors, times, line_k, obj_line_k, slots,
+                     parts_tab, include, lines, e_start, ents, w, bg_lin, out_u8, out_lin, gain, lut, gt_l, gt_r,
+                     gt_tot, gt_vis, gt_only, full_lines, seed_lin, acc_hits, line_hit):
+    """``render_lines_kernel`` over the numba threads, N_CHUNKS interleaved sets of lines (worth the threads'
+    start-up only for many pixels: a busy machine may take milliseconds to give a parked thread a core)."""
+    for ch in prange(N_CHUNKS):
+        _render_chunk(ch, N_CHUNKS, world, lut_b, bld, light, cam, rot_tab, pos_tab, actors, times, line_k, obj_line_k,
+                      slots, parts_tab, include, lines, e_start, ents, w, bg_lin, out_u8, out_lin, gain, lut, gt_l,
+                      gt_r, gt_tot, gt_vis, gt_only, full_lines, seed_lin, acc_hits, line_hit)
+
+
+@njit(cache=True)
+def _render_chunk(ch, n_chunks, world, lut_b, bld, light, cam, rot_tab, pos_tab, actors, times, line_k, obj_line_k,
+                  slots, parts_tab, include, lines, e_start, ents, w, bg_lin, out_u8, out_lin, gain, lut, gt_l, gt_r,
+                  gt_tot, gt_vis, gt_only, full_lines, seed_lin, acc_hits, line_hit):
+    """Work unit ``ch`` of ``n_chunks`` of ``render_lines_kernel``: lines ch, ch + n_chunks, ..."""
     n_obj = actors.shape[0]
     moving_cam = cam[C_MOVING] != 0.0
     want_lin = out_lin.shape[0] > 0
@@ -288,64 +310,63 @@ def render_lines_kernel(world, lut_b, bld, light, cam, rot_tab, pos_tab, actors,
     accumulate = acc_hits.shape[0] > 0
     cap = max(n_obj * MAX_PARTS, 1)
     n = lines.shape[0]
-    for ch in prange(N_CHUNKS):
-        depth = np.empty(cap)
-        idx_o = np.empty(cap, np.int64)
-        idx_p = np.empty(cap, np.int64)
-        span_l = np.empty(cap)
-        span_r = np.empty(cap)
-        pa = np.empty(cap, np.int64)
-        pb = np.empty(cap, np.int64)
-        owner = np.full(w, -1, np.int64)
-        ia = np.empty(cap + 1, np.int64)
-        ib = np.empty(cap + 1, np.int64)
-        lin = np.empty((w, 3), np.float32)
-        local = np.empty((max(n_obj, 1), MAX_PARTS, PART_COLS))
-        scratch = parts_scratch()
-        for j in range(ch, n, N_CHUNKS):
-            line = lines[j]
-            for q in range(e_start[j], e_start[j + 1]):
-                e = ents[q]
-                ok = obj_line_k[:, e]
-                for o in range(n_obj):
-                    gt_l[o, line], gt_r[o, line], gt_tot[o, line], gt_vis[o, line] = np.nan, np.nan, 0, 0
-                    if include[o] and ok[o] >= 0 and slots[o, ok[o]] == SLOT_LOCAL:
-                        k = ok[o]
-                        actor_parts(actors[o], world, lut_b, bld, light, cam, rot_tab[k], pos_tab[k], times[k],
-                                    local[o], scratch)
-                m = _collect_line(line, w, actors, ok, slots, parts_tab, local, include, gt_l, gt_r, gt_tot,
-                                  depth, idx_o, idx_p, span_l, span_r, pa, pb)
-                if full_lines and not gt_only:
-                    if moving_cam:
-                        k = line_k[e]
-                        background_line(world, lut_b, bld, light, cam, rot_tab[k], pos_tab[k], line, lin)
-                    else:
-                        lin[:, :] = bg_lin[line]
-                    ia[0], ib[0], n_runs = 0, w, 1
+    depth = np.empty(cap)
+    idx_o = np.empty(cap, np.int64)
+    idx_p = np.empty(cap, np.int64)
+    span_l = np.empty(cap)
+    span_r = np.empty(cap)
+    pa = np.empty(cap, np.int64)
+    pb = np.empty(cap, np.int64)
+    owner = np.full(w, -1, np.int64)
+    ia = np.empty(cap + 1, np.int64)
+    ib = np.empty(cap + 1, np.int64)
+    lin = np.empty((w, 3), np.float32)
+    local = np.empty((max(n_obj, 1), MAX_PARTS, PART_COLS))
+    scratch = parts_scratch()
+    for j in range(ch, n, n_chunks):
+        line = lines[j]
+        for q in range(e_start[j], e_start[j + 1]):
+            e = ents[q]
+            ok = obj_line_k[:, e]
+            for o in range(n_obj):
+                gt_l[o, line], gt_r[o, line], gt_tot[o, line], gt_vis[o, line] = np.nan, np.nan, 0, 0
+                if include[o] and ok[o] >= 0 and slots[o, ok[o]] == SLOT_LOCAL:
+                    k = ok[o]
+                    actor_parts(actors[o], world, lut_b, bld, light, cam, rot_tab[k], pos_tab[k], times[k],
+                                local[o], scratch)
+            m = _collect_line(line, w, actors, ok, slots, parts_tab, local, include, gt_l, gt_r, gt_tot,
+                              depth, idx_o, idx_p, span_l, span_r, pa, pb)
+            if full_lines and not gt_only:
+                if moving_cam:
+                    k = line_k[e]
+                    background_line(world, lut_b, bld, light, cam, rot_tab[k], pos_tab[k], line, lin)
                 else:
-                    n_runs = _span_runs(span_l, span_r, m, w, ia, ib)
-                    if not gt_only:
-                        for r in range(n_runs):
-                            lin[ia[r]:ib[r]] = bg_lin[line, ia[r]:ib[r]]
-                if m > 0:
-                    _paint_spans(lin, line, m, ok, slots, parts_tab, local, gt_vis, depth, idx_o, idx_p, span_l,
-                                 span_r, owner, ia, ib, n_runs)
-                if seed and m == 0:
-                    continue  # no actor pixel on this line: it is the composite, nothing to write
-                if line_hit.shape[0] > 0:
-                    line_hit[line] = True
-                if accumulate and not gt_only:
-                    _add_line(out_lin[line], lin, seed_lin, line, seed, ia, ib, n_runs, acc_hits[line] == 0)
-                    acc_hits[line] += 1
-                elif not gt_only:
-                    if seed:
-                        out_lin[line, :, :] = seed_lin[line]
+                    lin[:, :] = bg_lin[line]
+                ia[0], ib[0], n_runs = 0, w, 1
+            else:
+                n_runs = _span_runs(span_l, span_r, m, w, ia, ib)
+                if not gt_only:
                     for r in range(n_runs):
-                        x0, x1 = ia[r], ib[r]
-                        if want_lin:
-                            out_lin[line, x0:x1, :] = lin[x0:x1]
-                        if want_u8:
-                            encode_line(lin[x0:x1], gain, lut, out_u8[line, x0:x1])
+                        lin[ia[r]:ib[r]] = bg_lin[line, ia[r]:ib[r]]
+            if m > 0:
+                _paint_spans(lin, line, m, ok, slots, parts_tab, local, gt_vis, depth, idx_o, idx_p, span_l,
+                             span_r, owner, ia, ib, n_runs)
+            if seed and m == 0:
+                continue  # no actor pixel on this line: it is the composite, nothing to write
+            if line_hit.shape[0] > 0:
+                line_hit[line] = True
+            if accumulate and not gt_only:
+                _add_line(out_lin[line], lin, seed_lin, line, seed, ia, ib, n_runs, acc_hits[line] == 0)
+                acc_hits[line] += 1
+            elif not gt_only:
+                if seed:
+                    out_lin[line, :, :] = seed_lin[line]
+                for r in range(n_runs):
+                    x0, x1 = ia[r], ib[r]
+                    if want_lin:
+                        out_lin[line, x0:x1, :] = lin[x0:x1]
+                    if want_u8:
+                        encode_line(lin[x0:x1], gain, lut, out_u8[line, x0:x1])
 
 
 guard(__name__)  # after every kernel and import: see rollcam.sim._jitcache

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+import numba
 import numpy as np
 
 from . import _actors as A
@@ -22,6 +23,12 @@ from .scene import Camera, Scene
 
 BOUND_GROUPS = 32
 """Time groups per render for the conservative actor bounds that decide which lines an actor touches."""
+
+PARALLEL_MIN_PIXELS = 1 << 18
+"""Work (pixels shaded) below which a kernel runs on the calling thread alone: waking the numba threads costs
+tens of microseconds on a quiet machine and milliseconds on a busy one (a parked thread waits for a core)."""
+PARALLEL_MIN_ITEMS = 2048
+"""Actor bounds or parts below which they are computed on the calling thread alone (same reason)."""
 
 _EMPTY_LIN = np.empty((0, 0, 3), np.float32)
 
@@ -54,8 +61,9 @@ class Pass:
 class Painter:
     """The kernel tables of one scene camera (both orientations) and the render passes over them."""
 
-    def __init__(self, scene: Scene, camera: Camera, gain: float, lut: np.ndarray) -> None:
+    def __init__(self, scene: Scene, camera: Camera, gain: float, lut: np.ndarray, threads: int | None = None) -> None:
         self.gain, self.lut = gain, lut  # the 8-bit output: radiance scale and encoding curve
+        self.threads = threads  # numba threads for large kernels (None: numba's setting; 1: the caller's only)
         self.tables = compile_scene(scene)
         self.cams = {False: compile_camera(camera, False), True: compile_camera(camera, True)}
         self.camera_moving = camera.ego.moving
@@ -90,7 +98,8 @@ class Painter:
         ``span_s[g]`` at pose ``k_first[g]``, where ``need[o, g]`` (other entries are not written)."""
         out = np.empty((*need.shape, 4))
         t = self.tables
-        A.actor_bounds_all(t.actors, t.world, cam, rot, pos, t_first, k_first, span_s, need, out)
+        kernel = A.actor_bounds_par if self._parallel(int(need.sum()), PARALLEL_MIN_ITEMS) else A.actor_bounds_all
+        kernel(t.actors, t.world, cam, rot, pos, t_first, k_first, span_s, need, out)
         return out
 
     def speeds(self, by_column: bool, times_s: np.ndarray) -> np.ndarray:
@@ -109,7 +118,8 @@ class Painter:
         s_o, s_k = np.repeat(np.arange(self.n_actors), n_t), np.tile(np.arange(n_t), self.n_actors)
         out = np.empty((self.n_actors * n_t, A.MAX_PARTS, A.PART_COLS))
         t = self.tables
-        A.actor_parts_all(t.actors, t.world, t.building_lut, t.buildings, t.light, self.cams[by_column], rot, pos,
+        kernel = A.actor_parts_par if self._parallel(s_o.size, PARALLEL_MIN_ITEMS) else A.actor_parts_all
+        kernel(t.actors, t.world, t.building_lut, t.buildings, t.light, self.cams[by_column], rot, pos,
                           times_s, s_o, s_k, out)
         return out.reshape(self.n_actors, n_t, A.MAX_PARTS, A.PART_COLS)
 
@@ -151,7 +161,10 @@ class Painter:
         t, n_along = self.tables, p.n_along
         if e_start is None:
             e_start, ents = np.arange(lines.size + 1), lines
-        K.render_lines_kernel(
+        # Whole lines shade every pixel; over a composite only the pixels under actors (a few percent).
+        work = ents.size * n_along // (1 if full_lines else 16)
+        kernel = K.render_lines_par if self._parallel(work, PARALLEL_MIN_PIXELS) else K.render_lines_kernel
+        kernel(
             t.world, t.building_lut, t.buildings, t.light, p.cam, p.rot, p.pos, t.actors, p.times_s, p.entry_k,
             p.obj_k, p.slots, p.parts, include, lines, e_start, ents, n_along,
             _EMPTY_LIN if bg is None else bg,
@@ -174,6 +187,14 @@ class Painter:
         return u8, lin, gt
 
     # ------------------------------------------------------------------ internals
+    def _parallel(self, work: int, threshold: int) -> bool:
+        """Whether a kernel of this much work runs over the numba threads (set to ``threads`` when given)."""
+        if self.threads == 1 or work < threshold:
+            return False
+        if self.threads is not None:
+            numba.set_num_threads(min(self.threads, numba.config.NUMBA_NUM_THREADS))
+        return True
+
     def _touch(self, cam, times_s, rot, pos, k_line, moving, include, n_along, obj_k, only, line_of) -> None:
         """Fill ``obj_k[o, e]`` with actor o's time slot on each entry its bounds reach.
 
@@ -216,7 +237,8 @@ class Painter:
         slots[s_o, s_k] = np.arange(s_o.size)
         parts = self._parts_buffer(max(s_o.size, 1))
         if s_o.size:
-            A.actor_parts_all(t.actors, t.world, t.building_lut, t.buildings, t.light, cam, rot, pos, times_s, s_o,
+            kernel = A.actor_parts_par if self._parallel(s_o.size, PARALLEL_MIN_ITEMS) else A.actor_parts_all
+            kernel(t.actors, t.world, t.building_lut, t.buildings, t.light, cam, rot, pos, times_s, s_o,
                               s_k, parts)
         return slots, parts
 

@@ -1,8 +1,8 @@
 """Numba kernels of the static world: camera poses and background ray casting (street, facades, sky).
 
 Part of the per-line renderer (``rollcam.sim._actors`` holds the actors, ``rollcam.sim._kernels`` the line
-painting); table layouts are filled by ``rollcam.sim.compile``. Every function is pure, so every render path
-shades identically.
+painting, ``rollcam.sim._shade`` the materials a ray hits); table layouts are filled by ``rollcam.sim.compile``.
+Every function is pure, so every render path shades identically.
 """
 
 from __future__ import annotations
@@ -13,6 +13,17 @@ import numpy as np
 from numba import njit, prange
 
 from ._jitcache import guard
+from ._shade import (
+    BG_FAST,
+    CURB_RGB,
+    NO_CELL,
+    asphalt_albedo,
+    facade_albedo,
+    fog_transmittance,
+    sidewalk_albedo,
+    sky,
+    value_noise,
+)
 
 # ---- camera table columns -------------------------------------------------------------------------------
 C_FX, C_FY, C_CX, C_CY, C_W, C_H, C_TRANSPOSED = 0, 1, 2, 3, 4, 5, 6
@@ -35,9 +46,6 @@ KIND_STREET, KIND_CHART, KIND_FLAT = 0, 1, 2
 B_SIDE, B_Y0, B_Y1, B_HEIGHT, B_RGB, B_WIN_RGB, B_FLOOR, B_WIN_W, B_WIN_SP, B_LIT = 0, 1, 2, 3, 4, 7, 10, 11, 12, 13
 BLD_COLS = 14
 
-# Background shading tolerates reassociation and fast math functions (NaN/inf semantics kept); every path
-# renders the background through the same compiled functions, so results stay identical between paths.
-BG_FAST = {"contract", "afn", "reassoc", "arcp", "nsz"}
 
 # ======================================================================================================
 # camera
@@ -95,211 +103,162 @@ def to_camera(rot, pos, x, y, z, out):
 # ======================================================================================================
 
 
-@njit(cache=True, fastmath=BG_FAST, inline="always")
-def _hash01(ix, iy, seed):
-    h = (ix * 374761393 + iy * 668265263 + seed * 2147483647) & 0xFFFFFFFF
-    h = ((h ^ (h >> 13)) * 1274126177) & 0xFFFFFFFF
-    h = h ^ (h >> 16)
-    return (h & 0xFFFFFF) / 16777216.0
-
-
-@njit(cache=True, fastmath=BG_FAST, inline="always")
-def _value_noise(x, y, seed):
-    ix, iy = math.floor(x), math.floor(y)
-    fx, fy = x - ix, y - iy
-    ix, iy = int(ix), int(iy)
-    a = _hash01(ix, iy, seed)
-    b = _hash01(ix + 1, iy, seed)
-    c = _hash01(ix, iy + 1, seed)
-    d = _hash01(ix + 1, iy + 1, seed)
-    sx, sy = fx * fx * (3 - 2 * fx), fy * fy * (3 - 2 * fy)
-    return (a + (b - a) * sx) * (1 - sy) + (c + (d - c) * sx) * sy
+@njit(cache=True, fastmath=BG_FAST, error_model="numpy", inline="always")
+def street_bin(y, y_half, bin_m):
+    """Bin of the building lookup holding street coordinate ``y`` (the street repeats every 2 * y_half)."""
+    yy = y + y_half
+    yy -= math.floor(yy / (2.0 * y_half)) * (2.0 * y_half)  # periodic street; cheaper than Python's float %
+    return int(yy / bin_m)
 
 
 @njit(cache=True, fastmath=BG_FAST, inline="always")
 def building_at(world, lut, side, y):
     """Index of the building on ``side`` (0 west, 1 east) at street coordinate ``y`` (periodic), or -1."""
-    yh = world[W_YHALF]
-    yy = y + yh
-    yy -= math.floor(yy / (2.0 * yh)) * (2.0 * yh)  # periodic street; cheaper than Python's float %
-    i = int(yy / world[W_BIN])
+    i = street_bin(y, world[W_YHALF], world[W_BIN])
     if i < 0 or i >= lut.shape[1]:
         return -1
     return lut[side, i]
 
 
+@njit(cache=True, fastmath=BG_FAST, error_model="numpy", inline="always")
+def sun_probe(px, py, pz, sun_x, sun_y, sun_z, facade_x, skip_side):
+    """Where the ray from point p towards the sun crosses a facade plane (street canyon shadows).
+
+    Returns (state, side, y, z): state 0 unshadowed, 1 shadowed (sun below the horizon), 2 shadowed exactly
+    when a building stands on ``side`` at street coordinate y and is taller than z.
+    """
+    if sun_z <= 0.0:
+        return 1, 0, 0.0, 0.0
+    if sun_x == 0.0:
+        return 0, 0, 0.0, 0.0
+    side = 1 if sun_x > 0 else 0
+    if side == skip_side:
+        return 0, 0, 0.0, 0.0
+    t = ((facade_x if side == 1 else -facade_x) - px) / sun_x
+    if t <= 0.0:
+        return 0, 0, 0.0, 0.0
+    return 2, side, py + t * sun_y, pz + t * sun_z
+
+
 @njit(cache=True, fastmath=BG_FAST, inline="always")
 def _sun_blocked(world, lut, bld, px, py, pz, light, skip_side):
     """True when a facade stands between point ``p`` and the sun (street canyon shadows)."""
-    sx, sy, sz = light[L_SUN], light[L_SUN + 1], light[L_SUN + 2]
-    if sz <= 0.0:
-        return True
-    if sx == 0.0:
-        return False
-    side = 1 if sx > 0 else 0
-    if side == skip_side:
-        return False
-    xf = world[W_FACADE] if side == 1 else -world[W_FACADE]
-    t = (xf - px) / sx
-    if t <= 0.0:
-        return False
-    b = building_at(world, lut, side, py + t * sy)
-    if b < 0:
-        return False
-    return pz + t * sz < bld[b, B_HEIGHT]
+    state, side, y, z = sun_probe(px, py, pz, light[L_SUN], light[L_SUN + 1], light[L_SUN + 2], world[W_FACADE],
+                                  skip_side)
+    if state != 2:
+        return state == 1
+    b = building_at(world, lut, side, y)
+    return b >= 0 and z < bld[b, B_HEIGHT]
 
 
-@njit(cache=True, fastmath=BG_FAST)
-def _ground_albedo(world, gx, gy):
-    """Albedo (r, g, b) of the ground at (gx, gy): asphalt with markings, curb, tiled sidewalk."""
-    seed = int(world[W_SEED])
-    ax = abs(gx)
-    road, curb = world[W_ROAD], world[W_ROAD] + world[W_CURB]
-    yl = gy
-    if ax < road:
-        n = _value_noise(gx * 9.0, gy * 9.0, seed) * 0.6 + _value_noise(gx * 1.3, gy * 1.3, seed + 7) * 0.4
-        g = 0.75 + 0.5 * n
-        r, gg, b = world[W_ASPHALT] * g, world[W_ASPHALT + 1] * g, world[W_ASPHALT + 2] * g
-        paint = False
-        dc = yl - world[W_CROSS]
-        if abs(dc) < 2.0 and ax < road - 0.3:
-            paint = (gx + 100.0) % 1.0 < 0.5  # zebra crossing
-        elif ax < 0.07:
-            paint = (yl % 9.0) < 3.0  # dashed centre line
-        elif road - 0.35 < ax < road - 0.2:
-            paint = True  # edge line
-        if paint:
-            return 0.62, 0.62, 0.60
-        return r, gg, b
-    if ax < curb:
-        return 0.45, 0.44, 0.42
-    u, v = (ax - curb) / 0.6, yl / 0.6
-    iu, iv = math.floor(u), math.floor(v)
-    g = 0.85 + 0.3 * _hash01(int(iu), int(iv), seed + 3)
-    if u - iu < 0.04 or v - iv < 0.04:
-        g *= 0.7  # grout
-    g *= 0.9 + 0.2 * _value_noise(gx * 4.0, gy * 4.0, seed + 11)
-    return world[W_SIDEWALK] * g, world[W_SIDEWALK + 1] * g, world[W_SIDEWALK + 2] * g
-
-
-@njit(cache=True, fastmath=BG_FAST)
-def _facade(world, bld, b, fy, fz, light):
-    """Albedo (r, g, b) and emission (lit windows) of facade ``b`` at street coordinate ``fy``, height ``fz``."""
-    y0 = bld[b, B_Y0]
-    yh = world[W_YHALF]
-    u = fy + yh
-    u -= math.floor(u / (2.0 * yh)) * (2.0 * yh)
-    u -= yh + y0
-    fl = bld[b, B_FLOOR]
-    floor_i = math.floor(fz / fl)
-    zz = fz - floor_i * fl
-    sp = bld[b, B_WIN_SP]
-    col_i = math.floor(u / sp)
-    uu = u - col_i * sp
-    ww = bld[b, B_WIN_W]
-    margin = 0.5 * (sp - ww)
-    top = bld[b, B_HEIGHT]
-    seed = int(world[W_SEED]) + b * 131
-    grain = 0.9 + 0.2 * _value_noise(u * 3.0, fz * 3.0, seed)
-    r, g, bl = bld[b, B_RGB] * grain, bld[b, B_RGB + 1] * grain, bld[b, B_RGB + 2] * grain
-    emit = 0.0
-    if fz > top - 0.6:
-        r, g, bl = r * 0.75, g * 0.75, bl * 0.75  # cornice
-    elif floor_i == 0:
-        if 0.1 < zz < 2.7 and 0.25 < uu < sp - 0.25:
-            shop = _hash01(int(col_i), 17, seed)
-            r, g, bl = bld[b, B_WIN_RGB] * 0.8, bld[b, B_WIN_RGB + 1] * 0.8, bld[b, B_WIN_RGB + 2] * 0.8
-            if shop < 0.35:
-                r, g, bl = 0.12 + 0.2 * shop, 0.08, 0.06  # door
-    elif 0.9 < zz < 2.5 and margin < uu < sp - margin:
-        h = _hash01(int(col_i), int(floor_i), seed)
-        r = bld[b, B_WIN_RGB] * (0.7 + 0.6 * h)
-        g = bld[b, B_WIN_RGB + 1] * (0.7 + 0.6 * h)
-        bl = bld[b, B_WIN_RGB + 2] * (0.7 + 0.6 * h)
-        if h < bld[b, B_LIT]:
-            emit = light[L_GLOW]
-        if zz < 1.0 or zz > 2.4 or uu < margin + 0.06 or uu > sp - margin - 0.06:
-            r, g, bl = r * 0.5 + 0.1, g * 0.5 + 0.1, bl * 0.5 + 0.1  # frame
-    return r, g, bl, emit
-
-
-@njit(cache=True, fastmath=BG_FAST, inline="always")
-def _sky(light, dx, dy, dz):
-    n = math.sqrt(dx * dx + dy * dy + dz * dz)
-    s = math.sqrt(max(dz / n, 0.0))
-    cosg = (dx * light[L_SUN] + dy * light[L_SUN + 1] + dz * light[L_SUN + 2]) / n
-    glow = cosg**32 * 0.6 if cosg > 0.0 else 0.0
-    return (light[L_HORIZON] * (1.0 - s) + light[L_ZENITH] * s + light[L_SUN_RGB] * glow,
-            light[L_HORIZON + 1] * (1.0 - s) + light[L_ZENITH + 1] * s + light[L_SUN_RGB + 1] * glow,
-            light[L_HORIZON + 2] * (1.0 - s) + light[L_ZENITH + 2] * s + light[L_SUN_RGB + 2] * glow)
-
-
-@njit(cache=True, fastmath=BG_FAST, inline="always")
-def background_pixel(world, lut, bld, light, cam, rot, pos, xi, yi):
-    """Linear RGB radiance (r, g, b) of the static world seen through image pixel (xi, yi) from (rot, pos)."""
-    kind = int(world[W_KIND])
-    if kind == KIND_FLAT:
-        return world[W_LEVEL], world[W_LEVEL], world[W_LEVEL]
-    if kind == KIND_CHART:
-        # A uniform matte board filling the view: edges measured against it need no flat-field correction.
-        return world[W_ASPHALT], world[W_ASPHALT + 1], world[W_ASPHALT + 2]
-    cx = (xi + 0.5 - cam[C_CX]) / cam[C_FX]
-    cy = (yi + 0.5 - cam[C_CY]) / cam[C_FY]
-    dx = cx * rot[0, 0] + cy * rot[1, 0] + rot[2, 0]
-    dy = cx * rot[0, 1] + cy * rot[1, 1] + rot[2, 1]
-    dz = cx * rot[0, 2] + cy * rot[1, 2] + rot[2, 2]
-    xf = world[W_FACADE]
-    t_hit = 1e30
-    surf = 0  # 0 sky, 1 ground, 2 facade
-    side = 0
-    if dz < 0.0 and pos[2] > 0.0:
-        t = -pos[2] / dz
-        gx = pos[0] + t * dx
-        if abs(gx) < xf:
-            t_hit, surf = t, 1
-    if dx != 0.0:
-        side = 1 if dx > 0 else 0
-        t = ((xf if side == 1 else -xf) - pos[0]) / dx
-        if 0.0 < t < t_hit:
-            fy, fz = pos[1] + t * dy, pos[2] + t * dz
-            if fz >= 0.0:
-                b = building_at(world, lut, side, fy)
-                if b >= 0 and fz < bld[b, B_HEIGHT]:
-                    t_hit, surf = t, 2
-    emit = 0.0
-    if surf == 0:
-        return _sky(light, dx, dy, dz)
-    hx, hy, hz = pos[0] + t_hit * dx, pos[1] + t_hit * dy, pos[2] + t_hit * dz
-    if surf == 1:
-        ar, ag, ab = _ground_albedo(world, hx, hy)
-        ndotl = light[L_SUN + 2]
-        lit = 0.0 if _sun_blocked(world, lut, bld, hx, hy, 0.0, light, -1) else 1.0
-    else:
-        b = building_at(world, lut, side, hy)
-        ar, ag, ab, emit = _facade(world, bld, b, hy, hz, light)
-        ndotl = -light[L_SUN] if side == 1 else light[L_SUN]
-        lit = 0.0
-        if ndotl > 0.0 and not _sun_blocked(world, lut, bld, hx, hy, hz, light, side):
-            lit = 1.0
-    ndotl = max(ndotl, 0.0) * lit
-    dist = t_hit * math.sqrt(dx * dx + dy * dy + dz * dz)
-    f = math.exp(-dist / light[L_FOG])
-    g = 1.0 - f
-    return ((ar * (light[L_AMB] + light[L_SUN_RGB] * ndotl + emit)) * f + light[L_HAZE] * g,
-            (ag * (light[L_AMB + 1] + light[L_SUN_RGB + 1] * ndotl + emit)) * f + light[L_HAZE + 1] * g,
-            (ab * (light[L_AMB + 2] + light[L_SUN_RGB + 2] * ndotl + emit)) * f + light[L_HAZE + 2] * g)
-
-
-@njit(cache=True, fastmath=BG_FAST)
+@njit(cache=True, fastmath=BG_FAST, error_model="numpy")
 def background_line(world, lut, bld, light, cam, rot, pos, line, out_line):
-    """Render one render-space line of the background from pose (rot, pos) into ``out_line`` (n x 3)."""
+    """Render one render-space line of the background from pose (rot, pos) into ``out_line`` (n x 3).
+
+    One function with no array-taking callee: arrays handed to a callee (even an inlined one) are
+    reference-counted per call, which in this loop cost more than the shading (see ``rollcam.sim._shade``).
+    Every table value the loop needs is read into a local first.
+    """
+    n = out_line.shape[0]
+    kind = int(world[W_KIND])
+    if kind != KIND_STREET:
+        # A flat level, or a chart's uniform matte board filling the view (no flat-field correction needed).
+        v0 = world[W_LEVEL] if kind == KIND_FLAT else world[W_ASPHALT]
+        v1 = world[W_LEVEL] if kind == KIND_FLAT else world[W_ASPHALT + 1]
+        v2 = world[W_LEVEL] if kind == KIND_FLAT else world[W_ASPHALT + 2]
+        for a in range(n):
+            out_line[a, 0], out_line[a, 1], out_line[a, 2] = v0, v1, v2
+        return
     transposed = cam[C_TRANSPOSED] != 0.0
-    for a in range(out_line.shape[0]):
-        if transposed:
-            r, g, b = background_pixel(world, lut, bld, light, cam, rot, pos, line, a)
+    fx, fy_px, cx0, cy0 = cam[C_FX], cam[C_FY], cam[C_CX], cam[C_CY]
+    px, py, pz = pos[0], pos[1], pos[2]
+    xf, y_half, bin_m, n_bins = world[W_FACADE], world[W_YHALF], world[W_BIN], lut.shape[1]
+    seed = int(world[W_SEED])
+    road, curb, cross_y = world[W_ROAD], world[W_ROAD] + world[W_CURB], world[W_CROSS]
+    as_r, as_g, as_b = world[W_ASPHALT], world[W_ASPHALT + 1], world[W_ASPHALT + 2]
+    sw_r, sw_g, sw_b = world[W_SIDEWALK], world[W_SIDEWALK + 1], world[W_SIDEWALK + 2]
+    sun_x, sun_y, sun_z = light[L_SUN], light[L_SUN + 1], light[L_SUN + 2]
+    sun_r, sun_g, sun_b = light[L_SUN_RGB], light[L_SUN_RGB + 1], light[L_SUN_RGB + 2]
+    amb_r, amb_g, amb_b = light[L_AMB], light[L_AMB + 1], light[L_AMB + 2]
+    hz_r, hz_g, hz_b = light[L_HORIZON], light[L_HORIZON + 1], light[L_HORIZON + 2]
+    ze_r, ze_g, ze_b = light[L_ZENITH], light[L_ZENITH + 1], light[L_ZENITH + 2]
+    ha_r, ha_g, ha_b = light[L_HAZE], light[L_HAZE + 1], light[L_HAZE + 2]
+    inv_fog, glow = 1.0 / light[L_FOG], light[L_GLOW]
+    # Lattice cells of the four value noises (fine and coarse asphalt, sidewalk, facade), reused by neighbours.
+    c_fine, c_coarse, c_walk, c_wall = NO_CELL, NO_CELL, NO_CELL, NO_CELL
+    for a in range(n):
+        xi, yi = (line, a) if transposed else (a, line)
+        cx = (xi + 0.5 - cx0) / fx
+        cy = (yi + 0.5 - cy0) / fy_px
+        dx = cx * rot[0, 0] + cy * rot[1, 0] + rot[2, 0]
+        dy = cx * rot[0, 1] + cy * rot[1, 1] + rot[2, 1]
+        dz = cx * rot[0, 2] + cy * rot[1, 2] + rot[2, 2]
+        t_hit = 1e30
+        surf = 0  # 0 sky, 1 ground, 2 facade
+        side = 0
+        b_hit = 0
+        if dz < 0.0 and pz > 0.0:
+            t = -pz / dz
+            if abs(px + t * dx) < xf:
+                t_hit, surf = t, 1
+        if dx != 0.0:
+            side = 1 if dx > 0 else 0
+            t = ((xf if side == 1 else -xf) - px) / dx
+            if 0.0 < t < t_hit:
+                fz = pz + t * dz
+                if fz >= 0.0:
+                    i = street_bin(py + t * dy, y_half, bin_m)
+                    b = lut[side, i] if 0 <= i < n_bins else -1
+                    if b >= 0 and fz < bld[b, B_HEIGHT]:
+                        t_hit, surf, b_hit = t, 2, b
+        if surf == 0:
+            r, g, bl = sky(dx, dy, dz, sun_x, sun_y, sun_z, hz_r, hz_g, hz_b, ze_r, ze_g, ze_b, sun_r, sun_g, sun_b)
+            out_line[a, 0], out_line[a, 1], out_line[a, 2] = r, g, bl
+            continue
+        hx, hy, hz = px + t_hit * dx, py + t_hit * dy, pz + t_hit * dz
+        emit = 0.0
+        if surf == 1:
+            ax = abs(hx)
+            if ax < road:
+                n_fine, c_fine = value_noise(hx * 9.0, hy * 9.0, seed, c_fine)
+                n_coarse, c_coarse = value_noise(hx * 1.3, hy * 1.3, seed + 7, c_coarse)
+                ar, ag, ab = asphalt_albedo(hx, hy, n_fine * 0.6 + n_coarse * 0.4, road, cross_y, as_r, as_g, as_b)
+            elif ax < curb:
+                ar, ag, ab = CURB_RGB
+            else:
+                n_walk, c_walk = value_noise(hx * 4.0, hy * 4.0, seed + 11, c_walk)
+                ar, ag, ab = sidewalk_albedo(hx, hy, n_walk, seed, curb, sw_r, sw_g, sw_b)
+            ndotl = sun_z
+            skip = -1
         else:
-            r, g, b = background_pixel(world, lut, bld, light, cam, rot, pos, a, line)
-        out_line[a, 0], out_line[a, 1], out_line[a, 2] = r, g, b
+            u = hy + y_half
+            u -= math.floor(u / (2.0 * y_half)) * (2.0 * y_half)
+            u -= y_half + bld[b_hit, B_Y0]
+            n_wall, c_wall = value_noise(u * 3.0, hz * 3.0, seed + b_hit * 131, c_wall)
+            ar, ag, ab, emit = facade_albedo(
+                u, hz, n_wall, seed + b_hit * 131, bld[b_hit, B_FLOOR], bld[b_hit, B_WIN_SP], bld[b_hit, B_WIN_W],
+                bld[b_hit, B_HEIGHT], bld[b_hit, B_RGB], bld[b_hit, B_RGB + 1], bld[b_hit, B_RGB + 2],
+                bld[b_hit, B_WIN_RGB], bld[b_hit, B_WIN_RGB + 1], bld[b_hit, B_WIN_RGB + 2], bld[b_hit, B_LIT], glow)
+            ndotl = -sun_x if side == 1 else sun_x
+            skip = side
+        lit = 0.0
+        if ndotl > 0.0:
+            state, s_side, s_y, s_z = sun_probe(hx, hy, hz, sun_x, sun_y, sun_z, xf, skip)
+            lit = 1.0
+            if state == 1:
+                lit = 0.0
+            elif state == 2:
+                i = street_bin(s_y, y_half, bin_m)
+                b = lut[s_side, i] if 0 <= i < n_bins else -1
+                if b >= 0 and s_z < bld[b, B_HEIGHT]:
+                    lit = 0.0
+        ndotl = max(ndotl, 0.0) * lit
+        dist = t_hit * math.sqrt(dx * dx + dy * dy + dz * dz)
+        f = fog_transmittance(dist * inv_fog)
+        g = 1.0 - f
+        out_line[a, 0] = (ar * (amb_r + sun_r * ndotl + emit)) * f + ha_r * g
+        out_line[a, 1] = (ag * (amb_g + sun_g * ndotl + emit)) * f + ha_g * g
+        out_line[a, 2] = (ab * (amb_b + sun_b * ndotl + emit)) * f + ha_b * g
 
 
 @njit(cache=True, parallel=True)

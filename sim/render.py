@@ -48,14 +48,19 @@ class Renderer:
     a frame of lines (8-bit, optionally linear), its ground truth only, linear radiance of chosen lines into a
     buffer (or accumulated, for exposure integration), and the brute-force reference. The sensor path's
     planning reads the scene through ``poses``, ``actor_bounds`` and ``actor_image_speeds``.
+    ``threads`` caps the numba threads its large kernels use (None: numba's setting; 1: the calling thread
+    only); small ones always run on the calling thread.
     """
 
-    def __init__(self, scene: Scene, camera: Camera | int | str = 0, *, gain: float = 1.0) -> None:
+    def __init__(self, scene: Scene, camera: Camera | int | str = 0, *, gain: float = 1.0,
+                 threads: int | None = None) -> None:
         self.scene = scene
         self.camera = camera if isinstance(camera, Camera) else scene.camera(camera)
         if self.camera.width <= 0 or self.camera.height <= 0:
             raise ConfigError(f"camera size must be positive, got {self.camera.width}x{self.camera.height}")
-        self._painter = Painter(scene, self.camera, float(gain), _SRGB)
+        if threads is not None and (not isinstance(threads, int) or threads < 1):
+            raise ConfigError(f"threads must be an integer >= 1 or None, got {threads!r}")
+        self._painter = Painter(scene, self.camera, float(gain), _SRGB, threads)
         self._composite = Compositor(self._painter)
         self.camera_moving = self.camera.ego.moving
         tables = self._painter.tables

@@ -9,12 +9,13 @@ import json
 import numpy as np
 import pytest
 from rollcam.benchmarks import bench, render_cases
+from rollcam.benchmarks.render_report import format_table
 from rollcam.benchmarks.studies import STUDIES, missed
 from rollcam.common.errors import ConfigError
 from rollcam.host.cli import main
 
-ROW_KEYS = {"method", "scene", "ms_per_frame", "mean_abs_err_dn", "max_abs_err_dn", "max_box_err_px", "x_memcpy",
-            "speedup_vs_reference", "kind", "n_timed", "note"}
+ROW_KEYS = {"method", "scene", "ms_per_frame", "cpu_ms_per_frame", "mean_abs_err_dn", "max_abs_err_dn",
+            "max_box_err_px", "x_memcpy", "x_memcpy_cold", "speedup_vs_reference", "kind", "n_timed", "note"}
 
 
 @pytest.fixture(scope="module")
@@ -22,7 +23,8 @@ def tiny(tmp_path_factory: pytest.TempPathFactory) -> tuple[dict, object]:
     out = tmp_path_factory.mktemp("bench")
     doc = bench.run_bench(width=192, height=108, quick=True, out_dir=out, scenes=("fast_ego",),
                           bands=(1, 2, 4, 8, 16, 64), footage_fps=(240, bench.LINE_RATE), footage_scenes=None,
-                          full_reference=True, n_frames=2, compose_repeats=1, memcpy_repeats=10)
+                          full_reference=True, n_frames=2, compose_repeats=1, memcpy_repeats=10,
+                          scaling_sizes=((64, 36), (128, 72)), scaling_walkers=(0, 3), scaling_frames=1)
     return doc, out
 
 
@@ -40,6 +42,18 @@ def test_json_document_has_rows_floor_targets_machine(tiny) -> None:
         assert {"value", "limit", "pass", "per_scene"} <= set(target)
     on_disk = json.loads((out / "bench.json").read_text())
     assert on_disk["rows"] == doc["rows"]
+
+
+def test_scaling_table_times_every_camera_size_and_walker_count_and_fits_them(tiny) -> None:
+    doc, _ = tiny
+    rows = doc["scaling"]["rows"]
+    assert {(r["camera"], r["size"], r["walkers"]) for r in rows} == {
+        (c, s, n) for c in ("static", "moving") for s in ("64x36", "128x72") for n in (0, 3)}
+    assert all(r["ms_per_frame"] > 0 for r in rows)
+    fits = doc["scaling"]["fits"]
+    assert set(fits["vs_pixels"]) == {f"{c}, {n} walkers" for c in ("static", "moving") for n in (0, 3)}
+    assert all(f is not None and "b" in f for f in fits["vs_pixels"].values())
+    assert "scaling (exact RS" in format_table(doc)
 
 
 def test_exact_and_line_rate_footage_equal_the_reference(tiny) -> None:

@@ -103,7 +103,10 @@ def test_every_module_with_cached_kernels_is_guarded():
                     if name.startswith("rollcam.") and mod is not None and _jitcache.kernels(mod)}
     assert "rollcam.sim._kernels" in with_kernels
     assert with_kernels <= _jitcache.guarded(), with_kernels - _jitcache.guarded()
-    # The line kernel compiles in the actors, which compile in the walker and the world.
-    assert {p.name for p in _jitcache.compiled_in("rollcam.sim._kernels")} == {"_actors.py", "_body.py", "_world.py"}
-    assert {p.name for p in _jitcache.compiled_in("rollcam.sim._actors")} == {"_body.py", "_world.py"}
+    # The line kernel compiles in the actors, which compile in the walker and the world, which compiles in
+    # the materials.
+    assert {p.name for p in _jitcache.compiled_in("rollcam.sim._kernels")} == {"_actors.py", "_body.py", "_world.py",
+                                                                               "_shade.py"}
+    assert {p.name for p in _jitcache.compiled_in("rollcam.sim._actors")} == {"_body.py", "_world.py", "_shade.py"}
+    assert {p.name for p in _jitcache.compiled_in("rollcam.sim._world")} == {"_shade.py"}
     assert _jitcache.compiled_in("rollcam.sim._body") == frozenset()

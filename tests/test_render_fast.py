@@ -1,0 +1,83 @@
+"""The renderer's fast paths against their references: every ego-motion preset's exact RS frame against the
+brute-force renders, serial against threaded kernels, and the background's exact shortcuts (noise-cell reuse,
+the fog table) against the plain functions."""
+
+from __future__ import annotations
+
+import math
+
+import numba
+import numpy as np
+import pytest
+from rollcam.sim import _shade
+from rollcam.sim.render import Renderer
+from rollcam.sim.scenegen import ego_preset, make_street_scene
+
+
+def _rs_times(renderer: Renderer, t0_ns: int, line_ns: int = 31_000) -> np.ndarray:
+    return t0_ns + line_ns * np.arange(renderer.render_shape()[0], dtype=np.int64)
+
+
+@pytest.mark.parametrize("ego", ["none", "pan", "walk", "vehicle", "drone"])
+def test_exact_rs_equals_brute_force_for_every_ego_preset(ego: str) -> None:
+    scene = make_street_scene(3, speed="fast", width=96, height=54, n_pedestrians=20, ego=ego_preset(ego))
+    r = Renderer(scene)
+    times = _rs_times(r, 1_234_567_891)
+    fast = r.render_lines(times)
+    ref = r.reference_lines(times)
+    assert np.abs(fast.image.astype(int) - ref.image.astype(int)).max() <= 1
+    assert fast.truth.boxes() == ref.truth.boxes()
+
+
+@pytest.mark.parametrize("ego", ["none", "drone"])
+def test_threaded_kernels_paint_what_the_serial_ones_do(ego: str) -> None:
+    scene = make_street_scene(5, speed="normal", width=640, height=360, n_pedestrians=20, ego=ego_preset(ego))
+    times = _rs_times(Renderer(scene), 2_000_000_000)
+    serial = Renderer(scene, threads=1).render_lines(times, linear=True)
+    threaded = Renderer(scene, threads=max(numba.config.NUMBA_NUM_THREADS, 2)).render_lines(times, linear=True)
+    assert np.array_equal(serial.image, threaded.image)
+    assert np.array_equal(serial.linear, threaded.linear)
+
+
+def test_renderer_threads_must_be_a_positive_count() -> None:
+    scene = make_street_scene(0, width=32, height=18, n_pedestrians=0)
+    with pytest.raises(ValueError, match="threads must be"):
+        Renderer(scene, threads=0)
+
+
+@numba.njit
+def _noise_both_ways(xs, ys, seed):
+    """Value noise along a path with the cell reused between points, and afresh at every point."""
+    reused, fresh = np.empty(xs.size), np.empty(xs.size)
+    cell = _shade.NO_CELL
+    for i in range(xs.size):
+        reused[i], cell = _shade.value_noise(xs[i], ys[i], seed, cell)
+        fresh[i], _ = _shade.value_noise(xs[i], ys[i], seed, _shade.NO_CELL)
+    return reused, fresh
+
+
+def test_noise_cell_reuse_is_exact() -> None:
+    rng = np.random.default_rng(0)
+    # A slow path (long runs in one cell), a fast one (a new cell nearly every point) and negative coordinates.
+    xs = np.concatenate([np.linspace(-3.0, 5.0, 4000), rng.uniform(-50, 50, 500)])
+    ys = np.concatenate([np.linspace(7.0, -2.0, 4000), rng.uniform(-50, 50, 500)])
+    for seed in (0, 11, 2**31 - 1):
+        reused, fresh = _noise_both_ways(xs, ys, seed)
+        assert np.array_equal(reused, fresh)
+        assert fresh.min() >= 0.0 and fresh.max() < 1.0
+
+
+@numba.njit
+def _fog(xs):
+    out = np.empty(xs.size)
+    for i in range(xs.size):
+        out[i] = _shade.fog_transmittance(xs[i])
+    return out
+
+
+def test_fog_table_matches_exp() -> None:
+    xs = np.concatenate([np.linspace(0.0, 70.0, 200_001), [63.999, 64.0, 1e6]])
+    got = _fog(xs)
+    want = np.exp(-xs)
+    assert np.all(np.abs(got - want) <= 1e-10 * want + 1e-27)
+    assert got[-1] == 0.0 and math.isclose(got[0], 1.0)
