@@ -260,8 +260,9 @@ class USBIPServer(Closeable):
             _version, code, _status = P.read_op_header(conn.recv)
             if code == P.OP_REQ_DEVLIST:
                 conn.phase = "devlist"
-                conn.sock.sendall(P.rep_devlist([e.info for e in self.exports.values()]))
+                # Counted before the reply goes out: a client that has its answer sees the count.
                 self.stats.devlists += 1
+                conn.sock.sendall(P.rep_devlist([e.info for e in self.exports.values()]))
             elif code == P.OP_REQ_IMPORT:
                 busid = P.read_busid(conn.recv)
                 conn.phase = "import"
