@@ -134,7 +134,8 @@ class LiveView(Closeable):
     async def _gate(self, request: web.Request, handler: Callable[..., Any]) -> web.StreamResponse:
         """The page for a browser asking ``/``; the token for the view's routes when one is needed."""
         page = request.path == "/" and request.method == "GET" and "text/html" in request.headers.get("Accept", "")
-        if not (page or request.path == "/view" or request.path.startswith("/view/")):
+        public = request.path.removeprefix("/view/") in WEB_FILES  # the script and style are no secret
+        if public or not (page or request.path == "/view" or request.path.startswith("/view/")):
             return await handler(request)
         if self.token is not None and not hmac.compare_digest(request.query.get("token", ""), self.token):
             self.stats.refused_auth += 1
