@@ -65,7 +65,7 @@ def start_http(args: argparse.Namespace, camera: Any, pump: Any) -> Running | No
         stack.close()
         raise OSError(f"cannot serve HTTP on {host}:{port}: {exc.strerror or exc}") from None
     stack.callback(server.close)
-    info = {"sensor": camera.sensor.name, "uri": f"rollcam emulate {camera.sensor.name}"}
+    info = {"sensor": camera.sensor.name, "uri": "rollcam emulate"}
     view = LiveView(server, CameraControls(camera), annotate=annotate, info=lambda: info)
     stack.callback(view.close)
     try:

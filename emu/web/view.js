@@ -196,12 +196,12 @@ function onText(msg) {
 function showState(state) {
   view.state = state;
   const src = state.source || {};
-  $("source").textContent = [src.sensor, src.uri].filter(Boolean).join(" ") || "live view";
+  $("source").textContent = [src.sensor, src.uri].filter(Boolean).join(" · ") || "live view";
   $("ov-det").disabled = !state.detector;
   const form = $("controls");
   for (const [name, c] of Object.entries(state.controls)) {
     let input = $(`ctl-${name}`);
-    if (!input) input = form.appendChild(controlRow(name, c));
+    if (!input) { form.appendChild(controlRow(name, c)); input = $(`ctl-${name}`); }
     if (document.activeElement === input) continue; // do not overwrite what a person is typing
     if (c.kind === "bool") input.checked = c.value === "on"; else input.value = c.value;
   }
