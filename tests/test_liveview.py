@@ -186,14 +186,19 @@ def test_a_stalled_page_holds_up_neither_the_device_nor_another_page(view):
             assert time.monotonic() < end, srv.status()["clients"]
             time.sleep(0.1)
 
-        async def run() -> list[dict]:  # a live page beside it gets every frame, and the device makes them
-            async with aiohttp.ClientSession() as s, s.ws_connect(local(srv) + "/view/ws") as ws:
-                return await frames(ws, 40)
+        async def run() -> list[dict]:  # a live page beside it keeps getting frames (if the stalled one held
+            async with aiohttp.ClientSession() as s, s.ws_connect(local(srv) + "/view/ws") as ws:  # it, none)
+                return await asyncio.wait_for(frames(ws, 40), 60)
 
-        skipped = srv.camera.stats.skipped
+        key, stuck = max(srv.status()["clients"].items(), key=lambda kc: kc[1]["dropped"])
         got = asyncio.run(run())
-        assert got[-1]["seq"] - got[0]["seq"] < 50
-        assert srv.camera.stats.skipped - skipped <= 3
+        assert len(got) == 40 and got[-1]["seq"] > got[0]["seq"]
+        after = srv.status()
+        if key in after["clients"]:  # skipped, never waited for
+            now = after["clients"][key]
+            assert now["dropped"] > stuck["dropped"] and now["sent"] == stuck["sent"]
+        else:  # or, on a slow machine, closed for stalling past the send timeout
+            assert after["send_timeouts"] >= 1
     finally:
         stalled.close()
 
