@@ -246,6 +246,24 @@ def _imu(args: argparse.Namespace, progress: Any) -> tuple[Doc, str]:
     return doc, format_report(doc)
 
 
+# ----------------------------------------------------------------------------------------------- view
+def _view_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--seconds", type=value_type(positive_float, "a number of seconds > 0"), default=10.0,
+                   help="length of each phase (default: %(default)s)")
+    p.add_argument("--size", type=value_type(parse_size), default=(1920, 1080), metavar="WxH",
+                   help="frame size (default: 1920x1080)")
+    p.add_argument("--no-browser", action="store_true", help="a Python WebSocket client instead of Chromium")
+
+
+def _view(args: argparse.Namespace, progress: Any) -> tuple[Doc, str]:
+    from .view import format_report, run_view_bench
+
+    doc = run_view_bench(args.seconds, args.size, browser=False if args.no_browser else None, out_dir=args.out,
+                         say=progress.status)
+    write_json(args.out, "view_bench.json", doc)
+    return doc, format_report(doc)
+
+
 STUDIES: dict[str, Study] = {s.name: s for s in (
     Study("render", "speed versus error of the ways to make an RS frame (bench.json, bench.png)",
           _render_arguments, _render, _render_targets),
@@ -264,5 +282,7 @@ STUDIES: dict[str, Study] = {s.name: s for s in (
           _dataset_arguments, _dataset, _doc_targets),
     Study("imu", "IMU noise (Allan fit against the config) and gyro RS correction (error vs GS, time per frame)",
           _imu_arguments, _imu, _doc_targets),
+    Study("view", "the live view at 1080p30: the device's frame rate with a page watching, the page's update rate, "
+          "cost per frame", _view_arguments, _view, _doc_targets),
 )}
 """Study name -> study, in the order ``rollcam bench --help`` lists them."""

@@ -35,30 +35,51 @@ class Running:
     uses_pump: bool = True
 
 
-def _warn_if_wide(name: str, host: str) -> None:
+def _warn_if_wide(name: str, host: str, what: str = "it has no authentication") -> None:
     if host not in LOOPBACK:
-        print(f"rollcam: warning: {name} bound to {host!r}, reachable from other machines; it has no "
-              "authentication", file=sys.stderr)
+        print(f"rollcam: warning: {name} bound to {host!r}, reachable from other machines; {what}", file=sys.stderr)
 
 
 def start_http(args: argparse.Namespace, camera: Any, pump: Any) -> Running | None:
-    """The MJPEG-over-HTTP server, when ``--http`` is given (or no transport at all)."""
+    """The MJPEG-over-HTTP server and its live page, when ``--http`` is given (or no transport at all)."""
     if args.http is None:
         return None
     from rollcam.emu.http_mjpeg import MjpegServer
+    from rollcam.emu.http_view import LiveView
+    from rollcam.emu.view_controls import CameraControls
 
     host, port = args.http
-    _warn_if_wide("HTTP", host)
+    _warn_if_wide("HTTP", host, "the MJPEG stream has no authentication; the live view needs the token below")
+    stack = contextlib.ExitStack()  # closed last-in first: the view, then the server, then the detector
+    annotate = None
+    if getattr(args, "detector", None):
+        from .detectors import load_detector
+        from .view import detector_annotator
+
+        detector = load_detector(args.detector)
+        stack.callback(detector.close)
+        annotate = detector_annotator(detector)
     try:
         server = MjpegServer(camera, host, port, pump=pump, quality=args.quality)
     except OSError as exc:
+        stack.close()
         raise OSError(f"cannot serve HTTP on {host}:{port}: {exc.strerror or exc}") from None
-    server.start()
+    stack.callback(server.close)
+    info = {"sensor": camera.sensor.name, "uri": "rollcam emulate"}
+    view = LiveView(server, CameraControls(camera), annotate=annotate, info=lambda: info)
+    stack.callback(view.close)
+    try:
+        server.start()
+    except BaseException:
+        stack.close()
+        raise
     url = server.url
     base = url.rsplit("/", 1)[0]
-    return Running("http", server, [f"MJPEG stream:  {url}   (cv2.VideoCapture({url!r}))",
-                                    f"snapshot:      {base}/snapshot.jpg", f"status:        {base}/status.json"],
-                   {"url": url})
+    auth = "   (token required: bound beyond loopback)" if view.token else ""
+    return Running("http", stack, [f"live view:     {view.url}{auth}",
+                                   f"MJPEG stream:  {url}   (cv2.VideoCapture({url!r}))",
+                                   f"snapshot:      {base}/snapshot.jpg", f"status:        {base}/status.json"],
+                   {"url": url, "view": view.url, "token": view.token})
 
 
 def start_serial(args: argparse.Namespace, camera: Any, pump: Any) -> Running | None:

@@ -170,7 +170,7 @@ def test_list_json():
 def test_bench_lists_one_subcommand_per_study_each_with_json_and_check(capsys):
     from rollcam.benchmarks.studies import STUDIES
 
-    assert list(STUDIES) == ["render", "hog", "detect", "ptc", "sensor", "uvc", "soak", "dataset", "imu"]
+    assert list(STUDIES) == ["render", "hog", "detect", "ptc", "sensor", "uvc", "soak", "dataset", "imu", "view"]
     with pytest.raises(SystemExit) as exc:
         main(["bench", "--help"])
     assert exc.value.code == 0
@@ -186,7 +186,7 @@ def test_bench_lists_one_subcommand_per_study_each_with_json_and_check(capsys):
 def test_every_command_is_a_module_registered_the_same_way():
     from rollcam.host.commands import COMMANDS
 
-    assert set(COMMANDS) >= {"demo", "list", "capture", "detect", "emulate", "dataset", "eval", "bench"}
+    assert set(COMMANDS) >= {"demo", "list", "capture", "detect", "emulate", "view", "dataset", "eval", "bench"}
     for module_name in COMMANDS.values():
         module = importlib.import_module(f"rollcam.host.commands.{module_name}")
         assert callable(module.add_parser) and callable(module.run), module_name

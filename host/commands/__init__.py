@@ -23,6 +23,7 @@ COMMANDS: dict[str, str] = {
     "capture": "capture",
     "detect": "detect",
     "emulate": "emulate",
+    "view": "view",
     "dataset": "dataset",
     "eval": "eval",
     "train": "train",

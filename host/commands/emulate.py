@@ -48,9 +48,12 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
     _camera_flags(p)
     g = p.add_argument_group("transports")
     g.add_argument("--http", type=_HOST_PORT, default=None, metavar="HOST:PORT",
-                   help=f"serve MJPEG over HTTP (default when no transport is given: {DEFAULT_HTTP})")
+                   help="serve MJPEG over HTTP and the live view at / (default when no transport is given: "
+                        f"{DEFAULT_HTTP}; beyond loopback the view needs the token printed at start)")
     g.add_argument("--quality", type=value_type(jpeg_quality), default=JPEG_QUALITY, metavar="Q",
                    help="JPEG quality of the HTTP stream, 1..100 (default: %(default)s)")
+    g.add_argument("--detector", default=None, metavar="SPEC",
+                   help="draw this detector's boxes on the live view (hog, ssdlite, onnx:PATH; needs --http)")
     g.add_argument("--serial", action="store_true", help="serve the control protocol on a pseudo-terminal")
     g.add_argument("--usbip", type=_HOST_PORT, default=None, metavar="HOST:PORT",
                    help="serve the camera as a UVC device over USB/IP (the usbip protocol port is 3240)")
