@@ -108,27 +108,13 @@ class FaultPlan:
         kw: dict[str, Any] = {}
         rates: dict[str, float] = {}
         requests: list[RequestFault] = []
-        for key, value in seen.items():
-            try:
-                if key in RATES:
-                    rates[key] = _percent(_needs(value))
-                elif key == "seed":
-                    kw["seed"] = _int(_needs(value), 0, _M64)
-                elif key == "delay_ms":
-                    kw["delay_ms"] = _int(_needs(value), 0, MAX_DELAY_MS)
-                elif key == "disconnect":
-                    kw["disconnect"] = _int(_needs(value), 0, U32)
-                elif key == "seqwrap":
-                    kw["seqwrap"] = DEFAULT_SEQWRAP if value is None else _int(value, 1, U32 - 1)
-                elif key == "tswrap":
-                    kw["tswrap_s"] = DEFAULT_TSWRAP_S if value is None else _int(value, 1, 1 << 32)
-                elif key in REQUESTS:
-                    requests.append(_request(key, value))
-                else:
-                    raise ValueError(f"unknown fault; known: {', '.join(_known())}")
-            except ValueError as exc:
-                shown = key if value is None else f"{key}={value}"
-                raise ConfigError(f"{owner}: fault {shown!r} in {text!r}: {exc}") from None
+        key, value = "", None
+        try:
+            for key, value in seen.items():
+                _take(key, value, kw, rates, requests)
+        except ValueError as exc:
+            shown = key if value is None else f"{key}={value}"
+            raise ConfigError(f"{owner}: fault {shown!r} in {text!r}: {exc}") from None
         return cls(rates=tuple((k, rates[k]) for k in RATES if k in rates), requests=tuple(requests), **kw)
 
     @classmethod
@@ -254,6 +240,27 @@ class FaultInjector:
             return False
         self.stats.disconnects += 1
         return True
+
+
+def _take(key: str, value: str | None, kw: dict[str, Any], rates: dict[str, float],
+          requests: list[RequestFault]) -> None:
+    """Parse one ``key[=value]`` of a plan into the constructor's arguments (ValueError saying why not)."""
+    if key in RATES:
+        rates[key] = _percent(_needs(value))
+    elif key == "seed":
+        kw["seed"] = _int(_needs(value), 0, _M64)
+    elif key == "delay_ms":
+        kw["delay_ms"] = _int(_needs(value), 0, MAX_DELAY_MS)
+    elif key == "disconnect":
+        kw["disconnect"] = _int(_needs(value), 0, U32)
+    elif key == "seqwrap":
+        kw["seqwrap"] = DEFAULT_SEQWRAP if value is None else _int(value, 1, U32 - 1)
+    elif key == "tswrap":
+        kw["tswrap_s"] = DEFAULT_TSWRAP_S if value is None else _int(value, 1, 1 << 32)
+    elif key in REQUESTS:
+        requests.append(_request(key, value))
+    else:
+        raise ValueError(f"unknown fault; known: {', '.join(_known())}")
 
 
 def _needs(value: str | None) -> str:

@@ -167,7 +167,8 @@ class EmuDriver:
         if self.ts0 is None:
             self.ts0 = t_ns
         self.queue.complete(slot, bytesused=size, sequence=self.faults.sequence(frame.sequence - self.seq0),
-                            timestamp_ns=self.faults.timestamp_ns(t_ns, self.ts0), error=inj.hit("error", frame.sequence))
+                            timestamp_ns=self.faults.timestamp_ns(t_ns, self.ts0),
+                            error=inj.hit("error", frame.sequence))
         self.stats.delivered += 1
 
     def produce_now(self) -> bool:
