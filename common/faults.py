@@ -154,10 +154,12 @@ class FaultPlan:
         """The percentage given for ``kind`` (0 when not given)."""
         return next((p for k, p in self.rates if k == kind), 0.0)
 
-    def fires(self, kind: str, index: int) -> bool:
-        """Whether fault ``kind`` hits event ``index``: a pure function of (seed, kind, index)."""
+    def fires(self, kind: str, index: int, events: str = "") -> bool:
+        """Whether fault ``kind`` hits event ``index``: a pure function of (seed, kind, index). ``events`` names
+        a second series of events the same kind applies to (a USB camera's control requests beside its
+        payloads), drawn independently."""
         pct = self.rate(kind)
-        return pct > 0 and draw(self.seed, kind, index) < pct / 100.0 * 2.0**64
+        return pct > 0 and draw(self.seed, f"{kind}/{events}" if events else kind, index) < pct / 100.0 * 2.0**64
 
     def pick(self, kind: str, index: int, n: int) -> int:
         """A reproducible choice in ``0..n-1`` for event ``index`` of ``kind`` (where to cut, which bit to flip)."""
@@ -217,9 +219,9 @@ class FaultInjector:
     def __bool__(self) -> bool:
         return bool(self.plan)
 
-    def hit(self, kind: str, index: int) -> bool:
-        """``plan.fires(kind, index)``, counted when True."""
-        if not self.plan.fires(kind, index):
+    def hit(self, kind: str, index: int, events: str = "") -> bool:
+        """``plan.fires(kind, index, events)``, counted when True."""
+        if not self.plan.fires(kind, index, events):
             return False
         counter = _COUNTER[kind]
         setattr(self.stats, counter, getattr(self.stats, counter) + 1)

@@ -13,7 +13,9 @@ streams, decided by the part's frame sequence number (so a plan hits the same fr
 - ``seqwrap`` / ``tswrap``: ``X-Sequence`` counts in 32 bits from near its wrap, ``X-Timestamp-Ns`` in
   signed 64 bits from near its wrap.
 
-Snapshots (``/snapshot.jpg``) are not faulted. Everything here runs on the server's event loop.
+After a cut or a disconnect no part goes out for ``REPLUG_S`` (the camera is away), so the final part is the
+last every stream gets. Snapshots (``/snapshot.jpg``) are not faulted. Everything here runs on the server's
+event loop.
 """
 
 from __future__ import annotations
@@ -24,6 +26,8 @@ from collections.abc import Callable
 from typing import Any
 
 from rollcam.common.faults import FaultInjector
+
+REPLUG_S = 0.5
 
 
 class StreamFaults:
@@ -60,6 +64,8 @@ class StreamFaults:
             self._held_until = self.loop.time() + plan.delay_ms / 1000
             self.loop.call_later(plan.delay_ms / 1000, self.offer, part)
             return
+        if part.final:
+            self._held_until = self.loop.time() + REPLUG_S
         self.offer(part)
 
     def _wrapped(self, part: Any) -> Any:

@@ -132,7 +132,7 @@ class UVCFunction(Closeable):
                         raise Stall(f"request {setup.bRequest:#04x} with direction bit {setup.is_in}",
                                     C.ERR_INVALID_REQUEST)
                     self._class_requests += 1
-                    if self.injector.hit("stall", self._class_requests - 1):
+                    if self.injector.hit("stall", self._class_requests - 1, "control"):
                         raise Stall(f"injected STALL of class request {setup.bRequest:#04x}", C.ERR_UNKNOWN)
                     out = self.controls.request(setup.bRequest, setup.wIndex & 0xFF, setup.wIndex >> 8,
                                                 setup.wValue >> 8, setup.wLength, bytes(data))
