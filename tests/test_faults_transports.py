@@ -220,7 +220,7 @@ def test_usbip_bulk_stall_and_disconnect(usbip_server):
     assert stalls == fn.fault_stats.stalls > 0 and fn.fault_stats.disconnects == 1
     assert sum(f.complete for f in frames) >= 1
     deadline = time.monotonic() + 5
-    while fn.disconnected and time.monotonic() < deadline:  # the server resets the device once the peer is gone
+    while fn.plug.disconnected and time.monotonic() < deadline:  # the server resets the device once the peer is gone
         time.sleep(0.02)
     assert [d.busid for d in list_devices(*usbip_server.address)] == ["1-1", "1-2"]
     with ImportedDevice(*usbip_server.address, "1-2") as again:  # plugged back in: it imports and answers

@@ -11,7 +11,7 @@ selected alternate setting's endpoint (bInterval; a packet carries up to mult x 
 packets arrive no faster than a high-speed bus carries them (8,000 a second at bInterval 1).
 A fault plan (``faults``: ``rollcam.common.faults``) stalls class requests, drops, flags and damages what
 the stream sends (``stream.py``, ``faults.py``) and unplugs the device: from then on every request fails
-with ``Disconnected`` until the host enumerates it again (``reset()``; ``generation`` counts the plug-ins).
+with ``Disconnected`` until the host enumerates it again (``reset()``; ``plug.generation`` counts plug-ins).
 """
 
 from __future__ import annotations
@@ -36,7 +36,7 @@ from .descriptors import (
     split_descriptors,
     string_descriptor,
 )
-from .faults import Disconnected
+from .faults import Plug
 from .producer import FrameProducer
 from .requests import Stall, VideoControls
 from .stream import BusSchedule, StreamEndpoint, service_interval_ns
@@ -80,8 +80,7 @@ class UVCFunction(Closeable):
         self.producer = producer
         self.injector = FaultInjector(FaultPlan.of(faults))
         self.fault_stats = self.injector.stats
-        self.disconnected = False
-        self.generation = 0  # plug-ins after an injected disconnect (a host handle of an older one is dead)
+        self.plug = Plug()  # unplugged by an injected disconnect until the host enumerates the device again
         self._class_requests = 0
         self.realtime = realtime
         self.transfer = transfer
@@ -119,7 +118,7 @@ class UVCFunction(Closeable):
     def control(self, setup: Setup, data: bytes = b"") -> bytes:
         """Answer one control transfer: IN returns up to wLength bytes, OUT returns b''; refusals raise Stall."""
         with self._lock:
-            self._check_connected()
+            self.plug.check()
             try:
                 kind = setup.bmRequestType & C.TYPE_MASK
                 if kind == C.TYPE_STANDARD:
@@ -247,18 +246,10 @@ class UVCFunction(Closeable):
             self._stop_stream()
             self.configuration = 0
             self.alt = {0: 0, 1: 0}
-            if self.disconnected:
-                self.disconnected = False
-                self.generation += 1
+            self.plug.replug()
 
-    def _check_connected(self) -> None:
-        if self.disconnected:
-            raise Disconnected("the device was unplugged (injected disconnect); enumerate it again")
-
-    def _unplugged(self) -> None:
-        """An injected disconnect fired: the stream stops and every request fails until ``reset()``."""
+    def _halt_stream(self) -> None:
         with self._lock:
-            self.disconnected = True
             self._stop_stream()
 
     def _close(self) -> None:
@@ -268,22 +259,14 @@ class UVCFunction(Closeable):
     def read(self, endpoint: int, max_len: int, timeout_ms: int | None = None) -> bytes:
         """One payload from the streaming endpoint (see ``transfers.StreamTransfers.read``): b'' when an
         isochronous stream has nothing due; a bulk read waits up to ``timeout_ms`` (None or 0: forever)."""
-        self._check_connected()
-        try:
+        with self.plug.watch(self._halt_stream):
             return self._transfers.read(endpoint, max_len, timeout_ms)
-        except Disconnected:
-            self._unplugged()
-            raise
 
     def read_packets(self, endpoint: int, n_packets: int, max_len: int) -> tuple[bytes, list[int], list[int]]:
         """An isochronous URB's worth of packets: their data back to back, their lengths and their statuses
         (0, or -errno for a packet that failed)."""
-        self._check_connected()
-        try:
+        with self.plug.watch(self._halt_stream):
             return self._transfers.read_packets(endpoint, n_packets, max_len)
-        except Disconnected:
-            self._unplugged()
-            raise
 
 
 def _units(interval_ns: int) -> int:

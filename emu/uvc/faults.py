@@ -18,6 +18,9 @@ the function's.
 
 from __future__ import annotations
 
+import contextlib
+from collections.abc import Callable, Iterator
+
 from rollcam.common.errors import DeviceError
 from rollcam.common.faults import FaultInjector
 
@@ -33,6 +36,37 @@ class TransferOverflow(DeviceError):
 
 class Disconnected(DeviceError):
     """The device went away (an injected unplug): every transfer fails until the host enumerates it again."""
+
+
+class Plug:
+    """Whether a USB function is plugged in: ``disconnected`` after an injected unplug, ``generation`` counting
+    the plug-ins since (a host handle opened on an older one is dead)."""
+
+    def __init__(self) -> None:
+        self.disconnected = False
+        self.generation = 0
+
+    def check(self) -> None:
+        """Raise ``Disconnected`` while unplugged."""
+        if self.disconnected:
+            raise Disconnected("the device was unplugged (injected disconnect); enumerate it again")
+
+    def replug(self) -> None:
+        """The host enumerates the device again: plugged in, one generation on."""
+        if self.disconnected:
+            self.disconnected = False
+            self.generation += 1
+
+    @contextlib.contextmanager
+    def watch(self, on_unplug: Callable[[], None]) -> Iterator[None]:
+        """Run a transfer: refused while unplugged; a ``Disconnected`` from it unplugs (``on_unplug`` runs)."""
+        self.check()
+        try:
+            yield
+        except Disconnected:
+            self.disconnected = True
+            on_unplug()
+            raise
 
 
 class PayloadFaults:

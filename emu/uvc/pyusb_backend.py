@@ -129,7 +129,7 @@ class EmulatedBackend(usb.backend.IBackend):
 
     def enumerate_devices(self):
         for d in self.devices:
-            if d.function.disconnected:  # plugged back in: the bus gives it the next free address
+            if d.function.plug.disconnected:  # plugged back in: the bus gives it the next free address
                 d.function.reset()
                 d.address = max(x.address for x in self.devices) + 1
         return iter(self.devices)
@@ -158,12 +158,12 @@ class EmulatedBackend(usb.backend.IBackend):
         return dev.tree.endpoints[(intf, alt)][ep]
 
     def open_device(self, dev):
-        return _Handle(dev, generation=dev.function.generation)
+        return _Handle(dev, generation=dev.function.plug.generation)
 
     @staticmethod
     def _alive(h: _Handle) -> None:
-        f = h.dev.function
-        if f.disconnected or h.generation != f.generation:
+        plug = h.dev.function.plug
+        if plug.disconnected or h.generation != plug.generation:
             raise _usb_error(Disconnected("the handle's device was unplugged"))
 
     def close_device(self, dev_handle):
