@@ -129,7 +129,7 @@ class FaultPlan:
     def to_text(self) -> str:
         """The canonical text (``parse(plan.to_text()) == plan``)."""
         items = [f"{k}={_num(p)}%" for k, p in self.rates]
-        if self.rate("delay") and self.delay_ms != DEFAULT_DELAY_MS:
+        if self.delay_ms != DEFAULT_DELAY_MS:
             items.append(f"delay_ms={self.delay_ms}")
         if self.disconnect is not None:
             items.append(f"disconnect={self.disconnect}")

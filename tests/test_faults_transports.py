@@ -294,7 +294,8 @@ def test_http_delay_holds_the_stream_and_disconnect_ends_it(rollcam_http_camera)
     srv = rollcam_http_camera("imx219", scene={"scene": "flat"}, size=(640, 480),
                               faults="delay=30%,delay_ms=400,disconnect=8,seed=1")
     parts, times = _read_parts(srv.url)
-    assert len(parts) == 8 and all(c for _, _, c in parts)  # ended at a part boundary after N parts
+    assert all(c for _, _, c in parts) and len(parts) < 40  # the stream ended, at a part boundary
+    assert len(parts) + srv.slots.dropped_total == 8  # after N parts (those a slow reader skipped counted)
     gaps = [b - a for a, b in itertools.pairwise(times)]
     assert srv.fault_stats.delayed >= 1 and max(gaps) >= 0.35
     assert srv.fault_stats.disconnects == 1
