@@ -8,7 +8,8 @@ server's counters, ``GET /imu.jsonl`` the IMU's samples as JSON lines (emu/http_
 One thread encodes each frame once; the event loop (emu/http_server.py, aiohttp) writes
 the same bytes to every client. Slots are fair (emu/http_slots.py): a client reading slower than the frame
 rate skips frames (counted) and never grows memory, and one that does not read at all yields its slot to a
-newcomer. Bad requests get an HTTP error; the server keeps serving the others.
+newcomer. Bad requests get an HTTP error; the server keeps serving the others. A fault plan (``faults``)
+drops, holds and cuts stream parts (emu/http_faults.py); ``fault_stats`` counts what it injected.
 """
 
 from __future__ import annotations
@@ -24,11 +25,13 @@ from typing import Any
 
 from aiohttp import web
 from rollcam.common.errors import DeviceError
+from rollcam.common.faults import FaultInjector, FaultPlan
 from rollcam.common.lifecycle import Closeable, Stats, Worker
 from rollcam.firmware.camera import FirmwareCamera, FramePlan
 from rollcam.sim.codecs import JPEG_QUALITY, Levels, jpeg_quality, transcode
 from rollcam.sim.frame import Frame
 
+from .http_faults import StreamFaults
 from .http_imu import ImuStreams
 from .http_server import Connection, HttpHost, HttpLimits
 from .http_slots import StreamSlots
@@ -48,6 +51,7 @@ class Part:
     jpeg: bytes
     headers: tuple[tuple[str, str], ...]
     chunk: bytes = dataclasses.field(default=b"", repr=False)
+    final: bool = False  # the stream ends after this part (an injected cut or disconnect)
 
     def __post_init__(self) -> None:
         if not self.chunk:
@@ -120,7 +124,7 @@ class MjpegServer(Closeable):
 
     def __init__(self, camera: FirmwareCamera, host: str = "127.0.0.1", port: int = 0, *,
                  pump: FramePump | None = None, quality: int = JPEG_QUALITY, max_clients: int | None = None,
-                 limits: HttpLimits | None = None) -> None:
+                 limits: HttpLimits | None = None, faults: FaultPlan | str | None = None) -> None:
         self.camera = camera
         self.quality = jpeg_quality(quality)  # refused here, not in the encoder thread
         limits = limits or HttpLimits()
@@ -143,6 +147,9 @@ class MjpegServer(Closeable):
         app.cleanup_ctx.append(self._sweeper)
         self.http = HttpHost(app, host, port, limits=limits, name="rollcam-http")
         self.slots = StreamSlots(limits, self.http.loop.time)
+        injector = FaultInjector(FaultPlan.of(faults))
+        self.fault_stats = injector.stats
+        self._faults = StreamFaults(injector, self.slots.offer, self.http.loop, Part)
         self._encoder = Worker(self._encode_loop, name="rollcam-http-jpeg", wrap=DeviceError)
 
     @property
@@ -210,7 +217,7 @@ class MjpegServer(Closeable):
             self.http.call_soon(self._publish, part)
 
     def _publish(self, part: Part) -> None:
-        self.slots.offer(part)
+        self._faults.publish(part)
         for fut in self._snapshots:
             if not fut.done():
                 fut.set_result(part)
@@ -243,7 +250,8 @@ class MjpegServer(Closeable):
         doc = self.stats.to_json()
         doc["bad_requests"] += self.http.stats.malformed_requests
         return {**doc, "clients": s.to_json(), "http": self.http.stats.to_json(),
-                "pump": self.pump.stats.to_json(), "camera": self.camera.stats.to_json()}
+                "pump": self.pump.stats.to_json(), "camera": self.camera.stats.to_json(),
+                "faults": self.fault_stats.to_json()}
 
     async def _status(self, request: web.Request) -> web.Response:
         return web.Response(body=json.dumps(self.status()).encode(), content_type="application/json",
@@ -282,6 +290,8 @@ class MjpegServer(Closeable):
             await resp.prepare(request)
             while (part := await client.next()) is not None:
                 await client.send(resp.write, part.chunk, self.http.loop.time)
+                if part.final:
+                    break
             return resp
         except (ConnectionError, RuntimeError):  # the client went away mid-write
             return resp

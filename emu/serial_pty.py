@@ -2,7 +2,10 @@
 
 The server owns both ends of a pty (the slave in raw mode: no echo, no line editing), so clients may open
 and close the port as often as they like. Replies a client does not read are dropped once the pty's buffer
-is full (counted in ``stats.dropped_bytes``), so a stalled client costs no memory.
+is full (counted in ``stats.dropped_bytes``), so a stalled client costs no memory. A fault plan
+(``faults``, ``rollcam.common.faults``) damages replies as a bad line does: ``drop`` loses reply bytes,
+``corrupt`` flips one bit of a byte, ``delay`` holds a reply for ``delay_ms`` (decided by the byte's index
+among every reply byte sent, and by the reply's index); ``fault_stats`` counts what it injected.
 """
 
 from __future__ import annotations
@@ -15,6 +18,7 @@ import tty
 from dataclasses import dataclass
 
 from rollcam.common.errors import DeviceError
+from rollcam.common.faults import FaultInjector, FaultPlan
 from rollcam.common.lifecycle import Closeable, Stats, Worker
 from rollcam.firmware.camera import FirmwareCamera
 from rollcam.firmware.protocol import ProtocolSession
@@ -32,8 +36,11 @@ class PtySerialServer(Closeable):
     """Serves ``firmware.protocol`` for one camera on a new pseudo-terminal; a context manager (``with``
     starts it)."""
 
-    def __init__(self, camera: FirmwareCamera) -> None:
+    def __init__(self, camera: FirmwareCamera, faults: FaultPlan | str | None = None) -> None:
         self.camera = camera
+        self.injector = FaultInjector(FaultPlan.of(faults))
+        self.fault_stats = self.injector.stats
+        self._replies = self._reply_bytes = 0
         self.session = ProtocolSession(camera)
         try:
             self._master, self._slave = os.openpty()
@@ -81,7 +88,25 @@ class PtySerialServer(Closeable):
             reply = self.session.feed(data)
             self.stats.lines = self.session.lines
             if reply:
-                self._send(reply)
+                self._send(self._faulted(reply))
+
+    def _faulted(self, reply: bytes) -> bytes:
+        """``reply`` as the plan damages it (after holding it, for a delayed reply)."""
+        inj = self.injector
+        n, self._replies = self._replies, self._replies + 1
+        if not inj:
+            return reply
+        if inj.hit("delay", n):
+            self._stop.wait(inj.plan.delay_ms / 1000)
+        out = bytearray()
+        for i, byte in enumerate(reply, self._reply_bytes):
+            if inj.hit("drop", i):
+                continue
+            if inj.hit("corrupt", i):
+                byte ^= 1 << inj.plan.pick("corrupt", i, 8)
+            out.append(byte)
+        self._reply_bytes += len(reply)
+        return bytes(out)
 
     def _send(self, data: bytes) -> None:
         try:

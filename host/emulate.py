@@ -60,7 +60,7 @@ def start_http(args: argparse.Namespace, camera: Any, pump: Any) -> Running | No
         stack.callback(detector.close)
         annotate = detector_annotator(detector)
     try:
-        server = MjpegServer(camera, host, port, pump=pump, quality=args.quality)
+        server = MjpegServer(camera, host, port, pump=pump, quality=args.quality, faults=args.faults)
     except OSError as exc:
         stack.close()
         raise OSError(f"cannot serve HTTP on {host}:{port}: {exc.strerror or exc}") from None
@@ -88,7 +88,7 @@ def start_serial(args: argparse.Namespace, camera: Any, pump: Any) -> Running | 
         return None
     from rollcam.emu.serial_pty import PtySerialServer
 
-    server = PtySerialServer(camera)
+    server = PtySerialServer(camera, faults=args.faults)
     server.start()
     return Running("serial", server, [f"serial port:   {server.path}   (serial.Serial({server.path!r}); "
                                       "send '*IDN?' or 'HELP')"], {"path": server.path})
@@ -104,7 +104,7 @@ def start_usbip(args: argparse.Namespace, camera: Any, pump: Any) -> Running | N
     host, port = args.usbip
     _warn_if_wide("USB/IP", host)
     function = UVCFunction(FirmwareProducer(camera), transfer=args.usb_transfer, realtime=True,
-                           identity=DeviceIdentity(serial=camera.serial_number))
+                           identity=DeviceIdentity(serial=camera.serial_number), faults=args.faults)
     try:
         server = USBIPServer([function], host, port)
     except OSError as exc:
@@ -139,6 +139,16 @@ def wait_until_stopped(stop: threading.Event, duration_s: float | None, pump: An
     pump.check()
 
 
+def _fault_stats(server: Any) -> str:
+    """``kind=count`` of the faults a transport injected (the USB/IP server's are its functions')."""
+    holders = [e.function for e in server.exports.values()] if hasattr(server, "exports") else [server]
+    totals: dict[str, int] = {}
+    for h in holders:
+        for k, v in h.fault_stats.to_json().items():
+            totals[k] = totals.get(k, 0) + v
+    return ", ".join(f"{k}={v}" for k, v in totals.items() if v)
+
+
 def serve(args: argparse.Namespace, camera_options: dict[str, str]) -> int:
     """Run the emulator of ``args.sensor`` programmed by ``camera_options`` (text, as in an emu: URI) on the
     transports ``args`` asks for, until Ctrl-C, SIGTERM or ``args.duration`` (0: stop at once); every
@@ -162,9 +172,9 @@ def serve(args: argparse.Namespace, camera_options: dict[str, str]) -> int:
             pump.start()
         if args.json:
             print(json.dumps({"sensor": camera.sensor.name, "identity": camera.identity(),
-                              **{r.name: r.info for r in running}}), flush=True)
+                              "faults": args.faults.to_text(), **{r.name: r.info for r in running}}), flush=True)
         else:
-            print(f"emulating {camera!r}", flush=True)
+            print(f"emulating {camera!r}" + (f" with faults {args.faults}" if args.faults else ""), flush=True)
             for r in running:
                 for line in r.lines:
                     print(f"  {line}", flush=True)
@@ -178,4 +188,8 @@ def serve(args: argparse.Namespace, camera_options: dict[str, str]) -> int:
         camera.stream_off()
         signal.signal(signal.SIGTERM, previous)
     print(f"stopped; {camera.stats.frames} frames made, {camera.stats.skipped} skipped", file=sys.stderr)
+    for r in running:
+        stats = _fault_stats(r.server)
+        if args.faults and stats:
+            print(f"faults injected on {r.name}: {stats}", file=sys.stderr)
     return 0

@@ -265,7 +265,7 @@ def test_realtime_isochronous_endpoint_keeps_the_bus_pace():
     parser = PayloadParser(probe.dwClockFrequency, 64 * 48 * 2)
     t0, packets, frames = clock.t_ns, 0, []
     while clock.t_ns - t0 < 200_000_000:  # 0.2 s of device time, URBs of 32 packets back to back
-        data, lengths = fn.read_packets(0x81, 32, 3072)
+        data, lengths, _status = fn.read_packets(0x81, 32, 3072)
         packets += len(lengths)
         frames += parser.feed_batch(data, lengths)
     for _ in range(40):  # one packet a read, as pyusb reads an isochronous endpoint

@@ -12,7 +12,7 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from rollcam.common.errors import DeviceError
-from rollcam.emu.v4l2 import Device, Faults, V4L2Error, raw
+from rollcam.emu.v4l2 import Device, V4L2Error, raw
 from rollcam.emu.v4l2 import functions as fn
 from rollcam.sim import formats as sim_formats
 
@@ -141,16 +141,16 @@ def test_formats_decode_to_the_same_picture(fourcc):
 
 
 def test_sequence_gaps_on_dropped_buffers_and_error_flag():
-    with dev(faults=Faults(drop_percent=40, error_percent=30, seed=7)) as d:
+    with dev(faults="drop=40%,error=30%,seed=7") as d:
         bufs = list(d.stream(frames=30))
         seqs = [b.sequence for b in bufs]
-        assert seqs == sorted(seqs) and seqs[-1] + 1 == 30 + d.driver.stats.dropped_injected
-        assert d.driver.stats.dropped_injected > 0 and len(set(np.diff(seqs))) > 1
-        assert sum(b.error for b in bufs) == d.driver.stats.errors_injected > 0
+        assert seqs == sorted(seqs) and seqs[-1] + 1 == 30 + d.driver.fault_stats.dropped
+        assert d.driver.fault_stats.dropped > 0 and len(set(np.diff(seqs))) > 1
+        assert sum(b.error for b in bufs) == d.driver.fault_stats.errors > 0
 
 
 def test_injected_ioctl_error_is_one_shot_and_disconnect_gives_enodev():
-    with dev(faults=Faults(ioctl_errors={"VIDIOC_REQBUFS": errno.ENOMEM}, disconnect_after=3)) as d:
+    with dev(faults="reqbufs=ENOMEM,disconnect=3") as d:
         h = d.driver
         assert errno_of(fn.request_buffers, h, 4) == errno.ENOMEM
         n = fn.request_buffers(h, 4)
@@ -197,7 +197,7 @@ FUZZ_COUNTS: dict[str, int] = {}
 @given(ops=_OPS)
 def _fuzz_ioctl_sequences(ops):
     FUZZ_COUNTS["ioctl"] = FUZZ_COUNTS.get("ioctl", 0) + 1
-    with dev(faults=Faults(drop_percent=20, seed=1)) as d:
+    with dev(faults="drop=20%,seed=1") as d:
         h, q = d.driver, d.driver.queue
         for op, n in ops:
             call = {"reqbufs": lambda n=n: fn.request_buffers(h, n), "qbuf": lambda n=n: fn.queue_buffer(h, n),

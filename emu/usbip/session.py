@@ -7,7 +7,9 @@ bounded: at most ``max_queued_urbs`` URBs and ``max_urb_bytes`` transfer bytes q
 is always admitted, so the bound is the budget plus one ``MAX_TRANSFER``); beyond that the reader stops
 reading and TCP pushes back on the client. Failures follow the Linux stub driver: a failed isochronous URB
 still carries one packet descriptor per packet (each with the error and ``actual_length`` 0), as
-vhci-hcd reads ``number_of_packets`` descriptors after every isochronous RET_SUBMIT.
+vhci-hcd reads ``number_of_packets`` descriptors after every isochronous RET_SUBMIT. A device that is
+unplugged (an injected disconnect) ends the connection without answering, as the stub driver's unplug does:
+vhci-hcd then gives the outstanding URBs back with -ENODEV and the port goes away.
 """
 
 from __future__ import annotations
@@ -21,6 +23,7 @@ from collections.abc import Callable
 
 from rollcam.common.errors import DeviceError
 from rollcam.emu.uvc.device import Setup, UVCFunction
+from rollcam.emu.uvc.faults import Disconnected
 from rollcam.emu.uvc.requests import Stall
 from rollcam.emu.uvc.stream import TransferOverflow, TransferTimeout
 
@@ -137,6 +140,9 @@ class UrbSession:
                 self.cond.notify_all()
             try:
                 self.send(self.execute(urb).pack())
+            except Disconnected:
+                self.abort()  # the device is gone: the connection ends, unanswered (the stub's unplug)
+                return
             except OSError:
                 self.abort()  # a peer that does not take its replies loses the connection, not just a worker
                 return
@@ -169,6 +175,8 @@ class UrbSession:
             return failed(urb, -errno.EPIPE)
         except TransferOverflow:
             return failed(urb, -errno.EOVERFLOW)
+        except Disconnected:
+            raise
         except DeviceError:
             return failed(urb, -errno.ESHUTDOWN)
         except Exception:  # a fault of the emulated function: answer the URB so the importer stays in step
@@ -188,8 +196,7 @@ class UrbSession:
         n = len(urb.iso)
         size = min((p.length for p in urb.iso), default=0)
         try:
-            data, lengths = self.function.read_packets(0x80 | urb.ep, n, size)
-            status = [0] * n
+            data, lengths, status = self.function.read_packets(0x80 | urb.ep, n, size)
         except TransferOverflow:
             data, lengths, status = b"", [0] * n, [-errno.EOVERFLOW] * n
         packets = tuple(P.IsoPacket(p.offset, p.length, k, st)

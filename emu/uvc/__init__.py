@@ -13,6 +13,7 @@ from __future__ import annotations
 
 from .descriptors import DescriptorSet, DeviceIdentity, FrameSize, StreamFormat, build_descriptors, parse_streaming
 from .device import Setup, UVCFunction
+from .faults import Disconnected
 from .firmware_producer import FirmwareProducer
 from .payload import ParsedFrame, PayloadBatch, PayloadPacker, PayloadParser, pack_header, parse_header
 from .probe import Probe
@@ -24,6 +25,7 @@ __all__ = [
     "ControlRange",
     "DescriptorSet",
     "DeviceIdentity",
+    "Disconnected",
     "FirmwareProducer",
     "FrameProducer",
     "FrameSize",

@@ -9,6 +9,9 @@ device times and a host that reads too slowly skips to the newest frame, the ski
 An isochronous endpoint in real-time mode also keeps the bus's pace: one packet per service interval of the
 selected alternate setting's endpoint (bInterval; a packet carries up to mult x wMaxPacketSize bytes), so
 packets arrive no faster than a high-speed bus carries them (8,000 a second at bInterval 1).
+A fault plan (``faults``: ``rollcam.common.faults``) stalls class requests, drops, flags and damages what
+the stream sends (``stream.py``, ``faults.py``) and unplugs the device: from then on every request fails
+with ``Disconnected`` until the host enumerates it again (``reset()``; ``plug.generation`` counts plug-ins).
 """
 
 from __future__ import annotations
@@ -19,6 +22,7 @@ import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
+from rollcam.common.faults import FaultInjector, FaultPlan
 from rollcam.common.lifecycle import Closeable
 
 from . import constants as C
@@ -32,6 +36,7 @@ from .descriptors import (
     split_descriptors,
     string_descriptor,
 )
+from .faults import Plug
 from .producer import FrameProducer
 from .requests import Stall, VideoControls
 from .stream import BusSchedule, StreamEndpoint, service_interval_ns
@@ -70,8 +75,13 @@ class UVCFunction(Closeable):
     def __init__(self, producer: FrameProducer, *, fourccs: Sequence[str] = ("YUYV", "NV12", "MJPG"),
                  transfer: str = "iso", identity: DeviceIdentity | None = None, clock_hz: int = 1_000_000_000,
                  realtime: bool = False, bulk_payload_size: int = DEFAULT_BULK_PAYLOAD,
-                 sleep: Callable[[float], None] = time.sleep, render_ahead: bool = True) -> None:
+                 sleep: Callable[[float], None] = time.sleep, render_ahead: bool = True,
+                 faults: FaultPlan | str | None = None) -> None:
         self.producer = producer
+        self.injector = FaultInjector(FaultPlan.of(faults))
+        self.fault_stats = self.injector.stats
+        self.plug = Plug()  # unplugged by an injected disconnect until the host enumerates the device again
+        self._class_requests = 0
         self.realtime = realtime
         self.transfer = transfer
         self._lock = threading.RLock()
@@ -93,7 +103,8 @@ class UVCFunction(Closeable):
         self.controls = VideoControls(producer, formats, intervals, clock_hz, self._payload_size)
         self.configuration = 0
         self.alt = {0: 0, 1: 0}
-        self.stream = StreamEndpoint(producer, clock_hz, realtime, sleep, render_ahead)
+        self.stream = StreamEndpoint(producer, clock_hz, realtime, sleep, render_ahead, faults=self.injector,
+                                     bulk=transfer == "bulk")
         self.stats = self.stream.stats
         self._transfers = StreamTransfers(self.stream, self.controls, transfer, self._lock, producer.now_ns, sleep,
                                           lambda: bool(self.configuration))
@@ -107,6 +118,7 @@ class UVCFunction(Closeable):
     def control(self, setup: Setup, data: bytes = b"") -> bytes:
         """Answer one control transfer: IN returns up to wLength bytes, OUT returns b''; refusals raise Stall."""
         with self._lock:
+            self.plug.check()
             try:
                 kind = setup.bmRequestType & C.TYPE_MASK
                 if kind == C.TYPE_STANDARD:
@@ -118,6 +130,9 @@ class UVCFunction(Closeable):
                     if not direction_ok:
                         raise Stall(f"request {setup.bRequest:#04x} with direction bit {setup.is_in}",
                                     C.ERR_INVALID_REQUEST)
+                    self._class_requests += 1
+                    if self.injector.hit("stall", self._class_requests - 1, "control"):
+                        raise Stall(f"injected STALL of class request {setup.bRequest:#04x}", C.ERR_UNKNOWN)
                     out = self.controls.request(setup.bRequest, setup.wIndex & 0xFF, setup.wIndex >> 8,
                                                 setup.wValue >> 8, setup.wLength, bytes(data))
                 else:
@@ -225,11 +240,17 @@ class UVCFunction(Closeable):
             self.stream.mark_errors(n_frames)
 
     def reset(self) -> None:
-        """The host detached: stop streaming, unconfigure (a mid-frame stop is counted as aborted)."""
+        """The host detached, or enumerates a device that was unplugged: stop streaming, unconfigure (a
+        mid-frame stop is counted as aborted); an unplugged device is plugged in again (``generation`` + 1)."""
         with self._lock:
             self._stop_stream()
             self.configuration = 0
             self.alt = {0: 0, 1: 0}
+            self.plug.replug()
+
+    def _halt_stream(self) -> None:
+        with self._lock:
+            self._stop_stream()
 
     def _close(self) -> None:
         """Stop streaming (and the renderer thread of real-time mode)."""
@@ -238,11 +259,14 @@ class UVCFunction(Closeable):
     def read(self, endpoint: int, max_len: int, timeout_ms: int | None = None) -> bytes:
         """One payload from the streaming endpoint (see ``transfers.StreamTransfers.read``): b'' when an
         isochronous stream has nothing due; a bulk read waits up to ``timeout_ms`` (None or 0: forever)."""
-        return self._transfers.read(endpoint, max_len, timeout_ms)
+        with self.plug.watch(self._halt_stream):
+            return self._transfers.read(endpoint, max_len, timeout_ms)
 
-    def read_packets(self, endpoint: int, n_packets: int, max_len: int) -> tuple[bytes, list[int]]:
-        """An isochronous URB's worth of packets: their data back to back and their lengths."""
-        return self._transfers.read_packets(endpoint, n_packets, max_len)
+    def read_packets(self, endpoint: int, n_packets: int, max_len: int) -> tuple[bytes, list[int], list[int]]:
+        """An isochronous URB's worth of packets: their data back to back, their lengths and their statuses
+        (0, or -errno for a packet that failed)."""
+        with self.plug.watch(self._halt_stream):
+            return self._transfers.read_packets(endpoint, n_packets, max_len)
 
 
 def _units(interval_ns: int) -> int:

@@ -3,8 +3,11 @@
 ``usb.core.find(idVendor=..., backend=EmulatedBackend([function]))`` finds the camera; descriptors, configuration,
 control transfers (probe/commit, camera controls), ``set_interface_altsetting`` and reads from the streaming
 endpoint then go to the ``UVCFunction`` as they would go through libusb to a real camera. A STALL reaches the
-caller as ``usb.core.USBError`` with errno EPIPE, a timeout as ``usb.core.USBTimeoutError``. An isochronous
-read returns one packet (one payload or a zero-length packet) per call.
+caller as ``usb.core.USBError`` with errno EPIPE, a timeout as ``usb.core.USBTimeoutError``, an overflow
+(babble) with EOVERFLOW, as libusb reports them. An isochronous read returns one packet (one payload or a
+zero-length packet) per call. A function that was unplugged (an injected disconnect) fails every call on
+its open handles with ENODEV (libusb's LIBUSB_ERROR_NO_DEVICE); the next enumeration (``usb.core.find``)
+finds it again at a new address, as a bus re-enumerates a camera plugged back in.
 """
 
 from __future__ import annotations
@@ -20,6 +23,7 @@ from rollcam.common.errors import SourceError, require
 from . import constants as C
 from .descriptors import split_descriptors
 from .device import Setup, UVCFunction
+from .faults import Disconnected
 from .requests import Stall
 from .stream import TransferOverflow, TransferTimeout
 
@@ -102,9 +106,12 @@ class _Dev:
 class _Handle:
     dev: _Dev
     claimed: set[int] = field(default_factory=set)
+    generation: int = 0  # the function's plug-in this handle was opened on
 
 
 def _usb_error(exc: Exception) -> usb.core.USBError:
+    if isinstance(exc, Disconnected):
+        return usb.core.USBError(f"No such device (it may have been disconnected): {exc}", -4, errno.ENODEV)
     if isinstance(exc, TransferTimeout):
         return usb.core.USBTimeoutError(str(exc), -7, errno.ETIMEDOUT)
     if isinstance(exc, TransferOverflow):
@@ -121,6 +128,10 @@ class EmulatedBackend(usb.backend.IBackend):
                         for i, f in enumerate(functions, 1)]
 
     def enumerate_devices(self):
+        for d in self.devices:
+            if d.function.plug.disconnected:  # plugged back in: the bus gives it the next free address
+                d.function.reset()
+                d.address = max(x.address for x in self.devices) + 1
         return iter(self.devices)
 
     def get_parent(self, dev):
@@ -147,15 +158,22 @@ class EmulatedBackend(usb.backend.IBackend):
         return dev.tree.endpoints[(intf, alt)][ep]
 
     def open_device(self, dev):
-        return _Handle(dev)
+        return _Handle(dev, generation=dev.function.plug.generation)
+
+    @staticmethod
+    def _alive(h: _Handle) -> None:
+        plug = h.dev.function.plug
+        if plug.disconnected or h.generation != plug.generation:
+            raise _usb_error(Disconnected("the handle's device was unplugged"))
 
     def close_device(self, dev_handle):
         dev_handle.claimed.clear()
 
     def _control(self, h: _Handle, setup: Setup, data: bytes = b"") -> bytes:
+        self._alive(h)
         try:
             return h.dev.function.control(setup, data)
-        except Stall as exc:
+        except (Stall, Disconnected) as exc:
             raise _usb_error(exc) from None
 
     def set_configuration(self, dev_handle, config_value):
@@ -174,9 +192,10 @@ class EmulatedBackend(usb.backend.IBackend):
         dev_handle.claimed.discard(intf)
 
     def _read(self, dev_handle, ep, buff, timeout) -> int:
+        self._alive(dev_handle)
         try:
             data = dev_handle.dev.function.read(ep, len(buff) * buff.itemsize, timeout)
-        except (Stall, TransferTimeout, TransferOverflow) as exc:
+        except (Stall, TransferTimeout, TransferOverflow, Disconnected) as exc:
             raise _usb_error(exc) from None
         memoryview(buff).cast("B")[: len(data)] = data
         return len(data)
@@ -209,6 +228,7 @@ class EmulatedBackend(usb.backend.IBackend):
         self._control(dev_handle, Setup(0x02, C.REQ_CLEAR_FEATURE, C.FEATURE_ENDPOINT_HALT, ep, 0))
 
     def reset_device(self, dev_handle):
+        self._alive(dev_handle)
         dev_handle.dev.function.reset()
 
     def is_kernel_driver_active(self, dev_handle, intf):

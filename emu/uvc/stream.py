@@ -4,19 +4,25 @@ Only the frame being sent is held (in one reused buffer), plus in real-time mode
 has ready. In real-time mode a frame goes out once the device clock has passed its readout; a host that reads
 too slowly gets the newest completed frame, the ones it missed counted in ``stats.frames_dropped``; a stop
 mid-frame counts in ``frames_aborted``. Without render-ahead (``render_ahead=False``) frames are rendered
-when the host asks, and frames the host fell behind on are skipped without being rendered.
+when the host asks, and frames the host fell behind on are skipped without being rendered. A fault plan
+(``faults``) drops frames (never sent), sends frames with ERR set, unplugs the device after N frames
+(``Disconnected``) and damages payloads (``faults.PayloadFaults``), decided by frame and payload index.
 """
 
 from __future__ import annotations
 
+import errno
 from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
 from rollcam.common.errors import DeviceError
+from rollcam.common.faults import FaultInjector
+from rollcam.sim.frame import Frame
 
 from .ahead import RenderAhead, newest_due
 from .convert import encode
+from .faults import Disconnected, PayloadFaults, TransferOverflow
 from .payload import PayloadBatch, PayloadPacker
 from .producer import FrameProducer
 from .requests import Committed
@@ -27,10 +33,6 @@ MICROFRAME_NS = 125_000
 
 class TransferTimeout(DeviceError):
     """No data became ready on an endpoint within the transfer's timeout."""
-
-
-class TransferOverflow(DeviceError):
-    """The host's buffer is smaller than the payload the device has to send (a babble/overflow error)."""
 
 
 def service_interval_ns(endpoint_descriptor: bytes) -> int:
@@ -78,9 +80,12 @@ class StreamEndpoint:
     """Payload source of one UVC function (not thread-safe: the function serialises calls)."""
 
     def __init__(self, producer: FrameProducer, clock_hz: int, realtime: bool,
-                 sleep: Callable[[float], None], render_ahead: bool = True) -> None:
+                 sleep: Callable[[float], None], render_ahead: bool = True, *,
+                 faults: FaultInjector | None = None, bulk: bool = False) -> None:
         self.producer, self.clock_hz, self.realtime, self.sleep = producer, clock_hz, realtime, sleep
         self.render_ahead = render_ahead and realtime
+        self.faults = faults or FaultInjector()
+        self.payload_faults = PayloadFaults(self.faults, bulk)
         self._ahead: RenderAhead | None = None
         self.stats = StreamStats()
         self._error_frames = 0
@@ -104,7 +109,8 @@ class StreamEndpoint:
                                       self.stats)
 
     def stop(self) -> None:
-        """End the stream (a frame cut short counts as aborted)."""
+        """End the stream (a frame cut short counts as aborted); a halted endpoint is usable again."""
+        self.payload_faults.clear_halt()
         if self._batch is not None and self._pos < len(self._batch):
             self.stats.frames_aborted += 1  # the host went away mid-frame
         if self._ahead is not None:
@@ -120,6 +126,7 @@ class StreamEndpoint:
 
     def next_payload(self, max_len: int) -> bytes | int:
         """The next payload, or the ns until the next frame is due (real-time mode)."""
+        self.payload_faults.check_halt()
         if self._batch is None or self._pos >= len(self._batch):
             wait_ns = self._next_batch()
             if wait_ns:
@@ -128,22 +135,45 @@ class StreamEndpoint:
         if len(payload) > max_len:
             raise TransferOverflow(f"payload of {len(payload)} bytes does not fit a {max_len}-byte read")
         self._pos += 1
+        out = self.payload_faults.apply(payload, self._next_index - 1)  # raises for a payload that fails
         self.stats.payloads_sent += 1
-        self.stats.bytes_sent += len(payload)
-        return bytes(payload)
+        self.stats.bytes_sent += len(out)
+        return out
 
-    def next_payloads(self, n: int, max_len: int) -> tuple[bytes, list[int], int]:
-        """Up to ``n`` payloads of at most ``max_len`` bytes each, back to back, with their lengths, and the ns
-        until the next frame is due when they ran out (0 otherwise). Each frame's run of payloads is copied
-        out in one piece (the packer reuses its buffer for the next frame), which makes an isochronous URB of
-        many packets cheap."""
+    def _next_payloads_faulty(self, n: int, max_len: int) -> tuple[bytes, list[int], list[int], int]:
+        """``next_payloads`` one payload at a time through the payload faults: a babbled packet is empty
+        with status -EOVERFLOW, the others go on."""
+        chunks: list[bytes] = []
+        lengths: list[int] = []
+        status: list[int] = []
+        while len(lengths) < n:
+            try:
+                got = self.next_payload(max_len)
+            except TransferOverflow:
+                got = b""
+                status.append(-errno.EOVERFLOW)
+            else:
+                if isinstance(got, int):
+                    return b"".join(chunks), lengths, status, got
+                status.append(0)
+            chunks.append(got)
+            lengths.append(len(got))
+        return b"".join(chunks), lengths, status, 0
+
+    def next_payloads(self, n: int, max_len: int) -> tuple[bytes, list[int], list[int], int]:
+        """Up to ``n`` payloads of at most ``max_len`` bytes each, back to back, with their lengths and
+        statuses (0, or -errno for a packet that failed), and the ns until the next frame is due when they
+        ran out (0 otherwise). Each frame's run of payloads is copied out in one piece (the packer reuses its
+        buffer for the next frame), which makes an isochronous URB of many packets cheap."""
+        if self.payload_faults.active:
+            return self._next_payloads_faulty(n, max_len)
         chunks: list[bytes] = []
         lengths: list[int] = []
         while len(lengths) < n:
             if self._batch is None or self._pos >= len(self._batch):
                 wait_ns = self._next_batch()
                 if wait_ns:
-                    return b"".join(chunks), lengths, wait_ns
+                    return b"".join(chunks), lengths, [0] * len(lengths), wait_ns
             b = self._batch
             k = min(n - len(lengths), len(b) - self._pos)
             run = b.lengths[self._pos:self._pos + k]
@@ -156,30 +186,40 @@ class StreamEndpoint:
             self._pos += k
             self.stats.payloads_sent += k
             self.stats.bytes_sent += end - start
-        return b"".join(chunks), lengths, 0
+        return b"".join(chunks), lengths, [0] * len(lengths), 0
+
+    def _next_frame(self, now: int) -> tuple[int, Frame, np.ndarray] | int:
+        """The next frame to send (index, frame, encoded data), or the ns until it is due."""
+        p = self.producer
+        index = self._next_index
+        if self._ahead is not None:
+            return self._ahead.take()
+        if self.realtime:
+            due = p.frame_due_ns(index)
+            if due > now:
+                return due - now
+            newest = newest_due(p, index, now)  # the host fell behind: skip to the newest frame
+            self.stats.frames_dropped += newest - index
+            index = newest
+        frame = p.frame(index)
+        return index, frame, encode(frame.data, self._format.fourcc, self._format.jpeg_quality)
 
     def _next_batch(self) -> int:
         p = self.producer
-        index = self._next_index
         now = p.now_ns()
-        c = self._format
-        if self._ahead is not None:
-            got = self._ahead.take()
+        if self.faults.disconnect_due(self.stats.frames_sent):
+            raise Disconnected(f"injected disconnect after {self.stats.frames_sent} frames")
+        while True:
+            got = self._next_frame(now)
             if isinstance(got, int):
                 return got
             index, frame, data = got
-        else:
-            if self.realtime:
-                due = p.frame_due_ns(index)
-                if due > now:
-                    return due - now
-                newest = newest_due(p, index, now)  # the host fell behind: skip to the newest frame
-                self.stats.frames_dropped += newest - index
-                index = newest
-            frame = p.frame(index)
-            data = encode(frame.data, c.fourcc, c.jpeg_quality)
+            self._next_index = index + 1
+            if not self.faults.hit("drop", index):  # an injected drop: the frame never goes on the bus
+                break
         err = self._error_frames > 0
         self._error_frames -= err
+        err = err or self.faults.hit("error", index)
         send_ns = now if self.realtime else p.frame_due_ns(index)
         need = self._packer.buffer_size(data.size)
         if self._buf.size < need:
@@ -187,6 +227,5 @@ class StreamEndpoint:
         # The previous frame's payloads were all copied out by the reads that sent them: its buffer is free.
         self._batch = self._packer.pack(data, frame.timestamp_ns, send_ns, error=err, out=self._buf)
         self._pos = 0
-        self._next_index = index + 1
         self.stats.frames_sent += 1
         return 0

@@ -76,16 +76,18 @@ class StreamTransfers:
                 raise TransferTimeout(f"no frame within {timeout_ms} ms")
             self._sleep(got / 1e9)
 
-    def read_packets(self, endpoint: int, n_packets: int, max_len: int) -> tuple[bytes, list[int]]:
-        """An isochronous URB's worth of packets: their data back to back and their lengths. Packets for which
-        no frame is due yet are zero-length; in real-time mode every packet takes its service interval."""
+    def read_packets(self, endpoint: int, n_packets: int, max_len: int) -> tuple[bytes, list[int], list[int]]:
+        """An isochronous URB's worth of packets: their data back to back, their lengths and statuses (0 or
+        -errno). Packets for which no frame is due yet are zero-length; in real-time mode every packet takes
+        its service interval."""
         if self.transfer != "iso":
             raise Stall("packets are read from an isochronous endpoint", C.ERR_INVALID_REQUEST)
         with self._lock:
             self._check_stream(endpoint)
-            data, lengths, _wait_ns = self.endpoint.next_payloads(n_packets, max_len)
+            data, lengths, status, _wait_ns = self.endpoint.next_payloads(n_packets, max_len)
         self._bus_time(n_packets)
-        return data, lengths + [0] * (n_packets - len(lengths))
+        pad = [0] * (n_packets - len(lengths))
+        return data, lengths + pad, status + pad
 
     def _clock_s(self) -> float:
         return self._now_ns() / 1e9

@@ -17,6 +17,7 @@ from typing import Any
 
 import numpy as np
 from rollcam.common.errors import ConfigError
+from rollcam.common.faults import FaultPlan
 from rollcam.common.lifecycle import Closeable
 from rollcam.firmware.camera import Clock, FirmwareCamera
 from rollcam.firmware.pixfmt import is_raw
@@ -24,7 +25,7 @@ from rollcam.sim.codecs import Levels, codec
 
 from . import functions as fn
 from . import raw
-from .driver import CID_TO_CONTROL, EmuDriver, Faults
+from .driver import CID_TO_CONTROL, EmuDriver
 
 
 @dataclass(frozen=True)
@@ -97,10 +98,11 @@ class Device(Closeable):
 
     @classmethod
     def open(cls, sensor: str, *, scene: dict[str, Any] | None = None, realtime: bool = True, bands: int = 8,
-             faults: Faults | None = None, clock: Clock | None = None, rt_priority: int | None = None,
+             faults: FaultPlan | str | None = None, clock: Clock | None = None, rt_priority: int | None = None,
              **camera_options: Any) -> Device:
         """A device on a new FirmwareCamera of ``sensor`` (``realtime=False``: frames as fast as asked;
-        ``rt_priority``: the real-time pump's waits run under SCHED_FIFO at that priority)."""
+        ``faults``: a ``FaultPlan`` or its text, e.g. ``"drop=5%,error=2%,seed=1"``; ``rt_priority``: the
+        real-time pump's waits run under SCHED_FIFO at that priority)."""
         camera = FirmwareCamera(sensor, scene=scene, clock=clock, **camera_options)
         return cls(EmuDriver(camera, realtime=realtime, bands=bands, faults=faults, rt_priority=rt_priority))
 

@@ -2,20 +2,23 @@
 
 ``EmuDriver`` answers the VIDIOC requests of ``raw.Ioctl`` for one FirmwareCamera with the kernel's
 semantics and errnos. Frames are paced in real time (a ``FramePump`` fills the buffer band by band at the
-lines' device times) or made as fast as possible (each DQBUF renders the next frame). ``Faults`` injects
-what vivid can: dropped buffers, the ERROR flag, one-shot ioctl errors and a disconnect.
+lines' device times) or made as fast as possible (each DQBUF renders the next frame). A
+``rollcam.common.faults.FaultPlan`` injects what vivid's error-injection controls do: dropped buffers (a gap
+in the sequence numbers), the ERROR flag, one-shot ioctl errors, a disconnect (ENODEV until the device is
+closed, then it is connected again) and sequence and timestamp wrap; ``fault_stats`` counts what was injected.
 """
 
 from __future__ import annotations
 
 import errno
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from fractions import Fraction
 from typing import Any
 
 import numpy as np
 from rollcam.common.errors import ConfigError, DeviceError
+from rollcam.common.faults import REQUESTS, FaultInjector, FaultPlan
 from rollcam.common.lifecycle import Stats
 from rollcam.emu.pump import FramePump
 from rollcam.firmware.camera import FirmwareCamera, FramePlan
@@ -38,41 +41,30 @@ _CTRL_TYPES = {"int": raw.CtrlType.INTEGER, "bool": raw.CtrlType.BOOLEAN, "menu"
 
 
 @dataclass
-class Faults:
-    """vivid-like fault injection: percentages of dropped and ERROR-flagged buffers, one-shot ioctl errors
-    (request -> errno, consumed by the next such call), and a disconnect after N delivered frames."""
-
-    drop_percent: float = 0.0
-    error_percent: float = 0.0
-    ioctl_errors: dict[str, int] = field(default_factory=dict)
-    disconnect_after: int | None = None
-    seed: int = 0
-
-
-@dataclass
 class DriverStats(Stats):
-    """What the driver did with frames: delivered, dropped (no buffer queued, or injected), ERROR-flagged."""
+    """What the driver did with frames: delivered, and dropped because no buffer was queued (injected faults
+    are counted in ``EmuDriver.fault_stats``)."""
 
     delivered: int = 0
     dropped_no_buffer: int = 0
-    dropped_injected: int = 0
-    errors_injected: int = 0
 
 
 class EmuDriver:
     """Driver state of one emulated /dev/videoN: format, buffer queue, streaming, faults, statistics."""
 
     def __init__(self, camera: FirmwareCamera, *, realtime: bool = True, bands: int = 8,
-                 faults: Faults | None = None, rt_priority: int | None = None) -> None:
+                 faults: FaultPlan | str | None = None, rt_priority: int | None = None) -> None:
         self.camera = camera
         self.realtime = realtime
         self.rt_priority = rt_priority
         self.bands = bands
-        self.faults = faults or Faults()
-        self.rng = np.random.default_rng(self.faults.seed)
+        self.faults = FaultPlan.of(faults)
+        self.injector = FaultInjector(self.faults)
+        self.fault_stats = self.injector.stats
         self.queue = BufferQueue()
         self.pump: FramePump | None = None
         self.seq0 = 0
+        self.ts0: int | None = None  # the stream's first timestamp (where an injected timestamp wrap counts from)
         self.stats = DriverStats()
         self._filling: tuple[int, Slot, np.ndarray] | None = None
 
@@ -86,7 +78,8 @@ class EmuDriver:
         request = raw.Ioctl(request)
         if self.queue.disconnected:
             raise V4L2Error(errno.ENODEV, f"{request.value}: device disconnected")
-        injected = self.faults.ioctl_errors.pop(request.value, None)
+        name = request.value.removeprefix("VIDIOC_").lower()
+        injected = self.injector.request(name) if name in REQUESTS else None
         if injected is not None:
             raise V4L2Error(injected, f"{request.value}: injected error")
         try:
@@ -107,12 +100,14 @@ class EmuDriver:
             self.queue.disconnect()
 
     def close(self) -> None:
-        """Release the device (stream off, buffers freed). Idempotent."""
+        """Release the device (stream off, buffers freed); a disconnected device is connected again, as vivid's
+        is once its last file handle closes. Idempotent."""
         try:
             self._stop_pump()
         finally:
             self.camera.stream_off()
             self.queue.stop()
+            self.queue.disconnected = False
 
     # ------------------------------------------------------------------------------------- frame delivery
     def _stop_pump(self) -> None:
@@ -159,18 +154,21 @@ class EmuDriver:
         return np.ascontiguousarray(data).reshape(-1).view(np.uint8)
 
     def _deliver(self, slot: Slot, frame: Frame, size: int) -> None:
-        f = self.faults
-        if f.disconnect_after is not None and self.stats.delivered >= f.disconnect_after:
+        """Complete ``slot`` with ``frame`` (faults decided by the device frame number: reproducible in real
+        time too, whichever frames the application had buffers for)."""
+        inj = self.injector
+        if inj and inj.disconnect_due(self.stats.delivered):
             self.queue.disconnect()  # unplugged before this frame: it is lost, as on a real unplug
             return
-        if f.drop_percent and self.rng.random() * 100 < f.drop_percent:
-            self.stats.dropped_injected += 1
-            self.queue.give_back(slot)
+        if inj.hit("drop", frame.sequence):
+            self.queue.give_back(slot)  # vivid: never returned; the sequence number shows the gap
             return
-        error = bool(f.error_percent) and self.rng.random() * 100 < f.error_percent
-        self.stats.errors_injected += error
-        self.queue.complete(slot, bytesused=size, sequence=frame.sequence - self.seq0,
-                            timestamp_ns=self.camera.host_ns(frame.timestamp_ns), error=error)
+        t_ns = self.camera.host_ns(frame.timestamp_ns)
+        if self.ts0 is None:
+            self.ts0 = t_ns
+        self.queue.complete(slot, bytesused=size, sequence=self.faults.sequence(frame.sequence - self.seq0),
+                            timestamp_ns=self.faults.timestamp_ns(t_ns, self.ts0),
+                            error=inj.hit("error", frame.sequence))
         self.stats.delivered += 1
 
     def produce_now(self) -> bool:
@@ -344,6 +342,7 @@ def _streamon(d: EmuDriver, _arg: Any) -> None:
                                       f"{d.fmt.sizeimage} bytes; REQBUFS again")
     d.queue.start()
     d.seq0 = d.camera.next_seq  # V4L2 sequence numbers count from 0 at each STREAMON
+    d.ts0 = None
     d.camera.stream_on()
     if d.realtime:
         d.pump = FramePump(d.camera, bands=d.bands, name="rollcam-v4l2", rt_priority=d.rt_priority)

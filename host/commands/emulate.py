@@ -12,6 +12,7 @@ import argparse
 from collections.abc import Callable
 from typing import Any
 
+from rollcam.common.faults import FaultPlan
 from rollcam.common.values import (
     JPEG_QUALITY,
     finite_float,
@@ -59,6 +60,10 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
                    help="serve the camera as a UVC device over USB/IP (the usbip protocol port is 3240)")
     g.add_argument("--usb-transfer", choices=("iso", "bulk"), default="iso",
                    help="UVC streaming endpoint type for --usbip (default: %(default)s)")
+    p.add_argument("--faults", type=value_type(FaultPlan.parse, "a fault plan like drop=2%,error=1%,seed=7"),
+                   default=FaultPlan(), metavar="PLAN",
+                   help="inject faults on every transport, reproducibly by seed, e.g. 'drop=2%%,stall=1%%,"
+                        "disconnect=300,seed=7' (docs/faults.md lists the keys and what each transport does)")
     p.add_argument("--duration", type=value_type(non_negative_float, "a number of seconds >= 0"), default=None,
                    metavar="SECONDS", help="stop after this long (0: as soon as every server is up)")
     p.add_argument("--json", action="store_true", help="print the endpoints as one JSON line")

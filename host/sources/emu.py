@@ -4,8 +4,12 @@ The options are the emulated camera's option table (``rollcam.firmware.options``
 emulate`` flags, ``rollcam://`` URLs and the serial ``OPT``/``SCENE`` commands read): ``scene``, ``seed``,
 ``camera``, the scene kind's own (``time``, ``speed``, ``pedestrians``, ``ego``; ``vx``; ``level``), ``size``,
 ``fps``, ``shutter``, ``readout``, ``exposure_us``, ``gain`` (linear total), ``format``, ``physics``,
-``blur_px``, ``noise``, ``serial``, ``noise_seed``, ``hflip``, ``vflip``, ``test_pattern``. Two more belong to
-the source: ``start_ns`` (device clock at frame 0) and ``frames`` (stop after N frames; endless by default).
+``blur_px``, ``noise``, ``serial``, ``noise_seed``, ``hflip``, ``vflip``, ``test_pattern``. Three more belong to
+the source: ``start_ns`` (device clock at frame 0), ``frames`` (stop after N frames; endless by default) and
+``faults`` (a ``rollcam.common.faults`` plan, e.g. ``faults=drop=5,error=2,seed=3``; in process ``drop`` skips
+frames (a gap in ``sequence``), ``error`` sets ``meta["error"]``, ``disconnect=N`` makes the read after N
+frames raise ``SourceError``, ``seqwrap``/``tswrap`` shift ``sequence``/``timestamp_ns``; every device a
+``rollcam run`` or ``rollcam emulate`` makes from the URI takes the same plan, see docs/faults.md).
 
 Frames come from a ``FirmwareCamera`` holding the ``CameraSpec`` the options build, the same device object the
 V4L2, serial, HTTP and UVC paths stream, read without pacing: frame ``n`` is the one the device schedules at
@@ -14,9 +18,11 @@ V4L2, serial, HTTP and UVC paths stream, read without pacing: frame ``n`` is the
 
 from __future__ import annotations
 
+import dataclasses
 from typing import Any
 
 from rollcam.common.errors import SourceError
+from rollcam.common.faults import FaultInjector, FaultPlan
 from rollcam.common.values import non_negative_int, positive_int
 from rollcam.firmware.camera import FirmwareCamera, FramePlan
 from rollcam.firmware.imaging import encode
@@ -27,7 +33,7 @@ from rollcam.sim.synthetic import SyntheticCamera
 
 from .base import CameraSource, SourceURI
 
-SOURCE_OPTIONS = {"start_ns", "frames"}
+SOURCE_OPTIONS = {"start_ns", "frames", "faults"}
 """Options of the source itself; all others are the camera's (``rollcam.firmware.options.OPTIONS``)."""
 
 
@@ -41,6 +47,11 @@ def build_device(sensor_name: str, opts: SourceURI) -> tuple[FirmwareCamera, int
     return FirmwareCamera(spec, clock=lambda: 0), start_ns
 
 
+def fault_plan(opts: SourceURI) -> FaultPlan:
+    """The ``faults=`` plan of an ``emu:`` URI (no fault when absent)."""
+    return opts.get("faults", lambda text: FaultPlan.parse(text, f"source {opts.uri!r}"), FaultPlan())
+
+
 class EmuSource(CameraSource):
     """Frames from a FirmwareCamera, in sequence, with exact timing and ground truth."""
 
@@ -50,7 +61,10 @@ class EmuSource(CameraSource):
         self.uri = uri.uri
         self.device, self.start_ns = build_device(uri.target, uri)
         self.limit = uri.get("frames", positive_int)
+        self.faults = FaultInjector(fault_plan(uri))
+        self.fault_stats = self.faults.stats
         self.index = 0
+        self.delivered = 0
         self._schedule = self.device.schedule(self.start_ns)
 
     @property
@@ -67,10 +81,26 @@ class EmuSource(CameraSource):
         self._check_open()
         if self.limit is not None and self.index >= self.limit:
             return None
+        inj = self.faults
+        if inj and inj.disconnect_due(self.delivered):
+            raise SourceError(f"source {self.uri!r}: device disconnected (injected after {self.delivered} frames)")
+        while inj.hit("drop", self.index):  # a dropped frame is never rendered: the sequence shows the gap
+            self.index += 1
         plan = FramePlan(self.index, self._schedule)
-        frames = [encode(self.device.render(plan, shutter), self.device.spec) for shutter in shutters]
+        error = inj.hit("error", self.index)
+        frames = [self._faulted(encode(self.device.render(plan, shutter), self.device.spec), error)
+                  for shutter in shutters]
         self.index += 1
+        self.delivered += 1
         return frames
+
+    def _faulted(self, frame: Frame, error: bool) -> Frame:
+        p = self.faults.plan
+        if not p:
+            return frame
+        return dataclasses.replace(frame, sequence=p.sequence(frame.sequence),
+                                   timestamp_ns=p.timestamp_ns(frame.timestamp_ns, self.start_ns),
+                                   meta={**frame.meta, "error": True} if error else frame.meta)
 
     def read(self) -> Frame | None:
         """The next frame, or None after ``frames=N``."""

@@ -4,6 +4,8 @@ Installed with rollcam (a ``pytest11`` entry point), so any project's tests can 
 
 - ``rollcam_camera(sensor, scene=.., seed=.., **options)``: an open ``emu:`` source of any hw_config
   (name or YAML path) and scene, closed after the test.
+- ``rollcam_v4l2_device(sensor, faults=.., **options)``: an emulated V4L2 device (``rollcam.emu.v4l2.Device``).
+- ``rollcam_http_camera(sensor, faults=.., **options)``: the emulated camera's MJPEG server on 127.0.0.1.
 - ``rollcam_mjpeg_server(frames)``: an MJPEG-over-HTTP server on 127.0.0.1 serving those Frames with
   rollcam's timing headers; its ``url`` opens as a source (``http://...``) or in ``cv2.VideoCapture``.
 - ``rollcam_usb_backend(sensor, **scene)``: a pyusb backend on which ``usb.core.find`` finds emulated UVC
@@ -16,6 +18,10 @@ Installed with rollcam (a ``pytest11`` entry point), so any project's tests can 
 - ``mock_depthai``: a stand-in ``depthai`` module (``rollcam.host.testing.depthai_mock``) installed in
   ``sys.modules`` for the test, so an OAK capture script runs without hardware on emulated sensors.
 
+Every factory that makes a device takes ``faults=``: a ``rollcam.common.faults`` plan or its text
+(``"drop=5%,error=2%,seed=1"``), the same as ``rollcam emulate --faults`` and the ``emu:`` URI's ``faults=``;
+the device's ``fault_stats`` counts what it injected (docs/faults.md).
+
 Fixtures are lazy: importing this plugin loads nothing heavy, and a fixture's optional dependency is needed
 only by the tests that use it.
 """
@@ -23,6 +29,7 @@ only by the tests that use it.
 from __future__ import annotations
 
 import sys
+import urllib.parse
 from collections.abc import Callable, Iterable, Iterator
 from typing import Any
 
@@ -40,6 +47,8 @@ def rollcam_camera() -> Iterator[Callable[..., Any]]:
     opened: list[Any] = []
 
     def make(sensor: str = "imx219", **options: Any) -> Any:
+        if "faults" in options:  # a plan's text holds '%' and '=': sent quoted
+            options["faults"] = urllib.parse.quote(str(options["faults"]), safe=",=@")
         query = "&".join(f"{k}={v}" for k, v in options.items())
         source = open_camera(f"emu:{sensor}" + (f"?{query}" if query else ""))
         opened.append(source)
@@ -136,11 +145,12 @@ def rollcam_usb_backend() -> Iterator[Callable[..., Any]]:
     functions: list[Any] = []
 
     def make(sensor: str = "imx219", *, cameras: int = 1, transfer: str = "iso", realtime: bool = False,
-             **scene: Any) -> Any:
+             faults: Any = None, size: Any = None, **scene: Any) -> Any:
         made = []
         for k in range(cameras):
-            cam = FirmwareCamera(sensor, scene={"scene": "street", **scene}, serial_number=f"{k + 1:04d}")
-            made.append(UVCFunction(FirmwareProducer(cam), transfer=transfer, realtime=realtime,
+            cam = FirmwareCamera(sensor, scene={"scene": "street", **scene}, serial_number=f"{k + 1:04d}",
+                                 **({"size": size} if size is not None else {}))
+            made.append(UVCFunction(FirmwareProducer(cam), transfer=transfer, realtime=realtime, faults=faults,
                                     identity=DeviceIdentity(product_id=0x0102 + k, serial=cam.serial_number)))
         functions.extend(made)
         return EmulatedBackend(made)
@@ -163,10 +173,52 @@ def rollcam_serial_port() -> Iterator[Callable[..., Any]]:
 
     servers: list[Any] = []
 
-    def make(sensor: str = "imx219", **scene: Any) -> Any:
-        server = PtySerialServer(FirmwareCamera(sensor, scene={"scene": "street", **scene}))
+    def make(sensor: str = "imx219", *, faults: Any = None, **scene: Any) -> Any:
+        server = PtySerialServer(FirmwareCamera(sensor, scene={"scene": "street", **scene}), faults=faults)
         server.start()
         servers.append(server)
+        return server
+
+    yield make
+    for server in servers:
+        server.close()
+
+
+@pytest.fixture
+def rollcam_v4l2_device() -> Iterator[Callable[..., Any]]:
+    """Factory of emulated V4L2 devices: ``dev = rollcam_v4l2_device("imx219", faults="drop=10%", size=(640,
+    480), realtime=False)`` returns an open ``rollcam.emu.v4l2.Device`` (scene options as ``scene={...}``,
+    camera options as keywords); devices are closed after the test."""
+    from rollcam.emu.v4l2 import Device
+
+    devices: list[Any] = []
+
+    def make(sensor: str = "imx219", **options: Any) -> Any:
+        options.setdefault("scene", {"scene": "street"})
+        device = Device.open(sensor, **options)
+        devices.append(device)
+        return device
+
+    yield make
+    for device in devices:
+        device.close()
+
+
+@pytest.fixture
+def rollcam_http_camera() -> Iterator[Callable[..., Any]]:
+    """Factory of the emulated camera's MJPEG servers: ``srv = rollcam_http_camera("imx219", faults="cut=5%",
+    size=(320, 240))`` returns a started ``rollcam.emu.http_mjpeg.MjpegServer`` on 127.0.0.1 (its ``url``
+    opens in ``cv2.VideoCapture`` or as a source; ``fault_stats`` counts the injected faults)."""
+    from rollcam.emu.http_mjpeg import MjpegServer
+    from rollcam.firmware.camera import FirmwareCamera
+
+    servers: list[Any] = []
+
+    def make(sensor: str = "imx219", *, faults: Any = None, scene: Any = None, **options: Any) -> Any:
+        camera = FirmwareCamera(sensor, scene=scene or {"scene": "street"}, **options)
+        server = MjpegServer(camera, "127.0.0.1", 0, faults=faults)
+        servers.append(server)
+        server.start()
         return server
 
     yield make
