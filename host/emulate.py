@@ -33,6 +33,8 @@ class Running:
     lines: list[str]
     info: dict[str, Any]
     uses_pump: bool = True
+    injector: Any = None
+    """What holds the transport's ``fault_stats`` (or its ``exports``) when ``server`` is a wrapper."""
 
 
 def _warn_if_wide(name: str, host: str, what: str = "it has no authentication") -> None:
@@ -79,7 +81,7 @@ def start_http(args: argparse.Namespace, camera: Any, pump: Any) -> Running | No
     return Running("http", stack, [f"live view:     {view.url}{auth}",
                                    f"MJPEG stream:  {url}   (cv2.VideoCapture({url!r}))",
                                    f"snapshot:      {base}/snapshot.jpg", f"status:        {base}/status.json"],
-                   {"url": url, "view": view.url, "token": view.token})
+                   {"url": url, "view": view.url, "token": view.token}, injector=server)
 
 
 def start_serial(args: argparse.Namespace, camera: Any, pump: Any) -> Running | None:
@@ -189,7 +191,7 @@ def serve(args: argparse.Namespace, camera_options: dict[str, str]) -> int:
         signal.signal(signal.SIGTERM, previous)
     print(f"stopped; {camera.stats.frames} frames made, {camera.stats.skipped} skipped", file=sys.stderr)
     for r in running:
-        stats = _fault_stats(r.server)
+        stats = _fault_stats(r.injector if r.injector is not None else r.server)
         if args.faults and stats:
             print(f"faults injected on {r.name}: {stats}", file=sys.stderr)
     return 0
