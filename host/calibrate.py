@@ -11,8 +11,9 @@ predicted by the rotation the gyro integrates between the two lines' instants:
     p2'       = K proj(Q(t2)^T Q(t1) K^-1 p1)
 
 ``line_time`` and ``offset`` are fitted to minimise ``|p2' - p2|`` by a coarse grid search (robust truncated
-cost) and then Levenberg-Marquardt with Huber weights (numpy only); their standard errors come from the
-Gauss-Newton covariance scaled by the residual variance. The model is rotation only: the capture should
+cost) and then Levenberg-Marquardt with Huber weights (numpy only); their standard errors are the larger of
+the Gauss-Newton covariance scaled by the residual variance and the covariance clustered by first image
+(tracks from one image share its stretch of gyro noise). The model is rotation only: the capture should
 rotate without translating (``ego=calib``), or translate little against the scene's depth.
 
 Inputs, all files ``rollcam capture`` writes: the images and their ``frames.jsonl`` records (timestamp,
@@ -209,6 +210,7 @@ class TrackModel:
         self.k = (fx, fy, cx, cy)
         self.ray1 = np.stack([(tracks.p1[:, 0] - cx) / fx, (tracks.p1[:, 1] - cy) / fy, np.ones(len(tracks))], 1)
         self.p2 = tracks.p2
+        self.frame = tracks.frame
 
     def covered(self, max_line_s: float, max_offset_s: float) -> np.ndarray:
         """Tracks whose instants the gyro covers for every line time and offset up to the bounds."""
@@ -287,8 +289,17 @@ def _refine(model: TrackModel, x_us: np.ndarray, sel: np.ndarray) -> tuple[np.nd
     r = resid(x_us)
     rv = r.ravel()
     dof = max(rv.size - 2, 1)
-    cov = float(w @ rv**2) / dof * np.linalg.inv(jtj)
-    return x_us, cov, r
+    inv = np.linalg.inv(jtj)
+    cov = float(w @ rv**2) / dof * inv
+    # Tracks that start in one image share its gyro noise and its rendering: a covariance clustered by that
+    # image (the sandwich estimator) counts what they share; the larger of the two is stated.
+    score = (jac * (w * rv)[:, None]).reshape(-1, 2, 2).sum(1)  # per track
+    labels = np.unique(model.frame[sel], return_inverse=True)[1]
+    per_image = np.zeros((int(labels.max()) + 1, 2))
+    np.add.at(per_image, labels, score)
+    n_c = per_image.shape[0]
+    clustered = inv @ (per_image.T @ per_image) @ inv * (n_c / max(n_c - 1, 1))
+    return x_us, np.maximum(cov, clustered), r
 
 
 def calibrate(capture_dir: str | os.PathLike[str], *, max_offset_s: float = 0.02,
