@@ -176,7 +176,7 @@ OPTIONS: dict[str, Option] = {o.name: o for o in (
     Option("speed", _speed, "normal", "street: static | normal | fast | a multiplier", ("street",)),
     Option("pedestrians", bounded(non_negative_int, 0, MAX_PEDESTRIANS), 20, "street: number of walkers",
            ("street",), "n_pedestrians"),
-    Option("ego", _ego, "none", "street: camera motion none | pan | walk | vehicle | drone", ("street",)),
+    Option("ego", _ego, "none", "street: camera motion none | pan | walk | vehicle | drone | calib", ("street",)),
     Option("vx", bounded(finite_float, -MAX_VX_PX_S, MAX_VX_PX_S), 2000.0, "chart: bar speed, px/s",
            ("chart",), "vx_px_s"),
     Option("level", bounded(non_negative_float, 0.0, MAX_LEVEL), 0.5,

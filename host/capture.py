@@ -48,7 +48,7 @@ SUFFIX = {"rolling": "_rs", "global": "_gs"}
 """File-name suffix of each shutter; any other (``unknown``) gets none."""
 # Files a capture writes (and their temporary files); --overwrite removes only these, nothing else the folder holds.
 _CAPTURE_FILE = re.compile(r"\d{6,}(_rs|_gs)?\.(png|jpg|npy)|\.?(frames\.jsonl|capture\.json|imu\.csv|camera_poses\.csv"
-                           r"|imu\.yaml|camchain\.yaml|camera\.yaml)")
+                           r"|imu\.yaml|camchain\.yaml|camera\.yaml|camchain-imucam\.yaml)")
 _INSTANT = re.compile(r"\d+")
 
 

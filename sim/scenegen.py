@@ -240,7 +240,14 @@ def make_flat_scene(seed: int = 0, *, level: float = 0.5, width: int = 1920, hei
 
 
 def ego_preset(name: str) -> EgoMotion:
-    """Named camera ego-motions: 'none', 'pan' (30 deg/s), 'walk' (handheld), 'vehicle' (10 m/s + vibration)."""
+    """Named camera ego-motions: 'none', 'pan' (30 deg/s), 'walk' (handheld), 'vehicle' (10 m/s + vibration),
+    'drone', and 'calib' (a camera-IMU calibration excitation: rotation only, sinusoidal about all three axes).
+
+    'calib' is what a calibration engineer does by hand, waving the rig in front of a target: its angular
+    velocity swings through zero (up to ~30 deg/s, ~12 rad/s^2), which makes the camera-IMU time offset
+    observable (a constant pan shifts every image by the same amount whatever the offset), and it does not
+    translate, so a pure-rotation model explains every feature track (``rollcam.host.calibrate``).
+    """
     presets = {
         "none": EgoMotion(),
         "pan": EgoMotion(pan_dps=30.0),
@@ -249,6 +256,7 @@ def ego_preset(name: str) -> EgoMotion:
                              vibration_hz=12.0),
         "drone": EgoMotion(pan_dps=20.0, tilt_dps=-5.0, roll_dps=10.0, velocity_mps=(2.0, 3.0, 0.0),
                            vibration_deg=0.3, vibration_m=0.002, vibration_hz=60.0),
+        "calib": EgoMotion(vibration_deg=1.5, vibration_hz=3.0),
     }
     if name not in presets:
         raise ConfigError(f"ego-motion {name!r} is not one of {list(presets)}")

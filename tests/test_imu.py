@@ -21,7 +21,7 @@ from rollcam.sim.scene import Camera
 from rollcam.sim.scenegen import ego_preset, make_street_scene
 
 DAY_NS = 86_400 * 10**9
-PRESETS = ("none", "pan", "walk", "vehicle", "drone")
+PRESETS = ("none", "pan", "walk", "vehicle", "drone", "calib")
 
 
 def _camera(ego: str) -> Camera:

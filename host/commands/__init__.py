@@ -21,6 +21,7 @@ COMMANDS: dict[str, str] = {
     "demo": "demo",
     "list": "list",
     "capture": "capture",
+    "calibrate": "calibrate",
     "detect": "detect",
     "emulate": "emulate",
     "view": "view",
