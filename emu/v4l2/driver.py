@@ -24,7 +24,7 @@ from rollcam.firmware.pixfmt import device_format
 from rollcam.sim.codecs import transcode
 from rollcam.sim.frame import Frame
 
-from . import raw
+from . import ctrls, raw
 from .queue import BufferQueue, Slot, V4L2Error
 
 CID_TO_CONTROL = {raw.CID.EXPOSURE: "exposure", raw.CID.ANALOGUE_GAIN: "analogue_gain",
@@ -63,14 +63,17 @@ class EmuDriver:
     """Driver state of one emulated /dev/videoN: format, buffer queue, streaming, faults, statistics."""
 
     def __init__(self, camera: FirmwareCamera, *, realtime: bool = True, bands: int = 8,
-                 faults: Faults | None = None, rt_priority: int | None = None) -> None:
+                 faults: Faults | None = None, rt_priority: int | None = None,
+                 alloc: Callable[[int, int], np.ndarray] | None = None) -> None:
         self.camera = camera
         self.realtime = realtime
         self.rt_priority = rt_priority
         self.bands = bands
         self.faults = faults or Faults()
         self.rng = np.random.default_rng(self.faults.seed)
-        self.queue = BufferQueue()
+        self.queue = BufferQueue(alloc=alloc)
+        self.on_change: Callable[[], None] | None = None  # called (pump thread) after a buffer completes
+        self.ctrl_defaults = {name: info["value"] for name, info in camera.controls().items()}
         self.pump: FramePump | None = None
         self.seq0 = 0
         self.stats = DriverStats()
@@ -162,6 +165,8 @@ class EmuDriver:
         f = self.faults
         if f.disconnect_after is not None and self.stats.delivered >= f.disconnect_after:
             self.queue.disconnect()  # unplugged before this frame: it is lost, as on a real unplug
+            if self.on_change is not None:
+                self.on_change()
             return
         if f.drop_percent and self.rng.random() * 100 < f.drop_percent:
             self.stats.dropped_injected += 1
@@ -172,6 +177,8 @@ class EmuDriver:
         self.queue.complete(slot, bytesused=size, sequence=frame.sequence - self.seq0,
                             timestamp_ns=self.camera.host_ns(frame.timestamp_ns), error=error)
         self.stats.delivered += 1
+        if self.on_change is not None:
+            self.on_change()
 
     def produce_now(self) -> bool:
         """As-fast-as-possible mode: render the next frame into the oldest queued buffer; False if none is due."""
@@ -367,5 +374,6 @@ _HANDLERS: dict[raw.Ioctl, Callable[[EmuDriver, Any], Any]] = {
     raw.Ioctl.QUERYCTRL: _queryctrl, raw.Ioctl.QUERYMENU: _querymenu, raw.Ioctl.G_CTRL: _g_ctrl,
     raw.Ioctl.S_CTRL: _s_ctrl, raw.Ioctl.REQBUFS: _reqbufs, raw.Ioctl.QUERYBUF: _querybuf, raw.Ioctl.QBUF: _qbuf,
     raw.Ioctl.DQBUF: _dqbuf, raw.Ioctl.STREAMON: _streamon, raw.Ioctl.STREAMOFF: _streamoff,
+    **ctrls.HANDLERS,
 }
 """VIDIOC request -> handler(driver, arg)."""

@@ -23,6 +23,7 @@ COMMANDS: dict[str, str] = {
     "capture": "capture",
     "detect": "detect",
     "emulate": "emulate",
+    "run": "run",
     "dataset": "dataset",
     "eval": "eval",
     "bench": "bench",
