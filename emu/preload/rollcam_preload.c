@@ -46,7 +46,7 @@
 #define MAX_EXT_CTRLS 1024
 #define VIDEO_MAJOR 81
 
-enum { OP_OPEN = 1, OP_IOCTL = 2, OP_MMAP = 3, OP_READ = 4, OP_POLL = 5 };
+enum { OP_OPEN = 1, OP_IOCTL = 2, OP_MMAP = 3, OP_READ = 4, OP_POLL = 5, OP_CLOSE = 6 };
 
 struct req { uint32_t op, len; uint64_t a, b, c; };
 struct rsp { int64_t result; int32_t err; uint32_t len; };
@@ -252,6 +252,11 @@ static int minor_of(int index) {
     return *p ? atoi(p) : index;
 }
 
+struct rsp;
+struct req;
+static int xfer(int ctl, const struct req *q, const void *payload, void *out, uint32_t cap, struct rsp *r,
+                int *fds, int *nfds);
+
 static struct handle *lookup(int fd) {
     if (fd < 0 || fd >= MAX_FD)
         return NULL;
@@ -275,6 +280,10 @@ static void detach(int fd) {
     int last = --h->refs == 0;
     pthread_mutex_unlock(&table_lock);
     if (last) {
+        /* Closing is synchronous, as on a kernel device: the file is released before close() returns. */
+        struct req q = {OP_CLOSE, 0, 0, 0, 0};
+        struct rsp r;
+        xfer(h->ctl, &q, NULL, NULL, 0, &r, NULL, NULL);
         resolve_close();
         real_close(h->ctl);
         real_close(h->evfd);

@@ -27,6 +27,7 @@ READOUTS = [r.value for r in Readout]
 CLASS_NAMES = {raw.CID.USER_CLASS: "User Controls", raw.CID.CAMERA_CLASS: "Camera Controls",
                raw.CID.IMAGE_SOURCE_CLASS: "Image Source Controls",
                raw.CID.IMAGE_PROC_CLASS: "Image Processing Controls"}
+MAX_LINE_TIME_NS = 1_000_000_000
 EXPOSURE_UNIT_NS = 100_000  # V4L2_CID_EXPOSURE_ABSOLUTE counts 100 us
 V4L2_NAMES = {"exposure": "Exposure", "analogue_gain": "Analogue Gain", "digital_gain": "Digital Gain",
               "vblank": "Vertical Blanking", "hblank": "Horizontal Blanking", "pixel_rate": "Pixel Rate",
@@ -65,6 +66,8 @@ def controls(d: Any) -> dict[int, Ctrl]:
                                            int(_F.READ_ONLY | _F.WRITE_ONLY), 0)
                             for cid, name in CLASS_NAMES.items()}
     for cid, name in _control_names().items():
+        if name in ("hflip", "vflip") and getattr(cam.traits, f"{name}_bit", None) is None:
+            continue  # the sensor cannot flip: its driver registers no flip control
         i = info[name]
         kind = _T.INTEGER64 if name == "pixel_rate" else _KINDS[i["kind"]]
         flags = int(_F.READ_ONLY) if i["read_only"] else 0
@@ -84,7 +87,7 @@ def controls(d: Any) -> dict[int, Ctrl]:
         min(max(round(e.value * row_ns / EXPOSURE_UNIT_NS), lo), max(hi, lo)))
     line_ns = 0 if s.shutter == "global" else int(s.timing.line_time_ns)
     out[int(raw.CID.ROLLCAM_LINE_TIME)] = Ctrl(int(raw.CID.ROLLCAM_LINE_TIME), _T.INTEGER64, "Line Time (ns)",
-                                               0, 2**62, 1, line_ns, int(_F.READ_ONLY), line_ns)
+                                               0, MAX_LINE_TIME_NS, 1, line_ns, int(_F.READ_ONLY), line_ns)
     readout = READOUTS.index(s.readout.value)
     out[int(raw.CID.ROLLCAM_READOUT)] = Ctrl(int(raw.CID.ROLLCAM_READOUT), _T.MENU, "Readout Direction", 0,
                                              len(READOUTS) - 1, 1, readout, int(_F.READ_ONLY), readout,
@@ -95,6 +98,8 @@ def controls(d: Any) -> dict[int, Ctrl]:
 def find(d: Any, cid: int) -> Ctrl:
     """The control ``cid`` (NEXT_CTRL: the first one after it); EINVAL if there is none."""
     table = controls(d)
+    if cid & _NEXT == _F.NEXT_COMPOUND:
+        raise V4L2Error(errno.EINVAL, "no compound controls")
     if cid & _NEXT:
         base = cid & ~_NEXT
         for k, c in table.items():
@@ -179,8 +184,10 @@ def _ext(d: Any, arg: raw.ExtControls, mode: str) -> raw.ExtControls:
     found: list[Ctrl] = []
     for i, (cid, _value) in enumerate(arg.controls):
         c = table.get(cid)
-        if c is None or c.type == _T.CTRL_CLASS:
+        if c is None:
             raise error(errno.EINVAL, i, f"no control with id {cid:#x}")
+        if mode == "get" and c.flags & _F.WRITE_ONLY:
+            raise error(errno.EACCES, i, f"control {c.name!r} is write-only")
         if which not in (raw.CtrlWhich.CUR_VAL, raw.CtrlWhich.DEF_VAL) and (cid & 0x0FFF0000) != which:
             raise error(errno.EINVAL, i, f"control {cid:#x} is not in class {which:#x}")
         found.append(c)

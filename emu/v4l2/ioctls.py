@@ -14,17 +14,14 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
-from rollcam.firmware.controls import MAX_FRAME_LENGTH
-
 from . import abi, ctrls, raw
 from .events import EVENT_CTRL
-from .node import PRIO_BACKGROUND, PRIO_RECORD, READ_BUFFERS, DeviceNode, OpenFile
+from .node import PRIO_BACKGROUND, PRIO_INTERACTIVE, PRIO_RECORD, READ_BUFFERS, DeviceNode, OpenFile
 from .queue import V4L2Error
 
 CAPTURE = raw.BufType.VIDEO_CAPTURE
 PRIV_MAGIC = 0xFEEDCAFE
-FRMIVAL_STEPWISE = 3
-_PRIO_CHECKED = {"S_FMT", "S_CTRL", "S_EXT_CTRLS", "REQBUFS", "STREAMON", "STREAMOFF", "S_PARM", "S_INPUT"}
+_PRIO_CHECKED = {"S_PRIORITY", "S_FMT", "S_CTRL", "S_EXT_CTRLS", "REQBUFS", "STREAMON", "STREAMOFF", "S_PARM", "S_INPUT"}
 _QUEUE_CHECKED = {"REQBUFS", "QBUF", "DQBUF", "STREAMON", "STREAMOFF", "EXPBUF"}
 _CONTROL_CHANGERS = {"S_CTRL", "S_EXT_CTRLS", "S_FMT", "S_PARM", "STREAMON", "STREAMOFF", "S_INPUT"}
 
@@ -139,14 +136,11 @@ def _enum_framesizes(node: DeviceNode, _f: OpenFile, a: abi.FrmSizeEnum) -> None
 
 
 def _enum_frameintervals(node: DeviceNode, _f: OpenFile, a: abi.FrmIvalEnum) -> None:
-    """One STEPWISE range per size: from the mode's frame to the longest frame length, one line a step (S_PARM
-    picks the frame length, as VBLANK does)."""
+    """The mode's frame interval, DISCRETE (S_PARM still takes any interval: it sets the frame length)."""
     ival = node.driver.ioctl(raw.Ioctl.ENUM_FRAMEINTERVALS,
                              raw.FrmIval(a.index, raw.fourcc_text(a.pixel_format), a.width, a.height))
-    t = node.driver.camera.sensor.timing(f"{a.width}x{a.height}")
-    a.type = FRMIVAL_STEPWISE
-    a.numerator, a.denominator = ival.numerator, ival.denominator  # min
-    a._stepwise[:] = [MAX_FRAME_LENGTH * t.line_length_pck, t.pixel_rate_hz, t.line_length_pck, t.pixel_rate_hz]
+    a.type, a.numerator, a.denominator = ival.type, ival.numerator, ival.denominator
+    a._stepwise[:] = [0, 0, 0, 0]
     a.reserved[:] = [0, 0]
 
 
@@ -187,8 +181,8 @@ def _s_input(node: DeviceNode, _f: OpenFile, a: C.c_int) -> None:
     a.value = node.driver.ioctl(raw.Ioctl.S_INPUT, a.value)
 
 
-def _g_priority(_node: DeviceNode, f: OpenFile, a: C.c_uint32) -> None:
-    a.value = f.priority
+def _g_priority(node: DeviceNode, _f: OpenFile, a: C.c_uint32) -> None:
+    a.value = max((g.priority for g in node.files), default=PRIO_INTERACTIVE)  # v4l2_prio_max
 
 
 def _s_priority(_node: DeviceNode, f: OpenFile, a: C.c_uint32) -> None:

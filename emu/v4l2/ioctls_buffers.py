@@ -14,6 +14,7 @@ from .queue import V4L2Error
 
 CAPTURE = raw.BufType.VIDEO_CAPTURE
 BUF_CAP_SUPPORTS_MMAP = 1
+BUF_CAP_SUPPORTS_ORPHANED_BUFS = 1 << 4  # REQBUFS 0 while mapped: the program's mappings stay valid (memfds)
 FLAG_REQUEST_FD = 0x00800000
 _STATE_FLAGS = raw.BufFlag.QUEUED | raw.BufFlag.DONE | raw.BufFlag.ERROR
 _TIMESTAMP_FLAGS = raw.BufFlag.TIMESTAMP_MONOTONIC | raw.BufFlag.TSTAMP_SRC_SOE
@@ -51,7 +52,7 @@ def _reqbufs(node: DeviceNode, f: OpenFile, a: abi.RequestBuffers) -> None:
     node.reallocated()
     node.owner = f if count else None
     node.waiting_for_buffers = True
-    a.count, a.capabilities, a.flags = count, BUF_CAP_SUPPORTS_MMAP, 0
+    a.count, a.capabilities, a.flags = count, BUF_CAP_SUPPORTS_MMAP | BUF_CAP_SUPPORTS_ORPHANED_BUFS, 0
     a.reserved[:] = [0, 0, 0]
 
 

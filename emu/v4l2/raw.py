@@ -106,7 +106,7 @@ _IMAGE_PROC = 0x009F0900
 
 class CID(enum.IntEnum):
     """``V4L2_CID_*`` of the sensor controls (user, image-source and image-process classes), the class
-    controls, and rollcam's two read-only controls (``ROLLCAM_*``, in the user class's driver-private range):
+    controls, and rollcam's two read-only controls (``ROLLCAM_*``, in the camera class's driver-private range):
     the line time in ns (INTEGER64; 0 for a global shutter) and the readout direction (a menu)."""
 
     USER_CLASS = _USER - 0x900 + 1
@@ -123,8 +123,8 @@ class CID(enum.IntEnum):
     DIGITAL_GAIN = _IMAGE_PROC + 5
     CAMERA_CLASS = _CAMERA - 0x900 + 1
     EXPOSURE_ABSOLUTE = _CAMERA + 2
-    ROLLCAM_LINE_TIME = _USER + 0x1FF0
-    ROLLCAM_READOUT = _USER + 0x1FF1
+    ROLLCAM_LINE_TIME = _CAMERA + 0x1FF0
+    ROLLCAM_READOUT = _CAMERA + 0x1FF1
 
 
 class FrmSizeType(enum.IntEnum):

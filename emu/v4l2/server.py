@@ -26,11 +26,11 @@ from . import ioctls
 from .node import DeviceNode, OpenFile
 from .queue import V4L2Error
 
-OP_OPEN, OP_IOCTL, OP_MMAP, OP_READ, OP_POLL = 1, 2, 3, 4, 5
+OP_OPEN, OP_IOCTL, OP_MMAP, OP_READ, OP_POLL, OP_CLOSE = 1, 2, 3, 4, 5, 6
 _REQ = struct.Struct("=IIQQQ")
 _RSP = struct.Struct("=qiI")
 MAX_PAYLOAD = 1 << 16
-MAX_CONNECTIONS = 64
+MAX_CONNECTIONS = 512  # open files per server; v4l2-compliance opens 100 at once
 log = logging.getLogger(__name__)
 
 
@@ -97,6 +97,12 @@ class PreloadServer(Closeable):
                 if op == OP_OPEN:
                     node, f = self._open(conn, payload, a, f)
                     continue
+                if op == OP_CLOSE:  # released before the program's close() returns
+                    if node is not None and f is not None:
+                        node.release(f)
+                    node = f = None
+                    _send(conn, 0, 0, b"", [])
+                    return
                 result, err, data, fds = _dispatch(node, f, op, a, b, c, payload)
                 _send(conn, result, err, data, fds)
         except OSError:
