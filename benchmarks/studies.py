@@ -1,7 +1,7 @@
 """The studies behind ``rollcam bench STUDY``: one entry each, with its options, run, report and targets.
 
 Each study's code lives in its own module of ``rollcam.benchmarks`` (``bench`` renders, ``hog_recall``,
-``detect``, ``ptc``, ``sensor_bench``, ``uvc``, ``soak``, ``dataset``); an entry here is the thin layer the
+``detect``, ``ptc``, ``sensor_bench``, ``uvc``, ``soak``, ``dataset``, ``preload``); an entry here is the thin layer the
 command line needs. ``run(args, progress)`` does the work, writes its files under ``args.out`` and returns the
 JSON document with its plain-text report; ``targets(doc)`` reads the document's targets as ``{name: {"value",
 "op", "limit", "pass"}}`` (``pass`` None when a target did not apply). This module imports only the standard
@@ -231,6 +231,19 @@ def _dataset(args: argparse.Namespace, progress: Any) -> tuple[Doc, str]:
     return doc, format_report(doc)
 
 
+# -------------------------------------------------------------------------------------------- preload
+def _preload(args: argparse.Namespace, progress: Any) -> tuple[Doc, str]:
+    from .preload import format_report, run_preload_bench
+
+    doc = run_preload_bench(frames=args.frames, say=progress.status)
+    write_json(args.out, "preload.json", doc)
+    return doc, format_report(doc)
+
+
+def _preload_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--frames", type=_COUNT, default=30, help="frames per round (default: %(default)s)")
+
+
 STUDIES: dict[str, Study] = {s.name: s for s in (
     Study("render", "speed versus error of the ways to make an RS frame (bench.json, bench.png)",
           _render_arguments, _render, _render_targets),
@@ -247,5 +260,7 @@ STUDIES: dict[str, Study] = {s.name: s for s in (
           _soak_arguments, _soak, _doc_targets),
     Study("dataset", "dataset generation (vs render+encode, 1 vs 2 workers) and evaluation metric speed",
           _dataset_arguments, _dataset, _doc_targets),
+    Study("preload", "per-frame cost of rollcam run's preload path beyond making the frame (1920x1080 YUYV)",
+          _preload_arguments, _preload, _doc_targets),
 )}
 """Study name -> study, in the order ``rollcam bench --help`` lists them."""
