@@ -249,3 +249,16 @@ def test_rollcam_run_returns_the_program_status_and_cleans_up(tmp_path):
     sock = Path((tmp_path / "sock").read_text().strip())
     assert sock.name == "v4l2.sock" and not sock.parent.exists()
     assert main(["run", "--device", "/dev/video0=emu:nosuch", "--", "true"]) == 2
+
+
+def test_the_child_environment_preloads_the_library_and_puts_the_shims_first(server, tmp_path, monkeypatch):
+    import rollcam.host.preload as hp
+
+    base = {"PATH": "/usr/bin", "PYTHONPATH": "/elsewhere", "LD_PRELOAD": "/opt/other.so"}
+    env = program_environment(server, base)
+    assert env["LD_PRELOAD"].split() == [str(LIB), "/opt/other.so"]
+    assert env["ROLLCAM_PRELOAD_DEVICES"] == "/dev/video0,/dev/video3"
+    monkeypatch.setattr(hp, "SHIMS", tmp_path)  # where rollcam/host/shims (picamera2 stand-in) would be
+    assert program_environment(server, base)["PYTHONPATH"] == f"{tmp_path}{os.pathsep}/elsewhere"
+    monkeypatch.setattr(hp, "SHIMS", tmp_path / "absent")
+    assert program_environment(server, base)["PYTHONPATH"] == "/elsewhere"
