@@ -1,7 +1,7 @@
 """The LD_PRELOAD library that gives unmodified programs emulated ``/dev/videoN`` nodes (``rollcam run``).
 
 ``rollcam_preload.c`` is built into ``librollcam_preload.so`` beside this file by the normal install (a
-setuptools build step: ``pip install -e .`` on a machine with a C compiler). It forwards the program's libc
+setuptools build step, on a machine with a C compiler). It forwards the program's libc
 calls on the device paths to ``rollcam.emu.v4l2.server``; ``environment`` is what a program needs to use it.
 """
 
@@ -25,8 +25,8 @@ def library_path() -> Path:
     """The built library; DeviceError (naming the fix) when the install did not build it."""
     path = Path(__file__).with_name(LIBRARY_NAME)
     if not path.is_file():
-        raise DeviceError(f"{path} is missing: the preload library is built by the install; reinstall on a "
-                          "machine with a C compiler (pip install -e .)")
+        raise DeviceError(f"{path} is missing: the install builds the preload library; reinstall rollcam on a "
+                          "machine with a C compiler")
     return path
 
 

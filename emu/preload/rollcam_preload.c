@@ -57,6 +57,7 @@ struct handle {
     int readyfd;         /* the program's fd (first one opened) */
     int minor;
     int refs;            /* program fds referring to this handle (dup) */
+    pid_t pid;           /* the process that opened it: a forked child closing its copy releases nothing */
     pthread_mutex_t lock;
 };
 
@@ -283,7 +284,8 @@ static void detach(int fd) {
         /* Closing is synchronous, as on a kernel device: the file is released before close() returns. */
         struct req q = {OP_CLOSE, 0, 0, 0, 0};
         struct rsp r;
-        xfer(h->ctl, &q, NULL, NULL, 0, &r, NULL, NULL);
+        if (getpid() == h->pid)
+            xfer(h->ctl, &q, NULL, NULL, 0, &r, NULL, NULL);
         resolve_close();
         real_close(h->ctl);
         real_close(h->evfd);
@@ -461,6 +463,7 @@ static int emu_open(int index, const char *path, int flags) {
     h->readyfd = fds[0];
     h->evfd = fds[1];
     h->minor = minor_of(index);
+    h->pid = getpid();
     pthread_mutex_init(&h->lock, NULL);
     attach(fds[0], h);
     trace("rollcam-preload: open(%s) = %d\n", path, fds[0]);

@@ -75,6 +75,7 @@ class DeviceNode:
         self.driver = driver
         self.path, self.minor = path, minor
         self.lock = threading.RLock()
+        self._levels = threading.Lock()  # sync() runs on the pump's thread too: it must not wait for self.lock
         self.files: list[OpenFile] = []
         self.owner: OpenFile | None = None
         self.fileio: FileIO | None = None
@@ -93,7 +94,8 @@ class DeviceNode:
         """A new file handle."""
         with self.lock:
             f = OpenFile(flags)
-            self.files.append(f)
+            with self._levels:
+                self.files.append(f)
             self.sync()
             return f
 
@@ -104,9 +106,10 @@ class DeviceNode:
                 return
             if self.owner is f:
                 self.free_queue()
-            self.files.remove(f)
-            f.ready.close()
-            f.event.close()
+            with self._levels:
+                self.files.remove(f)
+                f.ready.close()
+                f.event.close()
             self.sync()
 
     def free_queue(self) -> None:
@@ -193,11 +196,13 @@ class DeviceNode:
 
     # ------------------------------------------------------------------------------------ readiness
     def sync(self) -> None:
-        """Set every file's readiness pipes from the queue's state (called after each change)."""
-        with self.lock:
+        """Set every file's readiness pipes from the queue's state (called after each change, also by the
+        pump's thread when a buffer completes: so without ``self.lock``, which STREAMOFF holds while it waits
+        for the pump to stop)."""
+        with self._levels:
             q = self.driver.queue
             ready = not q.streaming or q.disconnected or bool(q.done)
-            for f in self.files:
+            for f in list(self.files):
                 f.ready.set(ready)
                 f.event.set(bool(f.events.pending) or q.disconnected)
 
