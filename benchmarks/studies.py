@@ -1,7 +1,7 @@
 """The studies behind ``rollcam bench STUDY``: one entry each, with its options, run, report and targets.
 
 Each study's code lives in its own module of ``rollcam.benchmarks`` (``bench`` renders, ``hog_recall``,
-``detect``, ``ptc``, ``sensor_bench``, ``uvc``, ``soak``, ``dataset``, ``imu``); an entry here is the thin layer the
+``detect``, ``ptc``, ``sensor_bench``, ``uvc``, ``soak``, ``dataset``, ``imu``, ``view``, ``preload``); an entry here is the thin layer the
 command line needs. ``run(args, progress)`` does the work, writes its files under ``args.out`` and returns the
 JSON document with its plain-text report; ``targets(doc)`` reads the document's targets as ``{name: {"value",
 "op", "limit", "pass"}}`` (``pass`` None when a target did not apply). This module imports only the standard
@@ -264,6 +264,19 @@ def _view(args: argparse.Namespace, progress: Any) -> tuple[Doc, str]:
     return doc, format_report(doc)
 
 
+# -------------------------------------------------------------------------------------------- preload
+def _preload(args: argparse.Namespace, progress: Any) -> tuple[Doc, str]:
+    from .preload import format_report, run_preload_bench
+
+    doc = run_preload_bench(frames=args.frames, say=progress.status)
+    write_json(args.out, "preload.json", doc)
+    return doc, format_report(doc)
+
+
+def _preload_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--frames", type=_COUNT, default=30, help="frames per round (default: %(default)s)")
+
+
 STUDIES: dict[str, Study] = {s.name: s for s in (
     Study("render", "speed versus error of the ways to make an RS frame (bench.json, bench.png)",
           _render_arguments, _render, _render_targets),
@@ -284,5 +297,7 @@ STUDIES: dict[str, Study] = {s.name: s for s in (
           _imu_arguments, _imu, _doc_targets),
     Study("view", "the live view at 1080p30: the device's frame rate with a page watching, the page's update rate, "
           "cost per frame", _view_arguments, _view, _doc_targets),
+    Study("preload", "per-frame cost of rollcam run's preload path beyond making the frame (1920x1080 YUYV)",
+          _preload_arguments, _preload, _doc_targets),
 )}
 """Study name -> study, in the order ``rollcam bench --help`` lists them."""

@@ -22,7 +22,7 @@ _PROCESSED = (  # the emulated ISP's formats, in the order devices enumerate the
     ("GREY", "8-bit Greyscale"),
     ("MJPG", "Motion-JPEG"),
     ("UYVY", "UYVY 4:2:2"),
-    ("NV12", "Y/UV 4:2:0"),
+    ("NV12", "Y/CbCr 4:2:0"),  # the name before Linux 6.2, which v4l2-compliance of every version accepts
     ("YU12", "Planar YUV 4:2:0"),
     ("XR24", "32-bit BGRX 8-8-8-8"),
 )
@@ -66,7 +66,9 @@ FORMATS: dict[str, DeviceFormat] = {
 
 def raw_description(layout: sf.PixelFormat) -> str:
     """The kernel's style of name of a raw format: '10-bit Bayer RGRG/GBGB Packed', '10-bit Greyscale'."""
-    kind = "Greyscale" if layout.cfa == "mono" else f"Bayer {layout.cfa[:2] * 2}/{layout.cfa[2:] * 2}"
+    if layout.cfa == "mono":  # videodev2's names: "10-bit Greyscale (MIPI Packed)", "10-bit Greyscale"
+        return f"{layout.bits}-bit Greyscale{' (MIPI Packed)' if layout.packing == 'csi2' else ''}"
+    kind = f"Bayer {layout.cfa[:2] * 2}/{layout.cfa[2:] * 2}"
     return f"{layout.bits}-bit {kind}{' Packed' if layout.packing == 'csi2' else ''}"
 
 

@@ -27,7 +27,7 @@ from rollcam.firmware.pixfmt import device_format
 from rollcam.sim.codecs import transcode
 from rollcam.sim.frame import Frame
 
-from . import raw
+from . import ctrls, raw
 from .queue import BufferQueue, Slot, V4L2Error
 
 CID_TO_CONTROL = {raw.CID.EXPOSURE: "exposure", raw.CID.ANALOGUE_GAIN: "analogue_gain",
@@ -53,7 +53,8 @@ class EmuDriver:
     """Driver state of one emulated /dev/videoN: format, buffer queue, streaming, faults, statistics."""
 
     def __init__(self, camera: FirmwareCamera, *, realtime: bool = True, bands: int = 8,
-                 faults: FaultPlan | str | None = None, rt_priority: int | None = None) -> None:
+                 faults: FaultPlan | str | None = None, rt_priority: int | None = None,
+                 alloc: Callable[[int, int], np.ndarray] | None = None) -> None:
         self.camera = camera
         self.realtime = realtime
         self.rt_priority = rt_priority
@@ -61,7 +62,9 @@ class EmuDriver:
         self.faults = FaultPlan.of(faults)
         self.injector = FaultInjector(self.faults)
         self.fault_stats = self.injector.stats
-        self.queue = BufferQueue()
+        self.queue = BufferQueue(alloc=alloc)
+        self.on_change: Callable[[], None] | None = None  # called (pump thread) after a buffer completes
+        self.ctrl_defaults = {name: info["value"] for name, info in camera.controls().items()}
         self.pump: FramePump | None = None
         self.seq0 = 0
         self.ts0: int | None = None  # the stream's first timestamp (where an injected timestamp wrap counts from)
@@ -159,6 +162,8 @@ class EmuDriver:
         inj = self.injector
         if inj and inj.disconnect_due(self.stats.delivered):
             self.queue.disconnect()  # unplugged before this frame: it is lost, as on a real unplug
+            if self.on_change is not None:
+                self.on_change()
             return
         if inj.hit("drop", frame.sequence):
             self.queue.give_back(slot)  # vivid: never returned; the sequence number shows the gap
@@ -170,6 +175,8 @@ class EmuDriver:
                             timestamp_ns=self.faults.timestamp_ns(t_ns, self.ts0),
                             error=inj.hit("error", frame.sequence))
         self.stats.delivered += 1
+        if self.on_change is not None:
+            self.on_change()
 
     def produce_now(self) -> bool:
         """As-fast-as-possible mode: render the next frame into the oldest queued buffer; False if none is due."""
@@ -366,5 +373,6 @@ _HANDLERS: dict[raw.Ioctl, Callable[[EmuDriver, Any], Any]] = {
     raw.Ioctl.QUERYCTRL: _queryctrl, raw.Ioctl.QUERYMENU: _querymenu, raw.Ioctl.G_CTRL: _g_ctrl,
     raw.Ioctl.S_CTRL: _s_ctrl, raw.Ioctl.REQBUFS: _reqbufs, raw.Ioctl.QUERYBUF: _querybuf, raw.Ioctl.QBUF: _qbuf,
     raw.Ioctl.DQBUF: _dqbuf, raw.Ioctl.STREAMON: _streamon, raw.Ioctl.STREAMOFF: _streamoff,
+    **ctrls.HANDLERS,
 }
 """VIDIOC request -> handler(driver, arg)."""

@@ -39,8 +39,10 @@ class Slot:
 class BufferQueue:
     """Buffers move dequeued -> queued (QBUF) -> filled by the driver -> done -> dequeued (DQBUF)."""
 
-    def __init__(self, clock: Callable[[], float] = time.monotonic) -> None:
+    def __init__(self, clock: Callable[[], float] = time.monotonic,
+                 alloc: Callable[[int, int], np.ndarray] | None = None) -> None:
         self.clock = clock  # what DQBUF timeouts are measured on
+        self.alloc = alloc or (lambda _index, size: np.zeros(size, dtype=np.uint8))  # (index, bytes) -> memory
         self.cond = threading.Condition()
         self.slots: list[Slot] = []
         self.queued: collections.deque[int] = collections.deque()
@@ -70,7 +72,7 @@ class BufferQueue:
                 return 0
             count = min(max(count, MIN_BUFFERS), VIDEO_MAX_FRAME)
             self.slots = [Slot(Buffer(i, flags=BufFlag.MAPPED | BufFlag.TIMESTAMP_MONOTONIC, length=sizeimage),
-                               np.zeros(sizeimage, dtype=np.uint8)) for i in range(count)]
+                               self.alloc(i, sizeimage)) for i in range(count)]
             return count
 
     def _slot(self, index: int) -> Slot:

@@ -82,6 +82,7 @@ class CtrlType(enum.IntEnum):
     BOOLEAN = 2
     MENU = 3
     INTEGER64 = 5
+    CTRL_CLASS = 6
 
 
 class CtrlFlag(enum.IntFlag):
@@ -90,16 +91,27 @@ class CtrlFlag(enum.IntFlag):
     GRABBED = 0x0002
     READ_ONLY = 0x0004
     UPDATE = 0x0008
+    INACTIVE = 0x0010
+    WRITE_ONLY = 0x0040
+    VOLATILE = 0x0080
+    NEXT_CTRL = 0x80000000
+    NEXT_COMPOUND = 0x40000000
 
 
 _USER = 0x00980900
+_CAMERA = 0x009A0900
 _IMAGE_SOURCE = 0x009E0900
 _IMAGE_PROC = 0x009F0900
 
 
 class CID(enum.IntEnum):
-    """``V4L2_CID_*`` of the sensor controls (user, image-source and image-process classes)."""
+    """``V4L2_CID_*`` of the sensor controls (user, image-source and image-process classes), the class
+    controls, and rollcam's two read-only controls (``ROLLCAM_*``, in the camera class's driver-private range):
+    the line time in ns (INTEGER64; 0 for a global shutter) and the readout direction (a menu)."""
 
+    USER_CLASS = _USER - 0x900 + 1
+    IMAGE_SOURCE_CLASS = _IMAGE_SOURCE - 0x900 + 1
+    IMAGE_PROC_CLASS = _IMAGE_PROC - 0x900 + 1
     EXPOSURE = _USER + 17
     HFLIP = _USER + 20
     VFLIP = _USER + 21
@@ -109,6 +121,10 @@ class CID(enum.IntEnum):
     PIXEL_RATE = _IMAGE_PROC + 2
     TEST_PATTERN = _IMAGE_PROC + 3
     DIGITAL_GAIN = _IMAGE_PROC + 5
+    CAMERA_CLASS = _CAMERA - 0x900 + 1
+    EXPOSURE_ABSOLUTE = _CAMERA + 2
+    ROLLCAM_LINE_TIME = _CAMERA + 0x1FF0
+    ROLLCAM_READOUT = _CAMERA + 0x1FF1
 
 
 class FrmSizeType(enum.IntEnum):
@@ -139,7 +155,24 @@ class Ioctl(str, enum.Enum):
     DQBUF = "VIDIOC_DQBUF"
     STREAMON = "VIDIOC_STREAMON"
     STREAMOFF = "VIDIOC_STREAMOFF"
+    QUERY_EXT_CTRL = "VIDIOC_QUERY_EXT_CTRL"
+    G_EXT_CTRLS = "VIDIOC_G_EXT_CTRLS"
+    S_EXT_CTRLS = "VIDIOC_S_EXT_CTRLS"
+    TRY_EXT_CTRLS = "VIDIOC_TRY_EXT_CTRLS"
+    ENUMINPUT = "VIDIOC_ENUMINPUT"
+    G_INPUT = "VIDIOC_G_INPUT"
+    S_INPUT = "VIDIOC_S_INPUT"
 
+
+class CtrlWhich(enum.IntEnum):
+    """``v4l2_ext_controls.which``: current or default values (a control class value means current)."""
+
+    CUR_VAL = 0
+    DEF_VAL = 0x0F000000
+
+
+INPUT_TYPE_CAMERA = 2
+"""``V4L2_INPUT_TYPE_CAMERA``."""
 
 VIDEO_MAX_FRAME = 32
 """Most buffers a queue holds (videodev2.h)."""
@@ -268,3 +301,37 @@ class Buffer:
     sequence: int = 0
     memory: int = Memory.MMAP
     length: int = 0
+
+
+@dataclass
+class QueryExtCtrl:
+    """``struct v4l2_query_ext_ctrl`` (``id`` may carry ``CtrlFlag.NEXT_CTRL``)."""
+
+    id: int
+    type: int = 0
+    name: str = ""
+    minimum: int = 0
+    maximum: int = 0
+    step: int = 0
+    default_value: int = 0
+    flags: int = 0
+    elem_size: int = 4
+    elems: int = 1
+
+
+@dataclass
+class ExtControls:
+    """``struct v4l2_ext_controls`` with its array as ``[id, value]`` pairs; ``error_idx`` comes back set."""
+
+    which: int
+    controls: list[list[int]]
+    error_idx: int = 0
+
+
+@dataclass
+class Input:
+    """``struct v4l2_input``."""
+
+    index: int
+    name: str = ""
+    type: int = INPUT_TYPE_CAMERA

@@ -25,6 +25,7 @@ COMMANDS: dict[str, str] = {
     "detect": "detect",
     "emulate": "emulate",
     "view": "view",
+    "run": "run",
     "dataset": "dataset",
     "eval": "eval",
     "train": "train",

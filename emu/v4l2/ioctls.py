@@ -1,0 +1,305 @@
+"""The ioctl core of a device node: a program's ``ioctl(fd, VIDIOC_*, &arg)`` bytes in, the kernel's answer out.
+
+``handle(node, file, request, data)`` does what Linux's v4l2-ioctl.c and the vb2 ioctl helpers do before and
+after a driver: unknown requests get ENOTTY, the buffer type and memory are checked, priority and queue
+ownership give EBUSY, and the structure is translated to the driver's ``raw`` values and back with
+``abi``'s layouts. Control changes are announced as events to the files that subscribed.
+"""
+
+from __future__ import annotations
+
+import ctypes as C
+import errno
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Any
+
+from . import abi, ctrls, raw
+from .events import EVENT_CTRL
+from .node import PRIO_BACKGROUND, PRIO_INTERACTIVE, PRIO_RECORD, READ_BUFFERS, DeviceNode, OpenFile
+from .queue import V4L2Error
+
+CAPTURE = raw.BufType.VIDEO_CAPTURE
+PRIV_MAGIC = 0xFEEDCAFE
+_PRIO_CHECKED = {"S_PRIORITY", "S_FMT", "S_CTRL", "S_EXT_CTRLS", "REQBUFS", "STREAMON", "STREAMOFF", "S_PARM",
+                 "S_INPUT"}
+_QUEUE_CHECKED = {"REQBUFS", "QBUF", "DQBUF", "STREAMON", "STREAMOFF", "EXPBUF"}
+_CONTROL_CHANGERS = {"S_CTRL", "S_EXT_CTRLS", "S_FMT", "S_PARM", "STREAMON", "STREAMOFF", "S_INPUT"}
+
+
+@dataclass
+class Answer:
+    """What goes back to the program: the return value, the argument's bytes (None: nothing copied back),
+    and file descriptors (EXPBUF)."""
+
+    result: int = 0
+    data: bytes | None = None
+    fds: list[int] = field(default_factory=list)
+
+
+def handle(node: DeviceNode, f: OpenFile, request: int, data: bytes) -> Answer:
+    """Run one ioctl; V4L2Error carries the errno (the ext-controls array still comes back on error)."""
+    name, struct = abi.BY_NUMBER.get(request, (None, None))
+    if name not in HANDLERS:
+        raise V4L2Error(errno.ENOTTY, f"ioctl {name or hex(request)} is not supported by this device")
+    arg: Any = None
+    size = 0 if struct is None else C.sizeof(struct)
+    if struct is not None:
+        if len(data) < size:
+            raise V4L2Error(errno.EFAULT, f"{name}: {len(data)} bytes for a {size}-byte argument")
+        arg = struct.from_buffer_copy(data[:size])
+    with node.lock:
+        if node.driver.queue.disconnected and name not in ("QUERYCAP", "DQEVENT"):
+            raise V4L2Error(errno.ENODEV, f"{name}: device disconnected")
+        if name in _PRIO_CHECKED:
+            node.check_priority(f)
+        if name in _QUEUE_CHECKED:
+            node.check_owner(f)
+            if node.fileio is not None:
+                raise V4L2Error(errno.EBUSY, f"{name} while read() I/O owns the buffers")
+        before = ctrls.controls(node.driver) if name in _CONTROL_CHANGERS else None
+        extra = data[size:]
+        try:
+            out = HANDLERS[name](node, f, arg, extra) if name in _WITH_EXTRA else HANDLERS[name](node, f, arg)
+        finally:
+            if before is not None:
+                node.notify_controls(before, f)
+            node.sync()
+    if isinstance(out, Answer):
+        return out
+    return Answer(int(out or 0), None if struct is None else bytes(arg))
+
+
+def _type(t: int) -> None:
+    if t != CAPTURE:
+        raise V4L2Error(errno.EINVAL, f"buffer type {t} is not VIDEO_CAPTURE")
+
+
+# ------------------------------------------------------------------------------------------- device and formats
+def _querycap(node: DeviceNode, _f: OpenFile, a: abi.Capability) -> None:
+    c = node.driver.ioctl(raw.Ioctl.QUERYCAP)
+    abi.set_str(a.driver, c.driver)
+    abi.set_str(a.card, c.card)
+    abi.set_str(a.bus_info, f"{c.bus_info}-{node.minor}")
+    a.version = c.version
+    a.device_caps = c.device_caps | raw.Cap.READWRITE
+    a.capabilities = c.capabilities | raw.Cap.READWRITE
+    a.reserved[:] = [0, 0, 0]
+
+
+def _enum_fmt(node: DeviceNode, _f: OpenFile, a: abi.FmtDesc) -> None:
+    _type(a.type)
+    d = node.driver.ioctl(raw.Ioctl.ENUM_FMT, raw.FmtDesc(a.index))
+    a.flags = d.flags
+    abi.set_str(a.description, d.description)
+    a.pixelformat = raw.fourcc_code(d.pixelformat)
+    a.mbus_code = 0
+    a.reserved[:] = [0, 0, 0]
+
+
+def _put_pix(a: abi.Format, p: raw.PixFormat) -> None:
+    pix = a.fmt.pix
+    C.memset(C.addressof(a.fmt), 0, C.sizeof(a.fmt))
+    pix.width, pix.height, pix.pixelformat = p.width, p.height, raw.fourcc_code(p.pixelformat)
+    pix.field, pix.bytesperline, pix.sizeimage, pix.colorspace = p.field, p.bytesperline, p.sizeimage, p.colorspace
+    pix.priv = PRIV_MAGIC
+
+
+def _get_pix(a: abi.Format) -> raw.PixFormat:
+    pix = a.fmt.pix
+    return raw.PixFormat(pix.width, pix.height, raw.fourcc_text(pix.pixelformat))
+
+
+def _g_fmt(node: DeviceNode, _f: OpenFile, a: abi.Format) -> None:
+    _type(a.type)
+    _put_pix(a, node.driver.fmt)
+
+
+def _try_fmt(node: DeviceNode, _f: OpenFile, a: abi.Format) -> None:
+    _type(a.type)
+    _put_pix(a, node.driver.ioctl(raw.Ioctl.TRY_FMT, _get_pix(a)))
+
+
+def _s_fmt(node: DeviceNode, f: OpenFile, a: abi.Format) -> None:
+    _type(a.type)
+    want = _get_pix(a)
+    if node.driver.queue.slots and (node.owner is not f or node.driver.ioctl(raw.Ioctl.TRY_FMT, want) !=
+                                    node.driver.fmt):
+        raise V4L2Error(errno.EBUSY, "S_FMT while buffers are allocated")
+    _put_pix(a, node.driver.fmt if node.driver.queue.slots else node.driver.ioctl(raw.Ioctl.S_FMT, want))
+
+
+def _enum_framesizes(node: DeviceNode, _f: OpenFile, a: abi.FrmSizeEnum) -> None:
+    s = node.driver.ioctl(raw.Ioctl.ENUM_FRAMESIZES, raw.FrmSize(a.index, raw.fourcc_text(a.pixel_format)))
+    a.type, a.width, a.height = s.type, s.width, s.height
+    a._stepwise[2:] = [0, 0]
+    a.reserved[:] = [0, 0]
+
+
+def _enum_frameintervals(node: DeviceNode, _f: OpenFile, a: abi.FrmIvalEnum) -> None:
+    """The mode's frame interval, DISCRETE (S_PARM still takes any interval: it sets the frame length)."""
+    ival = node.driver.ioctl(raw.Ioctl.ENUM_FRAMEINTERVALS,
+                             raw.FrmIval(a.index, raw.fourcc_text(a.pixel_format), a.width, a.height))
+    a.type, a.numerator, a.denominator = ival.type, ival.numerator, ival.denominator
+    a._stepwise[:] = [0, 0, 0, 0]
+    a.reserved[:] = [0, 0]
+
+
+def _parm(node: DeviceNode, a: abi.StreamParm, ival: tuple[int, int]) -> None:
+    C.memset(C.addressof(a.parm), 0, C.sizeof(a.parm))
+    cap = a.parm.capture
+    cap.capability = raw.Cap.TIMEPERFRAME
+    cap.timeperframe.numerator, cap.timeperframe.denominator = ival
+    cap.readbuffers = READ_BUFFERS
+
+
+def _g_parm(node: DeviceNode, _f: OpenFile, a: abi.StreamParm) -> None:
+    _type(a.type)
+    p = node.driver.ioctl(raw.Ioctl.G_PARM)
+    _parm(node, a, (p.numerator, p.denominator))
+
+
+def _s_parm(node: DeviceNode, _f: OpenFile, a: abi.StreamParm) -> None:
+    _type(a.type)
+    t = a.parm.capture.timeperframe
+    p = node.driver.ioctl(raw.Ioctl.S_PARM, raw.StreamParm(numerator=t.numerator, denominator=t.denominator))
+    _parm(node, a, (p.numerator, p.denominator))
+
+
+def _enuminput(node: DeviceNode, _f: OpenFile, a: abi.Input) -> None:
+    i = node.driver.ioctl(raw.Ioctl.ENUMINPUT, raw.Input(a.index))
+    idx = a.index
+    C.memset(C.addressof(a), 0, C.sizeof(a))
+    a.index, a.type = idx, i.type
+    abi.set_str(a.name, i.name)
+
+
+def _g_input(node: DeviceNode, _f: OpenFile, a: C.c_int) -> None:
+    a.value = node.driver.ioctl(raw.Ioctl.G_INPUT)
+
+
+def _s_input(node: DeviceNode, _f: OpenFile, a: C.c_int) -> None:
+    a.value = node.driver.ioctl(raw.Ioctl.S_INPUT, a.value)
+
+
+def _g_priority(node: DeviceNode, _f: OpenFile, a: C.c_uint32) -> None:
+    a.value = max((g.priority for g in node.files), default=PRIO_INTERACTIVE)  # v4l2_prio_max
+
+
+def _s_priority(_node: DeviceNode, f: OpenFile, a: C.c_uint32) -> None:
+    if not PRIO_BACKGROUND <= a.value <= PRIO_RECORD:
+        raise V4L2Error(errno.EINVAL, f"priority {a.value} is not 1..3")
+    f.priority = a.value
+
+
+def _log_status(node: DeviceNode, _f: OpenFile, _a: None) -> None:
+    return None
+
+
+# ------------------------------------------------------------------------------------------------- controls
+def _queryctrl(node: DeviceNode, _f: OpenFile, a: abi.QueryCtrl) -> None:
+    c = ctrls.find(node.driver, a.id)
+    C.memset(C.addressof(a), 0, C.sizeof(a))
+    a.id, a.type, a.flags = c.id, c.type, c.flags
+    abi.set_str(a.name, c.name)
+    if c.type in (raw.CtrlType.INTEGER, raw.CtrlType.BOOLEAN, raw.CtrlType.MENU):
+        a.minimum, a.maximum, a.step, a.default_value = c.minimum, c.maximum, c.step, c.default
+
+
+def _query_ext_ctrl(node: DeviceNode, _f: OpenFile, a: abi.QueryExtCtrl) -> None:
+    q = node.driver.ioctl(raw.Ioctl.QUERY_EXT_CTRL, raw.QueryExtCtrl(a.id))
+    C.memset(C.addressof(a), 0, C.sizeof(a))
+    a.id, a.type, a.name = q.id, q.type, q.name.encode()[:31]
+    a.minimum, a.maximum, a.step, a.default_value, a.flags = q.minimum, q.maximum, q.step, q.default_value, q.flags
+    a.elem_size, a.elems = q.elem_size, q.elems
+
+
+def _querymenu(node: DeviceNode, _f: OpenFile, a: abi.QueryMenu) -> None:
+    m = node.driver.ioctl(raw.Ioctl.QUERYMENU, raw.QueryMenu(a.id, a.index))
+    abi.set_str(a.name, m.name)
+    a.reserved = 0
+
+
+def _g_ctrl(node: DeviceNode, _f: OpenFile, a: abi.Control) -> None:
+    a.value = ctrls.KERNEL_CTRL[raw.Ioctl.G_CTRL](node.driver, raw.Control(a.id)).value
+
+
+def _s_ctrl(node: DeviceNode, _f: OpenFile, a: abi.Control) -> None:
+    a.value = ctrls.KERNEL_CTRL[raw.Ioctl.S_CTRL](node.driver, raw.Control(a.id, a.value)).value
+
+
+def _ext_ctrls(request: raw.Ioctl) -> Callable[..., Answer]:
+    def run(node: DeviceNode, _f: OpenFile, a: abi.ExtControls, extra: bytes) -> Answer:
+        n = a.count
+        if n > 1024:
+            raise V4L2Error(errno.EINVAL, f"{n} controls in one call (at most 1024)")
+        if n and len(extra) < n * C.sizeof(abi.ExtControl):
+            raise V4L2Error(errno.EFAULT, "the controls array is not readable")
+        items = (abi.ExtControl * n).from_buffer_copy(extra[: n * C.sizeof(abi.ExtControl)]) if n else []
+        table = ctrls.controls(node.driver)
+        values = [[c.id, c.value64 if table.get(c.id) is not None and table[c.id].type == raw.CtrlType.INTEGER64
+                   else C.c_int32(c.value64 & 0xFFFFFFFF).value] for c in items]
+        arg = raw.ExtControls(a.which, values)
+        try:
+            node.driver.ioctl(request, arg)
+            err = None
+        except V4L2Error as exc:
+            err = exc
+        a.error_idx = arg.error_idx
+        for c, (_cid, v) in zip(items, arg.controls, strict=True):
+            is64 = table.get(c.id) is not None and table[c.id].type == raw.CtrlType.INTEGER64
+            c.value64 = v if is64 else (c.value64 & ~0xFFFFFFFF) | (v & 0xFFFFFFFF)
+            c.size = 0
+        data = bytes(a) + (bytes(items) if n else b"")
+        if err is not None:
+            raise _WithData(err, data)
+        return Answer(0, data)
+
+    return run
+
+
+class _WithData(V4L2Error):
+    """An error whose argument still goes back (the kernel copies ext-controls back on failure)."""
+
+    def __init__(self, err: V4L2Error, data: bytes) -> None:
+        super().__init__(err.errno, str(err))
+        self.data = data
+
+
+def _subscribe(node: DeviceNode, f: OpenFile, a: abi.EventSubscription) -> None:
+    ctrl = ctrls.controls(node.driver).get(a.id) if a.type == EVENT_CTRL else None
+    f.events.subscribe(a.type, a.id, a.flags, ctrl)
+
+
+def _unsubscribe(_node: DeviceNode, f: OpenFile, a: abi.EventSubscription) -> None:
+    f.events.unsubscribe(a.type, a.id)
+
+
+def _dqevent(node: DeviceNode, f: OpenFile, a: abi.Event) -> None:
+    if node.driver.queue.disconnected:
+        raise V4L2Error(errno.ENODEV, "device disconnected")
+    ev, left = f.events.dequeue()
+    C.memset(C.addressof(a), 0, C.sizeof(a))
+    a.type, a.id, a.pending, a.sequence = EVENT_CTRL, ev.id, left, ev.sequence
+    a.timestamp.tv_sec, a.timestamp.tv_nsec = divmod(ev.timestamp_ns, 1_000_000_000)
+    c = ev.ctrl
+    e = a.u.ctrl
+    e.changes, e.type, e.value64, e.flags = ev.changes, c.type, c.value, c.flags
+    if c.type != raw.CtrlType.INTEGER64:
+        e.minimum, e.maximum, e.step, e.default_value = c.minimum, c.maximum, c.step, c.default
+
+
+from .ioctls_buffers import BUFFER_HANDLERS  # noqa: E402  (the buffer requests, in their own module)
+
+HANDLERS: dict[str, Callable[..., Any]] = {
+    "QUERYCAP": _querycap, "ENUM_FMT": _enum_fmt, "G_FMT": _g_fmt, "S_FMT": _s_fmt, "TRY_FMT": _try_fmt,
+    "ENUM_FRAMESIZES": _enum_framesizes, "ENUM_FRAMEINTERVALS": _enum_frameintervals, "G_PARM": _g_parm,
+    "S_PARM": _s_parm, "ENUMINPUT": _enuminput, "G_INPUT": _g_input, "S_INPUT": _s_input,
+    "G_PRIORITY": _g_priority, "S_PRIORITY": _s_priority, "LOG_STATUS": _log_status,
+    "QUERYCTRL": _queryctrl, "QUERY_EXT_CTRL": _query_ext_ctrl, "QUERYMENU": _querymenu, "G_CTRL": _g_ctrl,
+    "S_CTRL": _s_ctrl, "G_EXT_CTRLS": _ext_ctrls(raw.Ioctl.G_EXT_CTRLS),
+    "S_EXT_CTRLS": _ext_ctrls(raw.Ioctl.S_EXT_CTRLS), "TRY_EXT_CTRLS": _ext_ctrls(raw.Ioctl.TRY_EXT_CTRLS),
+    "SUBSCRIBE_EVENT": _subscribe, "UNSUBSCRIBE_EVENT": _unsubscribe, "DQEVENT": _dqevent,
+    **BUFFER_HANDLERS,
+}
+_WITH_EXTRA = {"G_EXT_CTRLS", "S_EXT_CTRLS", "TRY_EXT_CTRLS"}

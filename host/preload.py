@@ -1,0 +1,117 @@
+"""``rollcam run``'s work: serve emulated ``/dev/videoN`` nodes and run a program that sees them.
+
+Each device is a ``FirmwareCamera`` (from an ``emu:`` URI or a sensor name) behind an ``EmuDriver`` and a
+``DeviceNode``; one ``PreloadServer`` serves them on a Unix socket in a private temporary folder. The
+program runs with the preload library (``rollcam.emu.preload``) in ``LD_PRELOAD``, the socket and device
+paths in its environment, and ``rollcam/host/shims`` first on its ``PYTHONPATH`` (stand-in modules such as
+``picamera2``). Its exit status is returned (128 + N when signal N ended it); the socket and folder go.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import shutil
+import signal
+import subprocess
+import tempfile
+from collections.abc import Iterator, Sequence
+from pathlib import Path
+
+from rollcam.common.errors import ConfigError
+from rollcam.common.faults import FaultPlan
+from rollcam.emu.preload import environment, write_sysfs
+from rollcam.emu.v4l2.driver import EmuDriver
+from rollcam.emu.v4l2.node import DeviceNode
+from rollcam.emu.v4l2.server import PreloadServer
+from rollcam.firmware.camera import FirmwareCamera
+from rollcam.firmware.spec import CameraSpec
+from rollcam.host.standins import standin_env
+
+DEFAULT_DEVICE = "/dev/video0"
+DEFAULT_SOURCE = "emu:imx219?size=640x480"
+
+
+def parse_device(text: str, index: int) -> tuple[str, str]:
+    """``PATH=SOURCE`` or ``SOURCE`` (then ``/dev/video{index}``) -> (path, source)."""
+    path, sep, source = text.partition("=")
+    if not sep or not path.startswith("/"):
+        path, source = f"/dev/video{index}", text
+    if not source:
+        raise ConfigError(f"device {text!r}: expected PATH=SOURCE (an emu: URI or a sensor name)")
+    return path, source
+
+
+def build_camera(source: str) -> tuple[FirmwareCamera, FaultPlan]:
+    """The camera an ``emu:`` URI or a sensor name describes, on the real device clock, and the URI's
+    ``faults=`` plan (``rollcam.common.faults``; none for a sensor name)."""
+    if not source.startswith("emu:"):
+        return FirmwareCamera(source), FaultPlan()
+    from rollcam.host.sources import parse_uri
+    from rollcam.host.sources.emu import fault_plan
+
+    uri = parse_uri(source)
+    plan = fault_plan(uri)
+    camera_opts = {k: v for k, v in uri.options.items() if k != "faults"}
+    return FirmwareCamera(CameraSpec.from_options(uri.target, camera_opts, f"device source {source!r}",
+                                                  ConfigError)), plan
+
+
+def minor_of(path: str, index: int) -> int:
+    """The minor number a node reports: the digits ending its path (video2 -> 2), else its index."""
+    digits = len(path) - len(path.rstrip("0123456789"))
+    return int(path[-digits:]) if digits else index
+
+
+@contextlib.contextmanager
+def serving(devices: Sequence[tuple[str, str]], *, realtime: bool = True) -> Iterator[PreloadServer]:
+    """Serve ``(path, source)`` devices on a socket in a new private folder; everything goes on exit."""
+    paths = [p for p, _ in devices]
+    if len(set(paths)) != len(paths):
+        raise ConfigError(f"device paths {paths!r} repeat")
+    folder = tempfile.mkdtemp(prefix="rollcam-run-")
+    nodes: dict[str, DeviceNode] = {}
+    try:
+        for i, (path, source) in enumerate(devices):
+            camera, faults = build_camera(source)
+            nodes[path] = DeviceNode(EmuDriver(camera, realtime=realtime, faults=faults), path, minor_of(path, i))
+        server = PreloadServer(nodes, os.path.join(folder, "v4l2.sock"))
+        write_sysfs(Path(folder) / "sys", [(n.path, n.minor, f"rollcam {n.driver.camera.sensor.name} emulator")
+                                           for n in nodes.values()])
+    except BaseException:
+        for node in nodes.values():
+            node.close()
+        shutil.rmtree(folder, ignore_errors=True)
+        raise
+    try:
+        yield server
+    finally:
+        server.close()
+        shutil.rmtree(folder, ignore_errors=True)
+
+
+def program_environment(server: PreloadServer, base: dict[str, str] | None = None) -> dict[str, str]:
+    """The environment a program under ``rollcam run`` gets: the preload library and its socket, and the
+    stand-in modules (``picamera2``) first on ``PYTHONPATH`` (``rollcam.host.standins``)."""
+    env = environment(server.socket_path, list(server.nodes), base, Path(server.socket_path).with_name("sys"))
+    return standin_env(env=env)
+
+
+def run_program(devices: Sequence[tuple[str, str]], argv: Sequence[str], *, realtime: bool = True) -> int:
+    """Run ``argv`` with the devices; its exit status (128 + N after signal N)."""
+    if not argv:
+        raise ConfigError("no program to run (rollcam run [--device PATH=SOURCE ...] -- PROGRAM ARGS...)")
+    if shutil.which(argv[0]) is None:
+        raise ConfigError(f"program {argv[0]!r} not found")
+    with serving(devices, realtime=realtime) as server:
+        proc = subprocess.Popen(list(argv), env=program_environment(server))
+        forwarded = {s: signal.signal(s, lambda n, _f: proc.send_signal(n)) for s in (signal.SIGINT, signal.SIGTERM)}
+        try:
+            code = proc.wait()
+        finally:
+            for s, old in forwarded.items():
+                signal.signal(s, old)
+            if proc.poll() is None:
+                proc.kill()
+                proc.wait()
+    return 128 - code if code < 0 else code
