@@ -90,11 +90,13 @@ def serving(devices: Sequence[tuple[str, str]], *, realtime: bool = True) -> Ite
         shutil.rmtree(folder, ignore_errors=True)
 
 
-def program_environment(server: PreloadServer, base: dict[str, str] | None = None) -> dict[str, str]:
+def program_environment(server: PreloadServer, base: dict[str, str] | None = None,
+                        sources: Sequence[str] = ()) -> dict[str, str]:
     """The environment a program under ``rollcam run`` gets: the preload library and its socket, and the
-    stand-in modules (``picamera2``) first on ``PYTHONPATH`` (``rollcam.host.standins``)."""
+    stand-in modules (``picamera2``) first on ``PYTHONPATH`` (``rollcam.host.standins``), their cameras the
+    same ``sources`` as the devices (``Picamera2(0)`` is the first ``--device``)."""
     env = environment(server.socket_path, list(server.nodes), base, Path(server.socket_path).with_name("sys"))
-    return standin_env(env=env)
+    return standin_env(sources, env=env)
 
 
 def run_program(devices: Sequence[tuple[str, str]], argv: Sequence[str], *, realtime: bool = True) -> int:
@@ -104,7 +106,7 @@ def run_program(devices: Sequence[tuple[str, str]], argv: Sequence[str], *, real
     if shutil.which(argv[0]) is None:
         raise ConfigError(f"program {argv[0]!r} not found")
     with serving(devices, realtime=realtime) as server:
-        proc = subprocess.Popen(list(argv), env=program_environment(server))
+        proc = subprocess.Popen(list(argv), env=program_environment(server, sources=[src for _, src in devices]))
         forwarded = {s: signal.signal(s, lambda n, _f: proc.send_signal(n)) for s in (signal.SIGINT, signal.SIGTERM)}
         try:
             code = proc.wait()

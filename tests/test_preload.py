@@ -271,5 +271,20 @@ def test_a_device_uri_carries_its_fault_plan_to_the_driver():
     assert not hp.build_camera("imx219")[1].to_text()
     with pytest.raises(RollcamError, match="nosuch"):
         hp.build_camera("emu:imx219?faults=nosuch=1")
-    monkeypatch.setattr(hp, "SHIMS", tmp_path / "absent")
-    assert program_environment(server, base)["PYTHONPATH"] == "/elsewhere"
+
+
+def test_a_picamera2_script_under_rollcam_run_gets_the_stand_in_on_the_first_device(tmp_path):
+    from rollcam.host.cli import main
+
+    script = tmp_path / "pi.py"
+    out = tmp_path / "out.json"
+    script.write_text(textwrap.dedent(f"""
+        import json
+        from picamera2 import Picamera2
+        with Picamera2() as cam:
+            json.dump({{"model": cam.camera_properties["Model"], "file": __import__("picamera2").__file__}},
+                      open({str(out)!r}, "w"))
+    """))
+    assert main(["run", "--device", "/dev/video0=imx477", "--", sys.executable, str(script)]) == 0
+    got = json.loads(out.read_text())
+    assert got["model"] == "imx477" and "/host/shims/picamera2/" in got["file"]
