@@ -77,7 +77,7 @@ def run_soak(minutes: float = 10.0, *, sensor: str = "imx219", size: tuple[int, 
             os.sched_setscheduler(0, os.SCHED_OTHER, os.sched_param(0))
         pump_stats = d.pump.stats.to_json() if d.pump else {}
         driver_stats = d.stats.to_json()
-        camera_stats = dict(cam.stats)
+        camera_stats = cam.stats.to_json()
         exposure_ns = int(timing.line_offset_ns(cam.state.exposure_lines))
         readout_ns = int(timing.line_offset_ns(size[1]))
         fn.stream_off(d)

@@ -190,6 +190,13 @@ class DeviceStream:
             self._next_seq = seq + 1
             return FramePlan(seq, sched)
 
+    def rewind(self, seq: int) -> None:
+        """Plan frame ``seq`` again next (a free-running consumer that planned ahead and threw the frames from
+        ``seq`` on away, because the spec changed before they started exposing): the schedule re-anchors at
+        that frame's start if the timing changed. Never moves forward."""
+        with self.lock:
+            self._next_seq = min(self._next_seq, seq)
+
     def note_made(self, seq: int) -> None:
         """Record that frame ``seq`` was planned by a consumer that does not use ``plan_next`` (UVC), so the
         next timing change re-anchors the schedule after it rather than at the stream's start."""
