@@ -1,8 +1,8 @@
 """The studies behind ``rollcam bench STUDY``: one entry each, with its options, run, report and targets.
 
 Each study's code lives in its own module of ``rollcam.benchmarks`` (``bench`` renders, ``hog_recall``,
-``detect``, ``ptc``, ``sensor_bench``, ``uvc``, ``soak``, ``dataset``); an entry here is the thin layer the
-command line needs. ``run(args, progress)`` does the work, writes its files under ``args.out`` and returns the
+``detect``, ``ptc``, ``sensor_bench``, ``uvc``, ``soak``, ``mjpeg``, ``dataset``); an entry here is the thin
+layer the command line needs. ``run(args, progress)`` does the work, writes its files under ``args.out`` and returns the
 JSON document with its plain-text report; ``targets(doc)`` reads the document's targets as ``{name: {"value",
 "op", "limit", "pass"}}`` (``pass`` None when a target did not apply). This module imports only the standard
 library at the top, so ``rollcam --help`` stays fast.
@@ -217,6 +217,16 @@ def _doc_targets(doc: Doc) -> Targets:
     return {name: _target(t["value"], t.get("op", "=="), t["limit"], t["pass"]) for name, t in doc["targets"].items()}
 
 
+# ---------------------------------------------------------------------------------------------- mjpeg
+def _mjpeg(args: argparse.Namespace, progress: Any) -> tuple[Doc, str]:
+    from .mjpeg import format_mjpeg_bench, run_mjpeg_bench
+
+    progress.status("JPEG encode and 8 clients of one MJPEG server")
+    doc = run_mjpeg_bench(quick=args.quick)
+    write_json(args.out, "mjpeg.json", doc)
+    return doc, format_mjpeg_bench(doc)
+
+
 # -------------------------------------------------------------------------------------------- dataset
 def _dataset_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--size", type=value_type(parse_size), default=(1920, 1080), metavar="WxH",
@@ -245,6 +255,8 @@ STUDIES: dict[str, Study] = {s.name: s for s in (
     Study("uvc", "UVC payload packing and parsing throughput (a few seconds)", _no_arguments, _uvc, _uvc_targets),
     Study("soak", "stream an emulated 1080p30 RS V4L2 device in real time: drops, jitter, latency",
           _soak_arguments, _soak, _doc_targets),
+    Study("mjpeg", "MJPEG serving: one 1080p JPEG encode per frame, and 8 clients of one 1080p30 stream",
+          _quick_argument, _mjpeg, _doc_targets),
     Study("dataset", "dataset generation (vs render+encode, 1 vs 2 workers) and evaluation metric speed",
           _dataset_arguments, _dataset, _doc_targets),
 )}
