@@ -174,6 +174,8 @@ def _sensor_targets(doc: Doc) -> Targets:
     o, a = doc["sensor_overhead"], doc["adaptive_blur"]
     return {"sensor_overhead_vs_rs_frame": _target(o["overhead_vs_rs_frame"], "<=", o["target"],
                                                    o["overhead_vs_rs_frame"] <= o["target"]),
+            "raw_frame_ms": _target(o["raw_frame_ms"], "<=", o["raw_frame_target_ms"],
+                                    o["raw_frame_ms"] <= o["raw_frame_target_ms"]),
             "adaptive_blur_evaluation_ratio": _target(a["evaluation_ratio"], ">=", a["target_ratio"],
                                                       a["evaluation_ratio"] >= a["target_ratio"])}
 
@@ -202,14 +204,24 @@ def _soak_arguments(p: argparse.ArgumentParser) -> None:
                    help="scene (default: street; flat isolates pacing from rendering cost)")
     p.add_argument("--rt-priority", type=value_type(positive_int, "an integer >= 1"), default=None, metavar="N",
                    help="run the pump's waits and the reader under SCHED_FIFO priority N")
+    p.add_argument("--hog", action="store_true",
+                   help="run a CPU hog (yes > /dev/null) for the whole run; target: drops <= 0.1 %%")
+    p.add_argument("--memory", action="store_true",
+                   help="instead: the RSS curve of 'rollcam emulate' at 1080p with one MJPEG reader (<= 500 MB)")
 
 
 def _soak(args: argparse.Namespace, progress: Any) -> tuple[Doc, str]:
-    from .soak import format_report, run_soak
+    from .soak import format_memory_report, format_report, run_memory_soak, run_soak
 
-    doc = run_soak(args.minutes, scene=args.scene, rt_priority=args.rt_priority, progress=progress.status)
+    if args.memory:
+        doc = run_memory_soak(args.minutes, progress=progress.status)
+        write_json(args.out, "soak_memory.json", doc)
+        return doc, format_memory_report(doc)
+    doc = run_soak(args.minutes, scene=args.scene, rt_priority=args.rt_priority, progress=progress.status,
+                   hog=args.hog)
     c = doc["config"]
-    write_json(args.out, f"soak_{c['scene']}{'_rt' if c['rt_priority'] is not None else ''}.json", doc)
+    tail = ("_rt" if c["rt_priority"] is not None else "") + ("_hog" if args.hog else "")
+    write_json(args.out, f"soak_{c['scene']}{tail}.json", doc)
     return doc, format_report(doc)
 
 
