@@ -12,9 +12,10 @@ frames made ahead whose exposure starts at or after the change are thrown away a
 spec (``stats.remade``), so a change takes effect at the first frame exposed after it, as on a sensor; a
 frame already exposing keeps the settings it started with.
 
-A frame whose readout ended more than a frame period before the pump got to it (rendering slower than the
-frame rate for longer than the pool lasts) is skipped: the stream's sequence numbers show the gap, and the
-camera's ``stats['skipped']`` counts it. An exception on the pump's thread stops it; ``check()`` and
+When rendering is slower than the frame rate for longer than the pool lasts, a frame whose readout has
+ended is still handed out (late) unless the next one made is due as well; then it is skipped, as are frames
+planned after their readout ended: the stream's sequence numbers show the gap, and the camera's
+``stats['skipped']`` counts it. An exception on the pump's thread stops it; ``check()`` and
 ``close()`` re-raise it.
 """
 
@@ -67,7 +68,7 @@ class PumpStats(Stats):
     frames: int = 0
     max_late_ns: int = 0
     remade: int = 0  # frames made ahead, thrown away because the spec changed before they started exposing
-    late_skipped: int = 0  # frames made in time for nothing: more than a frame period late when their turn came
+    late_skipped: int = 0  # frames made for nothing: the next one was due too when their turn came
     min_ahead: int | None = None  # fewest frames made beyond the one being read out, when one was due
     rt: str | None = None  # "SCHED_FIFO N", "refused: ..." or None (not asked for)
 
@@ -193,18 +194,21 @@ class FramePump(Closeable):
         self._pool.append(_Made(plan, spec, frame))
 
     def _may_render(self) -> bool:
-        """Room in the pool, and a render started now ends before the next last line is due; or it never
-        would (renders slower than a frame period): then the pool matters more than one frame's timing."""
+        """Room in the pool, no band due, and a render started now ends before the next last line is due; or
+        it never would (renders slower than a frame period): then the pool matters more than one frame's
+        timing."""
         pool = self._pool
         if not pool:
             return True
         if len(pool) >= self.ahead:
             return False
+        cur = pool[0]
+        plan, now = cur.plan, self.camera.clock_ns()
+        if now >= plan.schedule.band_due_ns(plan.seq, cur.bands_out, self.bands):
+            return False  # a band is due: hand it out first
         recent = sorted(self._render_ns)
         budget = 5 * (recent[9 * len(recent) // 10] if recent else 0) // 4 + RENDER_MARGIN_NS
-        plan = pool[0].plan
-        return (self.camera.clock_ns() + budget <= plan.due_ns
-                or budget >= plan.schedule.timing.frame_period_ns - HANDOFF_NS)
+        return now + budget <= plan.due_ns or budget >= plan.schedule.timing.frame_period_ns - HANDOFF_NS
 
     def _drop_stale(self) -> None:
         """Throw away frames made from a spec that changed before they started exposing; plan them again."""
@@ -226,7 +230,7 @@ class FramePump(Closeable):
         cam, plan, pool = self.camera, made.plan, self._pool
         band = made.bands_out
         if band == 0:
-            if cam.clock_ns() - plan.due_ns > plan.schedule.timing.frame_period_ns:  # long past: skip it
+            if len(pool) > 1 and cam.clock_ns() > pool[1].plan.due_ns:  # a newer frame is due too: skip this
                 pool.popleft()
                 self.stats.late_skipped += 1
                 with cam.lock:
