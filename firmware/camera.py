@@ -48,7 +48,6 @@ class FirmwareCamera(DeviceStream):
         self.traits = traits_for(self.sensor.name)
         self.registers = RegisterFile(self.sensor, self._mode_select)
         self.imager = Imager()
-        self.spec_changed_ns = -1  # device time the spec last changed (frames exposed from then on follow it)
 
     def __repr__(self) -> str:
         s = self.spec.settings
@@ -81,10 +80,7 @@ class FirmwareCamera(DeviceStream):
                 raise DeviceError(f"cannot change the {idle_only} while streaming; stop first")
             if self.streaming:
                 warm(spec)  # a new kind of frame compiles now, before its frame is due
-            if spec != self.spec:
-                self.spec_changed_ns = self.clock_ns()
-            self.spec = spec
-            self.changed.notify_all()
+            self._commit(spec)
             return spec
 
     def update(self, *, idle_only: str | None = None, **fields: Any) -> CameraSpec:
@@ -226,14 +222,11 @@ class FirmwareCamera(DeviceStream):
         return None if plan is None else self.render(plan)
 
     def render(self, plan: FramePlan, shutter: str | None = None) -> Frame:
-        """Make frame ``plan.seq`` from the current spec at its lines' device times (optionally under the other
-        shutter, for paired GS/RS data): the scene or the test pattern, flips applied."""
+        """Frame ``plan.seq`` from the current spec (optionally under the other shutter): ``make``'s frame."""
         return self.make(plan, shutter)[1]
 
     def make(self, plan: FramePlan, shutter: str | None = None) -> tuple[CameraSpec, Frame]:
-        """``render(plan)`` and the spec it was made from (a frame made ahead of its time is stale once the
-        spec changes before its exposure starts: see ``spec_changed_ns``)."""
-        with self.lock:
-            spec = self.spec
-            self.stats.frames += 1
+        """Frame ``plan.seq`` from the current spec at its lines' device times (optionally under the other shutter,
+        for paired GS/RS data), the scene or the test pattern, flips applied; and that spec."""
+        spec = self._spec_for_frame()
         return spec, self.imager.render(spec, plan.seq, plan.start_ns, shutter)
