@@ -1,9 +1,9 @@
 """The studies behind ``rollcam bench STUDY``: one entry each, with its options, run, report and targets.
 
 Each study's code lives in its own module of ``rollcam.benchmarks`` (``bench`` renders, ``hog_recall``,
-``detect``, ``ptc``, ``sensor_bench``, ``uvc``, ``soak``, ``dataset``, ``imu``, ``view``, ``preload``); an entry here is the thin layer the
-command line needs. ``run(args, progress)`` does the work, writes its files under ``args.out`` and returns the
-JSON document with its plain-text report; ``targets(doc)`` reads the document's targets as ``{name: {"value",
+``detect``, ``ptc``, ``sensor_bench``, ``uvc``, ``soak``, ``mjpeg``, ``dataset``, ``imu``, ``view``,
+``preload``); an entry here is the thin layer the command line needs. ``run(args, progress)`` does the work,
+writes its files under ``args.out`` and returns the JSON document with its plain-text report; ``targets(doc)`` reads the document's targets as ``{name: {"value",
 "op", "limit", "pass"}}`` (``pass`` None when a target did not apply). This module imports only the standard
 library at the top, so ``rollcam --help`` stays fast.
 """
@@ -174,6 +174,8 @@ def _sensor_targets(doc: Doc) -> Targets:
     o, a = doc["sensor_overhead"], doc["adaptive_blur"]
     return {"sensor_overhead_vs_rs_frame": _target(o["overhead_vs_rs_frame"], "<=", o["target"],
                                                    o["overhead_vs_rs_frame"] <= o["target"]),
+            "raw_frame_ms": _target(o["raw_frame_ms"], "<=", o["raw_frame_target_ms"],
+                                    o["raw_frame_ms"] <= o["raw_frame_target_ms"]),
             "adaptive_blur_evaluation_ratio": _target(a["evaluation_ratio"], ">=", a["target_ratio"],
                                                       a["evaluation_ratio"] >= a["target_ratio"])}
 
@@ -202,19 +204,39 @@ def _soak_arguments(p: argparse.ArgumentParser) -> None:
                    help="scene (default: street; flat isolates pacing from rendering cost)")
     p.add_argument("--rt-priority", type=value_type(positive_int, "an integer >= 1"), default=None, metavar="N",
                    help="run the pump's waits and the reader under SCHED_FIFO priority N")
+    p.add_argument("--hog", action="store_true",
+                   help="run a CPU hog (yes > /dev/null) for the whole run; target: drops <= 0.1 %%")
+    p.add_argument("--memory", action="store_true",
+                   help="instead: the RSS curve of 'rollcam emulate' at 1080p with one MJPEG reader (<= 500 MB)")
 
 
 def _soak(args: argparse.Namespace, progress: Any) -> tuple[Doc, str]:
-    from .soak import format_report, run_soak
+    from .soak import format_memory_report, format_report, run_memory_soak, run_soak
 
-    doc = run_soak(args.minutes, scene=args.scene, rt_priority=args.rt_priority, progress=progress.status)
+    if args.memory:
+        doc = run_memory_soak(args.minutes, progress=progress.status)
+        write_json(args.out, "soak_memory.json", doc)
+        return doc, format_memory_report(doc)
+    doc = run_soak(args.minutes, scene=args.scene, rt_priority=args.rt_priority, progress=progress.status,
+                   hog=args.hog)
     c = doc["config"]
-    write_json(args.out, f"soak_{c['scene']}{'_rt' if c['rt_priority'] is not None else ''}.json", doc)
+    tail = ("_rt" if c["rt_priority"] is not None else "") + ("_hog" if args.hog else "")
+    write_json(args.out, f"soak_{c['scene']}{tail}.json", doc)
     return doc, format_report(doc)
 
 
 def _doc_targets(doc: Doc) -> Targets:
     return {name: _target(t["value"], t.get("op", "=="), t["limit"], t["pass"]) for name, t in doc["targets"].items()}
+
+
+# ---------------------------------------------------------------------------------------------- mjpeg
+def _mjpeg(args: argparse.Namespace, progress: Any) -> tuple[Doc, str]:
+    from .mjpeg import format_mjpeg_bench, run_mjpeg_bench
+
+    progress.status("JPEG encode and 8 clients of one MJPEG server")
+    doc = run_mjpeg_bench(quick=args.quick)
+    write_json(args.out, "mjpeg.json", doc)
+    return doc, format_mjpeg_bench(doc)
 
 
 # -------------------------------------------------------------------------------------------- dataset
@@ -291,6 +313,8 @@ STUDIES: dict[str, Study] = {s.name: s for s in (
     Study("uvc", "UVC payload packing and parsing throughput (a few seconds)", _no_arguments, _uvc, _uvc_targets),
     Study("soak", "stream an emulated 1080p30 RS V4L2 device in real time: drops, jitter, latency",
           _soak_arguments, _soak, _doc_targets),
+    Study("mjpeg", "MJPEG serving: one 1080p JPEG encode per frame, and 8 clients of one 1080p30 stream",
+          _quick_argument, _mjpeg, _doc_targets),
     Study("dataset", "dataset generation (vs render+encode, 1 vs 2 workers) and evaluation metric speed",
           _dataset_arguments, _dataset, _doc_targets),
     Study("imu", "IMU noise (Allan fit against the config) and gyro RS correction (error vs GS, time per frame)",

@@ -19,6 +19,7 @@ import dataclasses
 import json
 import socket
 import threading
+import time
 from collections.abc import AsyncIterator
 from dataclasses import dataclass
 from typing import Any
@@ -109,6 +110,8 @@ class ServerStats(Stats):
     bad_requests: int = 0
     evicted_stalled: int = 0
     send_timeouts: int = 0
+    encode_ms_max: float = 0.0  # the slowest JPEG encode so far (one per frame, shared by every client)
+    encode_ms_total: float = 0.0
 
 
 class _MultipartResponse(web.StreamResponse):
@@ -212,7 +215,11 @@ class MjpegServer(Closeable):
             f = self._latest.get(0.2)
             if f is None:
                 continue
+            t0 = time.perf_counter_ns()
             part = Part.of(f, transcode(f, "MJPG", levels, self.quality).tobytes())
+            ms = (time.perf_counter_ns() - t0) / 1e6
+            self.stats.encode_ms_max = max(self.stats.encode_ms_max, round(ms, 3))
+            self.stats.encode_ms_total += ms
             self.stats.frames_encoded += 1
             self.http.call_soon(self._publish, part)
 

@@ -1,14 +1,16 @@
 """Fair slots for long-lived HTTP responses (MJPEG streams): no idle client can lock out a live one.
 
-Every stream holds a ``StreamClient``: a one-item mailbox on the event loop (a newer item replaces one not
-yet sent, and that counts as a drop, so a slow client skips frames and never queues them) and the time its
-current write began. A write that has not drained for ``stall_s`` marks the client *stalled*. ``StreamSlots``
-admits a newcomer under ``max_streams`` in all and ``max_streams_per_peer`` per address; when a limit is
-reached it evicts the longest-stalled client inside that limit; when none is stalled the newcomer waits up
-to ``admit_wait_s`` (a silent reader stalls within about ``stall_s`` once its capped buffers are full) and
-is refused only then. ``sweep()`` closes clients stalled past ``send_timeout_s`` whoever is waiting. Items are
-shared by every client (the same bytes object is written to each transport), so a stalled client costs at
-most its transport's write buffer: the high-water mark plus one item.
+Every stream holds a ``StreamClient``: a two-item mailbox on the event loop (the two newest items not yet
+sent; a third replaces the older, and that counts as a drop, so a slow client skips frames and never queues
+more than two, while one that keeps up rides out two parts published back to back by an event loop that was
+kept from running for a frame) and the time its current write began. A write that has not drained for
+``stall_s`` marks the client *stalled*. ``StreamSlots`` admits a newcomer under ``max_streams`` in all and
+``max_streams_per_peer`` per address; when a limit is reached it evicts the longest-stalled client inside that
+limit; when none is stalled the newcomer waits up to ``admit_wait_s`` (a silent reader stalls within about
+``stall_s`` once its capped buffers are full) and is refused only then. ``sweep()`` closes clients stalled
+past ``send_timeout_s`` whoever is waiting. Items are shared by every client (the same bytes object is
+written to each transport), so a stalled client costs at most its transport's write buffer: the high-water
+mark plus one item.
 """
 
 from __future__ import annotations
@@ -27,25 +29,30 @@ class StreamClient:
 
     def __init__(self, key: int, conn: Connection) -> None:
         self.key, self.conn, self.peer = key, conn, conn.peer
-        self.item: Any = None
+        self.item: Any = None  # the newest item not yet sent
+        self.older: Any = None  # the one before it, not yet sent either
         self.sent = self.dropped = 0
         self.writing_since: float | None = None
         self.gone = False
         self._wake = asyncio.Event()
 
     def offer(self, item: Any) -> None:
-        """Make ``item`` the next to send (replacing, and counting as dropped, one not yet sent)."""
+        """Queue ``item`` to send after the one not yet sent (if two wait, the older is dropped and counted)."""
         if self.item is not None:
-            self.dropped += 1
+            self.dropped += self.older is not None
+            self.older = self.item
         self.item = item
         self._wake.set()
 
     async def next(self) -> Any:
-        """The next item to send; None once the client was evicted."""
+        """The next item to send, oldest first; None once the client was evicted."""
         while self.item is None and not self.gone:
             self._wake.clear()
             await self._wake.wait()
-        item, self.item = self.item, None
+        if self.older is not None:
+            item, self.older = self.older, None
+        else:
+            item, self.item = self.item, None
         return None if self.gone else item
 
     async def send(self, write: Callable[[bytes], Awaitable[None]], data: bytes, now: Callable[[], float]) -> None:

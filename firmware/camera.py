@@ -80,8 +80,7 @@ class FirmwareCamera(DeviceStream):
                 raise DeviceError(f"cannot change the {idle_only} while streaming; stop first")
             if self.streaming:
                 warm(spec)  # a new kind of frame compiles now, before its frame is due
-            self.spec = spec
-            self.changed.notify_all()
+            self._commit(spec)
             return spec
 
     def update(self, *, idle_only: str | None = None, **fields: Any) -> CameraSpec:
@@ -223,9 +222,11 @@ class FirmwareCamera(DeviceStream):
         return None if plan is None else self.render(plan)
 
     def render(self, plan: FramePlan, shutter: str | None = None) -> Frame:
-        """Make frame ``plan.seq`` from the current spec at its lines' device times (optionally under the other
-        shutter, for paired GS/RS data): the scene or the test pattern, flips applied."""
-        with self.lock:
-            spec = self.spec
-            self.stats.frames += 1
-        return self.imager.render(spec, plan.seq, plan.start_ns, shutter)
+        """Frame ``plan.seq`` from the current spec (optionally under the other shutter): ``make``'s frame."""
+        return self.make(plan, shutter)[1]
+
+    def make(self, plan: FramePlan, shutter: str | None = None) -> tuple[CameraSpec, Frame]:
+        """Frame ``plan.seq`` from the current spec at its lines' device times (optionally under the other shutter,
+        for paired GS/RS data), the scene or the test pattern, flips applied; and that spec."""
+        spec = self._spec_for_frame()
+        return spec, self.imager.render(spec, plan.seq, plan.start_ns, shutter)

@@ -82,6 +82,21 @@ class DeviceStream:
         self._latched_start_ns = -1  # start of the latched frame, while one is latched
         self._schedule: FrameSchedule | None = None
         self._next_seq = 0
+        self.spec_changed_ns = -1  # device time the spec last changed (frames exposed from then on follow it)
+
+    def _spec_for_frame(self) -> CameraSpec:
+        """The spec a frame is made from now, counted in ``stats.frames`` (a frame made ahead is stale once the
+        spec changes before its exposure starts: ``spec_changed_ns``)."""
+        with self.lock:
+            self.stats.frames += 1
+            return self.spec
+
+    def _commit(self, spec: CameraSpec) -> None:
+        """Make ``spec`` the spec (under the lock), noting when it changed, and wake whoever waits on a change."""
+        if spec != self.spec:
+            self.spec_changed_ns = self.clock_ns()
+        self.spec = spec
+        self.changed.notify_all()
 
     def clock_ns(self) -> int:
         """Device clock: integer ns since the device booted."""
@@ -189,6 +204,13 @@ class DeviceStream:
                     seq = late
             self._next_seq = seq + 1
             return FramePlan(seq, sched)
+
+    def rewind(self, seq: int) -> None:
+        """Plan frame ``seq`` again next (a free-running consumer that planned ahead and threw the frames from
+        ``seq`` on away, because the spec changed before they started exposing): the schedule re-anchors at
+        that frame's start if the timing changed. Never moves forward."""
+        with self.lock:
+            self._next_seq = min(self._next_seq, seq)
 
     def note_made(self, seq: int) -> None:
         """Record that frame ``seq`` was planned by a consumer that does not use ``plan_next`` (UVC), so the

@@ -3,6 +3,9 @@
 Steps, in the order a camera ISP runs them: black-level subtraction, normalisation to the sensor's white
 level, white balance (fixed gains or grey-world), demosaic (OpenCV's bilinear or edge-aware), sRGB gamma.
 It is a preview, for detectors that want RGB: the ISP-less path hands raw frames straight to the consumer.
+After the demosaic every step is a function of one channel's integer sample, so ``preview`` applies them as
+a lookup table per channel (built with the same float32 arithmetic, so the output is the same bit for bit as
+running the steps on every pixel, at a fraction of the cost: no frame-sized float arrays).
 ``rollcam.sim.codecs`` runs every raw preview through ``preview`` and makes the processed fourccs from its output.
 """
 
@@ -11,7 +14,10 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from numba import njit, prange
 from rollcam.common.errors import ConfigError
+
+from ._jitcache import guard
 
 _DEMOSAIC = {  # Bayer order -> OpenCV code (OpenCV names the tile by its second row: RGGB is 'BayerBG')
     "RGGB": "BG", "BGGR": "RG", "GRBG": "GB", "GBRG": "GR",
@@ -65,17 +71,54 @@ def demosaic(raw: np.ndarray, order: str, algo: str = "bilinear") -> np.ndarray:
 
 def preview(raw: np.ndarray, order: str, params: IspParams) -> np.ndarray:
     """Raw samples ``(H, W)`` of a sensor with CFA ``order`` -> 8-bit BGR through the preview ISP."""
-    rgb = demosaic(raw, order, params.demosaic).astype(np.float32)
-    span = params.white_level_dn - params.black_level_dn
-    lin = (rgb - np.float32(params.black_level_dn)) * np.float32(1.0 / span)
+    rgb = demosaic(raw, order, params.demosaic)
+    gains = (1.0, 1.0, 1.0)
     if order != "mono":
         gains = params.wb_gains
         if gains is None:  # grey world: equalise channel means to green's
-            m = lin.reshape(-1, 3).mean(axis=0)
+            span = params.white_level_dn - params.black_level_dn
+            m = (rgb.reshape(-1, 3).mean(axis=0, dtype=np.float64) - params.black_level_dn) / span
             gains = (m[1] / max(m[2], 1e-6), 1.0, m[1] / max(m[0], 1e-6))
-        lin *= np.array([gains[2], gains[1], gains[0]], np.float32)  # BGR order
-    np.clip(lin, 0.0, 1.0, out=lin)
-    if params.gamma is None:
-        return np.round(lin * 255.0).astype(np.uint8)
-    idx = (lin * ((1 << _LUT_BITS) - 1) + 0.5).astype(np.int32)
-    return _SRGB[idx]
+    lut = tone_lut(int(np.iinfo(rgb.dtype).max) + 1, params, (float(gains[0]), float(gains[1]), float(gains[2])))
+    out = np.empty(rgb.shape, np.uint8)
+    _apply_lut(rgb.reshape(-1, 3), lut, out.reshape(-1, 3))
+    return out
+
+
+_LUTS: dict[tuple, np.ndarray] = {}
+
+
+def tone_lut(n: int, params: IspParams, gains: tuple[float, float, float]) -> np.ndarray:
+    """uint8 ``(3, n)``: the BGR output of each channel's sample value 0 .. n - 1 (black and white levels,
+    white balance ``gains`` (R, G, B), clip, gamma), in the float32 steps of the per-pixel definition."""
+    key = (n, params, gains)
+    lut = _LUTS.get(key)
+    if lut is None:
+        span = params.white_level_dn - params.black_level_dn
+        v = np.arange(n, dtype=np.float32)
+        lin = (v - np.float32(params.black_level_dn)) * np.float32(1.0 / span)
+        lin = lin[None, :] * np.array([gains[2], gains[1], gains[0]], np.float32)[:, None]  # BGR order
+        np.clip(lin, 0.0, 1.0, out=lin)
+        if params.gamma is None:
+            lut = np.round(lin * 255.0).astype(np.uint8)
+        else:
+            lut = _SRGB[(lin * ((1 << _LUT_BITS) - 1) + 0.5).astype(np.int32)]
+        if len(_LUTS) >= 8:  # a stream has one; keep a few
+            _LUTS.pop(next(iter(_LUTS)))
+        _LUTS[key] = lut
+    return lut
+
+
+@njit(cache=True, parallel=True)
+def _apply_lut(rgb, lut, out):
+    """out[i, c] = lut[c, rgb[i, c]] over the flattened pixels."""
+    n = rgb.shape[0]
+    step = 1 << 14
+    for chunk in prange((n + step - 1) // step):
+        for i in range(chunk * step, min(n, (chunk + 1) * step)):
+            out[i, 0] = lut[0, rgb[i, 0]]
+            out[i, 1] = lut[1, rgb[i, 1]]
+            out[i, 2] = lut[2, rgb[i, 2]]
+
+
+guard(__name__)  # after every kernel and import: see rollcam.sim._jitcache

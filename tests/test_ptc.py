@@ -13,9 +13,11 @@ from rollcam.sim.hwconfig import load_sensor
 def test_ptc_recovers_the_configured_figures(sensor):
     r = measure_ptc(sensor, size=(192, 144), steps=20)
     err = r.errors()
+    # At this size each figure's error spreads by about 0.5 % from seed to seed (imx219, 10 seeds: mean gain
+    # error -0.03 %, sd 0.55 %; full well -0.11 %, sd 0.56 %), so 2 % is four standard deviations.
     assert abs(err["gain"]) < 0.02, format_ptc(r)
     assert abs(err["read_noise"]) < 0.05, format_ptc(r)
-    assert abs(err["full_well"]) < 0.01, format_ptc(r)
+    assert abs(err["full_well"]) < 0.02, format_ptc(r)
     # Dark frames at exposures up to ~1 s (regression: negative DSNU offsets were clipped at 0 e-, which read
     # DSNU 0.61 e- for 1.0 and dark current 7.1 e-/s for 10).
     assert abs(err["dsnu"]) < 0.05, format_ptc(r)

@@ -70,3 +70,39 @@ def test_realtime_priority_is_used_or_refusal_reported():
     assert pump.stats.rt == "SCHED_FIFO 1" or str(pump.stats.rt).startswith("refused")
     for _seq, _band, at, due in rec.bands:
         assert at >= due
+
+
+class FrameLog(Recorder):
+    """Records each delivered frame's (sequence, exposure start, exposure, due)."""
+
+    def __init__(self, camera: FirmwareCamera, frames: int) -> None:
+        super().__init__(camera, frames)
+        self.frames_seen: list[tuple[int, int, int]] = []
+
+    def on_frame(self, frame, plan) -> None:
+        self.frames_seen.append((frame.sequence, frame.timestamp_ns, frame.exposure_ns))
+        super().on_frame(frame, plan)
+
+
+def test_frames_made_ahead_follow_a_change_from_the_first_frame_exposed_after_it():
+    """Render-ahead keeps frames made before they are due; a control change throws away the ones that had not
+    started exposing, so every frame exposed after the change has the new exposure and none before it."""
+    cam = FirmwareCamera("imx219", scene={"scene": "flat"}, size=(640, 480))
+    log = FrameLog(cam, 14)
+    with FramePump(cam, bands=2, ahead=3) as pump:
+        pump.add_sink(log)
+        cam.stream_on()
+        while len(log.done) < 5:
+            assert not log.enough.wait(0.02) or len(log.done) >= 5
+        old = cam.spec.settings.exposure_ns
+        cam.set_control("exposure", 100)
+        changed_ns = cam.spec_changed_ns
+        new = cam.spec.settings.exposure_ns
+        assert log.enough.wait(30)
+    assert pump.error is None and new != old
+    seqs = [s for s, _, _ in log.frames_seen]
+    assert seqs == sorted(seqs) and len(set(seqs)) == len(seqs)
+    for seq, start_ns, exposure_ns in log.frames_seen:
+        assert exposure_ns == (new if start_ns >= changed_ns else old), (seq, start_ns, changed_ns)
+    assert any(start >= changed_ns for _, start, _ in log.frames_seen)
+    assert pump.stats.remade >= 1  # frames had been made ahead with the old exposure, and were made again
