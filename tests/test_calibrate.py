@@ -66,5 +66,5 @@ def test_gyro_orientation_integrates_a_rate_linear_in_time() -> None:
 def test_refuses_a_capture_without_imu(tmp_path: Path) -> None:
     with open_camera("emu:imx219?size=160x120&scene=flat") as src:
         capture(src, tmp_path / "cap", 3, progress=False)
-    with pytest.raises(ConfigError, match="imu.csv"):
+    with pytest.raises(ConfigError, match=r"imu\.csv"):
         calibrate(tmp_path / "cap")
