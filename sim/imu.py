@@ -187,11 +187,9 @@ class Imu:
         """Unit white noise and unit random walks of samples ``idx``: gyro white, accel white, gyro walk,
         accel walk, each (n, 3); the IMU scales them by its densities."""
         from ._imunoise import white_and_walk
-        from .noise import normal_table
 
         n = len(idx)
         out = [np.empty((n, 3)) for _ in range(4)]
-        table = normal_table()
-        white_and_walk(self._key, idx.start, n, 0, 8, table, out[0], out[2])
-        white_and_walk(self._key, idx.start, n, 3, 11, table, out[1], out[3])
+        white_and_walk(self._key, idx.start, n, 0, 8, out[0], out[2])
+        white_and_walk(self._key, idx.start, n, 3, 11, out[1], out[3])
         return out[0], out[1], out[2], out[3]
