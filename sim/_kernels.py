@@ -233,6 +233,56 @@ def encode_line(lin, gain, lut, out_u8):
 
 
 # ======================================================================================================
+# a pass's set-up: which actor touches which entry, and where each actor's parts are computed
+# ======================================================================================================
+
+
+@njit(cache=True)
+def touch_entries(bounds, group_of_k, k_line, objs, idx, centre, n_along, obj_k):
+    """obj_k[o, e] = k_line[o, e] for each actor o in ``objs`` and entry e = idx[j] whose line centre
+    ``centre[j]`` lies in the actor's bounds ``bounds[o, group_of_k[k]]`` (ymin, ymax, xmin, xmax), which reach
+    the line's pixels; other entries are left alone. (In numpy this was a few (actors x entries) temporaries per
+    render, a millisecond of a static-camera RS frame.)"""
+    for a in range(objs.shape[0]):
+        o = objs[a]
+        for j in range(idx.shape[0]):
+            e = idx[j]
+            k = k_line[o, e]
+            g = group_of_k[k]
+            c = centre[j]
+            if bounds[o, g, 0] <= c and c <= bounds[o, g, 1] and bounds[o, g, 2] < n_along and bounds[o, g, 3] > 0:
+                obj_k[o, e] = k
+
+
+@njit(cache=True)
+def part_slots(obj_k, n_t, slots):
+    """Fill ``slots`` (actors x times) from the time slots ``obj_k`` uses: SLOT_NONE unused, SLOT_LOCAL used by
+    one entry, else the next row of the shared parts table (row-major order). Returns that table's (actor,
+    time) per row."""
+    n_obj, n_ent = obj_k.shape
+    uses = np.zeros((n_obj, n_t), np.int64)
+    for o in range(n_obj):
+        for e in range(n_ent):
+            k = obj_k[o, e]
+            if k >= 0:
+                uses[o, k] += 1
+    n = 0
+    for o in range(n_obj):
+        for k in range(n_t):
+            u = uses[o, k]
+            slots[o, k] = SLOT_NONE if u == 0 else (SLOT_LOCAL if u == 1 else n)
+            if u > 1:
+                n += 1
+    s_o = np.empty(n, np.int64)
+    s_k = np.empty(n, np.int64)
+    for o in range(n_obj):
+        for k in range(n_t):
+            if slots[o, k] >= 0:
+                s_o[slots[o, k]], s_k[slots[o, k]] = o, k
+    return s_o, s_k
+
+
+# ======================================================================================================
 # the per-line render loop
 # ======================================================================================================
 
