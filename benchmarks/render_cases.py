@@ -154,6 +154,11 @@ def _footage_fps(cam: SyntheticCamera, spec: int | str) -> Fraction:
     return Fraction(spec)
 
 
+def _ratio(a: float | None, b: float | None) -> float | None:
+    """a / b rounded, or None when either is missing (or b is zero: a copy below the clock's resolution)."""
+    return None if a is None or not b else round(a / b, 2)
+
+
 def _median_ms(samples_s: list[float]) -> float:
     return 1e3 * float(np.median(samples_s))
 
@@ -320,8 +325,10 @@ class SceneBench:
         ref = cam.renderer.reference_lines(times, by_column=bc).image
         return composition_error(exact, ref)["max_abs_err_dn"]
 
-    def rows(self, floor_ms: float, cold_ms: float) -> list[dict[str, Any]]:
-        """The table rows of this scene, errors against the baseline image and the exact RS boxes."""
+    def rows(self, floor: dict[str, float]) -> list[dict[str, Any]]:
+        """The table rows of this scene, errors against the baseline image and the exact RS boxes; costs also
+        in ``floor``'s frame copies (``bench.memcpy_floor``), wall against wall and CPU against CPU."""
+        floor_ms, cold_ms = floor["ms"], floor["cold_ms"]
         ref = self.results["reference"]
         baseline = ref["image"] if ref["image"] is not None else self.results["exact"]["image"]
         truth_boxes = self.results["exact"]["boxes"]
@@ -338,6 +345,8 @@ class SceneBench:
                 "cpu_ms_per_frame": None if r.get("cpu_ms") is None else round(r["cpu_ms"], 4),
                 "x_memcpy": round(r["ms"] / floor_ms, 2),
                 "x_memcpy_cold": round(r["ms"] / cold_ms, 2),
+                "x_memcpy_cpu": _ratio(r.get("cpu_ms"), floor.get("cpu_ms")),
+                "x_memcpy_cold_cpu": _ratio(r.get("cpu_ms"), floor.get("cold_cpu_ms")),
                 "speedup_vs_reference": round(ref["ms"] / r["ms"], 2),
                 "mean_abs_err_dn": round(err["mean_abs_err_dn"], 5),
                 "max_abs_err_dn": err["max_abs_err_dn"],

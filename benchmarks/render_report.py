@@ -56,7 +56,8 @@ def format_table(doc: dict[str, Any]) -> str:
                      f"{r['x_memcpy_cold']:>8.1f}{r['speedup_vs_reference']:>9.1f}{r['mean_abs_err_dn']:>10.4f}{r['max_abs_err_dn']:>8.0f}"
                      f"{box:>8}  {r['note']}")
     f = doc["floor"]
-    lines += ["", f"floor: {f['what']}: {f['ms']:.3f} ms ({f['gb_per_s']:.1f} GB/s; cache-cold {f['cold_ms']:.3f} ms)",
+    lines += ["", f"floor: {f['what']}: {f['ms']:.3f} ms ({f['gb_per_s']:.1f} GB/s; cache-cold {f['cold_ms']:.3f} ms; "
+              f"CPU {f.get('cpu_ms', float('nan')):.3f} / cold {f.get('cold_cpu_ms', float('nan')):.3f} ms)",
               f"baseline: {doc['baseline']}", ""]
     if doc.get("scaling"):
         from .render_scaling import format_scaling

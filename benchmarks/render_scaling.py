@@ -2,8 +2,9 @@
 
 For each camera (static, or moving with the ``vehicle`` ego-motion), frame size and walker count, the exact
 per-line render of an RS frame is timed (median over frames at different indices, after a warm-up that builds
-the static layer). The fits state the growth: ms = a * megapixels^b per camera and walker count (b near 1 is
-cost in proportion to pixels), and ms = c + d * walkers per camera and size (d: the cost of one more walker).
+the static layer), in wall and in process CPU time. The fits state the growth on CPU time (on a loaded machine
+wall time measures the scheduler): ms = a * megapixels^b per camera and walker count (b near 1 is cost in
+proportion to pixels), and ms = c + d * walkers per camera and size (d: the cost of one more walker).
 """
 
 from __future__ import annotations
@@ -70,14 +71,15 @@ def scaling_table(sizes: Sequence[tuple[int, int]], walkers: Sequence[int], fram
         for n in walkers:
             sel = [r for r in rows if r["camera"] == cam_name and r["walkers"] == n]
             fits["vs_pixels"][f"{cam_name}, {n} walkers"] = _fit_power([r["megapixels"] for r in sel],
-                                                                       [r["ms_per_frame"] for r in sel])
+                                                                       [r["cpu_ms_per_frame"] for r in sel])
         for w, h in sizes:
             sel = [r for r in rows if r["camera"] == cam_name and r["size"] == f"{w}x{h}"]
             fits["vs_walkers"][f"{cam_name}, {w}x{h}"] = _fit_line([r["walkers"] for r in sel],
-                                                                   [r["ms_per_frame"] for r in sel])
+                                                                   [r["cpu_ms_per_frame"] for r in sel])
     return {"rows": rows, "fits": fits, "frames": frames,
-            "what": "exact RS frame (render_lines with the RS line times), median of the timed frames; fits: "
-                    "ms = a * megapixels^b per camera and walker count, ms = c + d * walkers per camera and size"}
+            "what": "exact RS frame (render_lines with the RS line times), median of the timed frames; fits on "
+                    "process CPU ms: ms = a * megapixels^b per camera and walker count, ms = c + d * walkers per "
+                    "camera and size"}
 
 
 def format_scaling(doc: dict[str, Any]) -> list[str]:
@@ -93,8 +95,8 @@ def format_scaling(doc: dict[str, Any]) -> list[str]:
                 f"{cells[n]['ms_per_frame']:>7.1f} ({cells[n]['cpu_ms_per_frame']:>4.0f})" for n in walkers))
     for name, fit in doc["fits"]["vs_pixels"].items():
         if fit:
-            out.append(f"fit {name}: ms = {fit['a_ms']:.3g} * MP^{fit['b']:.2f}")
+            out.append(f"fit {name}: CPU ms = {fit['a_ms']:.3g} * MP^{fit['b']:.2f}")
     for name, fit in doc["fits"]["vs_walkers"].items():
         if fit:
-            out.append(f"fit {name}: ms = {fit['c_ms']:.3g} + {fit['d_ms_per_walker']:.3g} * walkers")
+            out.append(f"fit {name}: CPU ms = {fit['c_ms']:.3g} + {fit['d_ms_per_walker']:.3g} * walkers")
     return out

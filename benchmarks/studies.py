@@ -69,11 +69,11 @@ def _no_arguments(p: argparse.ArgumentParser) -> None:
 
 # --------------------------------------------------------------------------------------------- render
 def _render_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--quick", action="store_true", help="two scenes, fewer methods and frames (< 1 min)")
+    p.add_argument("--quick", action="store_true", help="static scene and every ego preset, fewer methods and frames")
     p.add_argument("--size", type=value_type(parse_size), default=(1920, 1080), metavar="WxH",
                    help="frame size (default: the study's 1920x1080)")
     p.add_argument("--scenes", type=value_type(name_list), default=None,
-                   help="comma-separated subset of normal,fast,normal_ego,fast_ego")
+                   help="comma-separated subset of normal,fast,normal_ego,fast_ego,pan_ego,walk_ego,drone_ego")
 
 
 def _render(args: argparse.Namespace, progress: Any) -> tuple[Doc, str]:

@@ -168,7 +168,7 @@ def _set_quad(parts, p, x0, y0, x1, y1, x2, y2, x3, y3):
 @njit(cache=True)
 def actor_parts(act, world, lut, bld, light, cam, rot, pos, t, parts, scratch):
     """Fill ``parts`` (MAX_PARTS x PART_COLS) with the render-space primitives of an actor at time ``t``."""
-    seg, rad, col_idx, root, joints, a, b, ua, ub = scratch
+    seg, rad, col_idx, root, joints = scratch
     for p in range(MAX_PARTS):
         parts[p, Q_KIND] = PART_NONE
     typ = int(act[A_TYPE])
@@ -203,40 +203,54 @@ def actor_parts(act, world, lut, bld, light, cam, rot, pos, t, parts, scratch):
     nrm = math.sqrt(sx * sx + sz * sz) + 1e-12
     horiz = math.sqrt(max(0.0, 1.0 - sy_up * sy_up))
     lxv, lzv = sx / nrm * horiz, sz / nrm * horiz
+    # Pose, intrinsics and lights as scalars: arrays handed to a helper are reference-counted per call, which
+    # on an RS frame (parts recomputed on every line a walker touches) cost more than the arithmetic. Every
+    # expression keeps ``to_camera``'s and ``_project``'s operation order, so the parts are bit-identical.
+    r00, r01, r02 = rot[0, 0], rot[0, 1], rot[0, 2]
+    r10, r11, r12 = rot[1, 0], rot[1, 1], rot[1, 2]
+    r20, r21, r22 = rot[2, 0], rot[2, 1], rot[2, 2]
+    p0, p1, p2 = pos[0], pos[1], pos[2]
+    fx, fy, cx, cy = cam[C_FX], cam[C_FY], cam[C_CX], cam[C_CY]
+    transposed = cam[C_TRANSPOSED] != 0.0
+    amb_r, amb_g, amb_b = light[L_AMB], light[L_AMB + 1], light[L_AMB + 2]
+    sun_r, sun_g, sun_b = light[L_SUN_RGB] * lit, light[L_SUN_RGB + 1] * lit, light[L_SUN_RGB + 2] * lit
+    lx_part = 0.0 if transposed else lxv  # a transposed line runs along the image's y axis
     for p in range(n):
-        to_camera(rot, pos, seg[p, 0], seg[p, 1], seg[p, 2], a)
-        to_camera(rot, pos, seg[p, 3], seg[p, 4], seg[p, 5], b)
-        if a[2] < NEAR_M and b[2] < NEAR_M:
+        dx, dy, dz = seg[p, 0] - p0, seg[p, 1] - p1, seg[p, 2] - p2
+        a0 = r00 * dx + r01 * dy + r02 * dz
+        a1 = r10 * dx + r11 * dy + r12 * dz
+        a2 = r20 * dx + r21 * dy + r22 * dz
+        dx, dy, dz = seg[p, 3] - p0, seg[p, 4] - p1, seg[p, 5] - p2
+        b0 = r00 * dx + r01 * dy + r02 * dz
+        b1 = r10 * dx + r11 * dy + r12 * dz
+        b2 = r20 * dx + r21 * dy + r22 * dz
+        if a2 < NEAR_M and b2 < NEAR_M:
             continue
         # Clip the segment at the near plane so parts crossing the camera plane stay finite.
-        if a[2] < NEAR_M:
-            f = (NEAR_M - a[2]) / (b[2] - a[2])
-            for c in range(3):
-                a[c] = a[c] + f * (b[c] - a[c])
-        elif b[2] < NEAR_M:
-            f = (NEAR_M - b[2]) / (a[2] - b[2])
-            for c in range(3):
-                b[c] = b[c] + f * (a[c] - b[c])
-        zm = 0.5 * (a[2] + b[2])
-        _project(cam, a[0], a[1], a[2], ua)
-        _project(cam, b[0], b[1], b[2], ub)
-        r_px = cam[C_FX] * rad[p] / zm
-        ci = col_idx[p]
-        base = P_SKIN + 3 * ci
+        if a2 < NEAR_M:
+            f = (NEAR_M - a2) / (b2 - a2)
+            a0, a1, a2 = a0 + f * (b0 - a0), a1 + f * (b1 - a1), a2 + f * (b2 - a2)
+        elif b2 < NEAR_M:
+            f = (NEAR_M - b2) / (a2 - b2)
+            b0, b1, b2 = b0 + f * (a0 - b0), b1 + f * (a1 - b1), b2 + f * (a2 - b2)
+        zm = 0.5 * (a2 + b2)
+        ua0, ua1 = fx * a0 / a2 + cx, fy * a1 / a2 + cy
+        ub0, ub1 = fx * b0 / b2 + cx, fy * b1 / b2 + cy
+        if transposed:
+            ua0, ua1, ub0, ub1 = ua1, ua0, ub1, ub0
+        r_px = fx * rad[p] / zm
+        base = P_SKIN + 3 * col_idx[p]
+        alb_r, alb_g, alb_b = act[base], act[base + 1], act[base + 2]
         parts[p, Q_KIND] = PART_CAPSULE
         parts[p, Q_DEPTH] = zm
-        for c in range(3):
-            alb = act[base + c]
-            parts[p, Q_AMB + c] = alb * light[L_AMB + c]
-            parts[p, Q_DIR + c] = alb * light[L_SUN_RGB + c] * lit
-        parts[p, Q_LX], parts[p, Q_LZ] = lxv, lzv
-        if cam[C_TRANSPOSED] != 0.0:
-            parts[p, Q_LX] = 0.0  # a transposed line runs along the image's y axis
+        parts[p, Q_AMB], parts[p, Q_AMB + 1], parts[p, Q_AMB + 2] = alb_r * amb_r, alb_g * amb_g, alb_b * amb_b
+        parts[p, Q_DIR], parts[p, Q_DIR + 1], parts[p, Q_DIR + 2] = alb_r * sun_r, alb_g * sun_g, alb_b * sun_b
+        parts[p, Q_LX], parts[p, Q_LZ] = lx_part, lzv
         g = Q_GEO
-        parts[p, g], parts[p, g + 1], parts[p, g + 2], parts[p, g + 3] = ua[0], ua[1], ub[0], ub[1]
+        parts[p, g], parts[p, g + 1], parts[p, g + 2], parts[p, g + 3] = ua0, ua1, ub0, ub1
         parts[p, g + 4] = r_px
-        parts[p, Q_YMIN] = min(ua[1], ub[1]) - r_px
-        parts[p, Q_YMAX] = max(ua[1], ub[1]) + r_px
+        parts[p, Q_YMIN] = min(ua1, ub1) - r_px
+        parts[p, Q_YMAX] = max(ua1, ub1) + r_px
 
 
 @njit(cache=True, inline="always")
@@ -300,8 +314,7 @@ def actor_speeds(actors, world, lut, bld, light, cam, rot_tab, pos_tab, times, o
 @njit(cache=True)
 def parts_scratch():
     """Scratch buffers ``actor_parts`` needs, allocated once per parallel work unit."""
-    return (np.empty((MAX_PARTS, 6)), np.empty(MAX_PARTS), np.empty(MAX_PARTS, np.int64), np.empty(4),
-            np.empty((5, 3)), np.empty(3), np.empty(3), np.empty(2), np.empty(2))
+    return np.empty((MAX_PARTS, 6)), np.empty(MAX_PARTS), np.empty(MAX_PARTS, np.int64), np.empty(4), np.empty((5, 3))
 
 
 @njit(cache=True)

@@ -42,7 +42,7 @@ def pedestrian_root(act, t, out):
     out[3] = d
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _limb(px, py, pz, fwd_x, fwd_y, ang, length, out, i):
     s, c = math.sin(ang), math.cos(ang)
     out[i, 0] = px + length * s * fwd_x

@@ -111,13 +111,14 @@ def _covered_pixels(span_l, span_r, m0, m, w, pa, pb):
 
 @njit(cache=True)
 def _collect_line(line, w, actors, obj_k, slots, parts_tab, local, include, gt_l, gt_r, gt_tot,
-                  depth, idx_o, idx_p, span_l, span_r, pa, pb):
+                  depth, idx_o, shade, span_l, span_r, pa, pb, lohi):
     """Spans of every included actor on ``line`` (``obj_k[o]``: its time slot, -1 when not touching).
 
+    Each span keeps its part's shading (``shade[m]``: Q_LX, Q_LZ, ambient RGB, direct RGB) so painting reads no
+    part table: a view of one per span was reference-counted, which cost more than copying eight numbers.
     Fills the per-actor extent and area ground truth. Returns the number of spans.
     """
     yc = line + 0.5
-    lohi = np.empty(2)
     m = 0
     for o in range(actors.shape[0]):
         if not include[o] or obj_k[o] < 0:
@@ -136,7 +137,10 @@ def _collect_line(line, w, actors, obj_k, slots, parts_tab, local, include, gt_l
             part_span(pt, p, yc, lohi)
             if lohi[1] <= lohi[0] or lohi[1] <= 0.0 or lohi[0] >= w:
                 continue
-            depth[m], idx_o[m], idx_p[m] = pt[p, Q_DEPTH], o, p
+            depth[m], idx_o[m] = pt[p, Q_DEPTH], o
+            shade[m, 0], shade[m, 1] = pt[p, Q_LX], pt[p, Q_LZ]
+            for c in range(3):
+                shade[m, 2 + c], shade[m, 5 + c] = pt[p, Q_AMB + c], pt[p, Q_DIR + c]
             span_l[m], span_r[m] = lohi[0], lohi[1]
             m += 1
             olo, ohi = min(olo, lohi[0]), max(ohi, lohi[1])
@@ -174,12 +178,12 @@ def _span_runs(span_l, span_r, m, w, ia, ib):
 
 
 @njit(cache=True)
-def _paint_spans(lin, line, m, obj_k, slots, parts_tab, local, gt_vis, depth, idx_o, idx_p, span_l, span_r, owner,
-                 ia, ib, n_runs):
+def _paint_spans(lin, line, m, gt_vis, depth, idx_o, shade, span_l, span_r, owner, ia, ib, n_runs, order):
     """Paint the collected spans over ``lin`` far to near (anti-aliased along the line); count visibility."""
     w = lin.shape[0]
     # Insertion sort, far first; ties keep actor/part order so every path paints identically.
-    order = np.arange(m)
+    for i in range(m):
+        order[i] = i
     for i in range(1, m):
         j = i
         while j > 0 and depth[order[j - 1]] < depth[order[j]]:
@@ -187,14 +191,12 @@ def _paint_spans(lin, line, m, obj_k, slots, parts_tab, local, gt_vis, depth, id
             j -= 1
     for ii in range(m):
         e = order[ii]
-        o, p = idx_o[e], idx_p[e]
-        s = slots[o, obj_k[o]]
-        pt = parts_tab[s] if s >= 0 else local[o]
+        o = idx_o[e]
         xl, xr = span_l[e], span_r[e]
         i0 = max(int(math.floor(xl)), 0)
         i1 = min(int(math.ceil(xr)), w)
         mid, half = 0.5 * (xl + xr), 0.5 * (xr - xl)
-        lx, lz = pt[p, Q_LX], pt[p, Q_LZ]
+        lx, lz = shade[e, 0], shade[e, 1]
         for i in range(i0, i1):
             cov = min(xr, i + 1.0) - max(xl, float(i))
             if cov <= 0.0:
@@ -208,7 +210,7 @@ def _paint_spans(lin, line, m, obj_k, slots, parts_tab, local, gt_vis, depth, id
             if sh < 0.0:
                 sh = 0.0
             for c in range(3):
-                v = pt[p, Q_AMB + c] + pt[p, Q_DIR + c] * sh
+                v = shade[e, 2 + c] + shade[e, 5 + c] * sh
                 lin[i, c] = lin[i, c] * (1.0 - cov) + v * cov
         for i in range(max(int(math.ceil(xl - 0.5)), 0), min(int(math.ceil(xr - 0.5)), w)):
             owner[i] = o
@@ -230,6 +232,56 @@ def encode_line(lin, gain, lut, out_u8):
             elif v > 1.0:
                 v = 1.0
             out_u8[i, 2 - c] = lut[int(v * LUT_SIZE + 0.5)]
+
+
+# ======================================================================================================
+# a pass's set-up: which actor touches which entry, and where each actor's parts are computed
+# ======================================================================================================
+
+
+@njit(cache=True)
+def touch_entries(bounds, group_of_k, k_line, objs, idx, centre, n_along, obj_k):
+    """obj_k[o, e] = k_line[o, e] for each actor o in ``objs`` and entry e = idx[j] whose line centre
+    ``centre[j]`` lies in the actor's bounds ``bounds[o, group_of_k[k]]`` (ymin, ymax, xmin, xmax), which reach
+    the line's pixels; other entries are left alone. (In numpy this was a few (actors x entries) temporaries per
+    render, a millisecond of a static-camera RS frame.)"""
+    for a in range(objs.shape[0]):
+        o = objs[a]
+        for j in range(idx.shape[0]):
+            e = idx[j]
+            k = k_line[o, e]
+            g = group_of_k[k]
+            c = centre[j]
+            if bounds[o, g, 0] <= c and c <= bounds[o, g, 1] and bounds[o, g, 2] < n_along and bounds[o, g, 3] > 0:
+                obj_k[o, e] = k
+
+
+@njit(cache=True)
+def part_slots(obj_k, n_t, slots):
+    """Fill ``slots`` (actors x times) from the time slots ``obj_k`` uses: SLOT_NONE unused, SLOT_LOCAL used by
+    one entry, else the next row of the shared parts table (row-major order). Returns that table's (actor,
+    time) per row."""
+    n_obj, n_ent = obj_k.shape
+    uses = np.zeros((n_obj, n_t), np.int64)
+    for o in range(n_obj):
+        for e in range(n_ent):
+            k = obj_k[o, e]
+            if k >= 0:
+                uses[o, k] += 1
+    n = 0
+    for o in range(n_obj):
+        for k in range(n_t):
+            u = uses[o, k]
+            slots[o, k] = SLOT_NONE if u == 0 else (SLOT_LOCAL if u == 1 else n)
+            if u > 1:
+                n += 1
+    s_o = np.empty(n, np.int64)
+    s_k = np.empty(n, np.int64)
+    for o in range(n_obj):
+        for k in range(n_t):
+            if slots[o, k] >= 0:
+                s_o[slots[o, k]], s_k[slots[o, k]] = o, k
+    return s_o, s_k
 
 
 # ======================================================================================================
@@ -312,7 +364,9 @@ def _render_chunk(ch, n_chunks, world, lut_b, bld, light, cam, rot_tab, pos_tab,
     n = lines.shape[0]
     depth = np.empty(cap)
     idx_o = np.empty(cap, np.int64)
-    idx_p = np.empty(cap, np.int64)
+    shade = np.empty((cap, 8))
+    order = np.empty(cap, np.int64)  # scratch of every line: an allocation per line costs as much as its work
+    lohi = np.empty(2)
     span_l = np.empty(cap)
     span_r = np.empty(cap)
     pa = np.empty(cap, np.int64)
@@ -335,7 +389,7 @@ def _render_chunk(ch, n_chunks, world, lut_b, bld, light, cam, rot_tab, pos_tab,
                     actor_parts(actors[o], world, lut_b, bld, light, cam, rot_tab[k], pos_tab[k], times[k],
                                 local[o], scratch)
             m = _collect_line(line, w, actors, ok, slots, parts_tab, local, include, gt_l, gt_r, gt_tot,
-                              depth, idx_o, idx_p, span_l, span_r, pa, pb)
+                              depth, idx_o, shade, span_l, span_r, pa, pb, lohi)
             if full_lines and not gt_only:
                 if moving_cam:
                     k = line_k[e]
@@ -349,8 +403,7 @@ def _render_chunk(ch, n_chunks, world, lut_b, bld, light, cam, rot_tab, pos_tab,
                     for r in range(n_runs):
                         lin[ia[r]:ib[r]] = bg_lin[line, ia[r]:ib[r]]
             if m > 0:
-                _paint_spans(lin, line, m, ok, slots, parts_tab, local, gt_vis, depth, idx_o, idx_p, span_l,
-                             span_r, owner, ia, ib, n_runs)
+                _paint_spans(lin, line, m, gt_vis, depth, idx_o, shade, span_l, span_r, owner, ia, ib, n_runs, order)
             if seed and m == 0:
                 continue  # no actor pixel on this line: it is the composite, nothing to write
             if line_hit.shape[0] > 0:

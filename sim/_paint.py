@@ -213,13 +213,8 @@ class Painter:
         bounds = self.bounds(cam, rot, pos, times_s[k_first], k_first, times_s[k_last] - times_s[k_first], need)
         idx = np.arange(obj_k.shape[1]) if only is None else only
         centre = (idx if line_of is None else line_of[idx]) + 0.5
-        objs = np.flatnonzero(include)
-        # All included actors at once (one pass of an exposure is called often: Python loops add up).
-        k = k_line[objs[:, None], idx[None, :]]
-        b = bounds[objs[:, None], group_of_k[k]]
-        touch = (b[..., 0] <= centre) & (centre <= b[..., 1]) & (b[..., 2] < n_along) & (b[..., 3] > 0)
-        t_o, t_l = np.nonzero(touch)
-        obj_k[objs[t_o], idx[t_l]] = k[t_o, t_l]
+        K.touch_entries(bounds, group_of_k, k_line, np.flatnonzero(include), idx.astype(np.int64),
+                        centre.astype(np.float64), n_along, obj_k)
 
     def _shared_parts(self, cam, times_s, rot, pos, obj_k) -> tuple[np.ndarray, np.ndarray]:
         """Slot table and parts table of a render.
@@ -229,12 +224,8 @@ class Painter:
         (``K.SLOT_LOCAL``).
         """
         t = self.tables
-        o_idx, l_idx = np.nonzero(obj_k >= 0)
-        uses = np.zeros((self.n_actors, times_s.shape[0]), np.int64)
-        np.add.at(uses, (o_idx, obj_k[o_idx, l_idx]), 1)
-        slots = np.where(uses == 1, K.SLOT_LOCAL, K.SLOT_NONE)
-        s_o, s_k = np.nonzero(uses > 1)
-        slots[s_o, s_k] = np.arange(s_o.size)
+        slots = np.empty((self.n_actors, times_s.shape[0]), np.int64)
+        s_o, s_k = K.part_slots(obj_k, times_s.shape[0], slots)
         parts = self._parts_buffer(max(s_o.size, 1))
         if s_o.size:
             kernel = A.actor_parts_par if self._parallel(s_o.size, PARALLEL_MIN_ITEMS) else A.actor_parts_all

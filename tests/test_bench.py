@@ -15,7 +15,8 @@ from rollcam.common.errors import ConfigError
 from rollcam.host.cli import main
 
 ROW_KEYS = {"method", "scene", "ms_per_frame", "cpu_ms_per_frame", "mean_abs_err_dn", "max_abs_err_dn",
-            "max_box_err_px", "x_memcpy", "x_memcpy_cold", "speedup_vs_reference", "kind", "n_timed", "note"}
+            "max_box_err_px", "x_memcpy", "x_memcpy_cold", "x_memcpy_cpu", "x_memcpy_cold_cpu", "speedup_vs_reference",
+            "kind", "n_timed", "note"}
 
 
 @pytest.fixture(scope="module")

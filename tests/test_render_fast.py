@@ -81,3 +81,23 @@ def test_fog_table_matches_exp() -> None:
     want = np.exp(-xs)
     assert np.all(np.abs(got - want) <= 1e-10 * want + 1e-27)
     assert got[-1] == 0.0 and math.isclose(got[0], 1.0)
+
+
+def test_part_slots_share_a_time_used_by_several_entries_and_leave_single_uses_local() -> None:
+    from rollcam.sim import _kernels as K
+
+    rng = np.random.default_rng(5)
+    obj_k = rng.integers(-1, 6, (7, 40)).astype(np.int64)
+    obj_k[2] = -1  # an actor touching nothing
+    obj_k[3, :] = -1
+    obj_k[3, 4] = 2  # used by one entry only
+    slots = np.empty((7, 6), np.int64)
+    s_o, s_k = K.part_slots(obj_k, 6, slots)
+    uses = np.zeros((7, 6), np.int64)
+    for o, e in zip(*np.nonzero(obj_k >= 0), strict=True):
+        uses[o, obj_k[o, e]] += 1
+    assert (slots[uses == 0] == K.SLOT_NONE).all() and (slots[uses == 1] == K.SLOT_LOCAL).all()
+    assert slots[3, 2] == K.SLOT_LOCAL
+    shared_o, shared_k = np.nonzero(uses > 1)  # row-major, as the table's rows
+    assert np.array_equal(s_o, shared_o) and np.array_equal(s_k, shared_k)
+    assert np.array_equal(slots[shared_o, shared_k], np.arange(shared_o.size))
