@@ -1,8 +1,8 @@
 """Numba kernels of the IMU's noise: counter-based white noise and bias random walks, by sample index.
 
 Every draw is a standard normal from the image noise's counter-based generator (``rollcam.sim._rng``:
-SplitMix64 and a Box-Muller pair) keyed by (seed key, stream, level, index), so sample ``k`` depends only on the seed and
-``k``, never on which samples were drawn before. A random walk is made random-access the same way: ``walk(n)``
+SplitMix64 and a Box-Muller pair) keyed by (seed key, stream, level, index), so sample ``k`` depends only on the
+seed and ``k``, never on which samples were drawn before. A random walk is made random-access the same way: ``walk(n)``
 is a unit-step Gaussian random walk (``W(0) = 0``, ``W(n) - W(n-1) ~ N(0, 1)`` independent) built as a
 Brownian bridge on a dyadic tree of ``WALK_LEVELS`` levels: the value at the end of the span, then each
 midpoint from its interval's ends plus a keyed normal of the bridge's variance. ``walk(n)`` costs one draw per
