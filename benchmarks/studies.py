@@ -1,8 +1,8 @@
 """The studies behind ``rollcam bench STUDY``: one entry each, with its options, run, report and targets.
 
 Each study's code lives in its own module of ``rollcam.benchmarks`` (``bench`` renders, ``hog_recall``,
-``detect``, ``ptc``, ``sensor_bench``, ``uvc``, ``soak``, ``dataset``); an entry here is the thin layer the
-command line needs. ``run(args, progress)`` does the work, writes its files under ``args.out`` and returns the
+``detect``, ``ptc``, ``sensor_bench``, ``uvc``, ``soak``, ``dataset``, ``personnet``); an entry here is the thin
+layer the command line needs. ``run(args, progress)`` does the work, writes its files under ``args.out`` and returns the
 JSON document with its plain-text report; ``targets(doc)`` reads the document's targets as ``{name: {"value",
 "op", "limit", "pass"}}`` (``pass`` None when a target did not apply). This module imports only the standard
 library at the top, so ``rollcam --help`` stays fast.
@@ -231,6 +231,24 @@ def _dataset(args: argparse.Namespace, progress: Any) -> tuple[Doc, str]:
     return doc, format_report(doc)
 
 
+# ------------------------------------------------------------------------------------------ personnet
+def _personnet_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--model", default=None, metavar="ONNX", help="a rollcam train model.onnx (default: the packaged "
+                   "personnet)")
+    p.add_argument("--dataset", default=None, metavar="DIR", help="rollcam dataset whose val and test splits to "
+                   "score (without it the mAP targets do not apply)")
+    p.add_argument("--empty-scenes", type=_COUNT, default=10,
+                   help="scenes of empty street frames, x 5 cameras x 3 times (default: %(default)s)")
+
+
+def _personnet(args: argparse.Namespace, progress: Any) -> tuple[Doc, str]:
+    from .personnet import format_report, personnet_bench
+
+    doc = personnet_bench(args.model, args.dataset, args.empty_scenes, say=progress.status)
+    write_json(args.out, "personnet.json", doc)
+    return doc, format_report(doc)
+
+
 STUDIES: dict[str, Study] = {s.name: s for s in (
     Study("render", "speed versus error of the ways to make an RS frame (bench.json, bench.png)",
           _render_arguments, _render, _render_targets),
@@ -247,5 +265,7 @@ STUDIES: dict[str, Study] = {s.name: s for s in (
           _soak_arguments, _soak, _doc_targets),
     Study("dataset", "dataset generation (vs render+encode, 1 vs 2 workers) and evaluation metric speed",
           _dataset_arguments, _dataset, _doc_targets),
+    Study("personnet", "the packaged personnet detector: size, ms per 640x360 frame on one core, mAP, empty-frame FP",
+          _personnet_arguments, _personnet, _doc_targets),
 )}
 """Study name -> study, in the order ``rollcam bench --help`` lists them."""
