@@ -55,3 +55,20 @@ def test_personnet_options_are_those_of_a_packaged_model():
     det = load_detector("personnet?conf=0.6&threads=1")
     assert det.conf == pytest.approx(0.6)
     det.close()
+
+
+def test_bench_targets_apply_only_to_what_was_measured():
+    from rollcam.benchmarks.personnet import format_report, targets
+
+    doc = {"model": "m.onnx", "file_mb": 0.08, "ms_model": 3.0, "ms_detect": 20.0, "ms_model_min": 2.0,
+           "ms_detect_min": 9.0, "empty": {"frames": 15, "conf": 0.3, "fp_per_frame": 0.0, "frames_with_fp": 0,
+                                           "max_fp": 0}}
+    t = targets(doc)
+    assert t["file_mb"]["pass"] is True and t["ms_detect"]["pass"] is False
+    assert t["mAP50"]["pass"] is None and t["mAP50_95"]["value"] is None
+    doc["pooled"] = {"mAP50": 0.95, "mAP50_95": 0.55}
+    t = targets(doc)
+    assert t["mAP50"]["pass"] is True and t["mAP50_95"]["pass"] is False
+    doc["targets"] = t
+    text = format_report(doc)
+    assert "target ms_detect: 20.0 <= 15.0: FAIL" in text and "target mAP50: 0.95 >= 0.9: PASS" in text
