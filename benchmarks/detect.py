@@ -5,7 +5,7 @@
    emulated sensor rendering the frame: the source's own cost) and the bookkeeping time (preview
    conversion, ground-truth matching, the JSON record, annotation and the hand-over to the encoder thread),
    which is the loop's overhead. Target: bookkeeping <= 5 ms per frame.
-2. Per-frame time of each built-in detector (``hog``, ``ssdlite``, ``ssdlite`` with 3x2 tiles, and any
+2. Per-frame time of each built-in detector (``hog``, ``ssdlite``, ``ssdlite`` with 3x2 tiles, ``personnet``, and any
    ``--onnx MODEL``) on a rendered street frame at 1920x1080 and 960x540: median of ``repeats`` calls after
    one warm-up call, single process, onnxruntime's default threads.
 """
@@ -27,7 +27,7 @@ from rollcam.host.sources import open_camera
 
 OVERHEAD_URI = "emu:imx219?size=1920x1080&seed=0"
 DETECTOR_URI = "emu:letsroll?seed=2&pedestrians=30&camera=1&shutter=global&size={w}x{h}&frames=1"
-DETECTORS = ("hog", "ssdlite", "ssdlite?tiles=3x2")
+DETECTORS = ("hog", "ssdlite", "ssdlite?tiles=3x2", "personnet")
 SIZES = ((1920, 1080), (960, 540))
 TARGET_BOOKKEEPING_MS = 5.0
 

@@ -2,10 +2,11 @@
 
 Each study's code lives in its own module of ``rollcam.benchmarks`` (``bench`` renders, ``hog_recall``,
 ``detect``, ``ptc``, ``sensor_bench``, ``uvc``, ``soak``, ``mjpeg``, ``dataset``, ``imu``, ``view``,
-``preload``); an entry here is the thin layer the command line needs. ``run(args, progress)`` does the work,
-writes its files under ``args.out`` and returns the JSON document with its plain-text report; ``targets(doc)``
-reads the document's targets as ``{name: {"value", "op", "limit", "pass"}}`` (``pass`` None when a target did
-not apply). This module imports only the standard library at the top, so ``rollcam --help`` stays fast.
+``preload``, ``personnet``); an entry here is the thin layer the command line needs. ``run(args, progress)``
+does the work, writes its files under ``args.out`` and returns the JSON document with its plain-text report;
+``targets(doc)`` reads the document's targets as ``{name: {"value", "op", "limit", "pass"}}`` (``pass`` None
+when a target did not apply). This module imports only the standard library at the top, so ``rollcam --help``
+stays fast.
 """
 
 from __future__ import annotations
@@ -299,6 +300,24 @@ def _preload_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--frames", type=_COUNT, default=30, help="frames per round (default: %(default)s)")
 
 
+# ------------------------------------------------------------------------------------------ personnet
+def _personnet_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--model", default=None, metavar="ONNX", help="a rollcam train model.onnx (default: the packaged "
+                   "personnet)")
+    p.add_argument("--dataset", default=None, metavar="DIR", help="rollcam dataset whose val and test splits to "
+                   "score (without it the mAP targets do not apply)")
+    p.add_argument("--empty-scenes", type=_COUNT, default=10,
+                   help="scenes of empty street frames, x 5 cameras x 3 times (default: %(default)s)")
+
+
+def _personnet(args: argparse.Namespace, progress: Any) -> tuple[Doc, str]:
+    from .personnet import format_report, personnet_bench
+
+    doc = personnet_bench(args.model, args.dataset, args.empty_scenes, say=progress.status)
+    write_json(args.out, "personnet.json", doc)
+    return doc, format_report(doc)
+
+
 STUDIES: dict[str, Study] = {s.name: s for s in (
     Study("render", "speed versus error of the ways to make an RS frame (bench.json, bench.png)",
           _render_arguments, _render, _render_targets),
@@ -323,5 +342,7 @@ STUDIES: dict[str, Study] = {s.name: s for s in (
           "cost per frame", _view_arguments, _view, _doc_targets),
     Study("preload", "per-frame cost of rollcam run's preload path beyond making the frame (1920x1080 YUYV)",
           _preload_arguments, _preload, _doc_targets),
+    Study("personnet", "the packaged personnet detector: size, ms per 640x360 frame on one core, mAP, empty-frame FP",
+          _personnet_arguments, _personnet, _doc_targets),
 )}
 """Study name -> study, in the order ``rollcam bench --help`` lists them."""

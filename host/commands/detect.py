@@ -22,10 +22,12 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
                     "for synthetic sources running precision/recall against the GS and RS ground truth. With --out, "
                     "write DIR/detections.jsonl, DIR/detections.mp4 and DIR/detect.json. Ctrl-C stops cleanly "
                     "(exit 130) keeping everything written.",
-        epilog="Detectors: 'hog', 'ssdlite' (packaged SSDLite-MobileNetV2 person model), 'onnx:MODEL.onnx' "
-               "(YOLO or SSD exports); options follow '?', e.g. 'ssdlite?conf=0.4&tiles=3x2'.")
+        epilog="Detectors: 'hog', 'ssdlite' (packaged SSDLite-MobileNetV2 person model), 'personnet' (rollcam's "
+               "own person model, trained on its GS/RS renders), 'onnx:MODEL.onnx' (YOLO or SSD exports); options "
+               "follow '?', e.g. 'ssdlite?conf=0.4&tiles=3x2'.")
     p.add_argument("source", metavar="SOURCE", help="source URI, e.g. 'emu:imx219?scene=street&speed=fast'")
-    p.add_argument("--detector", required=True, metavar="NAME", help="detector spec (hog, ssdlite, onnx:PATH)")
+    p.add_argument("--detector", required=True, metavar="NAME",
+                   help="detector spec (hog, ssdlite, personnet, onnx:PATH)")
     p.add_argument("--frames", type=value_type(positive_int, "an integer >= 1"), default=None, metavar="N",
                    help="stop after N frames")
     p.add_argument("--out", default=None, metavar="DIR", help="write detections.jsonl, detections.mp4, detect.json")

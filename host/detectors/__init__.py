@@ -14,7 +14,7 @@ from rollcam.common.errors import ConfigError
 
 from .base import PERSON, Detections, Detector, DetectorSpec, parse_spec
 
-DETECTORS = {"hog": "hog", "onnx": "onnx", "ssdlite": "ssdlite"}
+DETECTORS = {"hog": "hog", "onnx": "onnx", "personnet": "personnet", "ssdlite": "ssdlite"}
 """Detector name -> module name under ``rollcam.host.detectors``."""
 
 

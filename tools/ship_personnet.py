@@ -1,0 +1,125 @@
+"""Copy a trained PersonNet run into the package as the ``personnet`` detector, with its cards and licence.
+
+    python tools/ship_personnet.py RUN BENCH_JSON [DEST]
+
+RUN is a ``rollcam train`` folder (``model.onnx``, ``train.json``), BENCH_JSON the document ``rollcam bench
+personnet --model RUN/model.onnx --dataset DATA`` wrote for it, DEST the package folder (default
+``host/detectors/models/personnet``). Writes DEST/model.onnx, DEST/personnet.json (figures + training card),
+DEST/README.md (the card for people) and DEST/LICENSE. ``tools/train_personnet.sh`` runs the whole chain.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import shutil
+import sys
+from pathlib import Path
+from typing import Any
+
+LICENSE = """\
+MIT License
+
+Copyright (c) 2026 the rollcam authors
+
+The weights in model.onnx were trained from scratch by rollcam's own trainer (rollcam train, plain PyTorch)
+on synthetic images rendered by rollcam itself (rollcam dataset); no third-party data, weights or code went
+into them. They are part of rollcam and under its licence:
+
+Permission is hereby granted, free of charge, to any person obtaining a copy of this software and associated
+documentation files (the "Software"), to deal in the Software without restriction, including without
+limitation the rights to use, copy, modify, merge, publish, distribute, sublicense, and/or sell copies of the
+Software, and to permit persons to whom the Software is furnished to do so, subject to the following
+conditions:
+
+The above copyright notice and this permission notice shall be included in all copies or substantial portions
+of the Software.
+
+THE SOFTWARE IS PROVIDED "AS IS", WITHOUT WARRANTY OF ANY KIND, EXPRESS OR IMPLIED, INCLUDING BUT NOT LIMITED
+TO THE WARRANTIES OF MERCHANTABILITY, FITNESS FOR A PARTICULAR PURPOSE AND NONINFRINGEMENT. IN NO EVENT SHALL
+THE AUTHORS OR COPYRIGHT HOLDERS BE LIABLE FOR ANY CLAIM, DAMAGES OR OTHER LIABILITY, WHETHER IN AN ACTION OF
+CONTRACT, TORT OR OTHERWISE, ARISING FROM, OUT OF OR IN CONNECTION WITH THE SOFTWARE OR THE USE OR OTHER
+DEALINGS IN THE SOFTWARE.
+"""
+
+
+def _row(name: str, m: dict[str, Any]) -> str:
+    return (f"| {name} | {m['images']} | {m['boxes']} | {m['P']:.3f} | {m['R']:.3f} | {m['mAP50']:.3f} | "
+            f"{m['mAP50_95']:.3f} |")
+
+
+def readme(fig: dict[str, Any], train: dict[str, Any]) -> str:
+    """The people's card: what the model is, how it was made, what it scores, and how to rebuild it."""
+    cfg, ds = train["config"], train["dataset"]
+    lines = [
+        "# personnet: rollcam's own person detector (ONNX)", "",
+        "`model.onnx` is rollcam's anchor-free PersonNet (docs/training.md) trained from scratch by `rollcam train`",
+        "on rollcam's own paired global/rolling-shutter street renders (`rollcam dataset`), both walking speeds",
+        "and both shutters together. Licence: MIT (`LICENSE`): rollcam's code, rollcam's synthetic data, no",
+        "third-party weights. In rollcam it is the detector `personnet` (`--detector personnet`,",
+        "`load_detector(\"personnet\")`); `personnet.json` holds the full training card and these figures.", "",
+        f"- Model: `{cfg['model']}`, {train['model']['parameters']:,} parameters, input `images` "
+        f"[1, 3, {cfg['imgsz'].split('x')[1]}, {cfg['imgsz'].split('x')[0]}] RGB 0..1 (letterboxed), output "
+        "[1, 5, N] cx, cy, w, h, score (heatmap peaks; NMS in the detector).",
+        f"- File: {fig['file_mb']} MB, SHA-256 `{fig['sha256']}`.",
+        f"- Data: `{ds['path']}`, {ds['pairs']} GS/RS pairs at 1920x1080 ({ds['config']['scenes']} scenes x "
+        f"{ds['config']['cameras']} cameras x {len(ds['config']['times'])} times of day, speeds "
+        f"{', '.join(ds['config']['speeds'])}, dataset seed {ds['config']['seed']}); trained on the train split "
+        f"of {', '.join(train['subsets'])}.",
+        f"- Schedule: {cfg['epochs']} epochs, batch {cfg['batch']}, AdamW lr {cfg['lr']:g} (warm-up, cosine), "
+        f"seed {cfg['seed']}, {cfg['threads']} thread(s) on {train['device']}: {train['timings']['train_s']:.0f} s.",
+        f"- Default threshold `conf={fig['conf']}`: best F1 on the validation split.", "",
+        "## Figures (one run of `rollcam bench personnet`, on this project's shared 2-core machine)", "",
+        f"- Time per 640x360 frame on one CPU core (onnxruntime, 1 thread): network {fig['ms_model']} ms, "
+        f"`detect()` with letterbox and NMS {fig['ms_detect']} ms.",
+        f"- Empty street frames (no pedestrians; {fig['empty']['frames']} frames, 1920x1080): "
+        f"{fig['empty']['fp_per_frame']} false positives per frame at conf {fig['empty']['conf']} "
+        f"({fig['empty']['frames_with_fp']} frames with any).", "",
+        "Test split, 1920x1080 frames scored at the model's input (P and R at best F1; mAP at `conf=0.01`):", "",
+        "| test set | images | boxes | P | R | mAP@0.5 | mAP@0.5:0.95 |", "|---|---:|---:|---:|---:|---:|---:|",
+    ]
+    for speed, per in fig["test"].items():
+        lines += [_row(f"{speed} {sh.upper()}", per[sh]) for sh in ("gs", "rs") if sh in per]
+    lines += [_row("all four", fig["pooled"]), "", "Targets:", ""]
+    lines += [f"- {name}: {t['value']} {t['op']} {t['limit']}: {'met' if t['pass'] else 'not met'}"
+              for name, t in fig["targets"].items()]
+    lines += ["", "Validation (all four subsets) by epoch:", "", "| epoch | loss | val mAP@0.5 | val mAP@0.5:0.95 |",
+              "|---:|---:|---:|---:|"]
+    lines += [f"| {h['epoch']} | {h['loss']:.3f} | {h['val']['mAP50']:.3f} | {h['val']['mAP50_95']:.3f} |"
+              for h in train["history"] if "val" in h]
+    lines += ["", "## Rebuild", "", "```sh norun", "tools/train_personnet.sh    # dataset, training, figures, "
+              "and this folder", "```", "", "which runs:", "", "```sh norun",
+              "rollcam dataset --out rollcam_out/personnet/data --frames 640 --scenes 30 --workers 2",
+              train["command"],
+              "rollcam bench personnet --model rollcam_out/personnet/run/model.onnx "
+              "--dataset rollcam_out/personnet/data --out rollcam_out/personnet/bench",
+              "python tools/ship_personnet.py rollcam_out/personnet/run rollcam_out/personnet/bench/personnet.json",
+              "```", "", f"Trained from rollcam commit `{train['git']['commit']}`.", ""]
+    return "\n".join(lines)
+
+
+def main(argv: list[str]) -> int:
+    if len(argv) not in (2, 3):
+        print(__doc__, file=sys.stderr)
+        return 2
+    run, bench = Path(argv[0]), Path(argv[1])
+    dest = Path(argv[2]) if len(argv) == 3 else Path("host/detectors/models/personnet")
+    fig = json.loads(bench.read_text())
+    train = json.loads((run / "train.json").read_text())
+    model = (run / "model.onnx").read_bytes()
+    if hashlib.sha256(model).hexdigest() != fig["sha256"]:
+        print(f"{bench} measured another model than {run / 'model.onnx'}", file=sys.stderr)
+        return 2
+    dest.mkdir(parents=True, exist_ok=True)
+    shutil.copyfile(run / "model.onnx", dest / "model.onnx")
+    fig = {k: v for k, v in fig.items() if k != "model"}
+    (dest / "personnet.json").write_text(json.dumps({"name": "personnet", "licence": "MIT", "figures": fig,
+                                                     "training": train}, indent=1) + "\n")
+    (dest / "README.md").write_text(readme(fig, train))
+    (dest / "LICENSE").write_text(LICENSE)
+    print(f"shipped {run / 'model.onnx'} -> {dest}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main(sys.argv[1:]))
