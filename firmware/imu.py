@@ -64,12 +64,19 @@ def frame_end_ns(spec: Any, start_ns: int) -> int:
 
 
 class FrameImu:
-    """Hands each frame its IMU samples (see the module docstring); one per device, thread-safe."""
+    """Hands each frame its IMU samples (see the module docstring); one per device, thread-safe.
+
+    The windows of the last few frames are kept by sequence number, because frames are made ahead of their
+    time (``emu.pump``): a frame remade after a control change starts where the frame before it ends, and the
+    frames made ahead after it are forgotten, so no sample is lost or repeated whatever was made ahead."""
+
+    KEEP = 8
+    """Windows remembered (more than the pump makes ahead)."""
 
     def __init__(self) -> None:
         self._lock = threading.Lock()
         self._imu: tuple[Any, Imu] | None = None
-        self._last: tuple[int, int, int, int] | None = None  # seq, start, window start, window end
+        self._windows: dict[int, tuple[int, int, int]] = {}  # seq -> (start, window start, window end)
 
     def imu(self, spec: Any, camera: Any) -> Imu:
         """The IMU of ``spec`` on the scene camera ``camera`` (rebuilt when either changes)."""
@@ -82,21 +89,24 @@ class FrameImu:
         """The samples frame ``seq`` starting at ``start_ns`` carries."""
         end = frame_end_ns(spec, start_ns)
         with self._lock:
-            last = self._last
-            if last is not None and last[:2] == (seq, start_ns):
-                t0, end = last[2], last[3]
-            elif last is not None and last[3] <= end and seq > last[0]:
-                t0 = last[3]
+            same = self._windows.get(seq)
+            before = self._windows.get(seq - 1)
+            if same is not None and same[0] == start_ns:
+                t0, end = same[1], same[2]
+            elif before is not None and before[2] <= end:
+                t0 = before[2]
             else:
                 t0 = end - spec.settings.timing.frame_period_ns
-            self._last = (seq, int(start_ns), t0, end)
+            # A frame (re)made at seq invalidates what was made ahead after it.
+            self._windows = {k: v for k, v in self._windows.items() if seq - self.KEEP < k < seq}
+            self._windows[seq] = (int(start_ns), t0, end)
             imu = self.imu(spec, camera)
         return imu.samples(t0, end)
 
     def reset(self) -> None:
-        """Forget the last frame (a new stream starts its first frame afresh)."""
+        """Forget the frames made (a new stream starts its first frame afresh)."""
         with self._lock:
-            self._last = None
+            self._windows = {}
 
 
 def with_imu(frame: Any, spec: Any, camera: Any, tap: FrameImu, seq: int, start_ns: int) -> Any:

@@ -142,6 +142,25 @@ def test_frames_partition_the_imu_stream_at_2khz() -> None:
     np.testing.assert_array_equal(gs.imu.t_ns, rs.imu.t_ns)
 
 
+def test_frames_remade_after_a_control_change_still_partition_the_stream() -> None:
+    """The pump makes frames ahead and remakes them after a control change: the IMU windows follow."""
+    from rollcam.firmware.imaging import Imager
+    from rollcam.firmware.imu import FrameImu, frame_end_ns
+
+    spec = CameraSpec.from_options("imx219", {"size": "320x240", "ego": "pan", "imu_rate": "1000"})
+    longer = spec.with_options({"exposure_us": "20000"})
+    scene_camera = Imager().camera(spec).camera
+    tap = FrameImu()
+    period = spec.settings.timing.frame_period_ns
+    made = {n: tap.samples(spec, scene_camera, n, n * period) for n in range(4)}  # 0..3 made ahead
+    made[2] = tap.samples(longer, scene_camera, 2, 2 * period)  # exposure changed: 2 and 3 remade
+    made[3] = tap.samples(longer, scene_camera, 3, 3 * period)
+    k = np.concatenate([made[n].index for n in range(4)])
+    assert np.all(np.diff(k) == 1), "samples lost or repeated across a remade frame"
+    assert made[3].t_ns[-1] <= frame_end_ns(longer, 3 * period)
+    assert tap.samples(longer, scene_camera, 3, 3 * period).index.tolist() == made[3].index.tolist()  # re-asked
+
+
 def test_imu_options_at_every_door() -> None:
     spec = CameraSpec.from_options("imx219", {"imu_rate": "1000", "imu_offset_us": "-250",
                                               "imu_rotation_deg": "0,0,90"})
