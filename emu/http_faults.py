@@ -60,12 +60,12 @@ class StreamFaults:
         elif inj.hit("cut", seq):
             keep = plan.pick("cut", seq, len(part.chunk) - 1) + 1
             part = dataclasses.replace(part, chunk=part.chunk[:keep], final=True)
+        if part.final:  # before a delay: the streams end and stay away for REPLUG_S, held part or not
+            self._held_until = self.loop.time() + REPLUG_S
         if inj.hit("delay", seq):
-            self._held_until = self.loop.time() + plan.delay_ms / 1000
+            self._held_until = max(self._held_until or 0.0, self.loop.time() + plan.delay_ms / 1000)
             self.loop.call_later(plan.delay_ms / 1000, self.offer, part)
             return
-        if part.final:
-            self._held_until = self.loop.time() + REPLUG_S
         self.offer(part)
 
     def _wrapped(self, part: Any) -> Any:

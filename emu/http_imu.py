@@ -63,7 +63,10 @@ class ImuStreams:
 
     async def handle(self, request: web.Request) -> web.StreamResponse:
         """Stream the IMU as JSON lines until the client leaves or ``samples=N`` are sent."""
-        if self.camera.spec.imu is None:
+        spec = getattr(self.camera, "spec", None)  # a host source behind ``rollcam view`` has no device spec
+        if spec is None:
+            raise web.HTTPNotFound(text="this source has no IMU")
+        if spec.imu is None:
             raise web.HTTPNotFound(text="the IMU is off (imu=on turns it on)")
         limit = _query_int(request, "samples")
         start = _query_int(request, "from_ns")

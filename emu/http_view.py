@@ -10,7 +10,7 @@ One WebSocket carries everything, so picture and truth never disagree: each fram
 ticks, ground truth, the newest detections, drops), then the JPEG the MJPEG server already encoded for its own
 clients (one encode per frame, however many watch). The page draws the overlays in the browser on a canvas,
 so they cost the device nothing. A page is a stream client like any other (``StreamSlots``: the same limits,
-a one-frame mailbox per client where a newer frame replaces an unsent one, a stalled client evicted), so a
+a two-part mailbox per client where a newer frame replaces the oldest unsent one, a stalled client evicted), so a
 slow tab skips frames and never holds up the device or the other clients. Text messages are the controls:
 ``{"type": "set", "id": n, "name": "exposure_us", "value": "5000"}`` is answered ``applied`` or ``error``
 (the page shows it), run one at a time off the event loop; any change of the device, from any door, is sent
