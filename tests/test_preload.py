@@ -288,3 +288,19 @@ def test_a_picamera2_script_under_rollcam_run_gets_the_stand_in_on_the_first_dev
     assert main(["run", "--device", "/dev/video0=imx477", "--", sys.executable, str(script)]) == 0
     got = json.loads(out.read_text())
     assert got["model"] == "imx477" and "/host/shims/picamera2/" in got["file"]
+
+
+def test_faults_reach_the_preloaded_device_and_an_unplugged_one_comes_back_after_close(tmp_path):
+    need("v4l2-ctl")
+    source = "emu:imx219?size=160x120&format=YUYV&faults=s_ctrl=EIO@1,disconnect=2"
+    with serving([("/dev/video0", source)], realtime=False) as s:
+        driver = s.nodes["/dev/video0"].driver
+        bad = run(s, "v4l2-ctl", "-d", "/dev/video0", "--set-ctrl=exposure=300", check=False)
+        assert bad.returncode != 0 and driver.fault_stats.request_errors == 1  # the injected EIO, once
+        run(s, "v4l2-ctl", "-d", "/dev/video0", "--set-ctrl=exposure=300")  # the second S_CTRL goes through
+        out = run(s, "v4l2-ctl", "-d", "/dev/video0", "--stream-mmap", "--stream-count=5",
+                  f"--stream-to={tmp_path / 'a.raw'}", check=False)
+        assert "No such device" in out.stderr and driver.fault_stats.disconnects == 1  # ENODEV after 2 buffers
+        assert (tmp_path / "a.raw").stat().st_size <= 2 * 160 * 120 * 2
+        # the program closed its file: the device is connected again, as vivid's
+        assert "rollcam imx219 emulator" in run(s, "v4l2-ctl", "-d", "/dev/video0", "--all").stdout

@@ -79,12 +79,7 @@ class EmuDriver:
     def ioctl(self, request: raw.Ioctl | str, arg: Any = None) -> Any:
         """Run one VIDIOC request; failures raise V4L2Error with the kernel's errno."""
         request = raw.Ioctl(request)
-        if self.queue.disconnected:
-            raise V4L2Error(errno.ENODEV, f"{request.value}: device disconnected")
-        name = request.value.removeprefix("VIDIOC_").lower()
-        injected = self.injector.request(name) if name in REQUESTS else None
-        if injected is not None:
-            raise V4L2Error(injected, f"{request.value}: injected error")
+        self.admit(request)
         try:
             return _HANDLERS[request](self, arg)
         except V4L2Error:
@@ -93,6 +88,16 @@ class EmuDriver:
             raise V4L2Error(errno.EINVAL, f"{request.value}: {exc}") from None
         except DeviceError as exc:
             raise V4L2Error(errno.EBUSY, f"{request.value}: {exc}") from None
+
+    def admit(self, request: raw.Ioctl) -> None:
+        """What every request meets first: ENODEV once unplugged, then the fault plan's injected errno (paths
+        that answer a request without ``ioctl``, such as the preload node's controls, call it too)."""
+        if self.queue.disconnected:
+            raise V4L2Error(errno.ENODEV, f"{request.value}: device disconnected")
+        name = request.value.removeprefix("VIDIOC_").lower()
+        injected = self.injector.request(name) if name in REQUESTS else None
+        if injected is not None:
+            raise V4L2Error(injected, f"{request.value}: injected error")
 
     def disconnect(self) -> None:
         """Unplug: stop producing; every call and waiter from now on gets ENODEV."""

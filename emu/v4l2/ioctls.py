@@ -221,10 +221,12 @@ def _querymenu(node: DeviceNode, _f: OpenFile, a: abi.QueryMenu) -> None:
 
 
 def _g_ctrl(node: DeviceNode, _f: OpenFile, a: abi.Control) -> None:
+    node.driver.admit(raw.Ioctl.G_CTRL)  # unplugged, or an injected error: as the driver's own ioctl
     a.value = ctrls.KERNEL_CTRL[raw.Ioctl.G_CTRL](node.driver, raw.Control(a.id)).value
 
 
 def _s_ctrl(node: DeviceNode, _f: OpenFile, a: abi.Control) -> None:
+    node.driver.admit(raw.Ioctl.S_CTRL)
     a.value = ctrls.KERNEL_CTRL[raw.Ioctl.S_CTRL](node.driver, raw.Control(a.id, a.value)).value
 
 

@@ -110,6 +110,8 @@ class DeviceNode:
                 self.files.remove(f)
                 f.ready.close()
                 f.event.close()
+            if not self.files and self.driver.queue.disconnected:
+                self.driver.close()  # vivid: an unplugged device is connected again once its last file closes
             self.sync()
 
     def free_queue(self) -> None:
