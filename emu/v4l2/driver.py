@@ -292,7 +292,9 @@ def _queryctrl(d: EmuDriver, arg: raw.QueryCtrl) -> raw.QueryCtrl:
     flags = raw.CtrlFlag.READ_ONLY if info["read_only"] else 0
     if name in ("hflip", "vflip") and d.camera.streaming:
         flags |= raw.CtrlFlag.GRABBED
-    default = CONTROLS[name].get(d.camera.state) if name in ("hblank", "pixel_rate") else info["value"]
+    # default_value is the power-on value (the current one is G_CTRL's), as the preload node's QUERY_EXT_CTRL
+    default = CONTROLS[name].get(d.camera.state) if name in ("hblank", "pixel_rate") else \
+        d.ctrl_defaults.get(name, info["value"])
     return raw.QueryCtrl(arg.id, _CTRL_TYPES[info["kind"]], CTRL_NAMES[name], info["min"], info["max"], 1,
                          default, int(flags))
 

@@ -80,8 +80,7 @@ class DeviceNode:
         self.owner: OpenFile | None = None
         self.fileio: FileIO | None = None
         self.shm: dict[int, int] = {}  # buffer index -> memfd
-        self.stride = 0  # bytes between buffer offsets (page-aligned buffer length)
-        self.mapped: set[int] = set()
+        self.stride, self.mapped = 0, set()  # bytes between buffer offsets (page-aligned); mapped indices
         self.waiting_for_buffers = True
         driver.queue.alloc = self._alloc
         driver.on_change = self.sync

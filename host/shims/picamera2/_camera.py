@@ -64,7 +64,9 @@ def spec_of(source: str) -> CameraSpec:
     parts = parse_uri(source)
     if not parts.target:
         raise SourceError(f"source {source!r}: name a sensor, e.g. emu:imx219")
-    return CameraSpec.from_options(parts.target, parts.options, f"source {source!r}", SourceError)
+    # ``faults=`` is the plan of the V4L2 device ``rollcam run`` makes from the same URI; the stand-in injects none.
+    options = {k: v for k, v in parts.options.items() if k != "faults"}
+    return CameraSpec.from_options(parts.target, options, f"source {source!r}", SourceError)
 
 
 @dataclass(frozen=True)
