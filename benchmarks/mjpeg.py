@@ -30,6 +30,8 @@ from typing import Any
 
 import numpy as np
 
+from .http_attacks import stop
+
 TARGET_ENCODE_MS = 10.0
 
 SERVER = """
@@ -143,12 +145,7 @@ def serve_clients(clients: int = 8, seconds: float = 20.0, size: tuple[int, int]
         for r in readers:
             r.join(seconds + 30)
     finally:
-        proc.terminate()
-        try:
-            proc.wait(10)
-        except subprocess.TimeoutExpired:
-            proc.kill()
-            proc.wait(10)
+        stop(proc)
     per = status["clients"]
     seen = [set(r.seqs) for r in readers]
     anyone = set().union(*seen)
