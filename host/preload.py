@@ -25,7 +25,6 @@ from rollcam.emu.v4l2.driver import EmuDriver
 from rollcam.emu.v4l2.node import DeviceNode
 from rollcam.emu.v4l2.server import PreloadServer
 from rollcam.firmware.camera import FirmwareCamera
-from rollcam.firmware.spec import CameraSpec
 from rollcam.host.standins import standin_env
 
 DEFAULT_DEVICE = "/dev/video0"
@@ -45,16 +44,10 @@ def parse_device(text: str, index: int) -> tuple[str, str]:
 def build_camera(source: str) -> tuple[FirmwareCamera, FaultPlan]:
     """The camera an ``emu:`` URI or a sensor name describes, on the real device clock, and the URI's
     ``faults=`` plan (``rollcam.common.faults``; none for a sensor name)."""
-    if not source.startswith("emu:"):
-        return FirmwareCamera(source), FaultPlan()
-    from rollcam.host.sources import parse_uri
-    from rollcam.host.sources.emu import fault_plan
+    from rollcam.host.sources.emu import device_spec
 
-    uri = parse_uri(source)
-    plan = fault_plan(uri)
-    camera_opts = {k: v for k, v in uri.options.items() if k != "faults"}
-    return FirmwareCamera(CameraSpec.from_options(uri.target, camera_opts, f"device source {source!r}",
-                                                  ConfigError)), plan
+    spec, plan = device_spec(source, ConfigError)
+    return FirmwareCamera(spec), plan
 
 
 def minor_of(path: str, index: int) -> int:

@@ -52,6 +52,20 @@ def fault_plan(opts: SourceURI) -> FaultPlan:
     return opts.get("faults", lambda text: FaultPlan.parse(text, f"source {opts.uri!r}"), FaultPlan())
 
 
+def device_spec(source: str, error: type[Exception] = SourceError) -> tuple[CameraSpec, FaultPlan]:
+    """The spec and ``faults=`` plan of a device described by a sensor name or an ``emu:`` URI, for the doors that
+    build a device of their own from one (``rollcam run``'s /dev/videoN, the picamera2 stand-in); ``error`` is
+    what a bad source raises. The in-process source's own options (``start_ns``, ``frames``) are refused."""
+    from . import parse_uri
+
+    uri = parse_uri(source if source.startswith("emu:") else f"emu:{source}")
+    owner = f"source {source!r}"
+    if uri.scheme != "emu" or not uri.target:
+        raise error(f"{owner}: name a sensor or an emu: URI, e.g. emu:imx219?size=640x480")
+    camera_opts = {k: v for k, v in uri.options.items() if k != "faults"}
+    return CameraSpec.from_options(uri.target, camera_opts, owner, error), fault_plan(uri)
+
+
 class EmuSource(CameraSource):
     """Frames from a FirmwareCamera, in sequence, with exact timing and ground truth."""
 

@@ -22,7 +22,7 @@ from rollcam.firmware import controls as ctl
 from rollcam.firmware.camera import FirmwareCamera
 from rollcam.firmware.pixfmt import raw_formats
 from rollcam.firmware.spec import CameraSpec
-from rollcam.host.sources import parse_uri
+from rollcam.host.sources.emu import device_spec
 from rollcam.host.standins import PICAMERA2_ENV
 from rollcam.sim import formats as sf
 from rollcam.sim.frame import Frame
@@ -58,15 +58,9 @@ def sources() -> list[str]:
 
 
 def spec_of(source: str) -> CameraSpec:
-    """The camera spec of a sensor name or ``emu:`` URI; SourceError naming the source when it is bad."""
-    if not source.startswith("emu:"):
-        source = f"emu:{source}"
-    parts = parse_uri(source)
-    if not parts.target:
-        raise SourceError(f"source {source!r}: name a sensor, e.g. emu:imx219")
-    # ``faults=`` is the plan of the V4L2 device ``rollcam run`` makes from the same URI; the stand-in injects none.
-    options = {k: v for k, v in parts.options.items() if k != "faults"}
-    return CameraSpec.from_options(parts.target, options, f"source {source!r}", SourceError)
+    """The camera spec of a sensor name or ``emu:`` URI; SourceError naming the source when it is bad. A
+    ``faults=`` plan there is the V4L2 device's (``rollcam run``); the stand-in injects none."""
+    return device_spec(source, SourceError)[0]
 
 
 @dataclass(frozen=True)
