@@ -63,6 +63,17 @@ def serve(nofile: int | None = None) -> tuple[subprocess.Popen, str, int]:
     return proc, host, int(port)
 
 
+def read_part(f: Any) -> tuple[dict[str, str], bytes]:
+    """The next part of a multipart MJPEG stream read from the file ``f``: its headers (lower-case) and body."""
+    while not f.readline().startswith(b"--"):  # to the part's boundary
+        pass
+    heads = {}
+    while (line := f.readline().strip()) != b"":
+        k, v = line.decode().split(":", 1)
+        heads[k.lower()] = v.strip()
+    return heads, f.read(int(heads["content-length"]))
+
+
 def stop(proc: subprocess.Popen) -> None:
     """End a server process (SIGTERM, then SIGKILL if it does not end within 10 s)."""
     proc.terminate()
@@ -106,13 +117,7 @@ class Viewer(threading.Thread):
                 while f.readline().strip():  # the response's headers
                     pass
                 while time.monotonic() - t0 < self.seconds:
-                    while not f.readline().startswith(b"--"):  # to the part's boundary
-                        pass
-                    heads = {}
-                    while (line := f.readline().strip()) != b"":
-                        k, v = line.decode().split(":", 1)
-                        heads[k.lower()] = v.strip()
-                    f.read(int(heads["content-length"]))
+                    heads, _ = read_part(f)
                     now = time.monotonic_ns()
                     if self.first_s is None:
                         self.first_s = time.monotonic() - t0

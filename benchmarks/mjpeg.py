@@ -30,7 +30,7 @@ from typing import Any
 
 import numpy as np
 
-from .http_attacks import stop
+from .http_attacks import read_part, stop
 
 TARGET_ENCODE_MS = 10.0
 
@@ -116,13 +116,7 @@ class Reader(threading.Thread):
                     pass
                 end = time.monotonic() + self.seconds
                 while time.monotonic() < end:
-                    while not f.readline().startswith(b"--"):
-                        pass
-                    heads = {}
-                    while (line := f.readline().strip()) != b"":
-                        k, v = line.decode().split(":", 1)
-                        heads[k.lower()] = v.strip()
-                    f.read(int(heads["content-length"]))
+                    heads, _ = read_part(f)
                     self.seqs.append(int(heads["x-sequence"]))
         except OSError as exc:
             self.error = f"{type(exc).__name__}: {exc}"

@@ -38,6 +38,8 @@ from rollcam.common.errors import ConfigError
 from rollcam.emu.v4l2 import Device
 from rollcam.emu.v4l2 import functions as fn
 
+from .http_attacks import stop as stop_process
+
 TARGET_JITTER_P99_MS = 2.0
 TARGET_HOG_DROP_FRACTION = 0.001
 TARGET_RSS_MB = 500.0
@@ -208,12 +210,7 @@ def run_memory_soak(minutes: float = 10.0, *, every_s: float = 10.0, size: tuple
         curve.append((round(time.monotonic() - t0, 1), round(_rss_mb(proc.pid), 1)))
     finally:
         stop.set()
-        proc.terminate()
-        try:
-            proc.wait(15)
-        except subprocess.TimeoutExpired:
-            proc.kill()
-            proc.wait(10)
+        stop_process(proc)
     steady = [mb for t, mb in curve if t >= min(60.0, minutes * 30)]
     peak = max(steady) if steady else None
     command = f"rollcam emulate imx219 --size {size[0]}x{size[1]} --fps 30 --http"
