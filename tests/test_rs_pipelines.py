@@ -156,3 +156,14 @@ def test_eval_correct_refuses_what_it_cannot_do(tmp_path: Path, drone_dataset: P
     assert "imu=on" in capsys.readouterr().err
     assert main(["eval", str(drone_dataset), "--detector", "personnet", "--correct", "flow"]) == 2
     assert "previous frame" in capsys.readouterr().err
+
+
+@pytest.mark.slow
+def test_bench_imu_quick_meets_its_targets(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["bench", "imu", "--quick", "--check", "--out", str(tmp_path)]) == 0
+    out = capsys.readouterr().out
+    assert "calibration" in out and "RS / gyro / flow" in out
+    doc = json.loads((tmp_path / "imu_bench.json").read_text())
+    assert {"calibration_line_time_rel_error", "calibration_offset_error_ns", "objects_flow_box_error_below_rs",
+            "drone_gyro_box_error_below_rs"} <= set(doc["targets"])
+    assert all(t["pass"] for t in doc["targets"].values()), doc["targets"]
