@@ -47,8 +47,11 @@ def dense_flow(src: np.ndarray, dst: np.ndarray) -> np.ndarray:
 
 
 def _line_time(times: np.ndarray, line: np.ndarray) -> np.ndarray:
-    """Line times (float ns relative to the array's first) at fractional line coordinates (clipped)."""
-    return np.interp(line, np.arange(times.size, dtype=np.float64), (times - times[0]).astype(np.float64))
+    """Line times (ns after the first image line's, float32) at fractional line coordinates, clipped to the
+    frame: line offsets are linear in the line index (to the ns), so a slope is enough."""
+    n = times.size
+    slope = (float(times[-1]) - float(times[0])) / (n - 1) if n > 1 else 0.0
+    return np.clip(line, 0.0, n - 1.0).astype(np.float32) * np.float32(slope)
 
 
 def image_velocity(flow_to_prev: np.ndarray, line_times_ns: np.ndarray, prev_line_times_ns: np.ndarray, *,
@@ -56,14 +59,14 @@ def image_velocity(flow_to_prev: np.ndarray, line_times_ns: np.ndarray, prev_lin
     """Per-pixel image velocity (px/ns, (h, w, 2)) from the flow to the previous frame and both frames' line
     sample times (image order)."""
     h, w = flow_to_prev.shape[:2]
-    u, v = np.meshgrid(np.arange(w, dtype=np.float64), np.arange(h, dtype=np.float64))
-    line = u if by_column else v
+    idx = np.arange(w if by_column else h, dtype=np.float32)
+    line = idx[None, :] if by_column else idx[:, None]
     prev_line = line + flow_to_prev[..., 0 if by_column else 1]
-    base = float(prev_line_times_ns[0]) - float(line_times_ns[0])
-    dt = _line_time(line_times_ns, line) - (_line_time(prev_line_times_ns, prev_line) + base)
+    base = np.float32(float(line_times_ns[0]) - float(prev_line_times_ns[0]))
+    dt = _line_time(line_times_ns, line) - _line_time(prev_line_times_ns, prev_line) + base
     if not np.all(dt > 0):
         raise ConfigError("the previous frame's lines must be sampled before this frame's")
-    return (-flow_to_prev / dt[..., None]).astype(np.float32)
+    return -flow_to_prev / dt[..., None]
 
 
 def unwarp_flow(image: np.ndarray, velocity: np.ndarray, line_times_ns: np.ndarray, reference_ns: int, *,
@@ -79,14 +82,13 @@ def unwarp_flow(image: np.ndarray, velocity: np.ndarray, line_times_ns: np.ndarr
     if velocity.shape != (h, w, 2):
         raise ConfigError(f"velocity must be ({h}, {w}, 2), got {velocity.shape}")
     u, v = np.meshgrid(np.arange(w, dtype=np.float32), np.arange(h, dtype=np.float32))
-    rel = float(times[0]) - float(reference_ns)
-    vx, vy = np.ascontiguousarray(velocity[..., 0]), np.ascontiguousarray(velocity[..., 1])
-    mx, my = u.copy(), v.copy()
+    rel = np.float32(float(times[0]) - float(reference_ns))
+    vel = np.ascontiguousarray(velocity, np.float32)
+    mx, my = u, v
     for _ in range(FIXED_POINT_STEPS):
-        tau = (_line_time(times, mx if by_column else my) + rel).astype(np.float32)
-        sx = cv2.remap(vx, mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
-        sy = cv2.remap(vy, mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
-        mx, my = u + sx * tau, v + sy * tau
+        tau = _line_time(times, mx if by_column else my) + rel
+        s = cv2.remap(vel, mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
+        mx, my = u + s[..., 0] * tau, v + s[..., 1] * tau
     out = cv2.remap(image, mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT, borderValue=0)
     valid = (mx >= 0) & (mx <= w - 1) & (my >= 0) & (my <= h - 1)
     return out, valid
