@@ -117,11 +117,11 @@ def correct_stored(image: np.ndarray, imu: dict[str, Any], line_times_ns: np.nda
     """A stored RS image (8-bit BGR) gyro-corrected from its ``imu_record``."""
     from rollcam.sim.imu import ImuParams
 
+    if not imu["samples"]:
+        raise SourceError("the stored IMU block holds no samples")
     params = ImuParams(**{k: tuple(v) if isinstance(v, list) else v for k, v in imu["params"].items()})
     rows = np.asarray(imu["samples"], np.float64).reshape(-1, 7)
-    t_ns = np.asarray([int(r[0]) for r in imu["samples"]], np.int64)
+    t_ns = np.asarray([int(r[0]) for r in imu["samples"]], np.int64)  # exact: not through float64
     samples = ImuSamples(np.arange(len(t_ns)), t_ns, rows[:, 1:4], rows[:, 4:7], params)
-    if len(samples) < 1:
-        raise SourceError("the stored IMU block holds no samples")
     out, _ = gyro_correct(image, samples, line_times_ns, tuple(imu["intrinsics"]), by_column=by_column)
     return out

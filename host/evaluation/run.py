@@ -53,7 +53,8 @@ def evaluate_dataset(dataset: str | Path, *, detector: str | None = None, detect
         from ..detectors import load_detector
 
         det = load_detector(detector)
-        todo = sum(len(s.images) for s in sets if s.same_images_as is None)
+        names = {s.name for s in sets}
+        todo = sum(len(s.images) for s in sets if s.same_images_as not in names)
         bar = Progress(todo, label=f"eval {detector}", enabled=progress, unit="img")
         n = [0]
 
