@@ -4,27 +4,25 @@ Allan: a static IMU is sampled for ``hours`` of device time; the overlapping All
 fitted with Kalibr's two-term model ``sigma^2(tau) = N^2 / tau + K^2 tau / 3`` (white noise density N, bias
 random walk K; weighted least squares on the curve) and compared with the configured figures.
 
-Correction: for ego-motion cases (camera panning, a drone's rotation and vibration, a vehicle) and one of
-object motion only (a static camera, fast walkers), frame pairs of the same instant are rendered under
-both shutters; the RS frame is corrected from the device's gyro (``rollcam.sim.rscorrect``) and compared with
-the GS frame: mean absolute error (8-bit, pixels whose source lies inside the frame), box error (mean
-absolute edge offset from the GS box, px: the RS box as rendered, and as the correction maps it), the
-correction's time per frame, and optionally the recall of a detector against the GS boxes on GS, RS and
-corrected RS (the study's two pipelines side by side). Timings are medians within one run.
+Calibration: a capture of the ``ego=calib`` excitation (320x240, default IMU noise, a configured time offset)
+goes through ``rollcam calibrate``'s estimator; the line time must come back within 1 % and the offset
+within 0.1 ms.
+
+Correction: ``benchmarks/imu_correction.py`` (gyro and flow correction against the GS frame of the same
+instant). Timings are medians within one run.
 """
 
 from __future__ import annotations
 
-import time
 from collections.abc import Callable
 from typing import Any
 
 import numpy as np
 
-CASES = {"pan": "ego=pan&pedestrians=12", "drone": "ego=drone&pedestrians=12",
-         "vehicle": "ego=vehicle&pedestrians=12", "objects": "ego=none&speed=fast&pedestrians=12"}
-"""Case name -> emu: options: camera motion in the first three, object motion only in the last."""
 ALLAN_N_TOLERANCE, ALLAN_K_TOLERANCE = 0.10, 0.30
+LINE_TIME_TOLERANCE, OFFSET_TOLERANCE_NS = 0.01, 100_000
+CALIB_OFFSET_US = -1700
+EGO_CASES = ("pan", "drone", "vehicle")
 
 
 def allan_deviation(rate: np.ndarray, rate_hz: float, taus_s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -75,74 +73,46 @@ def allan_study(hours: float = 2.0, rate_hz: int = 100, seed: int = 0) -> dict[s
     return out
 
 
-def _box_error(a: Any, b: Any) -> float:
-    return float(np.mean(np.abs(np.subtract(a, b))))
+def calibration_study(frames: int, size: tuple[int, int] = (320, 240)) -> dict[str, Any]:
+    """``rollcam calibrate``'s estimate from a fresh ``ego=calib`` capture against its configuration."""
+    import json
+    import tempfile
+    import time
+    from pathlib import Path
 
+    from rollcam.host.calibrate import calibrate
+    from rollcam.host.capture import capture
+    from rollcam.host.sources import open_camera
 
-def _mapped_box(box: Any, rot: np.ndarray, k: tuple, w: int, h: int) -> tuple[float, float, float, float]:
-    from rollcam.sim.rscorrect import forward_points
-
-    x0, y0, x1, y1 = box
-    s = np.linspace(0.0, 1.0, 16)
-    # x extents are continuous (pixel i spans [i, i + 1)), y whole rows: both to OpenCV's pixel-centre coordinates
-    xa, xb, ya, yb = x0 - 0.5, x1 - 0.5, y0, y1 - 1
-    pts = np.concatenate([np.stack([xa + (xb - xa) * s, np.full_like(s, ya)], 1),
-                          np.stack([xa + (xb - xa) * s, np.full_like(s, yb)], 1),
-                          np.stack([np.full_like(s, xa), ya + (yb - ya) * s], 1),
-                          np.stack([np.full_like(s, xb), ya + (yb - ya) * s], 1)])
-    m = forward_points(pts, rot, k)
-    return (max(m[:, 0].min() + 0.5, 0.0), max(m[:, 1].min(), 0.0), min(m[:, 0].max() + 0.5, w),
-            min(m[:, 1].max() + 1, h))
-
-
-def correction_case(options: str, size: tuple[int, int], frames: int, detector: Any = None) -> dict[str, Any]:
-    """One case of the correction study (see the module docstring)."""
-    from rollcam.host import open_camera
-    from rollcam.host.truthmatch import RunningPR
-    from rollcam.sim.rscorrect import gyro_line_rotations, unwarp
-
-    w, h = size
-    uri = f"emu:imx219?size={w}x{h}&imu=on&{options}"
-    src = open_camera(uri)
-    mae_rs, mae_c, box_rs, box_c, ms = [], [], [], [], []
-    pr = {k: RunningPR() for k in ("gs", "rs", "corrected")}
-    for _ in range(frames):
-        gs, rs = src.read_pair()
-        p = rs.imu.params
-        times = rs.row_times_ns
-        imu = src.device.imager.imu.imu(src.spec, src.camera.camera)
-        cover = imu.samples(int(times.min()) + p.time_offset_ns - 10**7, int(times.max()) + p.time_offset_ns + 10**7)
-        k = tuple(rs.meta["intrinsics"])
+    uri = (f"emu:imx219?size={size[0]}x{size[1]}&ego=calib&pedestrians=0&exposure_us=2000"
+           f"&imu_offset_us={CALIB_OFFSET_US}")
+    with tempfile.TemporaryDirectory(prefix="rollcam-calib-") as tmp:
+        with open_camera(uri) as src:
+            capture(src, Path(tmp) / "cap", frames, progress=False)
+        rec = json.loads((Path(tmp) / "cap" / "frames.jsonl").read_text().splitlines()[0])
         t0 = time.perf_counter()
-        rot = gyro_line_rotations(cover, times, int(times.min()))
-        out, valid = unwarp(rs.data, rot, k)
-        ms.append((time.perf_counter() - t0) * 1e3)
-        g, r, c = (x.astype(np.int16) for x in (gs.data, rs.data, out))
-        mae_rs.append(float(np.abs(g - r)[valid].mean()))
-        mae_c.append(float(np.abs(g - c)[valid].mean()))
-        for o in rs.objects or ():
-            if o.box_gs is not None and o.box_rs is not None and o.visible > 0.5:
-                box_rs.append(_box_error(o.box_rs, o.box_gs))
-                box_c.append(_box_error(_mapped_box(o.box_rs, rot, k, w, h), o.box_gs))
-        if detector is not None:
-            for name, f, img in (("gs", gs, gs.data), ("rs", rs, rs.data), ("corrected", rs, out)):
-                pr[name].update(f, detector.detect(img))
-    doc: dict[str, Any] = {
-        "uri": uri, "frames": frames, "mae_rs_vs_gs": float(np.mean(mae_rs)),
-        "mae_corrected_vs_gs": float(np.mean(mae_c)),
-        "box_error_rs_px": float(np.mean(box_rs)) if box_rs else None,
-        "box_error_corrected_px": float(np.mean(box_c)) if box_c else None,
-        "boxes": len(box_rs), "correct_ms": float(np.median(ms))}
-    if detector is not None:  # recall against the GS boxes: what each pipeline's detector sees
-        doc["recall_vs_gs"] = {k: v.totals["gs"].recall for k, v in pr.items()}
-    return doc
+        cal = calibrate(Path(tmp) / "cap")
+        seconds = time.perf_counter() - t0
+    line_ns, offset_ns = int(rec["line_time_ns"]), CALIB_OFFSET_US * 1000
+    return {"uri": uri, "frames": frames, **cal.to_json(), "line_time_config_ns": line_ns,
+            "offset_config_ns": offset_ns, "line_time_rel_error": cal.line_time_s * 1e9 / line_ns - 1,
+            "offset_error_ns": cal.offset_s * 1e9 - offset_ns, "seconds": round(seconds, 2)}
+
+
+def _target(value: float, op: str, limit: float) -> dict[str, Any]:
+    ok = value <= limit if op == "<=" else value < limit
+    return {"value": round(value, 4), "op": op, "limit": round(limit, 4), "pass": bool(ok)}
 
 
 def run_imu_bench(*, quick: bool = False, detector: str | None = None,
                   say: Callable[[str], None] = lambda _: None) -> dict[str, Any]:
-    """Both halves of the study as one JSON document, with its targets."""
+    """The three parts of the study as one JSON document, with its targets."""
+    from .imu_correction import CASES, correction_case
+
     say("IMU noise: Allan deviation of a static IMU")
     allan = allan_study(hours=0.5 if quick else 2.0)
+    say("calibration: line time and camera-IMU offset from an ego=calib capture")
+    calib = calibration_study(16 if quick else 30)
     size, frames = ((640, 480), 2) if quick else ((1920, 1080), 4)
     det = None
     if detector:
@@ -151,19 +121,25 @@ def run_imu_bench(*, quick: bool = False, detector: str | None = None,
         det = load_detector(detector)
     cases = {}
     for name, opts in CASES.items():
-        say(f"gyro correction: {name} at {size[0]}x{size[1]}")
+        say(f"RS correction: {name} at {size[0]}x{size[1]}")
         cases[name] = correction_case(opts, size, frames, det)
     targets = {}
     for sensor in ("gyroscope", "accelerometer"):
         for term, tol in (("noise_density", ALLAN_N_TOLERANCE), ("random_walk", ALLAN_K_TOLERANCE)):
-            err = allan[sensor][term]["rel_error"]
-            targets[f"allan_{sensor}_{term}_rel_error"] = {"value": round(abs(err), 4), "op": "<=", "limit": tol,
-                                                           "pass": abs(err) <= tol}
-    pan = cases["pan"]
-    targets["pan_corrected_mae_below_rs"] = {"value": round(pan["mae_corrected_vs_gs"], 3), "op": "<",
-                                             "limit": round(pan["mae_rs_vs_gs"], 3),
-                                             "pass": pan["mae_corrected_vs_gs"] < pan["mae_rs_vs_gs"]}
-    return {"allan": allan, "correction": {"size": list(size), "cases": cases}, "targets": targets}
+            targets[f"allan_{sensor}_{term}_rel_error"] = _target(abs(allan[sensor][term]["rel_error"]), "<=", tol)
+    targets["calibration_line_time_rel_error"] = _target(abs(calib["line_time_rel_error"]), "<=",
+                                                         LINE_TIME_TOLERANCE)
+    targets["calibration_offset_error_ns"] = _target(abs(calib["offset_error_ns"]), "<=", OFFSET_TOLERANCE_NS)
+    for name in EGO_CASES:  # the gyro undoes camera rotation: less image and box error than uncorrected RS
+        c = cases[name]
+        targets[f"{name}_gyro_mae_below_rs"] = _target(c["mae_vs_gs"]["gyro"], "<", c["mae_vs_gs"]["rs"])
+        targets[f"{name}_gyro_box_error_below_rs"] = _target(c["box_error_px"]["gyro"], "<",
+                                                             c["box_error_px"]["rs"])
+    c = cases["objects"]  # object motion: the flow's case (the gyro cannot help)
+    targets["objects_flow_mae_below_rs"] = _target(c["mae_vs_gs"]["flow"], "<", c["mae_vs_gs"]["rs"])
+    targets["objects_flow_box_error_below_rs"] = _target(c["box_error_px"]["flow"], "<", c["box_error_px"]["rs"])
+    return {"allan": allan, "calibration": calib, "correction": {"size": list(size), "cases": cases},
+            "targets": targets}
 
 
 def format_report(doc: dict[str, Any]) -> str:
@@ -175,15 +151,22 @@ def format_report(doc: dict[str, Any]) -> str:
             t = a[sensor][term]
             lines.append(f"  {sensor:13s} {term:13s} config {t['config']:.4e}  fit {t['fit']:.4e}  "
                          f"({t['rel_error'] * 100:+.1f} %)")
+    cal = doc["calibration"]
+    lines.append(f"calibration ({cal['frames']} frames of {cal['uri']}): line time {cal['line_time_ns']:.1f} +- "
+                 f"{cal['line_time_std_ns']:.1f} ns (config {cal['line_time_config_ns']}, "
+                 f"{cal['line_time_rel_error'] * 100:+.2f} %), offset {cal['timeshift_cam_imu_ns'] / 1e3:.1f} +- "
+                 f"{cal['timeshift_cam_imu_std_ns'] / 1e3:.1f} us (config {cal['offset_config_ns'] / 1e3:.0f}, "
+                 f"{cal['offset_error_ns'] / 1e3:+.1f} us), {cal['seconds']:.1f} s")
     c = doc["correction"]
-    lines.append(f"gyro RS correction at {c['size'][0]}x{c['size'][1]} (MAE 8-bit vs the GS frame of the same "
-                 "instant; box error px vs GS boxes):")
+    lines.append(f"RS correction at {c['size'][0]}x{c['size'][1]}, RS / gyro / flow (MAE 8-bit vs the GS frame of "
+                 "the same instant; box error px vs GS boxes; ms per frame):")
     for name, r in c["cases"].items():
-        box = ("-" if r["box_error_rs_px"] is None else
-               f"{r['box_error_rs_px']:.2f} -> {r['box_error_corrected_px']:.2f}")
+        mae = " / ".join(f"{r['mae_vs_gs'][m]:.2f}" for m in ("rs", "gyro", "flow"))
+        box = " / ".join("-" if r["box_error_px"][m] is None else f"{r['box_error_px'][m]:.2f}"
+                         for m in ("rs", "gyro", "flow"))
         rec = r.get("recall_vs_gs")
-        extra = "" if rec is None else "  recall GS/RS/corr " + "/".join(
+        extra = "" if rec is None else "  recall GS/RS/gyro/flow " + "/".join(
             "-" if v is None else f"{v:.2f}" for v in rec.values())
-        lines.append(f"  {name:8s} MAE RS {r['mae_rs_vs_gs']:.2f} -> corrected {r['mae_corrected_vs_gs']:.2f}  "
-                     f"box {box}  {r['correct_ms']:.1f} ms/frame{extra}")
+        lines.append(f"  {name:8s} MAE {mae}  box {box}  ms gyro {r['correct_ms']['gyro']:.0f} flow "
+                     f"{r['correct_ms']['flow']:.0f}{extra}")
     return "\n".join(lines)

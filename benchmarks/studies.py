@@ -258,7 +258,7 @@ def _dataset(args: argparse.Namespace, progress: Any) -> tuple[Doc, str]:
 def _imu_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--quick", action="store_true", help="half an hour of IMU, 640x480 frames (< 1 min)")
     p.add_argument("--detector", default=None, metavar="NAME",
-                   help="also compare this detector's recall on GS, RS and corrected RS (e.g. hog)")
+                   help="also compare this detector's recall on GS, RS and gyro/flow-corrected RS (e.g. personnet)")
 
 
 def _imu(args: argparse.Namespace, progress: Any) -> tuple[Doc, str]:
@@ -336,7 +336,8 @@ STUDIES: dict[str, Study] = {s.name: s for s in (
           _quick_argument, _mjpeg, _doc_targets),
     Study("dataset", "dataset generation (vs render+encode, 1 vs 2 workers) and evaluation metric speed",
           _dataset_arguments, _dataset, _doc_targets),
-    Study("imu", "IMU noise (Allan fit against the config) and gyro RS correction (error vs GS, time per frame)",
+    Study("imu", "IMU noise (Allan fit against the config), calibration (line time, offset), gyro and flow RS "
+          "correction (error vs GS, time per frame)",
           _imu_arguments, _imu, _doc_targets),
     Study("view", "the live view at 1080p30: the device's frame rate with a page watching, the page's update rate, "
           "cost per frame", _view_arguments, _view, _doc_targets),

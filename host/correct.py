@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import dataclasses
 from collections.abc import Callable
+from typing import Any
 
 import numpy as np
 from rollcam.common.errors import SourceError
@@ -20,7 +21,7 @@ from rollcam.sim.frame import Frame
 from rollcam.sim.imu import ImuSamples
 from rollcam.sim.rscorrect import correct_image
 
-CORRECTIONS = ("gyro",)
+CORRECTIONS = ("gyro", "flow")
 HISTORY_NS = 1_000_000_000
 
 
@@ -47,19 +48,20 @@ class GyroCorrector:
         samples = self._add(frame.imu)
         if frame.shutter != "rolling" or frame.line_time_ns == 0 or frame.meta.get("rs_correct"):
             return frame
-        times = frame.row_times_ns
-        held = _held(samples, int(times.min()), int(times.max()))
-        image, _ = correct_image(frame_bgr(frame), held, times, int(times.min()), tuple(frame.meta["intrinsics"]),
-                                 by_column=frame.readout.by_column)
+        image, _ = gyro_correct(frame_bgr(frame), samples, frame.row_times_ns, tuple(frame.meta["intrinsics"]),
+                                by_column=frame.readout.by_column)
         self.frames += 1
         return dataclasses.replace(frame, data=image, format="BGR3", meta={**frame.meta, "rs_correct": "gyro-host"})
 
-    def reader(self, read: Callable[[], Frame | None]) -> Callable[[], Frame | None]:
-        """``read`` with every frame corrected."""
-        def corrected() -> Frame | None:
-            frame = read()
-            return None if frame is None else self.correct(frame)
-        return corrected
+
+def gyro_correct(image: np.ndarray, samples: ImuSamples, line_times_ns: np.ndarray,
+                 intrinsics: tuple[float, float, float, float], *, by_column: bool = False
+                 ) -> tuple[np.ndarray, np.ndarray]:
+    """``image`` unwarped to its first line's orientation from ``samples`` (edge rates held where they stop
+    short of the lines); returns the image and the mask of pixels with a source."""
+    times = np.asarray(line_times_ns, np.int64)
+    held = _held(samples, int(times.min()), int(times.max()))
+    return correct_image(image, held, times, int(times.min()), intrinsics, by_column=by_column)
 
 
 def _held(s: ImuSamples, first_ns: int, last_ns: int) -> ImuSamples:
@@ -77,4 +79,49 @@ def correcting_reader(read: Callable[[], Frame | None], method: str) -> Callable
     """``read`` behind the named correction (``CORRECTIONS``)."""
     if method not in CORRECTIONS:
         raise SourceError(f"correction {method!r} is not one of {list(CORRECTIONS)}")
-    return GyroCorrector().reader(read)
+    from .flowcorrect import FlowCorrector
+
+    corrector = FlowCorrector() if method == "flow" else GyroCorrector()
+
+    def corrected() -> Frame | None:
+        frame = read()
+        return None if frame is None else corrector.correct(frame)
+    return corrected
+
+
+def imu_record(frame: Frame, device: Any) -> dict[str, Any] | None:
+    """What a dataset keeps of a frame to gyro-correct its stored image later (JSON): the IMU's calibration,
+    the samples of ``device`` (the emulated camera that made it) over the frame's lines, two more each side,
+    and the pinhole intrinsics; None for a frame without an IMU. Not the block the frame carried: a stream's
+    first frame carries one frame period up to its end, which a long exposure's first lines precede."""
+    from rollcam.firmware.imu import device_samples
+
+    if frame.imu is None or "intrinsics" not in frame.meta or frame.row_times_ns is None:
+        return None
+    p = frame.imu.params
+    margin = 2 * (10**9 // p.rate_hz)
+    t0 = int(frame.row_times_ns.min()) + p.time_offset_ns - margin
+    t1 = int(frame.row_times_ns.max()) + p.time_offset_ns + margin
+    samples = device_samples(device, t0, 10**6, now_ns=t1)
+    return {"params": dataclasses.asdict(p), "samples": samples.to_rows(),
+            "intrinsics": [float(v) for v in frame.meta["intrinsics"]]}
+
+
+def line_times(first_ns: int, last_ns: int, n_lines: int) -> np.ndarray:
+    """Line times (image order) from the first and last image line's: line offsets are linear, to the ns."""
+    return np.round(np.linspace(float(first_ns), float(last_ns), int(n_lines))).astype(np.int64)
+
+
+def correct_stored(image: np.ndarray, imu: dict[str, Any], line_times_ns: np.ndarray, *, by_column: bool = False
+                   ) -> np.ndarray:
+    """A stored RS image (8-bit BGR) gyro-corrected from its ``imu_record``."""
+    from rollcam.sim.imu import ImuParams
+
+    if not imu["samples"]:
+        raise SourceError("the stored IMU block holds no samples")
+    params = ImuParams(**{k: tuple(v) if isinstance(v, list) else v for k, v in imu["params"].items()})
+    rows = np.asarray(imu["samples"], np.float64).reshape(-1, 7)
+    t_ns = np.asarray([int(r[0]) for r in imu["samples"]], np.int64)  # exact: not through float64
+    samples = ImuSamples(np.arange(len(t_ns)), t_ns, rows[:, 1:4], rows[:, 4:7], params)
+    out, _ = gyro_correct(image, samples, line_times_ns, tuple(imu["intrinsics"]), by_column=by_column)
+    return out

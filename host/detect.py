@@ -179,7 +179,8 @@ def run_detect(source: CameraSource, detector: Detector, *, frames: int | None =
                clock: Callable[[], float] = time.perf_counter, meta: dict[str, Any] | None = None,
                correct: str | None = None) -> DetectResult:
     """Detect on up to ``frames`` frames of ``source`` (all when None), logging to ``out_dir`` if given;
-    ``correct='gyro'`` unwarps each rolling-shutter frame from its IMU samples first (``rollcam.host.correct``)."""
+    ``correct="gyro"`` unwarps each rolling-shutter frame from its IMU samples first, ``"flow"`` from its flow
+    to the previous frame (``rollcam.host.correct``)."""
     from .preview import frame_bgr
 
     result = DetectResult(truth=truth if truth is not None else RunningPR(), out_dir=out_dir)

@@ -35,9 +35,10 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
     p.add_argument("--overwrite", action="store_true", help="replace an earlier run in DIR")
     p.add_argument("--shutter", choices=("rolling", "global"), default=None,
                    help="read this shutter from sources that render both (default: the source's)")
-    p.add_argument("--correct", choices=("gyro",), default=None,
+    p.add_argument("--correct", choices=("gyro", "flow"), default=None,
                    help="correct the rolling shutter on the host before detecting: gyro (per-row rotational "
-                        "unwarp from the frames' IMU samples; the source needs imu=on)")
+                        "unwarp from the frames' IMU samples; the source needs imu=on) or flow (optional, for "
+                        "object motion: dense optical flow from the previous frame; approximate)")
     p.add_argument("--iou", type=value_type(positive_fraction, "a number in (0, 1]"), default=0.5,
                    help="IoU for matching ground truth, in (0, 1] (default: %(default)s)")
     p.add_argument("--min-height", type=value_type(non_negative_float, "a number of pixels >= 0"), default=0.0,

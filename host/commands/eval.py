@@ -15,7 +15,9 @@ GS->RS difference. mAP comes from faster-coco-eval (COCO rules; ignore regions a
 at the confidence of best mean F1, as Ultralytics reports them. Instead of a detector, --detections takes a
 file of your own model's outputs (rollcam detections.jsonl or a COCO results JSON). Results go to
 OUT/DETECTOR_SPLIT.json and .png; with --subset NAME to OUT/DETECTOR_SPLIT_NAME.json and .png, so evaluating
-one subset never replaces the results of all of them."""
+one subset never replaces the results of all of them. --correct gyro adds the study's baseline pipeline: the
+RS images against the GS labels and gyro-corrected from the IMU block each sample's record keeps (a dataset
+built with --source-options imu=on), to OUT/DETECTOR_SPLIT_gyro.json."""
 
 
 def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
@@ -36,6 +38,9 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
                    "(default: DATASET/eval/ for a folder, else rollcam_out/eval)")
     p.add_argument("--save-detections", default=None, metavar="FILE", help="also write the detector's detections "
                    "as detections.jsonl (to re-evaluate without inference)")
+    p.add_argument("--correct", default=None, metavar="gyro",
+                   help="also evaluate the RS images against the GS labels, and gyro-corrected (rows RS_GSBOX, "
+                        "RS_GYRO); the dataset needs IMU blocks (rollcam dataset --source-options imu=on)")
     p.add_argument("--json", action="store_true", help="print one JSON document instead of the table")
     p.add_argument("--progress", action="store_true", help="show progress even when stderr is not a terminal")
     return p
@@ -45,10 +50,13 @@ def _slug(text: str) -> str:
     return "".join(c if c.isalnum() or c in "-_." else "_" for c in text)[:60]
 
 
-def result_stem(detector: str | None, detections: str | None, split: str, subset: str | None) -> str:
-    """File stem of one evaluation's results: DETECTOR_SPLIT, or DETECTOR_SPLIT_SUBSET for one subset."""
+def result_stem(detector: str | None, detections: str | None, split: str, subset: str | None,
+                correct: str | None = None) -> str:
+    """File stem of one evaluation's results: DETECTOR_SPLIT, DETECTOR_SPLIT_SUBSET for one subset, and
+    ``_CORRECTION`` after either with ``--correct``."""
     stem = f"{_slug(detector or Path(detections or 'detections').stem)}_{_slug(split)}"
-    return stem if subset is None else f"{stem}_{_slug(subset)}"
+    stem = stem if subset is None else f"{stem}_{_slug(subset)}"
+    return stem if correct is None else f"{stem}_{_slug(correct)}"
 
 
 def run(args: argparse.Namespace) -> int:
@@ -60,13 +68,13 @@ def run(args: argparse.Namespace) -> int:
 
     doc = evaluate_dataset(args.dataset, detector=args.detector, detections=args.detections, split=args.split,
                            subset=args.subset, images=args.images, save_detections=args.save_detections,
-                           progress=True if args.progress else None)
+                           progress=True if args.progress else None, correct=args.correct)
     if not any(doc["results"].values()) and not doc["sets"]:
         raise ConfigError("nothing was evaluated")
     ds = Path(args.dataset)
     out = Path(args.out) if args.out else (ds / "eval" if ds.is_dir() else Path("rollcam_out/eval"))
     out.mkdir(parents=True, exist_ok=True)
-    stem = result_stem(args.detector, args.detections, args.split, args.subset)
+    stem = result_stem(args.detector, args.detections, args.split, args.subset, args.correct)
     doc["files"] = {"json": str(out / f"{stem}.json"), "chart": str(out / f"{stem}.png")}
     write_atomic(out / f"{stem}.json", (json.dumps(doc, indent=1) + "\n").encode())
     plot(doc, out / f"{stem}.png")

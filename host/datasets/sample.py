@@ -20,6 +20,7 @@ from rollcam.common.files import file_digest, file_matches, write_atomic
 from rollcam.sim.frame import Frame
 
 from ..capture import encode_image
+from ..correct import imu_record
 from ..sources import open_camera
 from .plan import DatasetConfig, LabelPolicy, Sample, Task, sample_uri, speed_tag, subset_name
 
@@ -69,6 +70,12 @@ def yolo_text(labels: list[dict[str, Any]], width: int, height: int) -> str:
     return "".join(line + "\n" for line in lines)
 
 
+def _line_span(frame: Frame) -> list[int] | None:
+    """Sample times of the first and last image line (the rest are linear between)."""
+    t = frame.row_times_ns
+    return None if t is None or not len(t) else [int(t[0]), int(t[-1])]
+
+
 def image_relpath(s: Sample, shutter: str, ext: str) -> str:
     """Path of a sample's image, relative to the dataset root."""
     return f"{subset_name(s.speed, shutter)}/images/{s.split}/{s.name}.{ext}"
@@ -89,6 +96,8 @@ def render_sample(cfg: DatasetConfig, s: Sample) -> SampleResult:
     uri = sample_uri(cfg, s)
     with open_camera(uri) as source:
         pair = source.read_pair()
+        # the RS frame's IMU over its lines: rollcam eval --correct gyro corrects the stored RS image
+        imu = None if pair is None else imu_record(pair[1], source.device)
     if pair is None:
         raise SourceError(f"source {uri!r} gave no frame")
     files: dict[str, bytes] = {}
@@ -100,11 +109,14 @@ def render_sample(cfg: DatasetConfig, s: Sample) -> SampleResult:
         images[shutter] = {"file": image_relpath(s, shutter, cfg.image_format), "width": frame.width,
                            "height": frame.height, "timestamp_ns": int(frame.timestamp_ns),
                            "line_time_ns": int(frame.line_time_ns), "exposure_ns": int(frame.exposure_ns),
-                           "format": frame.format, "objects": labels}
+                           "format": frame.format, "readout": frame.readout.value,
+                           "line_times_ns": _line_span(frame), "objects": labels}
     record = {"name": s.name, "speed": s.speed, "speed_tag": speed_tag(s.speed), "split": s.split,
               "scene": s.scene, "scene_seed": s.scene_seed, "time_of_day": s.time, "camera": s.camera,
               "start_ns": s.start_ns, "uri": uri, "images": images,
               "files": {rel: file_digest(data) for rel, data in sorted(files.items())}}
+    if imu is not None:
+        record["imu"] = imu
     return SampleResult(s.key, record, files)
 
 

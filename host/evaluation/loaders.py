@@ -27,23 +27,27 @@ IMAGE_EXTS = (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff", ".webp")
 
 @dataclass
 class ImageEntry:
-    """One image to evaluate: its key (path from the dataset root), file, COCO id and truth."""
+    """One image to evaluate: its key (path from the dataset root), file, COCO id and truth; ``prepare``, when
+    set, turns the image as read into what the detector sees (``rollcam eval --correct``)."""
 
     key: str
     path: Path
     image_id: int
     truth: Truth
+    prepare: Callable[[np.ndarray], np.ndarray] | None = None
 
 
 @dataclass
 class EvalSet:
-    """Images of one dataset (one shutter and speed for rollcam datasets) with one class list."""
+    """Images of one dataset (one shutter and speed for rollcam datasets) with one class list;
+    ``same_images_as`` names a set whose images (and so detections) these are, under other labels."""
 
     name: str
     images: list[ImageEntry]
     class_names: list[str]
     speed: str | None = None
     shutter: str | None = None
+    same_images_as: str | None = None
     by_key: dict[str, ImageEntry] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
@@ -143,7 +147,7 @@ def run_detector(detector: Any, s: EvalSet, on_image: Callable[[], None] | None 
         img = cv2.imread(str(e.path), flags)
         if img is None:
             raise ConfigError(f"cannot read image {str(e.path)!r}")
-        d = detector.detect(img)
+        d = detector.detect(img if e.prepare is None else e.prepare(img))
         keep = np.array([int(c) in to_set for c in d.classes], bool)
         out.append(Dets.of(d.boxes[keep], d.scores[keep], [to_set[int(c)] for c in d.classes[keep]]))
         if on_image is not None:

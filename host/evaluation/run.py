@@ -19,6 +19,8 @@ def _save(path: Path, sets: list[EvalSet], dets: list[list[Dets]]) -> None:
 
     lines = []
     for s, ds in zip(sets, dets, strict=True):
+        if s.same_images_as is not None:  # another set's images: their lines are written once
+            continue
         for e, d in zip(s.images, ds, strict=True):
             items = [{"box": [round(float(v), 2) for v in b], "score": round(float(sc), 6), "cls": int(c)}
                      for b, sc, c in zip(d.boxes, d.scores, d.classes, strict=True)]
@@ -29,13 +31,19 @@ def _save(path: Path, sets: list[EvalSet], dets: list[list[Dets]]) -> None:
 
 def evaluate_dataset(dataset: str | Path, *, detector: str | None = None, detections: str | Path | None = None,
                      split: str = "test", subset: str | None = None, images: str | Path | None = None,
-                     save_detections: str | Path | None = None, progress: bool | None = None) -> dict[str, Any]:
-    """The evaluation document of ``rollcam eval`` (see ``report.build_document``)."""
+                     save_detections: str | Path | None = None, progress: bool | None = None,
+                     correct: str | None = None) -> dict[str, Any]:
+    """The evaluation document of ``rollcam eval`` (see ``report.build_document``); ``correct='gyro'`` adds the
+    gyro-corrected RS sets (``corrected.corrected_sets``)."""
     from ..progress import Progress
 
     if (detector is None) == (detections is None):
         raise ConfigError("give exactly one of a detector spec or a detections file")
     sets = load_sets(dataset, split, images)
+    if correct is not None:
+        from .corrected import corrected_sets
+
+        sets = corrected_sets(dataset, sets, correct)
     if subset is not None:
         sets = [s for s in sets if s.name == subset]
         if not sets:
@@ -45,7 +53,9 @@ def evaluate_dataset(dataset: str | Path, *, detector: str | None = None, detect
         from ..detectors import load_detector
 
         det = load_detector(detector)
-        bar = Progress(sum(len(s.images) for s in sets), label=f"eval {detector}", enabled=progress, unit="img")
+        names = {s.name for s in sets}
+        todo = sum(len(s.images) for s in sets if s.same_images_as not in names)
+        bar = Progress(todo, label=f"eval {detector}", enabled=progress, unit="img")
         n = [0]
 
         def tick() -> None:
@@ -53,7 +63,11 @@ def evaluate_dataset(dataset: str | Path, *, detector: str | None = None, detect
             bar.update(n[0])
 
         try:
-            all_dets = [run_detector(det, s, tick) for s in sets]
+            by_name: dict[str, list[Dets]] = {}
+            for s in sets:  # a set of another's images (listed after it) reuses its detections
+                by_name[s.name] = (by_name[s.same_images_as] if s.same_images_as in by_name
+                                   else run_detector(det, s, tick))
+            all_dets = [by_name[s.name] for s in sets]
         finally:
             bar.close()
             det.close()
@@ -67,4 +81,6 @@ def evaluate_dataset(dataset: str | Path, *, detector: str | None = None, detect
     t2 = time.perf_counter()
     meta = {"dataset": str(dataset), "detector": detector or f"file:{detections}", "split": split,
             "timing": {"inference_s": round(t1 - t0, 3), "metrics_s": round(t2 - t1, 4)}}
+    if correct is not None:
+        meta["correct"] = correct
     return build_document(rows, meta)
