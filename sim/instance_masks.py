@@ -10,9 +10,13 @@ covered pixels are ``LineTruth.area`` and its shown pixels ``LineTruth.visible``
 from __future__ import annotations
 
 import math
+from pathlib import Path
 
+import cv2
 import numpy as np
 from numba import njit
+from rollcam.common.errors import SourceError
+from rollcam.common.files import OS_FS, RENAME_ONLY_FS, FileSystem, write_atomic
 
 from . import _actors as A
 from ._jitcache import guard
@@ -73,4 +77,38 @@ def render_masks(renderer: Renderer, times_ns: np.ndarray, *, by_column: bool = 
     return owner, {int(i): np.ascontiguousarray(cover[o]) for o, i in enumerate(ids) if cover[o].any()}
 
 
-guard(__name__)
+
+def write_labelled_footage(renderer: Renderer, times_ns: np.ndarray, folder: str | Path, *,
+                           durable: bool = True) -> tuple[Path, Path]:
+    """Render GS frames at ``times_ns`` into ``folder/frames/`` (PNG) with their instance masks in
+    ``folder/masks/`` (16-bit PNG ids, amodal masks in ``masks/amodal/<frame>/<id>.png``), as footage from
+    another renderer would come: ``file:folder/frames?fps=..&labels=folder/masks`` reads it back.
+
+    Returns the two folders. Each file is written whole or not at all; ``durable=False`` skips the fsyncs
+    (a power cut may then lose the newest files), which makes a long export many times faster.
+    """
+    fs = OS_FS if durable else RENAME_ONLY_FS
+    root = Path(folder)
+    frames, masks = root / "frames", root / "masks"
+    n_lines = renderer.render_shape(False)[0]
+    digits = max(6, len(str(len(times_ns) - 1)))
+    for k, t in enumerate(np.asarray(times_ns, np.int64).tolist()):
+        line_times = np.full(n_lines, t, np.int64)
+        name = f"{k:0{digits}d}.png"
+        _write_png(frames / name, renderer.render_lines(line_times).image, fs)
+        vis, amodal = render_masks(renderer, line_times)
+        _write_png(masks / name, vis.astype(np.uint16), fs)
+        for oid, cover in amodal.items():
+            _write_png(masks / "amodal" / name[:-4] / f"{oid}.png", cover.astype(np.uint8) * 255, fs)
+    return frames, masks
+
+
+def _write_png(path: Path, img: np.ndarray, fs: FileSystem) -> None:
+    ok, buf = cv2.imencode(".png", img)
+    if not ok:
+        raise SourceError(f"{str(path)!r}: cannot encode PNG")
+    path.parent.mkdir(parents=True, exist_ok=True)
+    write_atomic(path, buf.tobytes(), fs)
+
+
+guard(__name__)  # after every kernel: see rollcam.sim._jitcache
