@@ -24,7 +24,7 @@ Frames are BGR like every rollcam source (footage decodes to RGB; ``.npy`` frame
 
 from __future__ import annotations
 
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from fractions import Fraction
 from pathlib import Path
 from typing import Any
@@ -68,6 +68,41 @@ def to_bgr(frame: np.ndarray) -> np.ndarray:
     return frame.copy()
 
 
+def _open_labels(uri: SourceURI, fp: Footage) -> LabelTrack | None:
+    """Per-frame labels (``labels=PATH``, ``label_format=``), checked against the footage's frames and size."""
+    path = uri.get("labels", str)
+    fmt = uri.get("label_format", str, "auto")
+    if path is None:
+        if "label_format" in uri.options:
+            raise SourceError(f"source {uri.uri!r}: label_format= needs labels=PATH")
+        return None
+    try:
+        labels = load_labels(path, fmt, n_frames=len(fp), size=(fp.width, fp.height), frame_names=fp.frame_names)
+        labels[0]  # a first frame that does not parse fails here, not mid-stream
+    except (SourceError, ConfigError) as exc:
+        raise SourceError(f"source {uri.uri!r}: option labels={path!r}: {exc}") from None
+    return labels
+
+
+def nearest_frame(fp: Footage, t_ns: int) -> int:
+    """The footage frame nearest ``t_ns`` (ties to the earlier), within the footage."""
+    t = min(max(t_ns, fp.span_ns[0]), fp.span_ns[1])
+    a = int(fp.index_at_or_before_ns(np.array([t]))[0])
+    return a + 1 if a + 1 < len(fp) and fp.time_ns(a + 1) - t < t - fp.time_ns(a) else a
+
+
+def _whole_frames(fp: Footage, last_line_ns: int, period_ns: Fraction, start_of: Callable[[int], int]) -> int:
+    """How many composed frames (starting ``start_of(n)``, lasting ``last_line_ns``) fit in the footage's span."""
+    end = fp.span_ns[1] + _SNAP_NS - last_line_ns
+    n = int(end // period_ns) + 1 if end >= 0 else 0
+    # Frame starts are rounded (compose_stream's closed forms): settle the last one exactly.
+    while n > 0 and start_of(n - 1) > end:
+        n -= 1
+    while start_of(n) <= end:
+        n += 1
+    return n
+
+
 class FileSource(CameraSource):
     """Footage replayed as GS Frames, or composed into RS Frames when given a line time."""
 
@@ -102,7 +137,7 @@ class FileSource(CameraSource):
         self.labels: LabelTrack | None = None
         try:
             self.format = _pixel_format(self.footage[0])
-            self._open_labels(uri)
+            self.labels = _open_labels(uri, self.footage)
             self._stream: Iterator[ComposedFrame] | None = None
             self.timing: LineTiming | None = None
             self.out_fps: Fraction | None = None
@@ -116,22 +151,6 @@ class FileSource(CameraSource):
             self.footage.close()
             raise
         self.supports_pairs = self.rolling
-
-    def _open_labels(self, uri: SourceURI) -> None:
-        """Per-frame labels (``labels=PATH``, ``label_format=``), checked against the footage's frames and size."""
-        path = uri.get("labels", str)
-        fmt = uri.get("label_format", str, "auto")
-        if path is None:
-            if "label_format" in uri.options:
-                raise SourceError(f"source {uri.uri!r}: label_format= needs labels=PATH")
-            return
-        fp = self.footage
-        try:
-            self.labels = load_labels(path, fmt, n_frames=len(fp), size=(fp.width, fp.height),
-                                      frame_names=fp.frame_names)
-        except (SourceError, ConfigError) as exc:
-            raise SourceError(f"source {uri.uri!r}: option labels={path!r}: {exc}") from None
-        self.labels[0]  # a first frame that does not parse fails here, not mid-stream
 
     def _setup_rolling(self, uri: SourceURI, line_time_ns: int | None, sensor_name: str | None) -> None:
         """Line timing, output rate and readout of the composed stream; footage must cover one RS frame."""
@@ -190,20 +209,13 @@ class FileSource(CameraSource):
                      row_times_ns=np.full(n_lines, t, np.int64), objects=objects,
                      meta={"source": str(self.path), "footage_index": k})
 
-    def _nearest_frame(self, t_ns: int) -> int:
-        """The footage frame nearest ``t_ns`` (ties to the earlier), within the footage."""
-        fp = self.footage
-        t = min(max(t_ns, fp.span_ns[0]), fp.span_ns[1])
-        a = int(fp.index_at_or_before_ns(np.array([t]))[0])
-        return a + 1 if a + 1 < len(fp) and fp.time_ns(a + 1) - t < t - fp.time_ns(a) else a
-
     def _rolling_truth(self, composed: ComposedFrame) -> tuple[ObjectTruth, ...] | None:
         """RS labels composed from the footage's labels with the same line sources as the image."""
         if self.labels is None:
             return None
         src = line_sources(self.footage, composed.line_times_ns, _SNAP_NS)
         blended = None if self.method == "nearest" else ~src.exact
-        return compose_truth(self.labels, src, self._nearest_frame(composed.t_start_ns),
+        return compose_truth(self.labels, src, nearest_frame(self.footage, composed.t_start_ns),
                              by_column=self.readout.by_column, blended=blended)
 
     def _next_rolling(self) -> Frame | None:
@@ -245,28 +257,18 @@ class FileSource(CameraSource):
         if rs is None:
             return None
         self.index += 1
-        return self._global_frame(self._nearest_frame(rs.timestamp_ns), rs.sequence), rs
+        return self._global_frame(nearest_frame(self.footage, rs.timestamp_ns), rs.sequence), rs
 
     def composed_frames(self) -> int:
         """How many RS frames the footage holds whole (every line's time in its span); arithmetic, no pixels."""
         if not self.rolling:
             raise SourceError(f"source {self.uri!r}: composes no rolling-shutter frames (no line_time_ns= or sensor=)")
         assert self.timing is not None
-        fp = self.footage
-        n_lines = fp.width if self.readout.by_column else fp.height
+        n_lines = self.footage.width if self.readout.by_column else self.footage.height
         last_line_ns = int(line_sample_times_ns(0, n_lines, self.timing, self.readout).max())
-        end = fp.span_ns[1] + _SNAP_NS - last_line_ns
-        if self.out_fps is None:
-            period = Fraction(self.timing.frame_period_pck * NS_PER_S, self.timing.pixel_rate_hz)
-        else:
-            period = Fraction(NS_PER_S) / self.out_fps
-        n = int(end // period) + 1 if end >= 0 else 0
-        # Frame starts are rounded (compose_stream's closed forms): settle the last one exactly.
-        while n > 0 and self.frame_start_ns(n - 1) > end:
-            n -= 1
-        while self.frame_start_ns(n) <= end:
-            n += 1
-        return n
+        period = (Fraction(self.timing.frame_period_pck * NS_PER_S, self.timing.pixel_rate_hz)
+                  if self.out_fps is None else Fraction(NS_PER_S) / self.out_fps)
+        return _whole_frames(self.footage, last_line_ns, period, self.frame_start_ns)
 
     def frame_start_ns(self, n: int) -> int:
         """Start of composed frame ``n`` (``compose_stream``'s rule with start_ns 0)."""
