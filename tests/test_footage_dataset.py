@@ -104,6 +104,12 @@ def test_bad_labels_fail_before_any_output(footage, tmp_path, capsys):
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and err[0].startswith("rollcam: error:") and "no mask for footage frame" in err[0]
     assert str(bad) in err[0] and not out.exists()
+    for p in sorted(masks.glob("*.png")):  # every frame there, but the last one of another size
+        (bad / p.name).write_bytes(p.read_bytes())
+    cv2.imwrite(str(bad / p.name), np.zeros((H, W // 2), np.uint16))
+    assert main(["dataset", "--out", str(out), "--from-footage", uri.replace(str(masks), str(bad))]) == 2
+    err = capsys.readouterr().err
+    assert f"{p.name}' : mask is {W // 2}x{H}".replace("' :", "':") in err and not out.exists()
     assert main(["dataset", "--out", str(out), "--from-footage", uri, "--scenes", "5"]) == 2
     assert "--scenes describes emulated scenes" in capsys.readouterr().err
     assert main(["dataset", "--out", str(out), "--from-footage", f"file:{frames}?fps=50000&labels={masks}"]) == 2

@@ -14,8 +14,9 @@ import math
 from dataclasses import asdict, dataclass, field
 from typing import Any
 
-from rollcam.common.errors import ConfigError
+from rollcam.common.errors import ConfigError, SourceError
 from rollcam.common.values import parse_query
+from rollcam.sim.footage_labels import LabelTrack
 
 from ..sources import open_camera
 from .plan import IMAGE_FORMATS, SPLITS, LabelPolicy, Task, split_quotas
@@ -100,6 +101,7 @@ class FootageConfig:
     def plan(self) -> list[Task]:
         """The samples (every composed frame, or ``frames`` evenly spaced), split in contiguous time blocks."""
         with open_camera(self.source) as src:
+            _check_labels(self.source, src.labels)  # type: ignore[attr-defined]
             available = src.composed_frames()  # type: ignore[attr-defined]
             start_of = src.frame_start_ns  # type: ignore[attr-defined]
             n = available if self.frames is None else self.frames
@@ -114,3 +116,12 @@ class FootageConfig:
         samples = [FootageSample(sp, i, t) for sp, i, t in zip(splits, picks, starts, strict=True)]
         return [Task(0, FOOTAGE_SPEED, tuple(samples[j:j + _TASK_SAMPLES]))  # type: ignore[arg-type]
                 for j in range(0, len(samples), _TASK_SAMPLES)]
+
+
+def _check_labels(source: str, labels: LabelTrack) -> None:
+    """Read every frame's labels once: a bad label file stops the build before it writes anything."""
+    try:
+        for k in range(len(labels)):
+            labels[k]
+    except (SourceError, ConfigError) as exc:
+        raise SourceError(f"--from-footage {source!r}: {exc}") from None
