@@ -66,6 +66,20 @@ class FileSystem:
 
 
 OS_FS = FileSystem()
+
+
+class RenameOnlyFileSystem(FileSystem):
+    """Atomic but not durable: a crashed process still leaves files whole or absent, a power cut may lose the
+    newest. For bulk exports that are cheap to redo, where an fsync per file would cost more than the work."""
+
+    def fsync(self, fd: int) -> None:
+        pass
+
+    def fsync_dir(self, path: str | os.PathLike[str]) -> None:
+        pass
+
+
+RENAME_ONLY_FS = RenameOnlyFileSystem()
 _CREATE = os.O_WRONLY | os.O_CREAT | os.O_EXCL | getattr(os, "O_CLOEXEC", 0) | getattr(os, "O_BINARY", 0)
 
 

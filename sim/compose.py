@@ -85,6 +85,46 @@ def _gray_u8(a: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     )
 
 
+class LineSources(NamedTuple):
+    """Where each composed line comes from: the footage frames bracketing its time and the rule's choice.
+
+    ``a``/``b`` are the frames at or before / after the line's time (equal on the last frame), ``w`` its
+    fraction of the way from ``a`` to ``b``; ``nearest`` is the frame ``nearest`` composition copies (ties go to
+    ``a``); ``exact`` marks lines within ``snap_ns`` of a frame's time, which every method copies from
+    ``exact_k``. Image composition and label composition (``rollcam.sim.footage_labels``) both read this, so a
+    label line always comes from the frame(s) its image line came from.
+    """
+
+    a: np.ndarray
+    b: np.ndarray
+    w: np.ndarray
+    nearest: np.ndarray
+    exact: np.ndarray
+    exact_k: np.ndarray
+
+
+def line_sources(footage: Footage, line_times_ns: np.ndarray, snap_ns: int = 1) -> LineSources:
+    """The footage frames each line (absolute int64 ns time) is composed from; times off the span raise."""
+    t = np.asarray(line_times_ns, dtype=np.int64)
+    t0, t1 = footage.span_ns
+    outside = (t < t0 - snap_ns) | (t > t1 + snap_ns)
+    if np.any(outside):
+        raise SourceError(
+            f"line times {t[outside][:5].tolist()!r} ns (of {int(outside.sum())}) lie outside the "
+            f"footage's span [{t0}, {t1}] ns "
+            f"({len(footage)} frames at {float(footage.fps):g} fps)"
+        )
+    a = footage.index_at_or_before_ns(np.clip(t, t0, t1))
+    b = np.minimum(a + 1, len(footage) - 1)
+    ta, tb = footage.times_ns(a), footage.times_ns(b)
+    da, db = t - ta, tb - t  # da >= -snap; db <= 0 only on the last frame
+    snap_a = np.abs(da) <= snap_ns
+    snap_b = ~snap_a & ((np.abs(db) <= snap_ns) | (b == a))
+    span = np.maximum(tb - ta, 1)
+    w = np.where(b == a, 0.0, da / span).astype(np.float64)
+    return LineSources(a, b, w, np.where(da <= db, a, b), snap_a | snap_b, np.where(snap_a, a, b))
+
+
 class Composer:
     """Composes RS frames from one footage with one method, keeping optical flow between calls.
 
@@ -133,38 +173,20 @@ class Composer:
                 f"line_times_ns must be {self.n_lines} integer ns times (one per "
                 f"{'column' if self.by_column else 'row'}), got {t.dtype} array of shape {t.shape!r}"
             )
-        t = t.astype(np.int64)
-        t0, t1 = self.footage.span_ns
-        outside = (t < t0 - self.snap_ns) | (t > t1 + self.snap_ns)
-        if np.any(outside):
-            raise SourceError(
-                f"line times {t[outside][:5].tolist()!r} ns (of {int(outside.sum())}) lie outside the "
-                f"footage's span [{t0}, {t1}] ns "
-                f"({len(self.footage)} frames at {float(self.footage.fps):g} fps)"
-            )
-        t_in = np.clip(t, t0, t1)
-        a = self.footage.index_at_or_before_ns(t_in)
-        b = np.minimum(a + 1, len(self.footage) - 1)
-        ta, tb = self.footage.times_ns(a), self.footage.times_ns(b)
-        da, db = t - ta, tb - t  # da >= -snap; db <= 0 only on the last frame
+        src = line_sources(self.footage, t.astype(np.int64), self.snap_ns)
         lines_shape = (self.n_lines, *self._lines(0).shape[1:])
         out = np.empty(lines_shape, dtype=self.footage.dtype)
 
         if self.method == "nearest":
-            self._gather(out, np.where(da <= db, a, b), np.ones(self.n_lines, dtype=bool))
+            self._gather(out, src.nearest, np.ones(self.n_lines, dtype=bool))
         else:
             # Exact frames first: a line at a frame's time is that frame's line under every method.
-            snap_a = np.abs(da) <= self.snap_ns
-            snap_b = ~snap_a & ((np.abs(db) <= self.snap_ns) | (b == a))
-            exact_k = np.where(snap_a, a, b)
-            exact = snap_a | snap_b
-            self._gather(out, exact_k, exact)
-            todo = np.flatnonzero(~exact)
+            self._gather(out, src.exact_k, src.exact)
+            todo = np.flatnonzero(~src.exact)
             if todo.size:
-                w = (da[todo] / (tb[todo] - ta[todo])).astype(np.float64)
                 blend = self._blend_linear if self.method == "linear" else self._blend_flow
-                for pair_a, sel in _groups(a[todo]):
-                    blend(out, int(pair_a), todo[sel], w[sel])
+                for pair_a, sel in _groups(src.a[todo]):
+                    blend(out, int(pair_a), todo[sel], src.w[todo][sel])
         return out.swapaxes(0, 1).copy() if self.by_column else out
 
     def _gather(self, out: np.ndarray, k: np.ndarray, use: np.ndarray) -> None:
@@ -306,12 +328,15 @@ def compose_stream(
     flow_preset: str = "medium",
     flow_margin_px: int | None = None,
     snap_ns: int = 1,
+    first_frame: int = 0,
 ) -> Iterator[ComposedFrame]:
     """RS frames a sensor with ``timing`` and ``readout`` would read from the scene the footage shows.
 
     Frame ``n`` starts at ``start_ns + round(n * 1e9 / fps)`` (``fps`` of the output; by default the
     sensor's own frame period, ``timing.frame_start_ns(n)``) and line ``k`` in readout order is sampled
-    ``timing.line_offset_ns(k)`` later. E.g. 30 fps RS frames from 32,400 fps footage.
+    ``timing.line_offset_ns(k)`` later. E.g. 30 fps RS frames from 32,400 fps footage. ``first_frame``
+    starts the stream at output frame ``first_frame`` (frame ``n`` yielded is output frame ``first_frame + n``,
+    with its index), so one frame of a long stream is composed without the ones before it.
     """
     readout = Readout.parse(readout)
     composer = Composer(
@@ -331,9 +356,13 @@ def compose_stream(
         return int(start_ns) + (2 * n * NS_PER_S * den + num) // (2 * num)
 
     def line_times(n: int) -> np.ndarray:
-        return line_sample_times_ns(frame_start_ns(n), composer.n_lines, timing, readout)
+        return line_sample_times_ns(frame_start_ns(first_frame + n), composer.n_lines, timing, readout)
 
-    return compose_frames(composer, line_times, n_frames)
+    def frames() -> Iterator[ComposedFrame]:
+        for frame in compose_frames(composer, line_times, n_frames):
+            yield frame._replace(index=first_frame + frame.index)
+
+    return frames()
 
 
 def composition_error(composed: np.ndarray, reference: np.ndarray) -> dict[str, float]:

@@ -45,7 +45,7 @@ def as_fps(fps: FpsLike, where: str = "fps") -> Fraction:
     return value
 
 
-def _natural_key(path: Path) -> list[object]:
+def natural_key(path: Path) -> list[object]:
     """Sort key that puts ``frame2`` before ``frame10``."""
     return [int(part) if part.isdigit() else part.lower() for part in re.split(r"(\d+)", path.name)]
 
@@ -84,7 +84,7 @@ class _FolderReader:
         self.name = str(folder)
         self.files = sorted(
             (p for p in folder.iterdir() if p.suffix.lower() in IMAGE_SUFFIXES and p.is_file()),
-            key=_natural_key,
+            key=natural_key,
         )
         if not self.files:
             raise SourceError(f"{self.name!r}: folder holds no footage frames ({', '.join(IMAGE_SUFFIXES)})")
@@ -260,6 +260,12 @@ class Footage(Closeable):
         if len(self._cache) > self._cache_frames:
             self._cache.popitem(last=False)
         return frame
+
+    @property
+    def frame_names(self) -> list[str] | None:
+        """File names of a folder footage's frames in frame order (None for a video or in-memory frames)."""
+        files = getattr(self._reader, "files", None)
+        return None if files is None else [p.name for p in files]
 
     @property
     def height(self) -> int:

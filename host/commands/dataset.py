@@ -15,13 +15,17 @@ Render paired global- and rolling-shutter images of the same instants with exact
 design of the 'Let's Roll' study: 40 street scenes x 5 cameras x 5 times of day, normal and fast walkers,
 split 800/100/100 per speed by scene. Writes four datasets (normal_gs, normal_rs, fast_gs, fast_rs), each an
 Ultralytics folder (data.yaml, images/, labels/) with COCO files in annotations/, and a dataset card
-(README.md, dataset.json). Interrupt it at any time: rerunning the same command continues where it stopped."""
+(README.md, dataset.json). Interrupt it at any time: rerunning the same command continues where it stopped.
+With --from-footage, the pairs come from your own global-shutter footage and its per-frame labels instead
+(instance masks, COCO, MOT or YOLO): RS images and their labels are composed line by line (footage_gs,
+footage_rs)."""
 
 EPILOG = """\
 examples:
   rollcam dataset --out data/letsroll                      # the study's size (2,000 pairs at 1920x1080)
   rollcam dataset --out data/small --frames 40 --size 960x540 --workers 2
-  rollcam dataset --out /shared/lr --executor dask://10.0.0.5:8786 --worker-writes"""
+  rollcam dataset --out /shared/lr --executor dask://10.0.0.5:8786 --worker-writes
+  rollcam dataset --out data/mine --from-footage 'file:frames/?fps=32400&sensor=letsroll&labels=masks/'"""
 
 _COUNT = value_type(positive_int, "an integer >= 1")
 
@@ -31,6 +35,9 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
     p = sub.add_parser("dataset", help="build paired GS/RS datasets with exact labels (YOLO + COCO + card)",
                        description=DESCRIPTION, epilog=EPILOG, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--out", required=True, metavar="DIR", help="output folder (rerun to resume)")
+    p.add_argument("--from-footage", default=None, metavar="FILE_URI",
+                   help="build from footage instead of emulated scenes: a file: URI composing RS frames "
+                        "(line_time_ns= or sensor=) with per-frame labels (labels=PATH)"),
     p.add_argument("--sensor", default="letsroll", help="emulated sensor (default: %(default)s, the study's camera)")
     p.add_argument("--size", type=value_type(parse_size), default=None,
                    help="image WxH (default: the sensor's default mode)")
@@ -66,18 +73,34 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
     return p
 
 
+# Options that describe emulated scenes, with their defaults: --from-footage refuses any that is changed.
+_SCENE_OPTIONS = {"sensor": "letsroll", "size": None, "scenes": 40, "cameras": 5, "times": None,
+                  "speeds": ("normal", "fast"), "ego": "none", "pedestrians": 20, "seed": 0, "raw": None,
+                  "source_options": ""}
+
+
 def config_from_args(args: argparse.Namespace) -> Any:
-    """The DatasetConfig the options describe."""
+    """The DatasetConfig (or FootageConfig, with --from-footage) the options describe."""
+    from rollcam.common.errors import ConfigError
     from rollcam.sim.scenegen import TIMES_OF_DAY
 
     from ..datasets.plan import DatasetConfig, LabelPolicy
 
+    policy = LabelPolicy(min_width_px=args.min_box[0], min_height_px=args.min_box[1], min_visible=args.min_visible)
+    if args.from_footage is not None:
+        from ..datasets.footage import FootageConfig
+
+        changed = [k for k, v in _SCENE_OPTIONS.items() if getattr(args, k) != v]
+        if changed:
+            flag = "--" + changed[0].replace("_", "-")
+            raise ConfigError(f"{flag} describes emulated scenes; it does not apply with --from-footage")
+        return FootageConfig(source=args.from_footage, frames=args.frames, image_format=args.image_format,
+                             policy=policy)
     return DatasetConfig(
         sensor=args.sensor, size=args.size, scenes=args.scenes, cameras=args.cameras,
         times=args.times or tuple(TIMES_OF_DAY), speeds=args.speeds, frames=args.frames, ego=args.ego,
         pedestrians=args.pedestrians, seed=args.seed, image_format=args.image_format, raw_format=args.raw,
-        emu_options=args.source_options,
-        policy=LabelPolicy(min_width_px=args.min_box[0], min_height_px=args.min_box[1], min_visible=args.min_visible),
+        emu_options=args.source_options, policy=policy,
     )
 
 

@@ -6,7 +6,8 @@
 from __future__ import annotations
 
 from .build import BuildResult, build_dataset
+from .footage import FootageConfig
 from .plan import DatasetConfig, LabelPolicy, Sample, Task, make_plan, sample_uri, subset_name
 
-__all__ = ["BuildResult", "DatasetConfig", "LabelPolicy", "Sample", "Task", "build_dataset", "make_plan",
-           "sample_uri", "subset_name"]
+__all__ = ["BuildResult", "DatasetConfig", "FootageConfig", "LabelPolicy", "Sample", "Task", "build_dataset",
+           "make_plan", "sample_uri", "subset_name"]

@@ -27,8 +27,9 @@ from rollcam.common.files import acquire_lock, write_atomic
 from ..progress import Progress
 from ..sources import open_camera
 from .executors import open_executor
+from .footage import FootageConfig
 from .layout import CARD_JSON, CARD_MD, finalize
-from .plan import SHUTTERS, DatasetConfig, make_plan, sample_uri, subset_name
+from .plan import SHUTTERS, DatasetConfig, subset_name
 from .sample import (
     RECORDS,
     SampleResult,
@@ -125,7 +126,7 @@ def _clear(out: Path, old_cfg: dict[str, Any]) -> None:
 
 
 def build_dataset(
-    cfg: DatasetConfig,
+    cfg: DatasetConfig | FootageConfig,
     out_dir: str | Path,
     *,
     workers: int = 1,
@@ -138,7 +139,7 @@ def build_dataset(
     on_commit: Callable[[SampleResult], None] | None = None,
     clock: Callable[[], float] = time.monotonic,
 ) -> BuildResult:
-    """Build (or finish building) the dataset ``cfg`` describes in ``out_dir``.
+    """Build (or finish building) the dataset ``cfg`` describes in ``out_dir`` (emulated scenes, or footage).
 
     ``executor``: None (``workers`` processes, or this process when 1), ``local`` (a pool even of one) or
     ``dask://HOST:PORT``; ``threads_per_worker``: renderer threads of each local worker (default: an even
@@ -148,9 +149,9 @@ def build_dataset(
     process writes them. ``on_commit`` is called after each sample is committed (a seam for tests).
     """
     out = Path(out_dir).resolve()
-    tasks = make_plan(cfg)
+    tasks = cfg.plan()
     first = tasks[0].samples[0]
-    with open_camera(sample_uri(cfg, first)):  # bad sensor, size or source options fail here, before any work
+    with open_camera(cfg.sample_uri(first)):  # bad sensor, size or source options fail here, before any work
         pass
     _check_out(out, cfg, overwrite)  # a folder that would be refused gets no lock file either
     out.mkdir(parents=True, exist_ok=True)

@@ -98,6 +98,18 @@ class DatasetConfig:
         d["size"] = None if self.size is None else f"{self.size[0]}x{self.size[1]}"
         return d
 
+    def summary(self) -> str:
+        """One line for file headers."""
+        return f"sensor {self.sensor}, seed {self.seed}"
+
+    def plan(self) -> list[Task]:
+        """The seeded plan (``make_plan``)."""
+        return make_plan(self)
+
+    def sample_uri(self, s: Sample) -> str:
+        """The ``emu:`` URI of one sample (``sample_uri``)."""
+        return sample_uri(self, s)
+
 
 @dataclass(frozen=True)
 class Sample:
@@ -134,7 +146,7 @@ class Task:
 def speed_tag(speed: str) -> str:
     """Folder-safe name of a speed: ``normal``, ``fast``, or ``x2.5`` for a multiplier."""
     s = str(speed).lower()
-    if s in SPEED_PRESETS:
+    if s in SPEED_PRESETS or s == "footage":  # footage datasets (host.datasets.footage) have this one speed
         return s
     return "x" + re.sub(r"[^0-9.]", "_", f"{parse_speed(s):g}")
 
@@ -154,7 +166,7 @@ def split_of_scenes(n_scenes: int, fractions: tuple[float, float, float]) -> lis
     return ["train"] * n_train + ["val"] * n_val + ["test"] * n_test
 
 
-def _quotas(total: int, fractions: tuple[float, float, float]) -> list[int]:
+def split_quotas(total: int, fractions: tuple[float, float, float]) -> list[int]:
     """Split ``total`` samples by fractions, largest remainders first, at least one each."""
     raw = [total * f for f in fractions]
     q = [max(1, math.floor(v)) for v in raw]
@@ -184,7 +196,7 @@ def make_plan(cfg: DatasetConfig) -> list[Task]:
         if cfg.frames % n_speeds:
             raise ConfigError(f"--frames {cfg.frames} is not a multiple of the {n_speeds} speed(s)")
         chosen = {}
-        for sp, quota in zip(SPLITS, _quotas(per_speed, cfg.split_fractions), strict=True):
+        for sp, quota in zip(SPLITS, split_quotas(per_speed, cfg.split_fractions), strict=True):
             cells = grid[sp]
             if quota > len(cells):
                 raise ConfigError(f"--frames {cfg.frames}: split {sp!r} needs {quota} instants per speed but its "

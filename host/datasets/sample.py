@@ -22,7 +22,7 @@ from rollcam.sim.frame import Frame
 from ..capture import encode_image
 from ..correct import imu_record
 from ..sources import open_camera
-from .plan import DatasetConfig, LabelPolicy, Sample, Task, sample_uri, speed_tag, subset_name
+from .plan import DatasetConfig, LabelPolicy, Sample, Task, speed_tag, subset_name
 
 RECORDS = "records"
 CLASS_NAMES = ("person",)
@@ -93,7 +93,7 @@ def record_relpath(key: tuple[str, str]) -> str:
 
 def render_sample(cfg: DatasetConfig, s: Sample) -> SampleResult:
     """Render the GS/RS pair of one sample and build its files and record (nothing is written)."""
-    uri = sample_uri(cfg, s)
+    uri = cfg.sample_uri(s)
     with open_camera(uri) as source:
         pair = source.read_pair()
         # the RS frame's IMU over its lines: rollcam eval --correct gyro corrects the stored RS image

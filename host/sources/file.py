@@ -6,35 +6,44 @@ footage's frame rate). With ``line_time_ns=T`` (integer ns per line) or ``sensor
 timing spread over the footage's lines, as ``emu:NAME?size=WxH`` would read them) it composes rolling-shutter
 Frames as the original study did (``compose_stream``): line k of RS frame n is the footage at
 ``n / out_fps + k * T``, taken from the frame at that instant or synthesised between frames by ``method``
-(nearest | linear | flow). Composed frames carry their row times but no ground truth (``objects=None``);
-``read_pair()`` gives the footage frame at the RS frame's start beside the composed frame.
+(nearest | linear | flow). Composed frames carry their row times; ``read_pair()`` gives the footage frame at
+the RS frame's start beside the composed frame.
+
+With ``labels=PATH`` (per-frame labels of the footage: instance masks, COCO JSON, MOT text or YOLO files,
+``rollcam.sim.label_formats``; ``label_format=`` when the path does not tell) frames carry ground truth: a GS
+frame its footage frame's objects, an RS frame the labels composed line by line from the same footage frames as
+its image (``rollcam.sim.footage_labels``: exact from masks, within a stated bound from boxes). Without labels,
+``objects=None``.
 
 Options: ``fps`` (footage rate; a video's container rate by default), ``line_time_ns`` or ``sensor``,
 ``method`` (nearest), ``out_fps`` (the sensor's frame rate, or 30), ``readout`` (the sensor's, or
-top_to_bottom), ``frames`` (stop after N frames), ``flow_preset`` and ``flow_margin_px`` (flow only).
+top_to_bottom), ``frames`` (stop after N frames), ``start`` (begin at footage frame N, or composed frame N),
+``labels`` and ``label_format``, ``flow_preset`` and ``flow_margin_px`` (flow only).
 Frames are BGR like every rollcam source (footage decodes to RGB; ``.npy`` frames are taken as RGB).
 """
 
 from __future__ import annotations
 
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from fractions import Fraction
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 from rollcam.common.errors import ConfigError, SourceError
-from rollcam.sim.compose import METHODS, ComposedFrame, compose_stream
+from rollcam.sim.compose import METHODS, ComposedFrame, compose_stream, line_sources
 from rollcam.sim.footage import Footage, as_fps
-from rollcam.sim.frame import Frame
+from rollcam.sim.footage_labels import LabelTrack, compose_truth, frame_truth
+from rollcam.sim.frame import Frame, ObjectTruth
 from rollcam.sim.hwconfig import load_sensor
+from rollcam.sim.label_formats import load_labels
 from rollcam.sim.synthetic import resolve_settings
 from rollcam.sim.timing import NS_PER_S, LineTiming, Readout, line_sample_times_ns
 
 from .base import CameraSource, SourceURI, non_negative_int, positive_int
 
 OPTIONS = {"fps", "line_time_ns", "sensor", "method", "out_fps", "readout", "frames", "flow_preset",
-           "flow_margin_px"}
+           "flow_margin_px", "labels", "label_format", "start"}
 ROLLING_ONLY = ("method", "out_fps", "readout", "flow_preset", "flow_margin_px")
 DEFAULT_OUT_FPS = 30
 _SNAP_NS = 1  # compose's default: absorbs the ns rounding of the footage and line clocks
@@ -59,6 +68,41 @@ def to_bgr(frame: np.ndarray) -> np.ndarray:
     return frame.copy()
 
 
+def _open_labels(uri: SourceURI, fp: Footage) -> LabelTrack | None:
+    """Per-frame labels (``labels=PATH``, ``label_format=``), checked against the footage's frames and size."""
+    path = uri.get("labels", str)
+    fmt = uri.get("label_format", str, "auto")
+    if path is None:
+        if "label_format" in uri.options:
+            raise SourceError(f"source {uri.uri!r}: label_format= needs labels=PATH")
+        return None
+    try:
+        labels = load_labels(path, fmt, n_frames=len(fp), size=(fp.width, fp.height), frame_names=fp.frame_names)
+        labels[0]  # a first frame that does not parse fails here, not mid-stream
+    except (SourceError, ConfigError) as exc:
+        raise SourceError(f"source {uri.uri!r}: option labels={path!r}: {exc}") from None
+    return labels
+
+
+def nearest_frame(fp: Footage, t_ns: int) -> int:
+    """The footage frame nearest ``t_ns`` (ties to the earlier), within the footage."""
+    t = min(max(t_ns, fp.span_ns[0]), fp.span_ns[1])
+    a = int(fp.index_at_or_before_ns(np.array([t]))[0])
+    return a + 1 if a + 1 < len(fp) and fp.time_ns(a + 1) - t < t - fp.time_ns(a) else a
+
+
+def _whole_frames(fp: Footage, last_line_ns: int, period_ns: Fraction, start_of: Callable[[int], int]) -> int:
+    """How many composed frames (starting ``start_of(n)``, lasting ``last_line_ns``) fit in the footage's span."""
+    end = fp.span_ns[1] + _SNAP_NS - last_line_ns
+    n = int(end // period_ns) + 1 if end >= 0 else 0
+    # Frame starts are rounded (compose_stream's closed forms): settle the last one exactly.
+    while n > 0 and start_of(n - 1) > end:
+        n -= 1
+    while start_of(n) <= end:
+        n += 1
+    return n
+
+
 class FileSource(CameraSource):
     """Footage replayed as GS Frames, or composed into RS Frames when given a line time."""
 
@@ -69,6 +113,7 @@ class FileSource(CameraSource):
             raise SourceError(f"source {uri.uri!r}: name a video or a folder of frames, e.g. file:clip.mp4")
         self.path = Path(uri.target)
         self.limit: int | None = uri.get("frames", positive_int)
+        self.start: int = uri.get("start", non_negative_int, 0)
         line_time_ns = uri.get("line_time_ns", positive_int)
         sensor_name = uri.get("sensor", str)
         if line_time_ns is not None and sensor_name is not None:
@@ -89,8 +134,10 @@ class FileSource(CameraSource):
         except SourceError as exc:
             raise SourceError(f"source {uri.uri!r}: {exc}") from None
         self.index = 0
+        self.labels: LabelTrack | None = None
         try:
             self.format = _pixel_format(self.footage[0])
+            self.labels = _open_labels(uri, self.footage)
             self._stream: Iterator[ComposedFrame] | None = None
             self.timing: LineTiming | None = None
             self.out_fps: Fraction | None = None
@@ -145,7 +192,7 @@ class FileSource(CameraSource):
         self._stream = iter(compose_stream(
             fp, timing, readout, fps=out_fps, method=self.method, snap_ns=_SNAP_NS,
             flow_preset=uri.get("flow_preset", str, "medium"),
-            flow_margin_px=uri.get("flow_margin_px", non_negative_int),
+            flow_margin_px=uri.get("flow_margin_px", non_negative_int), first_frame=self.start,
         ))
 
     # ---------------------------------------------------------------------------------------- frames
@@ -156,10 +203,20 @@ class FileSource(CameraSource):
         """Footage frame ``k`` as a GS Frame."""
         t = self.footage.time_ns(k)
         n_lines = self.footage.height
+        objects = None if self.labels is None else frame_truth(self.labels, k)
         return Frame(data=to_bgr(self.footage[k]), format=self.format, sequence=sequence, timestamp_ns=t,
                      line_time_ns=0, readout=Readout.TOP_TO_BOTTOM, exposure_ns=0, shutter="global",
-                     row_times_ns=np.full(n_lines, t, np.int64), objects=None,
+                     row_times_ns=np.full(n_lines, t, np.int64), objects=objects,
                      meta={"source": str(self.path), "footage_index": k})
+
+    def _rolling_truth(self, composed: ComposedFrame) -> tuple[ObjectTruth, ...] | None:
+        """RS labels composed from the footage's labels with the same line sources as the image."""
+        if self.labels is None:
+            return None
+        src = line_sources(self.footage, composed.line_times_ns, _SNAP_NS)
+        blended = None if self.method == "nearest" else ~src.exact
+        return compose_truth(self.labels, src, nearest_frame(self.footage, composed.t_start_ns),
+                             by_column=self.readout.by_column, blended=blended)
 
     def _next_rolling(self) -> Frame | None:
         assert self._stream is not None and self.timing is not None
@@ -167,9 +224,10 @@ class FileSource(CameraSource):
             composed = next(self._stream)
         except StopIteration:
             return None
-        return Frame(data=to_bgr(composed.data), format=self.format, sequence=self.index,
+        return Frame(data=to_bgr(composed.data), format=self.format, sequence=composed.index,
                      timestamp_ns=composed.t_start_ns, line_time_ns=self.timing.line_time_ns, readout=self.readout,
-                     exposure_ns=0, shutter="rolling", row_times_ns=composed.line_times_ns, objects=None,
+                     exposure_ns=0, shutter="rolling", row_times_ns=composed.line_times_ns,
+                     objects=self._rolling_truth(composed),
                      meta={"source": str(self.path), "method": self.method,
                            "footage_fps": str(self.footage.fps)})
 
@@ -180,8 +238,8 @@ class FileSource(CameraSource):
             return None
         if self.rolling:
             frame = self._next_rolling()
-        elif self.index < len(self.footage):
-            frame = self._global_frame(self.index, self.index)
+        elif self.start + self.index < len(self.footage):
+            frame = self._global_frame(self.start + self.index, self.index)
         else:
             frame = None
         if frame is not None:
@@ -198,12 +256,27 @@ class FileSource(CameraSource):
         rs = self._next_rolling()
         if rs is None:
             return None
-        fp = self.footage
-        t = min(max(rs.timestamp_ns, fp.span_ns[0]), fp.span_ns[1])
-        a = int(fp.index_at_or_before_ns(np.array([t]))[0])
-        k = a + 1 if a + 1 < len(fp) and fp.time_ns(a + 1) - t < t - fp.time_ns(a) else a
         self.index += 1
-        return self._global_frame(k, rs.sequence), rs
+        return self._global_frame(nearest_frame(self.footage, rs.timestamp_ns), rs.sequence), rs
+
+    def composed_frames(self) -> int:
+        """How many RS frames the footage holds whole (every line's time in its span); arithmetic, no pixels."""
+        if not self.rolling:
+            raise SourceError(f"source {self.uri!r}: composes no rolling-shutter frames (no line_time_ns= or sensor=)")
+        assert self.timing is not None
+        n_lines = self.footage.width if self.readout.by_column else self.footage.height
+        last_line_ns = int(line_sample_times_ns(0, n_lines, self.timing, self.readout).max())
+        period = (Fraction(self.timing.frame_period_pck * NS_PER_S, self.timing.pixel_rate_hz)
+                  if self.out_fps is None else Fraction(NS_PER_S) / self.out_fps)
+        return _whole_frames(self.footage, last_line_ns, period, self.frame_start_ns)
+
+    def frame_start_ns(self, n: int) -> int:
+        """Start of composed frame ``n`` (``compose_stream``'s rule with start_ns 0)."""
+        assert self.timing is not None
+        if self.out_fps is None:
+            return self.timing.frame_start_ns(n)
+        num, den = self.out_fps.numerator, self.out_fps.denominator
+        return (2 * n * NS_PER_S * den + num) // (2 * num)
 
     def _close(self) -> None:
         """Release the footage."""
