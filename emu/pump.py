@@ -1,11 +1,11 @@
 """Real-time streaming of a FirmwareCamera: a thread that hands each frame's row bands to sinks at their times.
 
-The scene is deterministic, so the pump renders ahead of schedule, as a sensor pipeline is full before its
-frames are due: it keeps up to ``ahead`` frames made (the one being read out and the next ones) and, on the
-camera's clock, calls every sink's ``on_band`` as each band of lines has been read out, then ``on_frame``
-once the last line is out. A render takes the GIL (numba kernels hold it), so a render starts only when
-it will end before the next last line is due (its time estimated as the 90th percentile of the recent
-renders, plus a quarter and a margin), and only after the consumers woken by the previous frame have had
+The scene is deterministic, so the pump renders ahead of schedule, as a sensor pipeline is full before its frames
+are due: it keeps up to ``ahead`` frames made (the one being read out and the next ones) and, on the camera's clock,
+calls every sink's ``on_band`` as each band of lines has been read out, then ``on_frame`` once the last line is out.
+A render holds the GIL between its kernels (the renderer's numba kernels release it while they run), so a render
+starts only when it will end before the next last line is due (its time estimated as the 90th percentile of the
+recent renders, plus a quarter and a margin), and only after the consumers woken by the previous frame have had
 ``HANDOFF_NS`` to take the GIL; a slow render on a busy machine then costs a frame of the pool, not a dropped
 frame. When the spec changes (controls, registers, scene),
 frames made ahead whose exposure starts at or after the change are thrown away and made again from the new

@@ -258,7 +258,7 @@ def _clamped(v, lo, hi):
     return min(max(v, lo), hi)
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def actor_speeds(actors, world, lut, bld, light, cam, rot_tab, pos_tab, times, out):
     """out[o] = fastest render-space displacement rate (px/s) of any part end point of actor o.
 
@@ -332,13 +332,13 @@ def _bounds_chunk(ch, n_chunks, actors, world, cam, rot_tab, pos_tab, t_first, k
                              root, pc, uv)
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def actor_bounds_all(actors, world, cam, rot_tab, pos_tab, t_first, k_first, t_span, need, out):
     """out[o, g] = bounds of actor o over time group g (from t_first[g], lasting t_span[g]) where need[o, g]."""
     _bounds_chunk(0, 1, actors, world, cam, rot_tab, pos_tab, t_first, k_first, t_span, need, out)
 
 
-@njit(cache=True, parallel=True)
+@njit(cache=True, parallel=True, nogil=True)
 def actor_bounds_par(actors, world, cam, rot_tab, pos_tab, t_first, k_first, t_span, need, out):
     """``actor_bounds_all`` over the numba threads (worth their start-up only for many bounds)."""
     for ch in prange(N_CHUNKS):
@@ -356,13 +356,13 @@ def _parts_chunk(ch, n_chunks, actors, world, lut, bld, light, cam, rot_tab, pos
                     parts_tab[s], scratch)
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def actor_parts_all(actors, world, lut, bld, light, cam, rot_tab, pos_tab, times, slot_o, slot_k, parts_tab):
     """parts_tab[s] = parts of actor slot_o[s] at times[slot_k[s]]."""
     _parts_chunk(0, 1, actors, world, lut, bld, light, cam, rot_tab, pos_tab, times, slot_o, slot_k, parts_tab)
 
 
-@njit(cache=True, parallel=True)
+@njit(cache=True, parallel=True, nogil=True)
 def actor_parts_par(actors, world, lut, bld, light, cam, rot_tab, pos_tab, times, slot_o, slot_k, parts_tab):
     """``actor_parts_all`` over the numba threads (worth their start-up only for many slots)."""
     for ch in prange(N_CHUNKS):

@@ -239,7 +239,7 @@ def encode_line(lin, gain, lut, out_u8):
 # ======================================================================================================
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def touch_entries(bounds, group_of_k, k_line, objs, idx, centre, n_along, obj_k):
     """obj_k[o, e] = k_line[o, e] for each actor o in ``objs`` and entry e = idx[j] whose line centre
     ``centre[j]`` lies in the actor's bounds ``bounds[o, group_of_k[k]]`` (ymin, ymax, xmin, xmax), which reach
@@ -256,7 +256,7 @@ def touch_entries(bounds, group_of_k, k_line, objs, idx, centre, n_along, obj_k)
                 obj_k[o, e] = k
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def part_slots(obj_k, n_t, slots):
     """Fill ``slots`` (actors x times) from the time slots ``obj_k`` uses: SLOT_NONE unused, SLOT_LOCAL used by
     one entry, else the next row of the shared parts table (row-major order). Returns that table's (actor,
@@ -311,7 +311,7 @@ def _add_line(dst, lin, seed_lin, line, seed, ia, ib, n_runs, first):
                 dst[i, c] = lin[i, c] if first else dst[i, c] + lin[i, c]
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def render_lines_kernel(world, lut_b, bld, light, cam, rot_tab, pos_tab, actors, times, line_k, obj_line_k, slots,
                         parts_tab, include, lines, e_start, ents, w, bg_lin, out_u8, out_lin, gain, lut, gt_l, gt_r,
                         gt_tot, gt_vis, gt_only, full_lines, seed_lin, acc_hits, line_hit):
@@ -337,7 +337,7 @@ def render_lines_kernel(world, lut_b, bld, light, cam, rot_tab, pos_tab, actors,
                   gt_tot, gt_vis, gt_only, full_lines, seed_lin, acc_hits, line_hit)
 
 
-@njit(cache=True, parallel=True)
+@njit(cache=True, parallel=True, nogil=True)
 def render_lines_par(world, lut_b, bld, light, cam, rot_tab, pos_tab, actors, times, line_k, obj_line_k, slots,
                      parts_tab, include, lines, e_start, ents, w, bg_lin, out_u8, out_lin, gain, lut, gt_l, gt_r,
                      gt_tot, gt_vis, gt_only, full_lines, seed_lin, acc_hits, line_hit):

@@ -8,6 +8,7 @@ actor touches which line at which time, the parts several lines share) into a ``
 
 from __future__ import annotations
 
+import threading
 from dataclasses import dataclass
 
 import numba
@@ -31,6 +32,11 @@ PARALLEL_MIN_ITEMS = 2048
 """Actor bounds or parts below which they are computed on the calling thread alone (same reason)."""
 
 _EMPTY_LIN = np.empty((0, 0, 3), np.float32)
+
+_PARALLEL_LOCK = threading.Lock()
+"""Held around every call of a parallel kernel. The kernels release the GIL (``nogil``), so two threads may
+render at once; numba's threading layers differ in whether concurrent parallel launches are safe (workqueue's
+are not), and two launches would only share the same cores anyway. Serial kernels run concurrently."""
 
 
 @dataclass
@@ -90,7 +96,8 @@ class Painter:
     def background(self, by_column: bool, t_s: float, out: np.ndarray) -> None:
         """The static world (no actors) seen at time ``t_s``, linear RGB, into ``out`` (render orientation)."""
         t = self.tables
-        Wd.background_image(t.world, t.building_lut, t.buildings, t.light, self.cams[by_column], t_s, out)
+        with _PARALLEL_LOCK:
+            Wd.background_image(t.world, t.building_lut, t.buildings, t.light, self.cams[by_column], t_s, out)
 
     def bounds(self, cam: np.ndarray, rot: np.ndarray, pos: np.ndarray, t_first: np.ndarray, k_first: np.ndarray,
                span_s: np.ndarray, need: np.ndarray) -> np.ndarray:
@@ -98,8 +105,8 @@ class Painter:
         ``span_s[g]`` at pose ``k_first[g]``, where ``need[o, g]`` (other entries are not written)."""
         out = np.empty((*need.shape, 4))
         t = self.tables
-        kernel = A.actor_bounds_par if self._parallel(int(need.sum()), PARALLEL_MIN_ITEMS) else A.actor_bounds_all
-        kernel(t.actors, t.world, cam, rot, pos, t_first, k_first, span_s, need, out)
+        self._run(A.actor_bounds_all, A.actor_bounds_par, int(need.sum()), PARALLEL_MIN_ITEMS,
+                  t.actors, t.world, cam, rot, pos, t_first, k_first, span_s, need, out)
         return out
 
     def speeds(self, by_column: bool, times_s: np.ndarray) -> np.ndarray:
@@ -118,9 +125,8 @@ class Painter:
         s_o, s_k = np.repeat(np.arange(self.n_actors), n_t), np.tile(np.arange(n_t), self.n_actors)
         out = np.empty((self.n_actors * n_t, A.MAX_PARTS, A.PART_COLS))
         t = self.tables
-        kernel = A.actor_parts_par if self._parallel(s_o.size, PARALLEL_MIN_ITEMS) else A.actor_parts_all
-        kernel(t.actors, t.world, t.building_lut, t.buildings, t.light, self.cams[by_column], rot, pos,
-                          times_s, s_o, s_k, out)
+        self._run(A.actor_parts_all, A.actor_parts_par, s_o.size, PARALLEL_MIN_ITEMS, t.actors, t.world,
+                  t.building_lut, t.buildings, t.light, self.cams[by_column], rot, pos, times_s, s_o, s_k, out)
         return out.reshape(self.n_actors, n_t, A.MAX_PARTS, A.PART_COLS)
 
     def prepare(self, by_column: bool, times_s: np.ndarray, entry_k: np.ndarray, include: np.ndarray, n_along: int,
@@ -163,8 +169,8 @@ class Painter:
             e_start, ents = np.arange(lines.size + 1), lines
         # Whole lines shade every pixel; over a composite only the pixels under actors (a few percent).
         work = ents.size * n_along // (1 if full_lines else 16)
-        kernel = K.render_lines_par if self._parallel(work, PARALLEL_MIN_PIXELS) else K.render_lines_kernel
-        kernel(
+        self._run(
+            K.render_lines_kernel, K.render_lines_par, work, PARALLEL_MIN_PIXELS,
             t.world, t.building_lut, t.buildings, t.light, p.cam, p.rot, p.pos, t.actors, p.times_s, p.entry_k,
             p.obj_k, p.slots, p.parts, include, lines, e_start, ents, n_along,
             _EMPTY_LIN if bg is None else bg,
@@ -187,6 +193,14 @@ class Painter:
         return u8, lin, gt
 
     # ------------------------------------------------------------------ internals
+    def _run(self, serial, parallel, work: int, threshold: int, *args) -> None:
+        """Call ``serial(*args)``, or ``parallel(*args)`` (under the parallel-launch lock) for enough work."""
+        if not self._parallel(work, threshold):
+            serial(*args)
+            return
+        with _PARALLEL_LOCK:
+            parallel(*args)
+
     def _parallel(self, work: int, threshold: int) -> bool:
         """Whether a kernel of this much work runs over the numba threads (set to ``threads`` when given)."""
         if self.threads == 1 or work < threshold:
@@ -228,9 +242,8 @@ class Painter:
         s_o, s_k = K.part_slots(obj_k, times_s.shape[0], slots)
         parts = self._parts_buffer(max(s_o.size, 1))
         if s_o.size:
-            kernel = A.actor_parts_par if self._parallel(s_o.size, PARALLEL_MIN_ITEMS) else A.actor_parts_all
-            kernel(t.actors, t.world, t.building_lut, t.buildings, t.light, cam, rot, pos, times_s, s_o,
-                              s_k, parts)
+            self._run(A.actor_parts_all, A.actor_parts_par, s_o.size, PARALLEL_MIN_ITEMS, t.actors, t.world,
+                      t.building_lut, t.buildings, t.light, cam, rot, pos, times_s, s_o, s_k, parts)
         return slots, parts
 
     def _parts_buffer(self, n_slots: int) -> np.ndarray:

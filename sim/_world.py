@@ -77,7 +77,7 @@ def camera_pose(cam, t, rot, pos):
     rot[2, 0], rot[2, 1], rot[2, 2] = fx, fy, fz
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def pose_table(cam, times, rot_tab, pos_tab):
     """Camera pose at every time (a static camera's pose is computed once and repeated)."""
     moving = cam[C_MOVING] != 0.0
@@ -261,7 +261,7 @@ def background_line(world, lut, bld, light, cam, rot, pos, line, out_line):
         out_line[a, 2] = (ab * (amb_b + sun_b * ndotl + emit)) * f + ha_b * g
 
 
-@njit(cache=True, parallel=True)
+@njit(cache=True, parallel=True, nogil=True)
 def background_image(world, lut_b, bld, light, cam, t, out):
     """Whole background at one time (the static layer cache)."""
     rot = np.empty((3, 3))

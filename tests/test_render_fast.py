@@ -5,11 +5,12 @@ the fog table) against the plain functions."""
 from __future__ import annotations
 
 import math
+import threading
 
 import numba
 import numpy as np
 import pytest
-from rollcam.sim import _shade
+from rollcam.sim import _actors, _kernels, _shade, _world
 from rollcam.sim.render import Renderer
 from rollcam.sim.scenegen import ego_preset, make_street_scene
 
@@ -37,6 +38,39 @@ def test_threaded_kernels_paint_what_the_serial_ones_do(ego: str) -> None:
     threaded = Renderer(scene, threads=max(numba.config.NUMBA_NUM_THREADS, 2)).render_lines(times, linear=True)
     assert np.array_equal(serial.image, threaded.image)
     assert np.array_equal(serial.linear, threaded.linear)
+
+
+# Every kernel Python calls (sim/_paint.py): each releases the GIL while it runs.
+_ENTRY_KERNELS = (_kernels.render_lines_kernel, _kernels.render_lines_par, _kernels.touch_entries,
+                  _kernels.part_slots, _actors.actor_bounds_all, _actors.actor_bounds_par, _actors.actor_parts_all,
+                  _actors.actor_parts_par, _actors.actor_speeds, _world.pose_table, _world.background_image)
+
+
+def test_kernels_called_from_python_release_the_gil() -> None:
+    held = [k.py_func.__name__ for k in _ENTRY_KERNELS if not k.targetoptions.get("nogil")]
+    assert held == []
+
+
+@pytest.mark.parametrize("ego", ["none", "vehicle"])
+def test_renders_on_two_threads_at_once_equal_serial_renders(ego: str) -> None:
+    # The kernels release the GIL, so these renders overlap (parallel ones take turns under one lock).
+    scene = make_street_scene(2, speed="fast", width=320, height=180, n_pedestrians=20, ego=ego_preset(ego))
+    r0 = Renderer(scene)
+    starts = [1_000_000_000 + 33_000_000 * i for i in range(6)]
+    want = [r0.render_lines(_rs_times(r0, t)).image for t in starts]
+    got: dict[int, np.ndarray] = {}
+
+    def run(part: list[int], threads: int | None) -> None:
+        r = Renderer(scene, threads=threads)
+        for i in part:
+            got[i] = r.render_lines(_rs_times(r, starts[i])).image
+
+    workers = [threading.Thread(target=run, args=([0, 2, 4], 1)), threading.Thread(target=run, args=([1, 3, 5], None))]
+    for w in workers:
+        w.start()
+    for w in workers:
+        w.join()
+    assert all(np.array_equal(got[i], want[i]) for i in range(6))
 
 
 def test_renderer_threads_must_be_a_positive_count() -> None:
