@@ -54,3 +54,9 @@ def test_hog_finds_a_rendered_walker():
         if found:
             break
     assert found >= 1
+
+
+@pytest.mark.parametrize("shape", [(54, 96, 3), (95, 64, 3), (200, 31, 3), (8, 8, 3)])
+def test_hog_on_images_smaller_than_its_window_finds_nothing(shape):
+    # OpenCV's detectMultiScale kills the process (SIGSEGV) when no window fits; the detector must not call it.
+    assert len(load_detector("hog").detect(np.zeros(shape, np.uint8))) == 0

@@ -43,6 +43,10 @@ class HogDetector:
             img = img[:, :, :3]
         if self.upscale != 1.0:
             img = cv2.resize(img, None, fx=self.upscale, fy=self.upscale, interpolation=cv2.INTER_LINEAR)
+        win_w, win_h = self._hog.winSize
+        if img.shape[0] + 2 * self.padding_px < win_h or img.shape[1] + 2 * self.padding_px < win_w:
+            # No window fits (OpenCV would crash the process rather than raise): no person can be found.
+            return Detections.empty()
         rects, weights = self._hog.detectMultiScale(
             np.ascontiguousarray(img), hitThreshold=self.hit_threshold,
             winStride=(self.stride_px, self.stride_px), padding=(self.padding_px, self.padding_px), scale=self.scale)
