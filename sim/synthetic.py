@@ -195,7 +195,7 @@ class SyntheticCamera:
         # scales with the requested exposure and gain only.
         ref_exposure = resolve_settings(sensor, size=(s.width, s.height), readout=s.readout).exposure_ns
         brightness = s.gain * s.exposure_ns / max(ref_exposure, 1)
-        self.renderer = Renderer(scene, cam, gain=brightness)
+        self.renderer = Renderer(scene, cam, gain=brightness, light_window_ns=s.exposure_ns)
         self._start_ns = int(start_ns)
         self.pixel_format = fourcc_of(pixel_format).fourcc
         self.physics = self.pixel_format != "BGR3" if physics is None else bool(physics)
