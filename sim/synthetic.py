@@ -272,6 +272,8 @@ class SyntheticCamera:
                 "time_of_day": self.scene.time_of_day, **extra}
         if s.clamped_exposure:
             meta["exposure_clamped"] = True
+        if self.scene.lights:
+            meta["lights"] = [f"{li.name}: {li.waveform.describe()}" for li in self.scene.lights]
         if data is None:
             data = np.ascontiguousarray(flip(res.image, self.hflip, self.vflip))
         if self.hflip or self.vflip:

@@ -68,13 +68,13 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
 
 def config_from_args(args: argparse.Namespace) -> Any:
     """The DatasetConfig the options describe."""
-    from rollcam.sim.scenegen import TIMES_OF_DAY
+    from rollcam.sim.scenegen import DATASET_TIMES
 
     from ..datasets.plan import DatasetConfig, LabelPolicy
 
     return DatasetConfig(
         sensor=args.sensor, size=args.size, scenes=args.scenes, cameras=args.cameras,
-        times=args.times or tuple(TIMES_OF_DAY), speeds=args.speeds, frames=args.frames, ego=args.ego,
+        times=args.times or DATASET_TIMES, speeds=args.speeds, frames=args.frames, ego=args.ego,
         pedestrians=args.pedestrians, seed=args.seed, image_format=args.image_format, raw_format=args.raw,
         emu_options=args.source_options,
         policy=LabelPolicy(min_width_px=args.min_box[0], min_height_px=args.min_box[1], min_visible=args.min_visible),
