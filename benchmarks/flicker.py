@@ -28,7 +28,7 @@ DEPTH = 0.5
 def _time_frames(cams: dict[str, Any], frames: int) -> dict[str, float]:
     """Median CPU-wall ms per frame of each camera, frames interleaved across the cameras."""
     times: dict[str, list[float]] = {k: [] for k in cams}
-    for k, cam in cams.items():
+    for cam in cams.values():
         cam.frame(0)  # warm-up: compile, static layers
     for i in range(1, frames + 1):
         for k, cam in cams.items():

@@ -2,11 +2,11 @@
 
 Each study's code lives in its own module of ``rollcam.benchmarks`` (``bench`` renders, ``hog_recall``,
 ``detect``, ``ptc``, ``sensor_bench``, ``uvc``, ``soak``, ``mjpeg``, ``dataset``, ``imu``, ``view``,
-``preload``, ``personnet``, ``flicker``); an entry here is the thin layer the command line needs. ``run(args, progress)``
-does the work, writes its files under ``args.out`` and returns the JSON document with its plain-text report;
-``targets(doc)`` reads the document's targets as ``{name: {"value", "op", "limit", "pass"}}`` (``pass`` None
-when a target did not apply). This module imports only the standard library at the top, so ``rollcam --help``
-stays fast.
+``preload``, ``personnet``, ``flicker``); an entry here is the thin layer the command line needs.
+``run(args, progress)`` does the work, writes its files under ``args.out`` and returns the JSON document with
+its plain-text report; ``targets(doc)`` reads the document's targets as ``{name: {"value", "op", "limit",
+"pass"}}`` (``pass`` None when a target did not apply). This module imports only the standard library at the
+top, so ``rollcam --help`` stays fast.
 """
 
 from __future__ import annotations
