@@ -52,9 +52,9 @@ class Renderer:
     only); small ones always run on the calling thread. A scene with modulated lights gets a ``FlickerRenderer``.
     """
 
-    def __new__(cls, scene: Scene, *args, **kwargs) -> Renderer:
+    def __new__(cls, scene: Scene | None = None, *args, **kwargs) -> Renderer:  # (no scene: copy/pickle)
         from .flicker_render import FlickerRenderer  # modulated lights: a sum of renders (lazy: it imports us)
-        return super().__new__(FlickerRenderer if cls is Renderer and scene.lights else cls)
+        return super().__new__(FlickerRenderer if cls is Renderer and getattr(scene, "lights", ()) else cls)
 
     def __init__(self, scene: Scene, camera: Camera | int | str = 0, *, gain: float = 1.0,
                  threads: int | None = None, light_window_ns: int = 0) -> None:

@@ -247,3 +247,19 @@ def test_what_modulated_lights_do_not_take() -> None:
     with pytest.raises(ConfigError, match="integrate"):
         r.render_linear(np.zeros(48, np.int64), out=buf, hits=np.zeros(48, np.int64))
     assert type(Renderer(make_scene("flat", width=64, height=48))) is Renderer  # no lights: no extra work
+
+
+def test_column_readout_bands_run_across_the_frame() -> None:
+    """Read by columns, the windows slide along x: the bands are columns, period 1 / (f * line_time) columns."""
+    scene = make_scene("flicker", 0, width=480, height=320, lamp="led", led_hz=400.0, led_duty=0.5)
+    cam = SyntheticCamera(SENSOR, scene, size=(480, 320), readout="lr", exposure_ns=300_000)
+    lin = cam.renderer.render_lines(cam.line_times_ns(0), by_column=True, linear=True).linear
+    assert lin.shape[:2] == (320, 480)
+    cols = lin[:, :, 1].astype(np.float64).mean(axis=0)
+    rows = lin[:, :, 1].astype(np.float64).mean(axis=1)
+    assert rows.max() - rows.min() < 1e-6 * rows.mean() < cols.max() - cols.min()
+    want = 1e9 / (400.0 * cam.settings.timing.line_time_ns)
+    assert abs(_period_rows(cols) - want) <= 1.0
+    ref = cam.renderer.reference_lines(cam.line_times_ns(0), by_column=True).image
+    fast = cam.renderer.render_lines(cam.line_times_ns(0), by_column=True).image
+    assert np.abs(fast.astype(np.int16) - ref.astype(np.int16)).max() <= 1
