@@ -22,7 +22,7 @@ import numpy as np
 from rollcam.common.errors import ConfigError
 
 from . import _flicker_mix as M
-from .render import _SRGB, Renderer, _check_times, _line_mask
+from .render import _SRGB, Renderer, _check_buffers, _check_times, _line_mask
 from .render_result import LinearFrame, RenderResult
 from .scene import Camera, Lighting, ModulatedLight, Scene
 
@@ -52,7 +52,8 @@ class FlickerRenderer(Renderer):
         self.lights = scene.lights
         self.parts = tuple(Renderer(light_scene(scene, li), self.camera, gain=gain, threads=threads)
                            for li in (None, *scene.lights))
-        self._scratch: dict[tuple[int, bool], np.ndarray] = {}
+        self._scratch: dict[bool, np.ndarray] = {}
+        self._static_stack: dict[bool, tuple[tuple[int, ...], np.ndarray]] = {}
 
     def line_weights(self, t0_ns: np.ndarray, t1_ns: np.ndarray) -> np.ndarray:
         """``(parts, lines)`` weights: 1 for the steady light, each light's mean over ``[t0, t1]`` after."""
@@ -67,21 +68,34 @@ class FlickerRenderer(Renderer):
         return self.line_weights(t0, t0 + self.light_window_ns)
 
     def scratch(self, k: int, by_column: bool) -> np.ndarray:
-        """A reusable float32 render-orientation buffer for part ``k``'s lines."""
-        key = (k, by_column)
-        if key not in self._scratch:
-            self._scratch[key] = np.empty((*self.render_shape(by_column), 3), np.float32)
-        return self._scratch[key]
+        """Part ``k``'s slot (float32, render orientation) of the reusable stack the parts render into."""
+        stack = self._scratch.get(by_column)
+        if stack is None:
+            shape = (len(self.parts), *self.render_shape(by_column), 3)
+            stack = self._scratch[by_column] = np.empty(shape, np.float32)
+        return stack[k]
 
     def join(self, frames: list[LinearFrame], weights: np.ndarray, which: np.ndarray, out: np.ndarray,
              out_u8: np.ndarray | None = None) -> None:
-        """``out[l] = sum_k weights[k, l] * frames[k][l]`` on lines ``which`` (and their 8-bit encoding)."""
-        which = np.asarray(which, np.int64)
-        for k, f in enumerate(frames):
-            static = f.lines if f.static is None else f.static
-            M.add_lines(out, static, f.lines, f.painted, weights[k], k == 0, which)
-        if out_u8 is not None:
-            M.encode_lines(out, which, self.gain, _SRGB, out_u8)
+        """``out[l] = sum_k weights[k, l] * frames[k][l]`` on lines ``which`` (and their 8-bit encoding), in
+        one pass: the parts' painted lines are read from the stack they were rendered into, their static
+        composites from one stacked copy made on first use (they never change)."""
+        by_column = frames[0].by_column
+        lines = self._scratch.get(by_column)
+        if lines is None or any(f.lines.ctypes.data != lines[k].ctypes.data for k, f in enumerate(frames)):
+            lines = np.stack([f.lines for f in frames])  # renders made elsewhere (the brute-force reference)
+        statics = lines if frames[0].static is None else self._statics(frames, by_column)
+        painted = np.stack([f.painted for f in frames])
+        u8 = np.empty((0, 1, 3), np.uint8) if out_u8 is None else out_u8
+        M.join_lines(out, statics, lines, painted, weights, np.asarray(which, np.int64), self.gain, _SRGB, u8)
+
+    def _statics(self, frames: list[LinearFrame], by_column: bool) -> np.ndarray:
+        """The parts' static composites as one ``(parts, lines, along, 3)`` array, copied once per orientation."""
+        ptrs = tuple(f.static.ctypes.data for f in frames)
+        hit = self._static_stack.get(by_column)
+        if hit is None or hit[0] != ptrs:
+            hit = self._static_stack[by_column] = (ptrs, np.stack([f.static for f in frames]))
+        return hit[1]
 
     # ------------------------------------------------------------------ the renders, as sums of the parts' renders
     def render_lines(self, times_ns: np.ndarray, *, by_column: bool = False, linear: bool = False,
@@ -110,6 +124,7 @@ class FlickerRenderer(Renderer):
         res = [p.render_linear(times_ns, by_column=by_column, lines=subset, out=self.scratch(k, by_column))
                for k, p in enumerate(self.parts)]
         out = np.empty((n_lines, n_along, 3), np.float32) if out is None else out
+        _check_buffers(out, None, (n_lines, n_along))
         self.join([r.radiance for r in res], self.window_weights(times_ns), np.flatnonzero(subset), out)
         frame = LinearFrame(None, out, subset.copy(), by_column)
         return RenderResult(np.empty((0, 0, 3), np.uint8), None, res[0].truth, res[0].lines_painted, frame)
