@@ -2,11 +2,11 @@
 
 Each study's code lives in its own module of ``rollcam.benchmarks`` (``bench`` renders, ``hog_recall``,
 ``detect``, ``ptc``, ``sensor_bench``, ``uvc``, ``soak``, ``mjpeg``, ``dataset``, ``imu``, ``view``,
-``preload``, ``personnet``); an entry here is the thin layer the command line needs. ``run(args, progress)``
-does the work, writes its files under ``args.out`` and returns the JSON document with its plain-text report;
-``targets(doc)`` reads the document's targets as ``{name: {"value", "op", "limit", "pass"}}`` (``pass`` None
-when a target did not apply). This module imports only the standard library at the top, so ``rollcam --help``
-stays fast.
+``preload``, ``personnet``, ``flicker``); an entry here is the thin layer the command line needs.
+``run(args, progress)`` does the work, writes its files under ``args.out`` and returns the JSON document with
+its plain-text report; ``targets(doc)`` reads the document's targets as ``{name: {"value", "op", "limit",
+"pass"}}`` (``pass`` None when a target did not apply). This module imports only the standard library at the
+top, so ``rollcam --help`` stays fast.
 """
 
 from __future__ import annotations
@@ -318,6 +318,21 @@ def _personnet(args: argparse.Namespace, progress: Any) -> tuple[Doc, str]:
     return doc, format_report(doc)
 
 
+# -------------------------------------------------------------------------------------------- flicker
+def _flicker_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--size", type=value_type(parse_size), default=(1920, 1080), metavar="WxH",
+                   help="frame size of the cost runs (default: 1920x1080)")
+    p.add_argument("--frames", type=_COUNT, default=10, help="frames per case (default: %(default)s)")
+
+
+def _flicker(args: argparse.Namespace, progress: Any) -> tuple[Doc, str]:
+    from .flicker import format_report, run_flicker_bench
+
+    doc = run_flicker_bench(args.size, args.frames, say=progress.status)
+    write_json(args.out, "flicker.json", doc)
+    return doc, format_report(doc)
+
+
 STUDIES: dict[str, Study] = {s.name: s for s in (
     Study("render", "speed versus error of the ways to make an RS frame (bench.json, bench.png)",
           _render_arguments, _render, _render_targets),
@@ -345,5 +360,7 @@ STUDIES: dict[str, Study] = {s.name: s for s in (
           _preload_arguments, _preload, _doc_targets),
     Study("personnet", "the packaged personnet detector: size, ms per 640x360 frame on one core, mAP, empty-frame FP",
           _personnet_arguments, _personnet, _doc_targets),
+    Study("flicker", "modulated light: cost of flicker on vs off (night street RS) and the bands vs analytic",
+          _flicker_arguments, _flicker, _doc_targets),
 )}
 """Study name -> study, in the order ``rollcam bench --help`` lists them."""

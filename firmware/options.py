@@ -47,6 +47,8 @@ MAX_LEVEL = 100.0
 """Brightest flat radiance level (1 is the sensor's full range; 100 saturates any exposure)."""
 MAX_EXPOSURE_US = 1e9
 """Longest exposure request, us (1000 s, the longest frame; it is clamped to the frame anyway)."""
+MAX_LED_HZ = 1e6
+"""Fastest LED PWM, Hz (drivers run up to a few hundred kHz; rollcam.sim.flicker.MAX_FREQ_HZ)."""
 MAX_BLUR_PX = 256.0
 """Largest motion-blur bound, px (time samples per line grow with it)."""
 MAX_DEVICE_NS = 2**62
@@ -93,7 +95,8 @@ def check_text(value: str, what: str) -> str:
 # flags, and ``rollcam --help`` must not load numpy and numba.
 SHUTTERS = ("rolling", "global")
 
-SCENE_KINDS = ("street", "chart", "flat")
+SCENE_KINDS = ("street", "chart", "flat", "flicker")
+LIGHT_SCENES = ("street", "flicker")  # scenes with modulated lights
 
 
 def _choice(*allowed: str) -> Callable[[str], str]:
@@ -111,6 +114,22 @@ def _speed(text: str) -> str:
     if parse_speed(text if str(text).lower() in SPEED_PRESETS else float(text)) > MAX_SPEED:
         raise ValueError(f"must be a preset or a multiplier in 0..{MAX_SPEED:g}")
     return str(text).lower()
+
+
+def _lamp(text: str) -> str:
+    from rollcam.sim.scenegen import LAMP_TYPES
+
+    word = str(text).strip().lower()
+    if word not in LAMP_TYPES:
+        raise ValueError(f"expected one of {'/'.join(LAMP_TYPES)}")
+    return word
+
+
+def _mains(text: str) -> float:
+    value = finite_float(text)
+    if value not in (50.0, 60.0):
+        raise ValueError("expected 50 or 60 (Hz)")
+    return value
 
 
 def _ego(text: str) -> str:
@@ -168,11 +187,26 @@ class Option:
 
 
 OPTIONS: dict[str, Option] = {o.name: o for o in (
-    Option("scene", _choice(*SCENE_KINDS), "street", "scene kind: street | chart | flat", SCENE_KINDS),
+    Option("scene", _choice(*SCENE_KINDS), "street", "scene kind: street | chart | flat | flicker (a wall under "
+                                                     "one modulated lamp)", SCENE_KINDS),
     Option("seed", _seed, 0, "scene seed (integer >= 0)", SCENE_KINDS),
     Option("camera", _text, "0", "scene camera: index or name", SCENE_KINDS),
-    Option("time", _choice("dawn", "morning", "noon", "afternoon", "dusk"), "noon",
-           "street: dawn | morning | noon | afternoon | dusk", ("street",), "time_of_day"),
+    Option("time", _choice("dawn", "morning", "noon", "afternoon", "dusk", "night"), "noon",
+           "street: dawn | morning | noon | afternoon | dusk | night", ("street",), "time_of_day"),
+    Option("lamps", _choice("auto", "on", "off"), "auto", "street: street lamps and LED signs (modulated light): "
+                                                         "auto (on at dusk and night) | on | off", ("street",)),
+    Option("lamp", _lamp, "sodium", "street lamp / flicker lamp type: incandescent | halogen | fluorescent | "
+                                    "sodium | led (PWM)", LIGHT_SCENES),
+    Option("mains_hz", _mains, 50.0, "mains frequency of the lamps, Hz: 50 | 60 (light at twice that)",
+           LIGHT_SCENES),
+    Option("lamp_depth", bounded(non_negative_float, 0.0, 1.0), None,
+           "lamps' modulation depth 0..1 (default: the lamp type's)", LIGHT_SCENES),
+    Option("led_hz", bounded(positive_float, 0.0, MAX_LED_HZ), 400.0, "PWM frequency of LED signs and LED "
+                                                                     "lamps, Hz", LIGHT_SCENES),
+    Option("led_duty", bounded(positive_float, 0.0, 1.0), 0.5, "PWM duty (on-fraction) of LEDs, 0..1",
+           LIGHT_SCENES),
+    Option("led_phase", bounded(non_negative_float, 0.0, 1.0), 0.0, "PWM phase of LEDs at device time 0, cycles",
+           LIGHT_SCENES),
     Option("speed", _speed, "normal", "street: static | normal | fast | a multiplier", ("street",)),
     Option("pedestrians", bounded(non_negative_int, 0, MAX_PEDESTRIANS), 20, "street: number of walkers",
            ("street",), "n_pedestrians"),
@@ -180,7 +214,7 @@ OPTIONS: dict[str, Option] = {o.name: o for o in (
     Option("vx", bounded(finite_float, -MAX_VX_PX_S, MAX_VX_PX_S), 2000.0, "chart: bar speed, px/s",
            ("chart",), "vx_px_s"),
     Option("level", bounded(non_negative_float, 0.0, MAX_LEVEL), 0.5,
-           "flat: radiance level (0..1 is the sensor's range)", ("flat",)),
+           "flat, flicker: (mean) radiance level (0..1 is the sensor's range)", ("flat", "flicker")),
     Option("size", _size, None, "output WxH (default: the sensor's default mode; another size is a "
                                      "rescaled readout)"),
     Option("fps", positive_float, None, "frame rate: sets the frame length (default: the mode's); above the "

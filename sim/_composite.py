@@ -136,10 +136,11 @@ class Compositor:
                             e_start=np.append(first, ents.size).astype(np.int64), ents=ents)
         return self.shared(layer), int(hits.sum()) - before
 
-    def reference(self, p: Pass, layer: StaticLayer, by_column: bool) -> RenderResult:
+    def reference(self, p: Pass, layer: StaticLayer, by_column: bool, linear: bool = False) -> RenderResult:
         """Every line of an exhaustive pass painted whole over the bare background (the oracle's frame)."""
-        u8, _, gt = self._painter.whole(p, self._all, layer.bg_lin, by_column, linear=False)
-        return RenderResult(_oriented(u8, by_column, contiguous=True), None, gt, u8.shape[0])
+        u8, lin, gt = self._painter.whole(p, self._all, layer.bg_lin, by_column, linear=linear)
+        lin_out = None if lin is None else _oriented(lin, by_column, contiguous=False)
+        return RenderResult(_oriented(u8, by_column, contiguous=True), lin_out, gt, u8.shape[0])
 
 
 def _oriented(a: np.ndarray, by_column: bool, *, contiguous: bool) -> np.ndarray:

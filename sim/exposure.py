@@ -30,6 +30,7 @@ from numba import njit, prange
 from rollcam.common.errors import ConfigError
 
 from ._jitcache import guard
+from .flicker_render import FlickerRenderer
 from .render import Renderer
 from .render_result import LinearFrame
 
@@ -191,6 +192,8 @@ def integrate(renderer: Renderer, plan: SamplePlan, *, by_column: bool = False, 
     n_lines, n_along = renderer.render_shape(by_column)
     if plan.n.shape != (n_lines,):
         raise ConfigError(f"the plan has {plan.n.shape[0]} lines, the render {n_lines}")
+    if isinstance(renderer, FlickerRenderer):
+        return _integrate_lights(renderer, plan, by_column, out, batch_samples)
     shape = (n_lines, n_along, 3)
     # Fresh np.empty pages are only faulted in where a line is written, so untouched lines cost nothing.
     acc = np.empty(shape, np.float32) if out is None else out
@@ -212,6 +215,21 @@ def integrate(renderer: Renderer, plan: SamplePlan, *, by_column: bool = False, 
         painted += got
     _finish(acc, static if static is not None else np.empty((0, n_along, 3), np.float32), hits, n)
     return Integrated(LinearFrame(static, acc, hits > 0, by_column), plan.evaluations, painted, passes)
+
+
+def _integrate_lights(renderer: FlickerRenderer, plan: SamplePlan, by_column: bool, out: np.ndarray | None,
+                      batch_samples: int) -> Integrated:
+    """Each light's render integrated with the plan, weighted per line by the light's mean over the line's
+    whole window [start, start + exposure] (``rollcam.sim.flicker_render``), summed into ``out``."""
+    n_lines, n_along = renderer.render_shape(by_column)
+    parts = [integrate(p, plan, by_column=by_column, out=renderer.scratch(k, by_column), batch_samples=batch_samples)
+             for k, p in enumerate(renderer.parts)]
+    weights = renderer.line_weights(plan.starts_ns, plan.starts_ns + plan.exposure_ns)
+    dst = np.empty((n_lines, n_along, 3), np.float32) if out is None else out
+    renderer.join([p.radiance for p in parts], weights, np.arange(n_lines), dst)
+    return Integrated(LinearFrame(None, dst, np.ones(n_lines, np.bool_), by_column),
+                      sum(p.evaluations for p in parts), sum(p.lines_painted for p in parts),
+                      max(p.passes for p in parts))
 
 
 guard(__name__)  # after every kernel and import: see rollcam.sim._jitcache

@@ -49,12 +49,16 @@ class Renderer:
     buffer (or accumulated, for exposure integration), and the brute-force reference. The sensor path's
     planning reads the scene through ``poses``, ``actor_bounds`` and ``actor_image_speeds``.
     ``threads`` caps the numba threads its large kernels use (None: numba's setting; 1: the calling thread
-    only); small ones always run on the calling thread.
+    only); small ones always run on the calling thread. A scene with modulated lights gets a ``FlickerRenderer``.
     """
 
+    def __new__(cls, scene: Scene | None = None, *args, **kwargs) -> Renderer:  # (no scene: copy/pickle)
+        from .flicker_render import FlickerRenderer  # modulated lights: a sum of renders (lazy: it imports us)
+        return super().__new__(FlickerRenderer if cls is Renderer and getattr(scene, "lights", ()) else cls)
+
     def __init__(self, scene: Scene, camera: Camera | int | str = 0, *, gain: float = 1.0,
-                 threads: int | None = None) -> None:
-        self.scene = scene
+                 threads: int | None = None, light_window_ns: int = 0) -> None:
+        self.scene, self.light_window_ns = scene, int(light_window_ns)  # a line's light window (modulated lights)
         self.camera = camera if isinstance(camera, Camera) else scene.camera(camera)
         if self.camera.width <= 0 or self.camera.height <= 0:
             raise ConfigError(f"camera size must be positive, got {self.camera.width}x{self.camera.height}")
@@ -64,8 +68,7 @@ class Renderer:
         self._composite = Compositor(self._painter)
         self.camera_moving = self.camera.ego.moving
         tables = self._painter.tables
-        self.actor_ids = tables.actor_ids
-        self.actor_classes = tables.actor_classes
+        self.actor_ids, self.actor_classes = tables.actor_ids, tables.actor_classes
         self.actor_speeds_mps = tables.actor_speeds_mps
         self._all = np.ones(self.n_actors, np.bool_)
 
@@ -199,15 +202,14 @@ class Renderer:
                                   n_along, line_of=line_of)
         return self._composite.accumulate(p, layer, line_of, out, hits, by_column)
 
-    def reference_frame(self, t_ns: int, *, by_column: bool = False) -> RenderResult:
+    def reference_frame(self, t_ns: int, *, by_column: bool = False, linear: bool = False) -> RenderResult:
         """One full render with every line at ``t_ns`` and no shortcuts: every line painted over the bare
-        background with every actor tested against it (no static-actor composite, no touched-line culling).
-        """
+        background with every actor tested against it (no static-actor composite, no touched-line culling)."""
         n_lines, n_along = self.render_shape(by_column)
         t_s = np.array([np.int64(t_ns).astype(np.float64) * 1e-9])
         layer = self._composite.layers.get(by_column, t_s[0])
         p = self._painter.prepare(by_column, t_s, np.zeros(n_lines, np.int64), self._all, n_along, exhaustive=True)
-        return self._composite.reference(p, layer, by_column)
+        return self._composite.reference(p, layer, by_column, linear)
 
     def reference_lines(self, times_ns: np.ndarray, *, by_column: bool = False) -> RenderResult:
         """The study's brute-force method: one full render per line, keeping line r of render r.

@@ -1,4 +1,4 @@
-"""The scene as plain, frozen data: street layout, lighting, pedestrians, calibration charts, cameras.
+"""The scene as plain, frozen data: street layout, lighting, modulated lights, pedestrians, charts, cameras.
 
 Everything moves analytically in time, so any instant can be evaluated directly (no stepping). Renderers,
 sensor models and ground truth read a Scene and never mutate it. World frame: X across the street (east),
@@ -9,6 +9,8 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field, replace
+
+from .flicker import Waveform
 
 RGB = tuple[float, float, float]
 
@@ -181,10 +183,28 @@ class Camera:
 
 
 @dataclass(frozen=True)
+class ModulatedLight:
+    """A light whose output follows a periodic waveform (a mains lamp, a PWM LED), and what it lights.
+
+    What it adds at the waveform's mean: ``ambient_rgb`` on every surface and walker, ``overhead_rgb`` as a
+    light from straight above (lamp heads over the street), ``glow`` on lit windows and shop fronts, and
+    ``level`` to a flat wall. The renderer scales that contribution, line by line, by the waveform's mean over
+    the line's exposure window (``rollcam.sim.flicker``); the scene's ``lighting`` is the steady rest.
+    """
+
+    name: str
+    waveform: Waveform
+    ambient_rgb: RGB = (0.0, 0.0, 0.0)
+    overhead_rgb: RGB = (0.0, 0.0, 0.0)
+    glow: float = 0.0
+    level: float = 0.0
+
+
+@dataclass(frozen=True)
 class Scene:
     """A complete scene: what is there (street or chart or flat field), its light, its actors, its cameras."""
 
-    kind: str  # "street", "chart" or "flat"
+    kind: str  # "street", "chart", "flat" or "flicker" (a flat wall under modulated light)
     seed: int
     lighting: Lighting
     cameras: tuple[Camera, ...]
@@ -192,6 +212,7 @@ class Scene:
     pedestrians: tuple[Pedestrian, ...] = ()
     chart: Chart | None = None
     flat_level: float = 0.5
+    lights: tuple[ModulatedLight, ...] = ()  # time-modulated lights, on top of the steady ``lighting``
 
     @property
     def time_of_day(self) -> str:

@@ -1,4 +1,4 @@
-"""Seeded procedural scenes: city streets with crowds (the study's setting), moving charts, flat fields.
+"""Seeded procedural scenes: city streets with crowds (the study's setting), moving charts, flat fields, flicker.
 
 ``make_scene(kind, seed=..., **options)`` is the one entry point; the same seed always gives the same scene.
 Every sampler draws from a ``numpy.random.Generator`` built from the seed here, never a global one.
@@ -7,11 +7,13 @@ Every sampler draws from a ``numpy.random.Generator`` built from the seed here, 
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 from typing import Any
 
 import numpy as np
 from rollcam.common.errors import ConfigError
 
+from .flicker import LAMPS, Waveform
 from .scene import (
     Building,
     Camera,
@@ -19,6 +21,7 @@ from .scene import (
     ChartBar,
     EgoMotion,
     Lighting,
+    ModulatedLight,
     Pedestrian,
     Scene,
     Street,
@@ -39,8 +42,21 @@ TIMES_OF_DAY: dict[str, Lighting] = {
                           (0.68, 0.70, 0.76), (0.26, 0.42, 0.74), (0.66, 0.66, 0.70), 400.0, 0.0),
     "dusk": Lighting("dusk", 285.0, 4.0, (0.45, 0.22, 0.10), (0.06, 0.06, 0.10), (0.45, 0.25, 0.22),
                      (0.08, 0.09, 0.20), (0.30, 0.20, 0.20), 240.0, 0.55),
+    "night": Lighting("night", 285.0, -25.0, (0.0, 0.0, 0.0), (0.010, 0.010, 0.014), (0.030, 0.028, 0.040),
+                      (0.004, 0.005, 0.012), (0.035, 0.030, 0.032), 200.0, 0.8),
 }
 DAYLIGHT = ("morning", "noon", "afternoon")
+DATASET_TIMES = ("dawn", "morning", "noon", "afternoon", "dusk")
+"""The times of day a dataset covers unless told otherwise (the study's five)."""
+LAMP_TIMES = ("dusk", "night")
+"""Times of day at which the street lamps and LED signs are on (``lamps='auto'``)."""
+
+LAMP_TYPES = (*LAMPS, "led")
+"""Street lamp types: the mains lamps of ``rollcam.sim.flicker.LAMPS``, or PWM-dimmed LEDs."""
+_LAMP_RGB = {"incandescent": (1.0, 0.78, 0.52), "halogen": (1.0, 0.84, 0.64), "fluorescent": (0.86, 0.95, 1.0),
+             "sodium": (1.0, 0.62, 0.22), "led": (0.95, 0.95, 1.0)}
+# A lamp-lit street's light, relative to noon sun on white ~ 1: what a night exposure is set for.
+_LAMP_AMBIENT, _LAMP_OVERHEAD = 0.05, 0.08
 
 SPEED_PRESETS = {"static": 0.0, "normal": 1.0, "fast": 10.0}
 """Speed multipliers: 'normal' walkers go up to 2 m/s as in the study, 'fast' ten times that."""
@@ -162,6 +178,40 @@ def _street_cameras(rng: np.random.Generator, street: Street, n: int, width: int
     return tuple(cams)
 
 
+def lamp_waveform(lamp: str, mains_hz: float = 50.0, lamp_depth: float | None = None, led_hz: float = 400.0,
+                  led_duty: float = 0.5, led_phase: float = 0.0) -> Waveform:
+    """The light of a lamp of type ``lamp`` (see ``LAMP_TYPES``): on the mains or, for 'led', PWM-dimmed."""
+    if lamp == "led":
+        return Waveform.pwm(led_hz, led_duty, led_phase, 1.0 if lamp_depth is None else lamp_depth)
+    if lamp not in LAMPS:
+        raise ConfigError(f"lamp {lamp!r} is not one of {list(LAMP_TYPES)}")
+    return Waveform.mains(lamp, mains_hz, lamp_depth)
+
+
+def street_lights(time_of_day: str, lighting: Lighting, *, lamps: str = "auto", lamp: str = "sodium",
+                  mains_hz: float = 50.0, lamp_depth: float | None = None, led_hz: float = 400.0,
+                  led_duty: float = 0.5, led_phase: float = 0.0) -> tuple[Lighting, tuple[ModulatedLight, ...]]:
+    """The street's steady lighting and its modulated lights: street lamps and PWM LED signs.
+
+    ``lamps`` 'auto' turns them on at dusk and night, 'on' always, 'off' never. The lamps light every surface
+    (ambient) and the ground from above in their colour; the signs take over the lit windows' and shop
+    fronts' glow (so the time-averaged frame keeps the time of day's look).
+    """
+    if lamps not in ("auto", "on", "off"):
+        raise ConfigError(f"lamps {lamps!r} is not one of auto, on, off")
+    on = lamps == "on" or (lamps == "auto" and time_of_day in LAMP_TIMES)
+    if not on:
+        return lighting, ()
+    wave = lamp_waveform(lamp, mains_hz, lamp_depth, led_hz, led_duty, led_phase)
+    rgb = _LAMP_RGB[lamp]
+    out = [ModulatedLight("street lamps", wave, tuple(_LAMP_AMBIENT * c for c in rgb),
+                          tuple(_LAMP_OVERHEAD * c for c in rgb))]
+    if lighting.window_glow > 0:
+        out.append(ModulatedLight("signs", Waveform.pwm(led_hz, led_duty, led_phase), glow=lighting.window_glow))
+        lighting = replace(lighting, window_glow=0.0)
+    return lighting, tuple(out)
+
+
 def make_street_scene(
     seed: int = 0,
     *,
@@ -174,10 +224,12 @@ def make_street_scene(
     focal_mm: float = STUDY_FOCAL_MM,
     sensor_width_mm: float = STUDY_SENSOR_WIDTH_MM,
     ego: EgoMotion | None = None,
+    **lamp_options: Any,
 ) -> Scene:
     """A seeded city street with a crowd walking on the sidewalks and crossing lanes, and several cameras.
 
     Walkers' base speeds are drawn up to 2 m/s and scaled by ``speed`` ('normal' 1x, 'fast' 10x).
+    ``lamp_options`` are ``street_lights``' (street lamps and LED signs, on at dusk and night by default).
     """
     if time_of_day not in TIMES_OF_DAY:
         raise ConfigError(f"time_of_day {time_of_day!r} is not one of {list(TIMES_OF_DAY)}")
@@ -209,7 +261,8 @@ def make_street_scene(
                                     base_speed * mult))
     cams = _street_cameras(rng, street, n_cameras, width, height, focal_mm, sensor_width_mm,
                            ego if ego is not None else EgoMotion())
-    return Scene("street", seed, TIMES_OF_DAY[time_of_day], cams, street=street, pedestrians=tuple(peds))
+    lighting, lights = street_lights(time_of_day, TIMES_OF_DAY[time_of_day], **lamp_options)
+    return Scene("street", seed, lighting, cams, street=street, pedestrians=tuple(peds), lights=lights)
 
 
 def make_chart_scene(seed: int = 0, *, vx_px_s: float = 2000.0, pitch_px: float = 64.0, bar_width_px: float = 24.0,
@@ -239,6 +292,22 @@ def make_flat_scene(seed: int = 0, *, level: float = 0.5, width: int = 1920, hei
     return Scene("flat", seed, TIMES_OF_DAY["noon"], (cam,), flat_level=float(level))
 
 
+def make_flicker_scene(seed: int = 0, *, lamp: str = "sodium", mains_hz: float = 50.0,
+                       lamp_depth: float | None = None, led_hz: float = 400.0, led_duty: float = 0.5,
+                       led_phase: float = 0.0, level: float = 0.5, width: int = 1920, height: int = 1080) -> Scene:
+    """Flicker calibration: a flat wall lit by one modulated lamp only, of mean radiance ``level``.
+
+    A rolling shutter shows the lamp's bands (period ``1 / (f * line_time)`` lines), a global shutter a frame
+    that changes brightness from frame to frame; nothing else in view changes.
+    """
+    if not math.isfinite(level) or level < 0:
+        raise ConfigError(f"flicker wall level must be a finite number >= 0, got {level!r}")
+    wave = lamp_waveform(lamp, mains_hz, lamp_depth, led_hz, led_duty, led_phase)
+    cam = Camera("flicker", width, height, STUDY_FOCAL_MM, STUDY_SENSOR_WIDTH_MM, (0.0, 0.0, 1.0))
+    return Scene("flicker", seed, TIMES_OF_DAY["noon"], (cam,), flat_level=0.0,
+                 lights=(ModulatedLight(lamp, wave, level=float(level)),))
+
+
 def ego_preset(name: str) -> EgoMotion:
     """Named camera ego-motions: 'none', 'pan' (30 deg/s), 'walk' (handheld), 'vehicle' (10 m/s + vibration),
     'drone', and 'calib' (a camera-IMU calibration excitation: rotation only, sinusoidal about all three axes).
@@ -263,12 +332,13 @@ def ego_preset(name: str) -> EgoMotion:
     return presets[name]
 
 
-SCENE_KINDS = ("street", "chart", "flat")
+SCENE_KINDS = ("street", "chart", "flat", "flicker")
 
 
 def make_scene(kind: str = "street", seed: int = 0, **options: Any) -> Scene:
-    """Build a scene by kind ('street', 'chart', 'flat') with that kind's keyword options."""
-    makers = {"street": make_street_scene, "chart": make_chart_scene, "flat": make_flat_scene}
+    """Build a scene by kind ('street', 'chart', 'flat', 'flicker') with that kind's keyword options."""
+    makers = {"street": make_street_scene, "chart": make_chart_scene, "flat": make_flat_scene,
+              "flicker": make_flicker_scene}
     if kind not in makers:
         raise ConfigError(f"scene {kind!r} is not one of {list(makers)}")
     try:

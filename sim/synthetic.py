@@ -195,7 +195,7 @@ class SyntheticCamera:
         # scales with the requested exposure and gain only.
         ref_exposure = resolve_settings(sensor, size=(s.width, s.height), readout=s.readout).exposure_ns
         brightness = s.gain * s.exposure_ns / max(ref_exposure, 1)
-        self.renderer = Renderer(scene, cam, gain=brightness)
+        self.renderer = Renderer(scene, cam, gain=brightness, light_window_ns=s.exposure_ns)
         self._start_ns = int(start_ns)
         self.pixel_format = fourcc_of(pixel_format).fourcc
         self.physics = self.pixel_format != "BGR3" if physics is None else bool(physics)
@@ -272,6 +272,8 @@ class SyntheticCamera:
                 "time_of_day": self.scene.time_of_day, **extra}
         if s.clamped_exposure:
             meta["exposure_clamped"] = True
+        if self.scene.lights:
+            meta["lights"] = [f"{li.name}: {li.waveform.describe()}" for li in self.scene.lights]
         if data is None:
             data = np.ascontiguousarray(flip(res.image, self.hflip, self.vflip))
         if self.hflip or self.vflip:

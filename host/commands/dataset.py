@@ -82,7 +82,7 @@ _SCENE_OPTIONS = {"sensor": "letsroll", "size": None, "scenes": 40, "cameras": 5
 def config_from_args(args: argparse.Namespace) -> Any:
     """The DatasetConfig (or FootageConfig, with --from-footage) the options describe."""
     from rollcam.common.errors import ConfigError
-    from rollcam.sim.scenegen import TIMES_OF_DAY
+    from rollcam.sim.scenegen import DATASET_TIMES
 
     from ..datasets.plan import DatasetConfig, LabelPolicy
 
@@ -98,7 +98,7 @@ def config_from_args(args: argparse.Namespace) -> Any:
                              policy=policy)
     return DatasetConfig(
         sensor=args.sensor, size=args.size, scenes=args.scenes, cameras=args.cameras,
-        times=args.times or tuple(TIMES_OF_DAY), speeds=args.speeds, frames=args.frames, ego=args.ego,
+        times=args.times or DATASET_TIMES, speeds=args.speeds, frames=args.frames, ego=args.ego,
         pedestrians=args.pedestrians, seed=args.seed, image_format=args.image_format, raw_format=args.raw,
         emu_options=args.source_options, policy=policy,
     )

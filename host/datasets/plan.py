@@ -16,7 +16,7 @@ from typing import Any
 
 import numpy as np
 from rollcam.common.errors import ConfigError
-from rollcam.sim.scenegen import SPEED_PRESETS, TIMES_OF_DAY, parse_speed
+from rollcam.sim.scenegen import DATASET_TIMES, SPEED_PRESETS, TIMES_OF_DAY, parse_speed
 
 SPLITS = ("train", "val", "test")
 SHUTTERS = ("gs", "rs")
@@ -56,7 +56,7 @@ class DatasetConfig:
     size: tuple[int, int] | None = None  # None: the sensor's default mode
     scenes: int = STUDY_SCENES
     cameras: int = STUDY_CAMERAS
-    times: tuple[str, ...] = tuple(TIMES_OF_DAY)
+    times: tuple[str, ...] = DATASET_TIMES
     speeds: tuple[str, ...] = ("normal", "fast")
     frames: int | None = None  # total GS/RS pairs over all speeds; None: the full grid
     split_fractions: tuple[float, float, float] = (0.8, 0.1, 0.1)
