@@ -20,6 +20,7 @@ from rollcam.sim.synthetic import SyntheticCamera
 
 from . import controls as ctl
 from .imaging import Imager, warm, warm_ahead
+from .insensor_stage import InSensorStage
 from .options import SHUTTERS
 from .registers import RegisterFile
 from .spec import CameraSpec
@@ -48,6 +49,7 @@ class FirmwareCamera(DeviceStream):
         self.traits = traits_for(self.sensor.name)
         self.registers = RegisterFile(self.sensor, self._mode_select)
         self.imager = Imager()
+        self.insensor = InSensorStage()
 
     def __repr__(self) -> str:
         s = self.spec.settings
@@ -203,6 +205,12 @@ class FirmwareCamera(DeviceStream):
     def _mode_select(self, on: bool) -> None:
         (self.stream_on if on else self.stream_off)()
 
+    def ledger(self) -> Any:
+        """The stream's energy and bandwidth ledger (``rollcam.firmware.ledger.Ledger``) as programmed now."""
+        from .insensor_stage import stream_ledger
+
+        return stream_ledger(self.spec, self.insensor)
+
     # ---------------------------------------------------------------------------------------- pixels
     @property
     def synthetic(self) -> SyntheticCamera:
@@ -227,6 +235,10 @@ class FirmwareCamera(DeviceStream):
 
     def make(self, plan: FramePlan, shutter: str | None = None) -> tuple[CameraSpec, Frame]:
         """Frame ``plan.seq`` from the current spec at its lines' device times (optionally under the other shutter,
-        for paired GS/RS data), the scene or the test pattern, flips applied; and that spec."""
+        for paired GS/RS data), the scene or the test pattern, flips applied, with the in-sensor network's results
+        when the spec has one (``firmware.insensor_stage``); and that spec."""
         spec = self._spec_for_frame()
-        return spec, self.imager.render(spec, plan.seq, plan.start_ns, shutter)
+        if spec.insensor is None:
+            return spec, self.imager.render(spec, plan.seq, plan.start_ns, shutter)
+        frame, samples = self.imager.render_samples(spec, plan.seq, plan.start_ns, shutter)
+        return spec, self.insensor.process(spec, frame, samples, self.stats)
