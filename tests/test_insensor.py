@@ -236,3 +236,19 @@ def test_detect_scores_the_results_against_their_own_frames(tmp_path) -> None:
     assert result.truth.frames == 4
     with open_camera("emu:letsroll?size=320x180&frames=1") as cam, pytest.raises(SourceError, match="no in-sensor"):
         run_detect(cam, load_detector("insensor"))
+
+
+def test_eval_scores_what_the_camera_sends_as_the_network_on_the_files(tmp_path) -> None:
+    from rollcam.host.datasets import DatasetConfig, build_dataset
+    from rollcam.host.evaluation.run import evaluate_dataset
+
+    cfg = DatasetConfig(size=(320, 180), scenes=3, cameras=1, times=("noon",), speeds=("fast",), frames=3,
+                        pedestrians=12, seed=5, raw_format="RGGB")
+    build_dataset(cfg, tmp_path / "d")
+    host = evaluate_dataset(tmp_path / "d", detector="personnet-raw?conf=0.01", split="test",
+                            save_detections=tmp_path / "host.jsonl")
+    chip = evaluate_dataset(tmp_path / "d", detector="insensor:personnet-raw?conf=0.01", split="test",
+                            save_detections=tmp_path / "chip.jsonl")
+    # The camera re-makes each image from its record and runs the network on its own mosaic: the same bytes.
+    assert (tmp_path / "chip.jsonl").read_text() == (tmp_path / "host.jsonl").read_text()
+    assert chip["results"] == host["results"] and host["results"]["fast"]["rs"]["images"] >= 1
