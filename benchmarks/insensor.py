@@ -13,6 +13,9 @@ the datasets' labelling policy on the RS boxes; metrics are ``rollcam eval``'s (
 F1, COCO mAP) with both networks at ``conf=0.01`` (mAP sees the whole curve); the detections counted as sent
 are those at the network's default threshold.
 
+The ledger is the in-sensor pipeline's as deployed: metadata only (the stream here also sends the raw frame,
+for the host pipeline; that image is not charged to the in-sensor pipeline).
+
 Latency from the frame's end of readout to detections: host = the raw frame's time on the link + the ISP and
 the detector measured on this machine's CPU (one thread; a loaded machine makes these upper bounds); in-sensor
 = the accelerator's modelled latency (its profile) + the detections' time on the link. Bytes and energy per
@@ -21,6 +24,7 @@ frame come from the ledger (``rollcam.firmware.ledger``), the host detector's MA
 
 from __future__ import annotations
 
+import dataclasses
 import time
 from typing import Any
 
@@ -93,7 +97,7 @@ def run_insensor_bench(*, scenes: int = 4, frames: int = 8, host: str = "personn
                     truths.append(_truth(f))
                     host_dets.append(Dets.of(d.boxes, d.scores, d.classes))
     keys = list(frames_by_key)
-    chip_dets, chip_truths, latencies = [], [], []
+    chip_dets, chip_truths, latencies, tensor_bytes = [], [], [], 0
     for k in keys:
         r = chip.get(k)
         if r is None:
@@ -102,10 +106,15 @@ def run_insensor_bench(*, scenes: int = 4, frames: int = 8, host: str = "personn
         chip_dets.append(Dets.of(r.boxes, r.scores, r.classes))
         sent_counts.append(int(np.sum(r.scores >= net_conf)))
         latencies.append(r.latency_ns)
+        tensor_bytes = r.tensor_bytes()
     assert spec is not None
     network = load_network(spec.insensor.network)
     macs = int(network.macs(320, 180))
-    meta = ledger(spec, detections=float(np.mean(sent_counts)), macs=macs, host_macs=host_macs).to_json()
+    # The in-sensor pipeline as deployed sends its detections only (metadata-only mode); this stream also sent the
+    # raw frame, for the host pipeline to run on the same frames.
+    alone = dataclasses.replace(spec, insensor=dataclasses.replace(spec.insensor, output="meta"))
+    meta = ledger(alone, detections=float(np.mean(sent_counts)), tensor_bytes=tensor_bytes, macs=macs,
+                  host_macs=host_macs).to_json()
     link_bps = spec.sensor.link.capacity_bps if spec.sensor.link is not None else None
     rows = meta["rows"]
 

@@ -32,7 +32,7 @@ def programming(camera: FirmwareCamera) -> dict[str, Any]:
     """The first line: the in-sensor options in effect and the stream's ledger."""
     values = camera.spec.option_values()
     return {"insensor": {k: (list(v) if isinstance(v, tuple) else v) for k, v in values.items()
-                         if k.startswith("insensor")}, "ledger": camera.ledger().to_json()}
+                         if k.startswith("insensor")}, "ledger": camera.insensor.ledger(camera.spec).to_json()}
 
 
 class InSensorStreams:

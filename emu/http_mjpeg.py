@@ -272,8 +272,8 @@ class MjpegServer(Closeable):
 
     def _ledger(self) -> dict[str, Any]:
         """The device's energy and bandwidth ledger (a host source behind ``rollcam view`` has none)."""
-        ledger = getattr(self.camera, "ledger", None)
-        return {} if ledger is None else {"ledger": ledger().to_json()}
+        stage = getattr(self.camera, "insensor", None)
+        return {} if stage is None else {"ledger": stage.ledger(self.camera.spec).to_json()}
 
     async def _status(self, request: web.Request) -> web.Response:
         return web.Response(body=json.dumps(self.status()).encode(), content_type="application/json",

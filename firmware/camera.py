@@ -49,7 +49,7 @@ class FirmwareCamera(DeviceStream):
         self.traits = traits_for(self.sensor.name)
         self.registers = RegisterFile(self.sensor, self._mode_select)
         self.imager = Imager()
-        self.insensor = InSensorStage()
+        self.insensor = InSensorStage()  # the in-sensor network's runs; ``insensor.ledger(spec)``: the ledger
 
     def __repr__(self) -> str:
         s = self.spec.settings
@@ -205,12 +205,6 @@ class FirmwareCamera(DeviceStream):
     def _mode_select(self, on: bool) -> None:
         (self.stream_on if on else self.stream_off)()
 
-    def ledger(self) -> Any:
-        """The stream's energy and bandwidth ledger (``rollcam.firmware.ledger.Ledger``) as programmed now."""
-        from .insensor_stage import stream_ledger
-
-        return stream_ledger(self.spec, self.insensor)
-
     # ---------------------------------------------------------------------------------------- pixels
     @property
     def synthetic(self) -> SyntheticCamera:
@@ -235,10 +229,6 @@ class FirmwareCamera(DeviceStream):
 
     def make(self, plan: FramePlan, shutter: str | None = None) -> tuple[CameraSpec, Frame]:
         """Frame ``plan.seq`` from the current spec at its lines' device times (optionally under the other shutter,
-        for paired GS/RS data), the scene or the test pattern, flips applied, with the in-sensor network's results
-        when the spec has one (``firmware.insensor_stage``); and that spec."""
+        for paired GS/RS data), flips applied, with the in-sensor results if any (``insensor``); and that spec."""
         spec = self._spec_for_frame()
-        if spec.insensor is None:
-            return spec, self.imager.render(spec, plan.seq, plan.start_ns, shutter)
-        frame, samples = self.imager.render_samples(spec, plan.seq, plan.start_ns, shutter)
-        return spec, self.insensor.process(spec, frame, samples, self.stats)
+        return spec, self.insensor.make(spec, self.imager, plan.seq, plan.start_ns, shutter, self.stats)

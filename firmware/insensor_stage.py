@@ -133,6 +133,18 @@ class InSensorStage:
                 stats.insensor_skipped += 1
         return run
 
+    def make(self, spec: CameraSpec, imager: Any, seq: int, start_ns: int, shutter: str | None = None,
+             stats: Any = None) -> Frame:
+        """Frame ``seq`` from ``imager`` (``firmware.imaging.Imager``), through the network when ``spec`` has one."""
+        if spec.insensor is None:
+            return imager.render(spec, seq, start_ns, shutter)
+        frame, samples = imager.render_samples(spec, seq, start_ns, shutter)
+        return self.process(spec, frame, samples, stats)
+
+    def ledger(self, spec: CameraSpec) -> Any:
+        """``stream_ledger`` of ``spec`` with this stage's latest result."""
+        return stream_ledger(spec, self)
+
     def process(self, spec: CameraSpec, frame: Frame, samples: np.ndarray | None, stats: Any = None) -> Frame:
         """``frame`` with the results done in its window; its image dropped in metadata-only mode."""
         cfg = spec.insensor

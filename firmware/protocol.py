@@ -136,7 +136,7 @@ def _insensor(cam: FirmwareCamera, since: str) -> str:
 
 
 def _ledger(cam: FirmwareCamera) -> str:
-    doc = cam.ledger().to_json()
+    doc = cam.insensor.ledger(cam.spec).to_json()
     rows = " ".join(f"{k}={v['bytes_per_frame']}" for k, v in doc["rows"].items())
     util = doc["rows"]["sent"]["utilisation"]
     e = doc["energy_uj_per_frame"]

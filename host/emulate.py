@@ -153,7 +153,7 @@ def _fault_stats(server: Any) -> str:
 
 def ledger_line(camera: Any) -> str:
     """The stream's ledger on one line: bytes per frame sent, link utilisation, energy per frame of the pipelines."""
-    doc = camera.ledger().to_json()
+    doc = camera.insensor.ledger(camera.spec).to_json()
     sent, e = doc["rows"]["sent"], doc["energy_uj_per_frame"]
     util = "no link in the hw_config" if sent["utilisation"] is None else \
         f"{100 * sent['utilisation']:.3f}% of the {doc['link']['bus']} link"
@@ -185,7 +185,7 @@ def serve(args: argparse.Namespace, camera_options: dict[str, str]) -> int:
             pump.start()
         if args.json:
             print(json.dumps({"sensor": camera.sensor.name, "identity": camera.identity(),
-                              "faults": args.faults.to_text(), "ledger": camera.ledger().to_json(),
+                              "faults": args.faults.to_text(), "ledger": camera.insensor.ledger(camera.spec).to_json(),
                               **{r.name: r.info for r in running}}), flush=True)
         else:
             print(f"emulating {camera!r}" + (f" with faults {args.faults}" if args.faults else ""), flush=True)

@@ -134,7 +134,7 @@ class EmuSource(CameraSource):
 
     def ledger(self) -> Any:
         """The stream's energy and bandwidth ledger (``rollcam.firmware.ledger``; docs/insensor.md)."""
-        return self.device.ledger()
+        return self.device.insensor.ledger(self.device.spec)
 
     def info(self) -> dict[str, Any]:
         """Sensor, size, timing and scene of the stream."""
