@@ -1,12 +1,12 @@
 """``CameraSpec``: the one frozen, validated description of an emulated camera.
 
-Sensor, output size, frame and line length, shutter, readout, exposure, gain, pixel format, sensor-model
-stages, blur bound, flips, test pattern and scene: everything that decides a frame's bytes besides the
-frame's sequence number and start time. It is validated once, when it is made (``dataclasses.replace``
-re-validates), and never changes; a device that is reprogrammed holds a new one. Every front door builds or
-replaces it: ``from_options`` for text (``emu:`` URIs, ``rollcam emulate`` flags, ``rollcam://`` URLs, serial
-``SCENE``), ``create`` for typed values, and the firmware's controls, registers, V4L2 and UVC requests through
-``rollcam.firmware.controls.SensorState``.
+Sensor, output size, frame and line length, shutter, readout, exposure, gain, pixel format, sensor-model stages,
+blur bound, flips, test pattern, scene, IMU and in-sensor network (``insensor``): everything that decides a
+frame's bytes besides the frame's sequence number and start time. It is validated once, when it is made
+(``dataclasses.replace`` re-validates), and never changes; a device that is reprogrammed holds a new one. Every
+front door builds or replaces it: ``from_options`` for text (``emu:`` URIs, ``rollcam emulate`` flags,
+``rollcam://`` URLs, serial ``SCENE``), ``create`` for typed values, and the firmware's controls, registers,
+V4L2 and UVC requests through ``rollcam.firmware.controls.SensorState``.
 
 Gain is the linear total gain (1.0 = unity): the sensor model splits it into analog then digital gain as a
 driver does; doors that speak register codes (V4L2 analogue/digital gain, the gain registers) or hundredths
