@@ -4,7 +4,8 @@
 part carries the frame's ``X-Sequence``, ``X-Timestamp-Ns`` (start of exposure, device clock),
 ``X-Line-Time-Ns``, ``X-Exposure-Ns``, ``X-Readout`` and ``X-Shutter`` headers, and with an in-sensor network
 ``X-Insensor``: the results the frame carries as one line of JSON (``InSensorResult.to_json()`` each, a list;
-each names its own source frame in ``seq``). The body is not chunked: it ends when the connection does.
+each names its own source frame in ``seq``; at most ``HEADER_DETECTIONS`` detections each, ``truncated`` counting
+the rest, which ``/insensor.jsonl`` has). The body is not chunked: it ends when the connection does.
 ``GET /snapshot.jpg`` returns the next frame, ``GET /status.json`` the server's counters (and the stream's
 ledger), ``GET /imu.jsonl`` the IMU's samples as JSON lines (emu/http_imu.py), ``GET /insensor.jsonl`` the
 in-sensor results as JSON lines (emu/http_insensor.py). In metadata-only mode (``insensor_output=meta``) no
@@ -70,7 +71,7 @@ class Part:
                    ("X-Line-Time-Ns", str(frame.line_time_ns)), ("X-Exposure-Ns", str(frame.exposure_ns)),
                    ("X-Readout", frame.readout.value), ("X-Shutter", frame.shutter)]
         if frame.insensor is not None:  # compact JSON holds no CR or LF, so it is one header line
-            headers.append(("X-Insensor", json.dumps([r.to_json() for r in frame.insensor],
+            headers.append(("X-Insensor", json.dumps([_header_result(r) for r in frame.insensor],
                                                      separators=(",", ":"))))
         return cls(frame.sequence, jpeg, tuple(headers))
 
@@ -79,6 +80,19 @@ class Part:
         head = [f"--{BOUNDARY}", "Content-Type: image/jpeg", f"Content-Length: {len(self.jpeg)}"]
         head += [f"{k}: {v}" for k, v in self.headers]
         return ("\r\n".join(head) + "\r\n\r\n").encode() + self.jpeg + b"\r\n"
+
+
+HEADER_DETECTIONS = 50
+"""Most detections of one result in an ``X-Insensor`` header (best first; clients cap header lines near 8 kB)."""
+
+
+def _header_result(result: Any) -> dict[str, Any]:
+    """A result's JSON for the part header: at most ``HEADER_DETECTIONS`` detections, ``truncated`` the rest."""
+    doc = result.to_json()
+    extra = len(doc["detections"]) - HEADER_DETECTIONS
+    if extra > 0:
+        doc["detections"], doc["truncated"] = doc["detections"][:HEADER_DETECTIONS], extra
+    return doc
 
 
 class _Latest:
