@@ -196,6 +196,8 @@ def test_http_jsonl_part_headers_and_metadata_only() -> None:
                 r.read(int(head["Content-Length"]))
                 heads.append(head)
         status = json.loads(urllib.request.urlopen(f"{base}/status.json", timeout=10).read())
+        with open_camera(f"{srv.url}#frames=3") as src:  # the http:// source reads the results back into Frames
+            got = list(src)
     assert lines[0]["insensor"]["insensor"] == "personnet-raw" and lines[0]["ledger"]["mode"] == "frame"
     seqs = [x["seq"] for x in lines[1:]]
     # In order, none twice; a frame the device skipped (a render late on a loaded machine) was never inferred.
@@ -207,6 +209,7 @@ def test_http_jsonl_part_headers_and_metadata_only() -> None:
         assert [x["seq"] for x in c] in ([int(h["X-Sequence"]) - 1], [])
     assert any(carried) or cam.stats.skipped  # none only when the frames before were skipped (a loaded machine)
     assert status["ledger"]["rows"]["raw"]["bytes_per_frame"] == 180 * 326 + 8
+    assert all(r.seq == f.sequence - 1 and len(r.boxes) for f in got for r in f.insensor)
 
     cam = FirmwareCamera(CameraSpec.from_options("letsroll", {"size": "320x180", "pedestrians": "10",
                                                               "insensor": "personnet-raw", "insensor_output": "meta"}))
@@ -271,3 +274,15 @@ def test_part_header_caps_the_detections_and_results_round_trip() -> None:
     assert len(head["detections"]) == HEADER_DETECTIONS and head["truncated"] == 7 and head["seq"] == 4
     back = InSensorResult.from_json(r.to_json(tensors=True))
     assert back.to_json(tensors=True) == r.to_json(tensors=True) and back.latency_ns == 5
+
+
+def test_bench_compares_the_two_pipelines_on_the_same_frames() -> None:
+    from rollcam.benchmarks.insensor import run_insensor_bench
+    from rollcam.benchmarks.studies import STUDIES, missed
+
+    doc = run_insensor_bench(scenes=1, frames=2)
+    host, chip = doc["pipelines"]["host"], doc["pipelines"]["insensor"]
+    assert host["frames"] == chip["frames"] == 6 and not missed(STUDIES["insensor"].targets(doc))
+    assert host["bytes_per_frame"] == 180 * (320 + 6) + 8  # the raw 8-bit frame, CSI-2 framed
+    assert chip["bytes_per_frame"] == doc["ledger"]["rows"]["meta"]["bytes_per_frame"] < host["bytes_per_frame"]
+    assert doc["ledger"]["mode"] == "meta" and chip["energy_uj"] < host["energy_uj"]
