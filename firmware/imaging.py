@@ -44,7 +44,7 @@ def kernel_kind(spec: CameraSpec) -> tuple:
     packing), leaving out values that only change numbers: size, timing, exposure, gain, seeds."""
     return (spec.sensor.name, spec.pixel_format, spec.uses_physics, spec.blur_px > 0, spec.noise, spec.hflip,
             spec.vflip, spec.shutter, spec.readout, spec.scene, spec.test_pattern != "none", spec.imu is not None,
-            spec.rs_correct, spec.insensor is not None and spec.insensor.input == "raw")
+            spec.rs_correct)
 
 
 def warm(spec: CameraSpec, imager: Imager | None = None) -> None:
