@@ -2,7 +2,7 @@
 
 Each study's code lives in its own module of ``rollcam.benchmarks`` (``bench`` renders, ``hog_recall``,
 ``detect``, ``ptc``, ``sensor_bench``, ``uvc``, ``soak``, ``mjpeg``, ``dataset``, ``imu``, ``view``,
-``preload``, ``personnet``, ``flicker``); an entry here is the thin layer the command line needs.
+``preload``, ``personnet``, ``flicker``, ``insensor``); an entry here is the thin layer the command line needs.
 ``run(args, progress)`` does the work, writes its files under ``args.out`` and returns the JSON document with
 its plain-text report; ``targets(doc)`` reads the document's targets as ``{name: {"value", "op", "limit",
 "pass"}}`` (``pass`` None when a target did not apply). This module imports only the standard library at the
@@ -333,6 +333,25 @@ def _flicker(args: argparse.Namespace, progress: Any) -> tuple[Doc, str]:
     return doc, format_report(doc)
 
 
+# ------------------------------------------------------------------------------------------- insensor
+def _insensor_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--scenes", type=_COUNT, default=4, help="street scenes, x 3 cameras (default: %(default)s)")
+    p.add_argument("--frames", type=_COUNT, default=8, help="frames per camera (default: %(default)s)")
+    p.add_argument("--host-detector", default="personnet", metavar="SPEC",
+                   help="the host pipeline's detector, on the ISP picture (default: %(default)s)")
+    p.add_argument("--network", default="personnet-raw", metavar="SPEC",
+                   help="the in-sensor network, on the raw mosaic (default: %(default)s)")
+
+
+def _insensor(args: argparse.Namespace, progress: Any) -> tuple[Doc, str]:
+    from .insensor import format_report, run_insensor_bench
+
+    doc = run_insensor_bench(scenes=args.scenes, frames=args.frames, host=args.host_detector, net=args.network,
+                             say=progress.status)
+    write_json(args.out, "insensor.json", doc)
+    return doc, format_report(doc)
+
+
 STUDIES: dict[str, Study] = {s.name: s for s in (
     Study("render", "speed versus error of the ways to make an RS frame (bench.json, bench.png)",
           _render_arguments, _render, _render_targets),
@@ -362,5 +381,7 @@ STUDIES: dict[str, Study] = {s.name: s for s in (
           _personnet_arguments, _personnet, _doc_targets),
     Study("flicker", "modulated light: cost of flicker on vs off (night street RS) and the bands vs analytic",
           _flicker_arguments, _flicker, _doc_targets),
+    Study("insensor", "ISP + host detector against the in-sensor detector on raw: accuracy, latency, bytes, energy",
+          _insensor_arguments, _insensor, _doc_targets),
 )}
 """Study name -> study, in the order ``rollcam bench --help`` lists them."""

@@ -36,7 +36,8 @@ def _calibration(camera: FirmwareCamera) -> dict[str, Any]:
                     "T_cam_imu": p.T_cam_imu.tolist(), "time_offset_ns": p.time_offset_ns}}
 
 
-def _query_int(request: web.Request, name: str) -> int | None:
+def query_int(request: web.Request, name: str) -> int | None:
+    """Query option ``name`` as an integer >= 0, None when absent (HTTP 400 naming it when bad)."""
     text = request.query.get(name)
     if text is None:
         return None
@@ -68,8 +69,8 @@ class ImuStreams:
             raise web.HTTPNotFound(text="this source has no IMU")
         if spec.imu is None:
             raise web.HTTPNotFound(text="the IMU is off (imu=on turns it on)")
-        limit = _query_int(request, "samples")
-        start = _query_int(request, "from_ns")
+        limit = query_int(request, "samples")
+        start = query_int(request, "from_ns")
         if self.active >= MAX_STREAMS:
             raise web.HTTPServiceUnavailable(text=f"{MAX_STREAMS} IMU streams already", headers={"Retry-After": "1"})
         self.active += 1

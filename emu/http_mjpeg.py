@@ -2,9 +2,14 @@
 
 ``GET /stream.mjpg`` (also ``/``) answers ``multipart/x-mixed-replace`` with one JPEG part per frame; each
 part carries the frame's ``X-Sequence``, ``X-Timestamp-Ns`` (start of exposure, device clock),
-``X-Line-Time-Ns``, ``X-Exposure-Ns``, ``X-Readout`` and ``X-Shutter`` headers. The body is not chunked: it
-ends when the connection does. ``GET /snapshot.jpg`` returns the next frame, ``GET /status.json`` the
-server's counters, ``GET /imu.jsonl`` the IMU's samples as JSON lines (emu/http_imu.py).
+``X-Line-Time-Ns``, ``X-Exposure-Ns``, ``X-Readout`` and ``X-Shutter`` headers, and with an in-sensor network
+``X-Insensor``: the results the frame carries as one line of JSON (``InSensorResult.to_json()`` each, a list;
+each names its own source frame in ``seq``; at most ``HEADER_DETECTIONS`` detections each, ``truncated`` counting
+the rest, which ``/insensor.jsonl`` has). The body is not chunked: it ends when the connection does.
+``GET /snapshot.jpg`` returns the next frame, ``GET /status.json`` the server's counters (and the stream's
+ledger), ``GET /imu.jsonl`` the IMU's samples as JSON lines (emu/http_imu.py), ``GET /insensor.jsonl`` the
+in-sensor results as JSON lines (emu/http_insensor.py). In metadata-only mode (``insensor_output=meta``) no
+image leaves the camera: the stream and snapshot answer 404 and ``/insensor.jsonl`` is what there is.
 One thread encodes each frame once; the event loop (emu/http_server.py, aiohttp) writes
 the same bytes to every client. Slots are fair (emu/http_slots.py): a client reading slower than the frame
 rate skips frames (counted) and never grows memory, and one that does not read at all yields its slot to a
@@ -34,6 +39,7 @@ from rollcam.sim.frame import Frame
 
 from .http_faults import StreamFaults
 from .http_imu import ImuStreams
+from .http_insensor import InSensorStreams
 from .http_server import Connection, HttpHost, HttpLimits
 from .http_slots import StreamSlots
 from .pump import FramePump
@@ -61,16 +67,32 @@ class Part:
     @classmethod
     def of(cls, frame: Frame, jpeg: bytes) -> Part:
         """The part for ``frame`` encoded as ``jpeg``."""
-        return cls(frame.sequence, jpeg, (
-            ("X-Sequence", str(frame.sequence)), ("X-Timestamp-Ns", str(frame.timestamp_ns)),
-            ("X-Line-Time-Ns", str(frame.line_time_ns)), ("X-Exposure-Ns", str(frame.exposure_ns)),
-            ("X-Readout", frame.readout.value), ("X-Shutter", frame.shutter)))
+        headers = [("X-Sequence", str(frame.sequence)), ("X-Timestamp-Ns", str(frame.timestamp_ns)),
+                   ("X-Line-Time-Ns", str(frame.line_time_ns)), ("X-Exposure-Ns", str(frame.exposure_ns)),
+                   ("X-Readout", frame.readout.value), ("X-Shutter", frame.shutter)]
+        if frame.insensor is not None:  # compact JSON holds no CR or LF, so it is one header line
+            headers.append(("X-Insensor", json.dumps([_header_result(r) for r in frame.insensor],
+                                                     separators=(",", ":"))))
+        return cls(frame.sequence, jpeg, tuple(headers))
 
     def encode(self) -> bytes:
         """The multipart chunk: boundary, headers, JPEG."""
         head = [f"--{BOUNDARY}", "Content-Type: image/jpeg", f"Content-Length: {len(self.jpeg)}"]
         head += [f"{k}: {v}" for k, v in self.headers]
         return ("\r\n".join(head) + "\r\n\r\n").encode() + self.jpeg + b"\r\n"
+
+
+HEADER_DETECTIONS = 50
+"""Most detections of one result in an ``X-Insensor`` header (best first; clients cap header lines near 8 kB)."""
+
+
+def _header_result(result: Any) -> dict[str, Any]:
+    """A result's JSON for the part header: at most ``HEADER_DETECTIONS`` detections, ``truncated`` the rest."""
+    doc = result.to_json()
+    extra = len(doc["detections"]) - HEADER_DETECTIONS
+    if extra > 0:
+        doc["detections"], doc["truncated"] = doc["detections"][:HEADER_DETECTIONS], extra
+    return doc
 
 
 class _Latest:
@@ -147,6 +169,8 @@ class MjpegServer(Closeable):
         app.router.add_get("/status.json", self._status, allow_head=False)
         self.imu = ImuStreams(camera)  # GET /imu.jsonl: the IMU as JSON lines
         self.imu.add_to(app)
+        self.insensor = InSensorStreams(camera)  # GET /insensor.jsonl: the in-sensor results as JSON lines
+        self.insensor.add_to(app)
         app.cleanup_ctx.append(self._sweeper)
         self.http = HttpHost(app, host, port, limits=limits, name="rollcam-http")
         self.slots = StreamSlots(limits, self.http.loop.time)
@@ -206,7 +230,7 @@ class MjpegServer(Closeable):
 
     def on_frame(self, frame: Frame, plan: FramePlan) -> None:
         """A frame is complete: hand it to the encoder (only the newest waits) when anyone is watching."""
-        if len(self.slots) or self._snapshots:
+        if (len(self.slots) or self._snapshots) and frame.data.size:  # metadata-only frames have no image
             self._latest.put(frame)
 
     def _encode_loop(self) -> None:
@@ -258,13 +282,26 @@ class MjpegServer(Closeable):
         doc["bad_requests"] += self.http.stats.malformed_requests
         return {**doc, "clients": s.to_json(), "http": self.http.stats.to_json(),
                 "pump": self.pump.stats.to_json(), "camera": self.camera.stats.to_json(),
-                "faults": self.fault_stats.to_json()}
+                "faults": self.fault_stats.to_json(), **self._ledger()}
+
+    def _ledger(self) -> dict[str, Any]:
+        """The device's energy and bandwidth ledger (a host source behind ``rollcam view`` has none)."""
+        stage = getattr(self.camera, "insensor", None)
+        return {} if stage is None else {"ledger": stage.ledger(self.camera.spec).to_json()}
 
     async def _status(self, request: web.Request) -> web.Response:
         return web.Response(body=json.dumps(self.status()).encode(), content_type="application/json",
                             headers={"Cache-Control": "no-store"})
 
+    def _image_sent(self) -> None:
+        """HTTP 404 in metadata-only mode: no image leaves the sensor."""
+        cfg = getattr(getattr(self.camera, "spec", None), "insensor", None)
+        if cfg is not None and not cfg.image_sent:
+            raise web.HTTPNotFound(text="metadata-only mode (insensor_output=meta): no image leaves the sensor; "
+                                        "GET /insensor.jsonl for its results")
+
     async def _snapshot(self, request: web.Request) -> web.Response:
+        self._image_sent()
         fut: asyncio.Future[Part] = asyncio.get_running_loop().create_future()
         self._snapshots.add(fut)
         try:
@@ -276,6 +313,7 @@ class MjpegServer(Closeable):
         return web.Response(body=part.jpeg, content_type="image/jpeg", headers={"Cache-Control": "no-store"})
 
     async def _stream(self, request: web.Request) -> web.StreamResponse:
+        self._image_sent()
         conn = Connection.of(request)
         if conn is None:  # gone before its turn
             raise web.HTTPServiceUnavailable(text="the connection closed")

@@ -7,6 +7,7 @@ with their side effects), ``registers`` (the hw_config register map with the par
 effects), ``traits`` (per-sensor register encodings), ``scheduler`` (device times of frames, lines and
 bands), ``patterns`` (test patterns), ``imaging`` (pixels: BGR renders, or raw frames through the sensor model),
 ``pixfmt`` (the one place BGR renders become YUYV, MJPG, ...; raw formats and their preview),
-and ``protocol`` (the line-based serial protocol). Nothing here knows of USB,
+``protocol`` (the line-based serial protocol), ``insensor`` and ``insensor_stage`` (a network run on the chip on
+each frame, on the device clock) and ``ledger`` (bytes, link load and energy per frame). Nothing here knows of USB,
 sockets or ptys.
 """

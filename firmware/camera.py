@@ -20,6 +20,7 @@ from rollcam.sim.synthetic import SyntheticCamera
 
 from . import controls as ctl
 from .imaging import Imager, warm, warm_ahead
+from .insensor_stage import InSensorStage
 from .options import SHUTTERS
 from .registers import RegisterFile
 from .spec import CameraSpec
@@ -48,6 +49,7 @@ class FirmwareCamera(DeviceStream):
         self.traits = traits_for(self.sensor.name)
         self.registers = RegisterFile(self.sensor, self._mode_select)
         self.imager = Imager()
+        self.insensor = InSensorStage()  # the in-sensor network's runs; ``insensor.ledger(spec)``: the ledger
 
     def __repr__(self) -> str:
         s = self.spec.settings
@@ -227,6 +229,6 @@ class FirmwareCamera(DeviceStream):
 
     def make(self, plan: FramePlan, shutter: str | None = None) -> tuple[CameraSpec, Frame]:
         """Frame ``plan.seq`` from the current spec at its lines' device times (optionally under the other shutter,
-        for paired GS/RS data), the scene or the test pattern, flips applied; and that spec."""
+        for paired GS/RS data), flips applied, with the in-sensor results if any (``insensor``); and that spec."""
         spec = self._spec_for_frame()
-        return spec, self.imager.render(spec, plan.seq, plan.start_ns, shutter)
+        return spec, self.insensor.make(spec, self.imager, plan.seq, plan.start_ns, shutter, self.stats)

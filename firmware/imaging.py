@@ -95,29 +95,37 @@ class Imager:
 
     def render(self, spec: CameraSpec, seq: int, start_ns: int, shutter: str | None = None) -> Frame:
         """Frame ``seq`` of ``spec`` exposed from device time ``start_ns`` (optionally under the other shutter)."""
+        return self.render_samples(spec, seq, start_ns, shutter)[0]
+
+    def render_samples(self, spec: CameraSpec, seq: int, start_ns: int, shutter: str | None = None
+                       ) -> tuple[Frame, np.ndarray | None]:
+        """``render``'s frame and the sensor's ADC samples behind it (uint16 H x W, output orientation; the test
+        pattern's mosaic when one is on; None without the sensor model), for the in-sensor network."""
         with self._render_lock:
             cam = self.camera(spec)
+            cam.last_samples = None
             frame = cam.render(seq, start_ns, shutter)
+            samples = cam.last_samples
         if spec.imu is not None:
             frame = with_imu(frame, spec, cam.camera, self.imu, seq, start_ns)
         pattern = spec.test_pattern
         meta = {**frame.meta, "bayer_order": spec.bayer_order, "test_pattern": pattern,
                 "pixel_format": spec.output_format}
         if pattern == "none":
-            return dataclasses.replace(frame, meta=meta)
+            return dataclasses.replace(frame, meta=meta), samples
         image = render_pattern(pattern, frame.width, frame.height)
+        bits = spec.sensor.bit_depth
+        dn = sf.mosaic(image, spec.bayer_order).astype(np.uint16) << (bits - 8)  # hwconfig: 8..16 bits
         if spec.raw:
-            bits = spec.sensor.bit_depth
-            dn = sf.mosaic(image, spec.bayer_order).astype(np.uint16) << (bits - 8)  # hwconfig: 8..16 bits
             data = codec(frame.format).encode(dn, sample_bits=bits)
-            return dataclasses.replace(frame, data=data, objects=(), meta=meta)
-        return dataclasses.replace(frame, data=image, objects=(), meta=meta)
+            return dataclasses.replace(frame, data=data, objects=(), meta=meta), dn
+        return dataclasses.replace(frame, data=image, objects=(), meta=meta), dn
 
 
 def encode(frame: Frame, spec: CameraSpec) -> Frame:
     """A device frame in ``spec``'s processed format (raw frames and BGR3 are returned as they are)."""
     fourcc = spec.pixel_format
-    if spec.raw or frame.format == fourcc:
+    if spec.raw or frame.format == fourcc or not frame.data.size:  # no data: metadata-only mode
         return frame
     return dataclasses.replace(frame, data=codec(fourcc).encode(frame.data), format=fourcc)
 

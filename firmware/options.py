@@ -174,6 +174,24 @@ def _size(text: str) -> tuple[int, int]:
 _seed = bounded(non_negative_int, 0, MAX_SEED)
 
 
+def _network(text: str) -> str | None:
+    from .insensor import network_spec
+
+    return network_spec(text)
+
+
+def _accel(text: str) -> Any:
+    from .insensor import accelerator
+
+    return accelerator(text)
+
+
+def _insensor_output(text: str) -> str:
+    from .insensor import output_mode
+
+    return output_mode(text)
+
+
 @dataclass(frozen=True)
 class Option:
     """One camera option: its parser, default, the scene kinds it applies to (None: not a scene option)."""
@@ -254,6 +272,16 @@ OPTIONS: dict[str, Option] = {o.name: o for o in (
     Option("imu_translation_m", _vector3, None, "the IMU's origin in camera coordinates x,y,z, m"),
     Option("rs_correct", _choice("none", "gyro"), "none", "ISP rolling-shutter correction: none | gyro (per-row "
                                                           "rotational unwarp from the IMU; processed formats)"),
+    Option("insensor", _network, "none", "in-sensor network, run on the chip on every frame it has time for: a "
+                                          "detector spec (personnet-raw, personnet, onnx:PATH, hog) or none"),
+    Option("insensor_input", _choice("raw", "isp"), None, "in-sensor network input: raw (the mosaic, no ISP) | "
+                                                         "isp (the ISP's picture) (default: the network's)"),
+    Option("insensor_size", _size, None, "largest in-sensor network input WxH; larger frames are binned by a whole "
+                                         "factor (default: 640x640)"),
+    Option("insensor_accel", _accel, "imx500", "in-sensor accelerator: imx500 | a throughput in GMAC/s (latency = "
+                                               "the network's MACs / throughput)"),
+    Option("insensor_output", _insensor_output, "frame", "what leaves the chip: frame (image and results, also "
+                                                         "frame+meta) | meta (results only)"),
     Option("test_pattern", _text, "none", "sensor test pattern instead of the scene: none | bars | solid | "
                                           "fade_bars | pn9 | walking_ones (as the sensor has them)"),
 )}

@@ -22,6 +22,8 @@ from .options import OPTIONS, SCENE_OPTIONS, as_text
 MAX_LINE = 256
 MAX_IMU_REPLY = 32
 """Most IMU samples one ``IMU?`` reply holds (ask again from its ``next=`` for more)."""
+MAX_INSENSOR_REPLY = 4
+"""Most in-sensor results one ``INSENSOR?`` reply holds (ask again from its ``next=`` for more)."""
 ERRORS = {100: "unknown command", 101: "wrong arguments", 102: "invalid value", 103: "refused by the device",
           104: "malformed line"}
 
@@ -116,6 +118,32 @@ def _imu(cam: FirmwareCamera, since: str) -> str:
     return f"n={len(s)} next={nxt} {rows}".rstrip()
 
 
+def _insensor(cam: FirmwareCamera, since: str) -> str:
+    """``n=N next=SEQ SEQ,T0,INPUT,DONE,K[,x0,y0,x1,y1,score,cls]*;...``: results of frames from ``since`` on
+    that are done on the device clock now (T0 the frame's first-line start of exposure; times in ns)."""
+    if cam.spec.insensor is None:
+        raise DeviceError("no in-sensor network (OPT insensor SPEC sets one)")
+    first = parse_int(since, "frame sequence number")
+    got = cam.insensor.recent(cam.clock_ns(), first)[:MAX_INSENSOR_REPLY]
+    nxt = got[-1].seq + 1 if got else first
+    parts = []
+    for r in got:
+        dets = [f"{b[0]:.1f},{b[1]:.1f},{b[2]:.1f},{b[3]:.1f},{sc:.3f},{c}"
+                for b, sc, c in zip(r.boxes, r.scores, r.classes, strict=True)]
+        parts.append(",".join([str(r.seq), str(r.timestamp_ns), str(r.input_ns), str(r.done_ns), str(len(r)),
+                               *dets]))
+    return f"n={len(got)} next={nxt} {';'.join(parts)}".rstrip()
+
+
+def _ledger(cam: FirmwareCamera) -> str:
+    doc = cam.insensor.ledger(cam.spec).to_json()
+    rows = " ".join(f"{k}={v['bytes_per_frame']}" for k, v in doc["rows"].items())
+    util = doc["rows"]["sent"]["utilisation"]
+    e = doc["energy_uj_per_frame"]
+    return (f"{rows} util={'none' if util is None else f'{util:.6f}'} insensor_uj={e['insensor']:.3f} "
+            f"host_uj={e['host']:.3f}")
+
+
 def _stats(cam: FirmwareCamera) -> str:
     return " ".join(f"{k}={v}" for k, v in dataclasses.asdict(cam.stats).items())
 
@@ -168,7 +196,12 @@ COMMANDS: dict[str, Command] = {
     "OPT?": Command(("NAME",), _get_option, "a camera option's value in effect"),
     "IMU?": Command(("SINCE_NS",), _imu, f"IMU samples stamped from SINCE_NS (device ns) until now, at most "
                     f"{MAX_IMU_REPLY}: n=N next=T t,wx,wy,wz,ax,ay,az;... (rad/s, m/s^2)"),
-    "STATS?": Command((), _stats, "frames made, skipped, triggers taken and ignored"),
+    "INSENSOR?": Command(("SINCE_SEQ",), _insensor, f"in-sensor results of frames from SINCE_SEQ done by now, at "
+                         f"most {MAX_INSENSOR_REPLY}: n=N next=SEQ seq,t0_ns,input_ns,done_ns,k"
+                         "[,x0,y0,x1,y1,score,cls]*;..."),
+    "LEDGER?": Command((), _ledger, "bytes per frame (raw, isp, meta, tensor, sent), link utilisation, energy per "
+                       "frame (uJ) of the in-sensor and host pipelines"),
+    "STATS?": Command((), _stats, "frames made, skipped, triggers taken and ignored, in-sensor runs and skips"),
 }
 """The protocol: command word -> Command."""
 

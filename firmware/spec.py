@@ -1,12 +1,12 @@
 """``CameraSpec``: the one frozen, validated description of an emulated camera.
 
-Sensor, output size, frame and line length, shutter, readout, exposure, gain, pixel format, sensor-model
-stages, blur bound, flips, test pattern and scene: everything that decides a frame's bytes besides the
-frame's sequence number and start time. It is validated once, when it is made (``dataclasses.replace``
-re-validates), and never changes; a device that is reprogrammed holds a new one. Every front door builds or
-replaces it: ``from_options`` for text (``emu:`` URIs, ``rollcam emulate`` flags, ``rollcam://`` URLs, serial
-``SCENE``), ``create`` for typed values, and the firmware's controls, registers, V4L2 and UVC requests through
-``rollcam.firmware.controls.SensorState``.
+Sensor, output size, frame and line length, shutter, readout, exposure, gain, pixel format, sensor-model stages,
+blur bound, flips, test pattern, scene, IMU and in-sensor network (``insensor``): everything that decides a
+frame's bytes besides the frame's sequence number and start time. It is validated once, when it is made
+(``dataclasses.replace`` re-validates), and never changes; a device that is reprogrammed holds a new one. Every
+front door builds or replaces it: ``from_options`` for text (``emu:`` URIs, ``rollcam emulate`` flags,
+``rollcam://`` URLs, serial ``SCENE``), ``create`` for typed values, and the firmware's controls, registers,
+V4L2 and UVC requests through ``rollcam.firmware.controls.SensorState``.
 
 Gain is the linear total gain (1.0 = unity): the sensor model splits it into analog then digital gain as a
 driver does; doors that speak register codes (V4L2 analogue/digital gain, the gain registers) or hundredths
@@ -33,6 +33,7 @@ from rollcam.sim.sensor import flipped_cfa
 from rollcam.sim.synthetic import MIN_FPS, StreamSettings, resolve_settings
 
 from .imu import IMU_OPTIONS, imu_option_values, resolve_imu
+from .insensor import INSENSOR_OPTIONS, InSensorConfig, insensor_option_values, load_network, resolve_insensor
 from .options import MAX_BLUR_PX, MAX_EXPOSURE_US, MAX_SEED, OPTIONS, check_size, check_text, parse_options
 from .pixfmt import FORMATS, raw_formats
 from .traits import traits_for
@@ -66,6 +67,7 @@ class CameraSpec:
     camera: str = "0"
     imu: ImuParams | None = None
     rs_correct: str = "none"
+    insensor: InSensorConfig | None = None
     settings: StreamSettings = field(init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
@@ -81,6 +83,9 @@ class CameraSpec:
         fix(self, "gain", float(self.gain))
         fix(self, "pixel_format", self._base_format(self.pixel_format))
         fix(self, "scene_options", tuple(sorted(dict(self.scene_options).items())))
+        if isinstance(self.insensor, InSensorConfig) and self.insensor.input is None:  # the network's own input
+            fix(self, "insensor", dataclasses.replace(self.insensor, input=self.insensor.resolved_input(
+                load_network(self.insensor.network))))
         _check_values(self)
 
     # -------------------------------------------------------------------------------------- building
@@ -93,6 +98,8 @@ class CameraSpec:
         sensor = load_sensor(sensor) if isinstance(sensor, str) else sensor
         if "imu_values" in fields:
             fields["imu"] = resolve_imu(sensor, fields.get("imu"), fields.pop("imu_values"))
+        if "insensor_values" in fields:
+            fields["insensor"] = resolve_insensor(fields.get("insensor"), fields.pop("insensor_values"))
         if isinstance(scene, str):
             fields["scene"], scene = scene, None
         if scene:
@@ -131,6 +138,8 @@ class CameraSpec:
         changes = _fields(values)
         if "imu_values" in changes:
             changes["imu"] = resolve_imu(self.sensor, self.imu, changes.pop("imu_values"))
+        if "insensor_values" in changes:
+            changes["insensor"] = resolve_insensor(self.insensor, changes.pop("insensor_values"))
         fps = changes.pop("fps", None)
         if "size" in changes:
             changes.setdefault("frame_length_lines", None)
@@ -149,8 +158,11 @@ class CameraSpec:
 
     @property
     def uses_physics(self) -> bool:
-        """True when frames go through the sensor model (default: every format but BGR3)."""
-        return self.pixel_format != "BGR3" if self.physics is None else self.physics
+        """True when frames go through the sensor model (default: every format but BGR3, and any stream whose
+        in-sensor network reads the raw mosaic)."""
+        if self.physics is not None:
+            return self.physics
+        return self.pixel_format != "BGR3" or (self.insensor is not None and self.insensor.input == "raw")
 
     @property
     def output_format(self) -> str:
@@ -204,7 +216,7 @@ class CameraSpec:
                 "noise": (parse_stages(None) if self.noise is None else self.noise) - {"quantization"},
                 "noise_seed": self.noise_seed, "hflip": self.hflip, "vflip": self.vflip,
                 "test_pattern": self.test_pattern, **imu_option_values(self.sensor, self.imu),
-                "rs_correct": self.rs_correct}
+                "rs_correct": self.rs_correct, **insensor_option_values(self.insensor)}
 
     def _base_format(self, fourcc: str) -> str:
         """``fourcc`` as stored: processed as is, raw in the sensor's own (unflipped) Bayer order."""
@@ -276,6 +288,12 @@ def _check_values(spec: CameraSpec) -> None:
         raise ConfigError(f"rs_correct {spec.rs_correct!r} is not one of ['none', 'gyro']")
     if spec.rs_correct == "gyro" and (spec.imu is None or spec.raw or spec.hflip or spec.vflip):
         raise ConfigError("rs_correct=gyro needs the IMU on (imu=on), a processed format and no flips")
+    if spec.insensor is not None:
+        if not isinstance(spec.insensor, InSensorConfig):
+            raise ConfigError(f"insensor must be an InSensorConfig or None, got {spec.insensor!r}")
+        spec.insensor.resolved_input(load_network(spec.insensor.network))  # the network loads now: bad specs fail
+        if spec.insensor.input == "raw" and spec.physics is False:
+            raise ConfigError("insensor_input=raw needs the sensor model (physics on): the mosaic is its output")
     scene_of(spec).camera(spec.camera)  # the scene is built (and cached) now: bad options fail here
 
 
@@ -285,8 +303,11 @@ def _fields(values: dict[str, Any]) -> dict[str, Any]:
     imu = {k: v for k, v in values.items() if k in IMU_OPTIONS}
     if imu:
         out["imu_values"] = imu
+    insensor = {k: v for k, v in values.items() if k in INSENSOR_OPTIONS}
+    if insensor:
+        out["insensor_values"] = insensor
     for name, value in values.items():
-        if name in _SCENE_NAMES or name in IMU_OPTIONS:
+        if name in _SCENE_NAMES or name in IMU_OPTIONS or name in INSENSOR_OPTIONS:
             continue
         if name == "exposure_us":
             out["exposure_ns"] = round(value * 1000)

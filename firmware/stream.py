@@ -32,12 +32,15 @@ Clock = Callable[[], int]
 
 @dataclass
 class CameraStats(Stats):
-    """What a device has done: frames made, frames skipped because they were late, external triggers."""
+    """What a device has done: frames made, frames skipped because they were late, external triggers, and
+    in-sensor inferences run and frames the in-sensor accelerator was too busy for."""
 
     frames: int = 0
     skipped: int = 0
     triggers: int = 0
     triggers_ignored: int = 0
+    insensor_runs: int = 0
+    insensor_skipped: int = 0
 
 
 @dataclass(frozen=True)

@@ -11,6 +11,10 @@ from rollcam.common.errors import (
     RollcamError,
     SourceError,
 )
+from rollcam.firmware.insensor import set_network_loader as _set_network_loader
+
+# The emulated camera's in-sensor networks are host detectors: registered by name, imported on first use.
+_set_network_loader("rollcam.host.insensor:load_network", replace=False)
 
 
 def __getattr__(name: str) -> object:

@@ -1,7 +1,9 @@
 """``rollcam detect SOURCE --detector NAME``: live detection on any source, logged and annotated.
 
 The loop reads a frame, hands the detector its preview (BGR) or raw mosaic (detectors with ``input='raw'``),
-and shows fps, capture latency and detector latency on one status line. With ``--out DIR`` it writes:
+or, with ``--detector insensor``, takes the detections the camera's in-sensor network made (each carried result
+scored against the frame it came from: ``rollcam.host.detectors.insensor``), and shows fps, capture latency
+and detector latency on one status line. With ``--out DIR`` it writes:
 
 - ``detections.jsonl``: one record per frame (sequence, timestamps, line time, exposure, latencies,
   detections with box/score/class, and for synthetic sources the ground-truth objects and per-frame match
@@ -204,26 +206,26 @@ def run_detect(source: CameraSource, detector: Detector, *, frames: int | None =
             t1 = clock()
             if frame is None:
                 break
-            image = frame.data if detector.input == "raw" else frame_bgr(frame)
             t2 = clock()
-            dets = detector.detect(image)
+            if detector.input == "device":  # the camera's own detections, each with the frame it came from
+                pairs = detector.pair(frame)
+                image = None
+            else:
+                image = frame.data if detector.input == "raw" else frame_bgr(frame)
+                t2 = clock()
+                pairs = [(frame, detector.detect(image))]
             t3 = clock()
-            counts = result.truth.update(frame, dets)
-            if log is not None:
-                rec: dict[str, Any] = {
-                    "sequence": frame.sequence, "timestamp_ns": frame.timestamp_ns, "shutter": frame.shutter,
-                    "line_time_ns": frame.line_time_ns, "exposure_ns": frame.exposure_ns,
-                    "width": frame.width, "height": frame.height, "capture_ms": round((t1 - t0) * 1e3, 3),
-                    "detect_ms": round((t3 - t2) * 1e3, 3), "detections": dets.to_json()}
-                if frame.objects is not None:
-                    rec["objects"] = [o.to_json() for o in frame.objects]
-                    rec["match"] = {k: {"tp": c.tp, "fp": c.fp, "fn": c.fn} for k, c in (counts or {}).items()}
-                log.write(rec)
-            if sink is not None:
-                sink.put(annotate(image if image.ndim == 3 else frame_bgr(frame), dets, frame, names))
+            dets = Detections.empty()
+            for src, dets in pairs:
+                counts = result.truth.update(src, dets)
+                if log is not None:
+                    log.write(_record(src, dets, counts, (t1 - t0) * 1e3, (t3 - t2) * 1e3))
+                if sink is not None and src.data.size:  # a metadata-only frame has no picture to draw on
+                    sink.put(annotate(image if image is not None and image.ndim == 3 else frame_bgr(src), dets,
+                                      src, names))
+                result.detections += len(dets)
             t4 = clock()
             result.frames += 1
-            result.detections += len(dets)
             result.capture_ms.append((t1 - t0) * 1e3)
             result.detect_ms.append((t3 - t2) * 1e3)
             result.bookkeeping_ms.append(((t2 - t1) + (t4 - t3)) * 1e3)
@@ -244,6 +246,20 @@ def run_detect(source: CameraSource, detector: Detector, *, frames: int | None =
             if out_dir is not None:
                 _write_summary(out_dir, result, source, detector, meta or {})
     return result
+
+
+def _record(frame: Frame, dets: Detections, counts: dict[str, Any] | None, capture_ms: float,
+            detect_ms: float) -> dict[str, Any]:
+    """One ``detections.jsonl`` record: the frame, its latencies, detections and truth matches."""
+    rec: dict[str, Any] = {
+        "sequence": frame.sequence, "timestamp_ns": frame.timestamp_ns, "shutter": frame.shutter,
+        "line_time_ns": frame.line_time_ns, "exposure_ns": frame.exposure_ns,
+        "width": frame.width, "height": frame.height, "capture_ms": round(capture_ms, 3),
+        "detect_ms": round(detect_ms, 3), "detections": dets.to_json()}
+    if frame.objects is not None:
+        rec["objects"] = [o.to_json() for o in frame.objects]
+        rec["match"] = {k: {"tp": c.tp, "fp": c.fp, "fn": c.fn} for k, c in (counts or {}).items()}
+    return rec
 
 
 def _write_summary(out_dir: Path, result: DetectResult, source: CameraSource, detector: Detector,

@@ -151,6 +151,17 @@ def _fault_stats(server: Any) -> str:
     return ", ".join(f"{k}={v}" for k, v in totals.items() if v)
 
 
+def ledger_line(camera: Any) -> str:
+    """The stream's ledger on one line: bytes per frame sent, link utilisation, energy per frame of the pipelines."""
+    doc = camera.insensor.ledger(camera.spec).to_json()
+    sent, e = doc["rows"]["sent"], doc["energy_uj_per_frame"]
+    util = "no link in the hw_config" if sent["utilisation"] is None else \
+        f"{100 * sent['utilisation']:.3f}% of the {doc['link']['bus']} link"
+    pipes = "" if doc["mode"] == "none" else \
+        f", energy/frame in-sensor {e['insensor']:.1f} uJ vs host {e['host']:.1f} uJ"
+    return f"{sent['bytes_per_frame']:,} B/frame sent ({doc['mode']}), {sent['mbit_s']:.2f} Mbit/s, {util}{pipes}"
+
+
 def serve(args: argparse.Namespace, camera_options: dict[str, str]) -> int:
     """Run the emulator of ``args.sensor`` programmed by ``camera_options`` (text, as in an emu: URI) on the
     transports ``args`` asks for, until Ctrl-C, SIGTERM or ``args.duration`` (0: stop at once); every
@@ -174,12 +185,14 @@ def serve(args: argparse.Namespace, camera_options: dict[str, str]) -> int:
             pump.start()
         if args.json:
             print(json.dumps({"sensor": camera.sensor.name, "identity": camera.identity(),
-                              "faults": args.faults.to_text(), **{r.name: r.info for r in running}}), flush=True)
+                              "faults": args.faults.to_text(), "ledger": camera.insensor.ledger(camera.spec).to_json(),
+                              **{r.name: r.info for r in running}}), flush=True)
         else:
             print(f"emulating {camera!r}" + (f" with faults {args.faults}" if args.faults else ""), flush=True)
             for r in running:
                 for line in r.lines:
                     print(f"  {line}", flush=True)
+            print(f"  ledger:        {ledger_line(camera)}", flush=True)
             print("press Ctrl-C to stop", flush=True)
         with contextlib.suppress(KeyboardInterrupt):  # Ctrl-C is the normal way to stop a server
             wait_until_stopped(stop, args.duration, pump)
@@ -189,7 +202,11 @@ def serve(args: argparse.Namespace, camera_options: dict[str, str]) -> int:
             r.server.close()
         camera.stream_off()
         signal.signal(signal.SIGTERM, previous)
-    print(f"stopped; {camera.stats.frames} frames made, {camera.stats.skipped} skipped", file=sys.stderr)
+    st = camera.stats
+    extra = "" if camera.spec.insensor is None else \
+        f"; in-sensor network ran on {st.insensor_runs}, skipped {st.insensor_skipped} (accelerator busy)"
+    print(f"stopped; {st.frames} frames made, {st.skipped} skipped{extra}", file=sys.stderr)
+    print(f"ledger: {ledger_line(camera)}", file=sys.stderr)
     for r in running:
         stats = _fault_stats(r.injector if r.injector is not None else r.server)
         if args.faults and stats:

@@ -296,6 +296,9 @@ def codec(fourcc: str) -> Codec:
 
 def preview_frame(frame: Frame, levels: Levels | None = None) -> np.ndarray:
     """The 8-bit BGR picture of ``frame``; a raw one's black level from ``levels`` or else its own meta."""
+    if not frame.data.size:
+        raise ConfigError(f"frame {frame.sequence} has no image: its camera sends metadata only "
+                          "(insensor_output=meta)")
     if levels is None:
         levels = Levels.of_frame(frame)
     return codec(frame.format).preview(frame.data, frame.width, frame.height, levels)
@@ -305,6 +308,6 @@ def transcode(frame: Frame, fourcc: str, levels: Levels | None = None, quality: 
               ) -> np.ndarray:
     """``frame`` as wire data of ``fourcc``: its data when already in it, else its preview encoded."""
     target = codec(fourcc)
-    if frame.format == target.fourcc:
+    if frame.format == target.fourcc and frame.data.size:
         return frame.data
     return target.encode(preview_frame(frame, levels), quality=quality)

@@ -11,6 +11,7 @@ from .timing import Readout
 
 if TYPE_CHECKING:
     from .imu import ImuSamples
+    from .insensor import InSensorResult
     from .pose import Kinematics
 
 Box = tuple[float, float, float, float]
@@ -63,6 +64,8 @@ class Frame:
     out as ``format`` says (``rollcam.sim.formats``); ``size`` (width, height) is the image size in pixels.
     With an IMU (``rollcam.sim.imu``), ``imu`` holds the samples the device delivered with this frame and, for
     synthetic frames, ``poses`` the camera's true kinematics at every line's sample time (``rollcam.sim.pose``).
+    With an in-sensor network (``rollcam.sim.insensor``), ``insensor`` holds the results that completed on the
+    device clock since the previous frame (each names its own source frame); None when the camera has none.
     """
 
     data: np.ndarray
@@ -79,6 +82,7 @@ class Frame:
     size: tuple[int, int] | None = field(default=None, repr=False)
     imu: ImuSamples | None = field(default=None, repr=False)
     poses: Kinematics | None = field(default=None, repr=False)
+    insensor: tuple[InSensorResult, ...] | None = field(default=None, repr=False)
 
     @property
     def height(self) -> int:
@@ -123,6 +127,8 @@ class Frame:
         }
         if self.imu is not None:
             rec["imu_samples"] = len(self.imu)
+        if self.insensor is not None:
+            rec["insensor"] = [r.to_json() for r in self.insensor]
         if self.objects is not None:
             rec["objects"] = [o.to_json() for o in self.objects]
         rec.update(self.meta)

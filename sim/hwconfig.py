@@ -5,7 +5,7 @@ row and each class a ``_rules`` table of checks that relate several values. The 
 and rejects unknown and missing keys; each class's ``__post_init__`` runs its schema and rules, so objects
 made with ``dataclasses.replace`` are checked too. Errors are ``ConfigError``s naming the file, the dotted key
 (``modes[1].line_length_pck``), the expected form and the bad value. The optional ``imu`` section is
-``rollcam.sim.imu.ImuParams``.
+``rollcam.sim.imu.ImuParams``; the optional ``link`` section (``Link``) the sensor's CSI-2 or USB link.
 """
 
 from __future__ import annotations
@@ -91,6 +91,21 @@ class SensorMode(_Checked):
     def read_size(self) -> tuple[int, int]:
         """Width and height of the sensor area this mode reads (output size times binning)."""
         return self.width * self.binning[0], self.height * self.binning[1]
+
+
+@dataclass(frozen=True, kw_only=True)
+class Link(_Checked):
+    """The sensor's data link to its host: MIPI CSI-2 (``lanes`` x ``lane_mbps``) or USB (``lane_mbps`` is the
+    bus's signalling rate, ``lanes`` 1), for the bandwidth ledger (``rollcam.firmware.ledger``)."""
+
+    bus: str = _f(str, "'csi2' or 'usb'", _one_of("csi2", "usb"))
+    lanes: int = _f(int, "an integer in 1..8 (data lanes)", lambda v: 1 <= v <= 8)
+    lane_mbps: float = _f(float, "a positive number (Mbit/s per lane)", _pos)
+
+    @property
+    def capacity_bps(self) -> int:
+        """Raw bits per second the link carries, all lanes together."""
+        return round(self.lanes * self.lane_mbps * 1e6)
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -217,6 +232,7 @@ class SensorConfig(_Checked):
     registers: tuple[Register, ...] = _f(_ListOf(Register), "a list of registers (may be empty)")
     sources: tuple[str, ...] = _f(_ListOf(str), "a list of strings", None, ())
     imu: ImuParams | None = _f(ImuParams, "a mapping of IMU figures (Kalibr terms), or absent", None, None)  # noqa: RUF009
+    link: Link | None = _f(Link, "a mapping {bus, lanes, lane_mbps}, or absent", None, None)  # noqa: RUF009
     _rules: ClassVar[tuple[_Rule, ...]] = (
         *(_Rule(f"optics.sensor_{ax}_mm",
                 lambda s, _, i, ax=ax: math.isclose(_dotted(s, f"optics.sensor_{ax}_mm"), _size_mm(s, ax),

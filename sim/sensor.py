@@ -86,7 +86,10 @@ class SensorPipeline:
 
     def deliver(self, radiance: np.ndarray | LinearFrame, exposure_ns: int, frame_index: int) -> np.ndarray:
         """Frame data in ``fourcc``'s layout (encoded by ``rollcam.sim.codecs``)."""
-        dn = self.samples(radiance, exposure_ns, frame_index)
+        return self.encode(self.samples(radiance, exposure_ns, frame_index))
+
+    def encode(self, dn: np.ndarray) -> np.ndarray:
+        """ADC samples (``samples``) in ``fourcc``'s layout: the raw layout, or the preview ISP's picture."""
         if self.raw:
             return codec(self.fourcc).encode(dn, sample_bits=self.model.bit_depth)
         h, w = dn.shape

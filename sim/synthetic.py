@@ -203,6 +203,9 @@ class SyntheticCamera:
             raise ConfigError(f"pixel format {pixel_format!r} needs the sensor model (physics on)")
         self.blur_px = blur_px or None
         self.pipeline: SensorPipeline | None = None
+        # The ADC samples (uint16 H x W, output orientation) of the last frame made through the sensor model: the
+        # raw mosaic an in-sensor network reads even when the stream's format is an ISP picture.
+        self.last_samples: np.ndarray | None = None
         # Radiance scratch of the sensor path, reused frame to frame: each frame is delivered (copied into its
         # fourcc layout) before the next render, and a reused buffer's pages are already mapped.
         self._radiance_buf: np.ndarray | None = None
@@ -317,7 +320,9 @@ class SyntheticCamera:
             extra.update(blur_bound_px=self.blur_px, blur_samples_max=int(plan.n.max()),
                          blur_evaluations=plan.evaluations, blur_capped=plan.capped)
         assert radiance is not None
-        return res, pipe.deliver(radiance, s.exposure_ns, index), extra
+        dn = pipe.samples(radiance, s.exposure_ns, index)
+        self.last_samples = dn
+        return res, pipe.encode(dn), extra
 
     def frames(self, n: int | None = None, shutter: str | None = None, first: int = 0) -> Iterator[Frame]:
         """Consecutive frames (forever when ``n`` is None)."""

@@ -27,7 +27,9 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
     p.add_argument("dataset", metavar="DATASET", help="rollcam dataset folder, YOLO data.yaml (or its folder), "
                    "or COCO JSON file")
     src = p.add_mutually_exclusive_group(required=True)
-    src.add_argument("--detector", metavar="SPEC", help="detector spec, e.g. hog or 'onnx:model.onnx?conf=0.25'")
+    src.add_argument("--detector", metavar="SPEC", help="detector spec, e.g. hog or 'onnx:model.onnx?conf=0.25'; "
+                     "insensor:NET takes what the emulated camera's in-sensor network NET sends for each image "
+                     "(a rollcam dataset: its records re-make the frames)")
     src.add_argument("--detections", metavar="FILE", help="detections.jsonl or a COCO results JSON")
     p.add_argument("--split", default="test", help="split to evaluate (default: test)")
     p.add_argument("--subset", default=None, metavar="NAME", help="evaluate one subset only, e.g. normal_rs")

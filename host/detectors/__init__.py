@@ -14,7 +14,8 @@ from rollcam.common.errors import ConfigError
 
 from .base import PERSON, Detections, Detector, DetectorSpec, parse_spec
 
-DETECTORS = {"hog": "hog", "onnx": "onnx", "personnet": "personnet", "ssdlite": "ssdlite"}
+DETECTORS = {"hog": "hog", "insensor": "insensor", "onnx": "onnx", "personnet": "personnet",
+             "personnet-raw": "personnet_raw", "ssdlite": "ssdlite"}
 """Detector name -> module name under ``rollcam.host.detectors``."""
 
 

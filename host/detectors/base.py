@@ -57,10 +57,11 @@ class Detections:
 @runtime_checkable
 class Detector(Protocol):
     """What every detector offers. ``input`` says what ``detect`` wants: ``"bgr"`` (8-bit BGR, H x W x 3)
-    or ``"raw"`` (the sensor's raw mosaic, ISP-less). ``class_names`` maps class ids to names."""
+    or ``"raw"`` (the sensor's raw mosaic, ISP-less); ``"device"`` is the ``insensor`` reader, whose detections
+    come with the frames (its ``pair(frame)``). ``class_names`` maps class ids to names."""
 
     name: str
-    input: Literal["bgr", "raw"]
+    input: Literal["bgr", "raw", "device"]
     class_names: dict[int, str]
 
     def detect(self, image: np.ndarray) -> Detections:

@@ -177,6 +177,7 @@ class OnnxDetector:
         self.width, self.height = size or ((fixed[1], fixed[0]) if fixed else DEFAULT_SIZE[self.layout])
         self.letterbox = (self.layout == "yolo") if letterbox_input is None else letterbox_input
         self.class_names = class_names or self._names_from_metadata()
+        self.last_outputs: tuple[tuple[str, np.ndarray], ...] = ()  # the raw output tensors of the last run
 
     # ------------------------------------------------------------------------------------------ model layout
     def _find_layout(self, layout: str) -> str:
@@ -228,11 +229,14 @@ class OnnxDetector:
         tensor, place = self._prepare(image)
         if self.layout == "yolo":
             (out,) = self._session.run(None, {self._input_name: tensor})
+            self.last_outputs = ((self._session.get_outputs()[0].name, np.asarray(out)),)
             boxes, scores, classes = self._decode_yolo(np.asarray(out))
         else:
             names = [self._ssd_outputs[r] for r in ("boxes", "scores", "classes")]
             num_name = self._ssd_outputs.get("num")
             outs = self._session.run([*names, *([num_name] if num_name else [])], {self._input_name: tensor})
+            self.last_outputs = tuple(zip([*names, *([num_name] if num_name else [])],
+                                          (np.asarray(o) for o in outs), strict=True))
             boxes, scores, classes = self._decode_ssd(outs)
         classes = classes - self.class_offset
         keep = scores >= self.conf

@@ -1,4 +1,5 @@
-"""``evaluate_dataset``: load the sets, get detections (a detector or a file), compute the metrics."""
+"""``evaluate_dataset``: load the sets, get detections (a detector, the emulated camera's in-sensor network
+(``insensor:NET``, ``rollcam.host.evaluation.insensor``) or a file), compute the metrics."""
 
 from __future__ import annotations
 
@@ -49,7 +50,14 @@ def evaluate_dataset(dataset: str | Path, *, detector: str | None = None, detect
         if not sets:
             raise ConfigError(f"--subset {subset!r} is not in {str(dataset)!r}")
     t0 = time.perf_counter()
-    if detector is not None:
+    if detector is not None and detector.startswith("insensor:"):  # what the emulated camera's network sends
+        from .insensor import insensor_detections
+
+        network = detector.removeprefix("insensor:")
+        all_dets = [insensor_detections(dataset, s, network) for s in sets]
+        if save_detections is not None:
+            _save(Path(save_detections), sets, all_dets)
+    elif detector is not None:
         from ..detectors import load_detector
 
         det = load_detector(detector)

@@ -4,7 +4,8 @@ The options are the emulated camera's option table (``rollcam.firmware.options``
 emulate`` flags, ``rollcam://`` URLs and the serial ``OPT``/``SCENE`` commands read): ``scene``, ``seed``,
 ``camera``, the scene kind's own (``time``, ``speed``, ``pedestrians``, ``ego``; ``vx``; ``level``), ``size``,
 ``fps``, ``shutter``, ``readout``, ``exposure_us``, ``gain`` (linear total), ``format``, ``physics``,
-``blur_px``, ``noise``, ``serial``, ``noise_seed``, ``hflip``, ``vflip``, ``test_pattern``. Three more belong to
+``blur_px``, ``noise``, ``serial``, ``noise_seed``, ``hflip``, ``vflip``, ``test_pattern``, the IMU's and the
+in-sensor network's (``insensor=personnet-raw``: frames carry its results, docs/insensor.md). Three more belong to
 the source: ``start_ns`` (device clock at frame 0), ``frames`` (stop after N frames; endless by default) and
 ``faults`` (a ``rollcam.common.faults`` plan, e.g. ``faults=drop=5,error=2,seed=3``; in process ``drop`` skips
 frames (a gap in ``sequence``), ``error`` sets ``meta["error"]``, ``disconnect=N`` makes the read after N
@@ -131,6 +132,10 @@ class EmuSource(CameraSource):
         got = self._next(("global", "rolling"))
         return None if got is None else (got[0], got[1])
 
+    def ledger(self) -> Any:
+        """The stream's energy and bandwidth ledger (``rollcam.firmware.ledger``; docs/insensor.md)."""
+        return self.device.insensor.ledger(self.device.spec)
+
     def info(self) -> dict[str, Any]:
         """Sensor, size, timing and scene of the stream."""
         spec, cam = self.device.spec, self.camera
@@ -139,7 +144,9 @@ class EmuSource(CameraSource):
                 "shutter": s.shutter, "readout": s.readout.value, "line_time_ns": s.timing.line_time_ns,
                 "fps": s.timing.fps, "exposure_ns": s.exposure_ns, "exposure_clamped": s.clamped_exposure,
                 "scene": spec.scene, "seed": spec.seed, "gain": spec.gain, "physics": spec.uses_physics,
-                **(cam.pipeline.info() if cam.pipeline is not None else {}), "format": spec.output_format}
+                **(cam.pipeline.info() if cam.pipeline is not None else {}), "format": spec.output_format,
+                **({} if spec.insensor is None else {"insensor": spec.insensor.network,
+                                                     "insensor_output": spec.insensor.output})}
 
 
 def open_source(uri: SourceURI) -> EmuSource:

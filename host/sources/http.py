@@ -13,6 +13,7 @@ the Frame when the server sends them (the rollcam emulator does; mjpg-streamer s
 | ``X-Line-Time-Ns`` | ``line_time_ns`` | integer ns (0: global shutter) |
 | ``X-Readout`` | ``readout`` | ``top_to_bottom`` etc. (as in hw_configs) |
 | ``X-Shutter`` | ``shutter`` | ``rolling`` or ``global`` |
+| ``X-Insensor`` | ``insensor`` | the camera's in-sensor results, a JSON list of ``InSensorResult.to_json()`` |
 
 Without them: sequence counts parts received, the timestamp is the host's monotonic clock at arrival, and
 the row timing comes from ``sensor=NAME`` (or is unknown). A line time from the headers wins over the
@@ -34,6 +35,7 @@ the rate comes from the parts' device timestamps (``X-Timestamp-Ns``/``X-Timesta
 
 from __future__ import annotations
 
+import dataclasses
 import threading
 import time
 from collections import deque
@@ -76,6 +78,17 @@ def _shutter(text: str) -> str:
     return value
 
 
+def _insensor(text: str) -> tuple[Any, ...]:
+    import json
+
+    from rollcam.sim.insensor import InSensorResult
+
+    try:
+        return tuple(InSensorResult.from_json(d) for d in json.loads(text))
+    except (KeyError, TypeError, AttributeError) as exc:
+        raise ValueError(f"not a list of in-sensor results ({exc})") from None
+
+
 PART_HEADERS: dict[str, tuple[str, Callable[[str], Any]]] = {
     "x-sequence": ("sequence", int),
     "x-timestamp-ns": ("timestamp_ns", int),
@@ -84,6 +97,7 @@ PART_HEADERS: dict[str, tuple[str, Callable[[str], Any]]] = {
     "x-line-time-ns": ("line_time_ns", non_negative_int),
     "x-readout": ("readout", Readout.parse),
     "x-shutter": ("shutter", _shutter),
+    "x-insensor": ("insensor", _insensor),
 }
 """Part header (lower case) -> (field, parser). ``timestamp_s`` is used only without ``timestamp_ns``."""
 
@@ -310,6 +324,8 @@ class HttpMjpegSource(CameraSource):
                                        **({"dropped": self._latest.dropped} if self._latest is not None else {})})
         if "line_time_ns" in fields or "shutter" in fields or "readout" in fields:
             frame = self._with_header_timing(frame, fields)
+        if "insensor" in fields:
+            frame = dataclasses.replace(frame, insensor=fields["insensor"])
         self._parts += 1
         return frame
 

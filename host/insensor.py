@@ -1,0 +1,142 @@
+"""Host detectors as in-sensor networks: the loader the firmware's in-sensor stage calls, and their op counts.
+
+``rollcam.firmware.insensor`` knows networks only through its ``Network`` protocol; ``import rollcam.host``
+registers ``load_network`` here, which builds any rollcam detector spec (``load_detector``) and wraps it as a
+``HostNetwork``. Its ``macs`` (multiply-accumulates per run, which set the modelled latency and energy) are
+counted from the ONNX graph at the model's input size (Conv, ConvTranspose, Gemm, MatMul; with the ``onnx``
+package, else the packaged model card's figure), times the runs of one image (tiles); HOG has no graph, and
+is costed at ``HOG_MACS_PER_PIXEL`` (a rough figure for gradients, cell histograms and the linear SVM, stated
+as such in docs/insensor.md). A raw network gets the mosaic at the bit depth its model was trained on.
+"""
+
+from __future__ import annotations
+
+import functools
+import threading
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from rollcam.common.errors import ConfigError
+from rollcam.firmware.insensor import NetworkOutput
+
+HOG_MACS_PER_PIXEL = 200
+"""Assumed cost of OpenCV's HOG people detector per input pixel and pyramid level (not measured)."""
+
+
+@functools.lru_cache(maxsize=16)
+def onnx_macs(path: str, width: int, height: int) -> int:
+    """Multiply-accumulates of one run of the ONNX model at ``path`` on a ``width`` x ``height`` input (batch 1),
+    from its graph's Conv, ConvTranspose, Gemm and MatMul nodes after shape inference."""
+    from rollcam.common.errors import require
+
+    onnx = require("onnx", feature="counting an in-sensor network's operations")
+    model = onnx.load(path)
+    dims = model.graph.input[0].type.tensor_type.shape.dim
+    if len(dims) == 4:
+        nchw = dims[1].dim_value in (1, 3)
+        sizes = (1, dims[1].dim_value, height, width) if nchw else (1, height, width, dims[3].dim_value)
+        for d, v in zip(dims, sizes, strict=True):
+            d.ClearField("dim_param")
+            d.dim_value = v
+    model = onnx.shape_inference.infer_shapes(model)
+    shapes: dict[str, list[int]] = {}
+    for vi in [*model.graph.value_info, *model.graph.input, *model.graph.output]:
+        shapes[vi.name] = [d.dim_value for d in vi.type.tensor_type.shape.dim]
+    inits = {t.name: list(t.dims) for t in model.graph.initializer}
+    shapes.update(inits)
+    total = 0
+    for node in model.graph.node:
+        if node.op_type in ("Conv", "ConvTranspose"):
+            w = shapes.get(node.input[1])
+            out = shapes.get(node.output[0])
+            if not w or not out:
+                continue
+            if node.op_type == "Conv":  # weight (Cout, Cin/g, kh, kw): each output element is Cin/g*kh*kw MACs
+                total += int(np.prod(out)) * int(np.prod(w[1:]))
+            else:  # weight (Cin, Cout/g, kh, kw): each input element feeds Cout/g*kh*kw outputs
+                inp = shapes.get(node.input[0]) or []
+                total += int(np.prod(inp)) * int(np.prod(w[1:]))
+        elif node.op_type in ("Gemm", "MatMul"):
+            a, b = shapes.get(node.input[0]), shapes.get(node.input[1])
+            if a and b:
+                total += int(np.prod(a)) * int(b[-1])
+    return total
+
+
+class HostNetwork:
+    """A rollcam detector behind the firmware's ``Network`` protocol (one inference at a time)."""
+
+    def __init__(self, spec: str, detector: Any, macs_per_run: int | None) -> None:
+        self.spec = spec
+        self.detector = detector
+        self.name = spec
+        self.input = "raw" if detector.input == "raw" else "isp"
+        self._macs = macs_per_run
+        self._lock = threading.Lock()
+
+    def __repr__(self) -> str:
+        return f"HostNetwork({self.spec!r}, {self.input}, {self.detector!r})"
+
+    def runs_per_image(self) -> int:
+        """Network runs one image costs (a tiled detector runs the whole frame and each tile)."""
+        tiles = getattr(self.detector, "tiles", None)
+        return 1 if tiles is None else tiles[0] * tiles[1] + int(getattr(self.detector, "full", True))
+
+    def macs(self, width: int, height: int) -> int:
+        """Multiply-accumulates of one image of ``width`` x ``height`` (see the module docstring)."""
+        if self._macs is None:  # HOG: per pixel, over the pyramid's levels (a geometric series of areas)
+            scale = float(getattr(self.detector, "scale", 1.05))
+            levels = 1.0 / (1.0 - 1.0 / (scale * scale))
+            return round(width * height * HOG_MACS_PER_PIXEL * min(levels, 64.0))
+        return self._macs * self.runs_per_image()
+
+    def run(self, image: np.ndarray, bits: int) -> NetworkOutput:
+        """One inference; a raw mosaic is brought to the bit depth the model was trained on."""
+        det = self.detector
+        if self.input == "raw":
+            want = getattr(det, "bits", None) or bits
+            if want != bits:
+                image = (image >> (bits - want)) if bits > want else (image.astype(np.uint32) << (want - bits))
+            image = image.astype(np.uint8 if want <= 8 else np.uint16, copy=False)
+            if getattr(det, "bits", 0) is None:
+                det.bits = want
+        with self._lock:
+            dets = det.detect(image)
+            tensors = tuple(getattr(det, "last_outputs", ()) or ())
+        return NetworkOutput(dets.boxes, dets.scores, dets.classes, tensors)
+
+    def close(self) -> None:
+        """Release the detector."""
+        self.detector.close()
+
+
+def load_network(spec: str) -> HostNetwork:
+    """The in-sensor network of a detector spec (the loader ``rollcam.host`` registers with the firmware)."""
+    from .detectors import load_detector
+
+    det = load_detector(spec)
+    path = getattr(det, "path", None)
+    if path is None:
+        if getattr(det, "name", "") != "hog":
+            raise ConfigError(f"insensor={spec!r}: the in-sensor stage needs a network it can cost: an ONNX model "
+                              "(onnx:, personnet, personnet-raw, ssdlite) or hog")
+        return HostNetwork(spec, det, None)
+    return HostNetwork(spec, det, model_macs(Path(path), det.width, det.height))
+
+
+def model_macs(path: Path, width: int, height: int) -> int:
+    """MACs of one run of an ONNX model: counted from its graph, or its packaged card's ``macs`` figure when the
+    ``onnx`` package is absent."""
+    from rollcam.common.errors import MissingDependencyError
+
+    try:
+        return onnx_macs(str(path), width, height)
+    except MissingDependencyError:
+        import json
+
+        for card in path.parent.glob("*.json"):
+            figures = json.loads(card.read_text()).get("figures", {})
+            if "macs" in figures:
+                return int(figures["macs"])
+        raise
