@@ -3,8 +3,7 @@
 ``rollcam.firmware.insensor`` knows networks only through its ``Network`` protocol; ``import rollcam.host``
 registers ``load_network`` here, which builds any rollcam detector spec (``load_detector``) and wraps it as a
 ``HostNetwork``. Its ``macs`` (multiply-accumulates per run, which set the modelled latency and energy) are
-counted from the ONNX graph at the model's input size (Conv, ConvTranspose, Gemm, MatMul; with the ``onnx``
-package, else the packaged model card's figure), times the runs of one image (tiles); HOG has no graph, and
+counted from the ONNX graph at the model's input size (Conv, ConvTranspose, Gemm, MatMul), times the runs of one image (tiles); HOG has no graph, and
 is costed at ``HOG_MACS_PER_PIXEL`` (a rough figure for gradients, cell histograms and the linear SVM, stated
 as such in docs/insensor.md). A raw network gets the mosaic at the bit depth its model was trained on.
 """
@@ -126,17 +125,5 @@ def load_network(spec: str) -> HostNetwork:
 
 
 def model_macs(path: Path, width: int, height: int) -> int:
-    """MACs of one run of an ONNX model: counted from its graph, or its packaged card's ``macs`` figure when the
-    ``onnx`` package is absent."""
-    from rollcam.common.errors import MissingDependencyError
-
-    try:
-        return onnx_macs(str(path), width, height)
-    except MissingDependencyError:
-        import json
-
-        for card in path.parent.glob("*.json"):
-            figures = json.loads(card.read_text()).get("figures", {})
-            if "macs" in figures:
-                return int(figures["macs"])
-        raise
+    """MACs of one run of an ONNX model, counted from its graph."""
+    return onnx_macs(str(path), width, height)
