@@ -147,3 +147,24 @@ def test_a_python_reader_streams_both_nodes(server):
             found += len(r["detections"])
             assert all(0 <= d["box"][0] < d["box"][2] <= 640 and d["cls"] == 0 for d in r["detections"])
     assert found > 0 and any(m["doc"]["results"] for m in metas)
+
+
+def test_the_user_space_device_streams_metadata_with_each_buffer():
+    from rollcam.common.errors import ConfigError
+    from rollcam.emu.v4l2 import Device
+
+    with Device.open("imx219", size=(640, 480), insensor="personnet-raw", realtime=False) as cam:
+        bufs = list(cam.stream(buffers=4, frames=4, metadata=True))
+        stage = cam.driver.camera.insensor
+    assert [b.sequence for b in bufs] == [0, 1, 2, 3]
+    for b in bufs:
+        assert b.metadata is not None and b.metadata["sequence"] == b.sequence
+        assert b.metadata["timestamp_ns"] == b.timestamp_ns
+    carried = [r for b in bufs[1:] for r in b.metadata["results"]]
+    assert carried and all(r["sequence"] == b.sequence - 1 for b in bufs[1:] for r in b.metadata["results"])
+    done = {r.seq: r for r in stage.recent(1 << 62)}
+    for r in carried:  # the node's results are the stage's (boxes as float32)
+        want = done[r["sequence"]]
+        assert len(r["detections"]) == min(len(want), 64)
+    with Device.open("imx219", realtime=False) as cam, pytest.raises(ConfigError, match="in-sensor network"):
+        next(cam.stream(frames=1, metadata=True))
