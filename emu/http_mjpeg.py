@@ -293,10 +293,15 @@ class MjpegServer(Closeable):
         return web.Response(body=json.dumps(self.status()).encode(), content_type="application/json",
                             headers={"Cache-Control": "no-store"})
 
+    @property
+    def images_sent(self) -> bool:
+        """False in metadata-only mode (``insensor_output=meta``): no image leaves the sensor."""
+        cfg = getattr(getattr(self.camera, "spec", None), "insensor", None)
+        return cfg is None or cfg.image_sent
+
     def _image_sent(self) -> None:
         """HTTP 404 in metadata-only mode: no image leaves the sensor."""
-        cfg = getattr(getattr(self.camera, "spec", None), "insensor", None)
-        if cfg is not None and not cfg.image_sent:
+        if not self.images_sent:
             raise web.HTTPNotFound(text="metadata-only mode (insensor_output=meta): no image leaves the sensor; "
                                         "GET /insensor.jsonl for its results")
 

@@ -78,9 +78,11 @@ def start_http(args: argparse.Namespace, camera: Any, pump: Any) -> Running | No
     url = server.url
     base = url.rsplit("/", 1)[0]
     auth = "   (token required: bound beyond loopback)" if view.token else ""
-    return Running("http", stack, [f"live view:     {view.url}{auth}",
-                                   f"MJPEG stream:  {url}   (cv2.VideoCapture({url!r}))",
-                                   f"snapshot:      {base}/snapshot.jpg", f"status:        {base}/status.json"],
+    if server.images_sent:
+        lines = [f"MJPEG stream:  {url}   (cv2.VideoCapture({url!r}))", f"snapshot:      {base}/snapshot.jpg"]
+    else:
+        lines = [f"in-sensor:     {base}/insensor.jsonl   (metadata only: no image leaves the sensor)"]
+    return Running("http", stack, [f"live view:     {view.url}{auth}", *lines, f"status:        {base}/status.json"],
                    {"url": url, "view": view.url, "token": view.token}, injector=server)
 
 
