@@ -207,7 +207,10 @@ def serve(args: argparse.Namespace, camera_options: dict[str, str]) -> int:
     st = camera.stats
     extra = "" if camera.spec.insensor is None else \
         f"; in-sensor network ran on {st.insensor_runs}, skipped {st.insensor_skipped} (accelerator busy)"
-    print(f"stopped; {st.frames} frames made, {st.skipped} skipped{extra}", file=sys.stderr)
+    ps = pump.stats  # camera.stats.frames also counts frames the pump made ahead and threw away
+    paced = f" ({ps.frames} delivered by the pump, {ps.remade} remade after a control change)" \
+        if ps.frames or ps.remade else ""
+    print(f"stopped; {st.frames} frames made{paced}, {st.skipped} skipped{extra}", file=sys.stderr)
     print(f"ledger: {ledger_line(camera)}", file=sys.stderr)
     for r in running:
         stats = _fault_stats(r.injector if r.injector is not None else r.server)
