@@ -46,7 +46,7 @@ def start_http(args: argparse.Namespace, camera: Any, pump: Any) -> Running | No
     """The MJPEG-over-HTTP server and its live page, when ``--http`` is given (or no transport at all)."""
     if args.http is None:
         return None
-    from rollcam.emu.http_mjpeg import MjpegServer
+    from rollcam.emu.http_mjpeg import MjpegServer, images_sent
     from rollcam.emu.http_view import LiveView
     from rollcam.emu.view_controls import CameraControls
 
@@ -78,7 +78,7 @@ def start_http(args: argparse.Namespace, camera: Any, pump: Any) -> Running | No
     url = server.url
     base = url.rsplit("/", 1)[0]
     auth = "   (token required: bound beyond loopback)" if view.token else ""
-    if server.images_sent:
+    if images_sent(camera):
         lines = [f"MJPEG stream:  {url}   (cv2.VideoCapture({url!r}))", f"snapshot:      {base}/snapshot.jpg"]
     else:
         lines = [f"in-sensor:     {base}/insensor.jsonl   (metadata only: no image leaves the sensor)"]

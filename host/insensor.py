@@ -2,10 +2,11 @@
 
 ``rollcam.firmware.insensor`` knows networks only through its ``Network`` protocol; ``import rollcam.host``
 registers ``load_network`` here, which builds any rollcam detector spec (``load_detector``) and wraps it as a
-``HostNetwork``. Its ``macs`` (multiply-accumulates per run, which set the modelled latency and energy) are
-counted from the ONNX graph at the model's input size (Conv, ConvTranspose, Gemm, MatMul), times the runs of one image (tiles); HOG has no graph, and
-is costed at ``HOG_MACS_PER_PIXEL`` (a rough figure for gradients, cell histograms and the linear SVM, stated
-as such in docs/insensor.md). A raw network gets the mosaic at the bit depth its model was trained on.
+``HostNetwork``. Its ``macs`` (multiply-accumulates per run, which set the modelled latency and energy) are counted
+from the ONNX graph at the model's input size (Conv, ConvTranspose, Gemm, MatMul), times the runs of one image
+(tiles); HOG has no graph, and is costed at ``HOG_MACS_PER_PIXEL`` (a rough figure for gradients, cell histograms
+and the linear SVM, stated as such in docs/insensor.md). A raw network gets the mosaic at the bit depth its model
+was trained on.
 """
 
 from __future__ import annotations
