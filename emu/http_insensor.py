@@ -7,25 +7,20 @@ with the stream's energy and bandwidth ledger (``rollcam.firmware.ledger``). A r
 device clock has passed its ``done_ns``. ``?from_seq=N`` starts at frame N if it is still among the last
 frames kept (default: the next result), ``?results=N`` ends the response after N results (default: endless).
 It works in both output modes; in metadata-only mode (``insensor_output=meta``) it is the only thing the
-camera sends. Bounded as ``/imu.jsonl`` is: at most ``MAX_STREAMS`` readers (HTTP 503 beyond), a reader that
-does not read within ``SEND_TIMEOUT_S`` is dropped.
+camera sends. Bounded as every JSON-lines endpoint is (emu/http_jsonl.py).
 """
 
 from __future__ import annotations
 
-import asyncio
-import json
-from typing import Any
+from typing import Any, ClassVar
 
 from aiohttp import web
+from rollcam.common.errors import DeviceError
 from rollcam.firmware.camera import FirmwareCamera
 
-from .http_imu import query_int
+from .http_jsonl import JsonLinesStreams, query_int
 
 INSENSOR_PATH = "/insensor.jsonl"
-POLL_S = 0.01
-SEND_TIMEOUT_S = 5.0
-MAX_STREAMS = 8
 
 
 def programming(camera: FirmwareCamera) -> dict[str, Any]:
@@ -35,64 +30,39 @@ def programming(camera: FirmwareCamera) -> dict[str, Any]:
                          if k.startswith("insensor")}, "ledger": camera.insensor.ledger(camera.spec).to_json()}
 
 
-class InSensorStreams:
+class InSensorStreams(JsonLinesStreams):
     """The ``/insensor.jsonl`` handler of one camera, bounded to ``MAX_STREAMS`` readers."""
 
-    def __init__(self, camera: FirmwareCamera) -> None:
-        self.camera = camera
-        self.active = 0
-        self.served = 0
+    path: ClassVar[str] = INSENSOR_PATH
+    what: ClassVar[str] = "in-sensor"
+    limit_option: ClassVar[str] = "results"
+    poll_s: ClassVar[float] = 0.01
 
-    def add_to(self, app: web.Application) -> None:
-        """Register the route on an aiohttp application."""
-        app.router.add_get(INSENSOR_PATH, self.handle, allow_head=False)
-
-    async def handle(self, request: web.Request) -> web.StreamResponse:
-        """Stream results as JSON lines until the client leaves or ``results=N`` are sent."""
+    def open(self, request: web.Request) -> dict[str, Any]:
+        """The stream's next frame: ``?from_seq`` or the one after the latest result done; ``?tensors``."""
         spec = getattr(self.camera, "spec", None)
         if spec is None or spec.insensor is None:
             raise web.HTTPNotFound(text="this camera has no in-sensor network (insensor=SPEC sets one)")
-        limit = query_int(request, "results")
         start = query_int(request, "from_seq")
         tensors = request.query.get("tensors", "0") not in ("0", "off", "false", "")
-        if self.active >= MAX_STREAMS:
-            raise web.HTTPServiceUnavailable(text=f"{MAX_STREAMS} in-sensor streams already",
-                                             headers={"Retry-After": "1"})
-        self.active += 1
-        self.served += 1
-        try:
-            return await self._stream(request, limit, start, tensors)
-        finally:
-            self.active -= 1
-
-    async def _stream(self, request: web.Request, limit: int | None, start: int | None,
-                      tensors: bool) -> web.StreamResponse:
-        resp = web.StreamResponse(headers={"Content-Type": "application/x-ndjson", "Cache-Control": "no-store"})
-        await resp.prepare(request)
         cam = self.camera
         if start is None:  # from the next result done after now
             done = cam.insensor.recent(cam.clock_ns())
-            since = done[-1].seq + 1 if done else 0
-        else:
-            since = start
-        sent = 0
-        try:
-            await asyncio.wait_for(resp.write((json.dumps(programming(cam)) + "\n").encode()), SEND_TIMEOUT_S)
-            while limit is None or sent < limit:
-                if cam.spec.insensor is None:
-                    await resp.write((json.dumps({"error": "the in-sensor network was turned off"}) + "\n").encode())
-                    break
-                fresh = cam.insensor.recent(cam.clock_ns(), since)
-                if limit is not None:
-                    fresh = fresh[: limit - sent]
-                if fresh:
-                    lines = "".join(json.dumps(r.to_json(tensors=tensors)) + "\n" for r in fresh)
-                    await asyncio.wait_for(resp.write(lines.encode()), SEND_TIMEOUT_S)
-                    sent += len(fresh)
-                    since = fresh[-1].seq + 1
-                else:
-                    await asyncio.sleep(POLL_S)
-            await resp.write_eof()
-        except (ConnectionError, RuntimeError, asyncio.TimeoutError):  # gone, or not reading
-            pass
-        return resp
+            start = done[-1].seq + 1 if done else 0
+        return {"since": start, "tensors": tensors}
+
+    def header(self) -> dict[str, Any]:
+        """The network's programming and the stream's ledger."""
+        return programming(self.camera)
+
+    def take(self, cursor: dict[str, Any], most: int | None) -> list[dict[str, Any]]:
+        """The results done since the cursor's frame (DeviceError once the network is turned off)."""
+        cam = self.camera
+        if cam.spec.insensor is None:
+            raise DeviceError("the in-sensor network was turned off")
+        fresh = cam.insensor.recent(cam.clock_ns(), cursor["since"])
+        if most is not None:
+            fresh = fresh[:most]
+        if fresh:
+            cursor["since"] = fresh[-1].seq + 1
+        return [r.to_json(tensors=cursor["tensors"]) for r in fresh]

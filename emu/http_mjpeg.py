@@ -86,6 +86,12 @@ HEADER_DETECTIONS = 50
 """Most detections of one result in an ``X-Insensor`` header (best first; clients cap header lines near 8 kB)."""
 
 
+def images_sent(camera: Any) -> bool:
+    """False for a camera in metadata-only mode (``insensor_output=meta``): no image leaves the sensor."""
+    cfg = getattr(getattr(camera, "spec", None), "insensor", None)
+    return cfg is None or cfg.image_sent
+
+
 def _header_result(result: Any) -> dict[str, Any]:
     """A result's JSON for the part header: at most ``HEADER_DETECTIONS`` detections, ``truncated`` the rest."""
     doc = result.to_json()
@@ -295,8 +301,7 @@ class MjpegServer(Closeable):
 
     def _image_sent(self) -> None:
         """HTTP 404 in metadata-only mode: no image leaves the sensor."""
-        cfg = getattr(getattr(self.camera, "spec", None), "insensor", None)
-        if cfg is not None and not cfg.image_sent:
+        if not images_sent(self.camera):
             raise web.HTTPNotFound(text="metadata-only mode (insensor_output=meta): no image leaves the sensor; "
                                         "GET /insensor.jsonl for its results")
 

@@ -38,7 +38,7 @@ from importlib import resources
 from typing import Any
 from urllib.parse import urlsplit
 
-from aiohttp import WSMsgType, web
+from aiohttp import WSCloseCode, WSMsgType, web
 from rollcam.common.errors import ConfigError, DeviceError
 from rollcam.common.lifecycle import Closeable, Stats
 from rollcam.sim.codecs import preview_frame
@@ -290,12 +290,16 @@ class _Page:
         while (part := await self.client.next()) is not None:
             if view.controls.version() is not self.version:  # changed through another door (serial, registers)
                 await self.send_state()
-            t0 = clock()
-            message = view.frame_message(part, self.client)
-            view.stats.message_ns += clock() - t0
-            view.stats.messages += 1
-            async with self.lock:
-                await self.client.send(self.ws.send_bytes, message, loop.time)
+            if not (part.final and len(part.chunk) < len(part.encode())):  # a cut frame never arrives
+                t0 = clock()
+                message = view.frame_message(part, self.client)
+                view.stats.message_ns += clock() - t0
+                view.stats.messages += 1
+                async with self.lock:
+                    await self.client.send(self.ws.send_bytes, message, loop.time)
+            if part.final:  # an injected cut or disconnect: the camera went away, as the MJPEG streams see it
+                await self.ws.close(code=WSCloseCode.GOING_AWAY, message=b"camera went away")
+                return
 
 
 def _png(frame: Frame) -> bytes:

@@ -266,6 +266,9 @@ def _check_limits(spec: CameraSpec) -> None:
 def _check_values(spec: CameraSpec) -> None:
     """The normalised spec's values that no single field decides (format and physics, frame length, seeds, the
     test pattern, the scene and its camera)."""
+    if spec.shutter != spec.sensor.shutter and not traits_for(spec.sensor.name).dual_shutter:
+        raise ConfigError(f"shutter {spec.shutter!r}: sensor {spec.sensor.name!r} has only a {spec.sensor.shutter} "
+                          "shutter (letsroll renders either)")
     if spec.physics is False and spec.raw:
         raise ConfigError(f"pixel format {spec.pixel_format!r} needs the sensor model (physics on)")
     if not isinstance(spec.blur_px, (int, float)) or not 0 <= spec.blur_px <= MAX_BLUR_PX:

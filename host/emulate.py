@@ -46,7 +46,7 @@ def start_http(args: argparse.Namespace, camera: Any, pump: Any) -> Running | No
     """The MJPEG-over-HTTP server and its live page, when ``--http`` is given (or no transport at all)."""
     if args.http is None:
         return None
-    from rollcam.emu.http_mjpeg import MjpegServer
+    from rollcam.emu.http_mjpeg import MjpegServer, images_sent
     from rollcam.emu.http_view import LiveView
     from rollcam.emu.view_controls import CameraControls
 
@@ -78,9 +78,11 @@ def start_http(args: argparse.Namespace, camera: Any, pump: Any) -> Running | No
     url = server.url
     base = url.rsplit("/", 1)[0]
     auth = "   (token required: bound beyond loopback)" if view.token else ""
-    return Running("http", stack, [f"live view:     {view.url}{auth}",
-                                   f"MJPEG stream:  {url}   (cv2.VideoCapture({url!r}))",
-                                   f"snapshot:      {base}/snapshot.jpg", f"status:        {base}/status.json"],
+    if images_sent(camera):
+        lines = [f"MJPEG stream:  {url}   (cv2.VideoCapture({url!r}))", f"snapshot:      {base}/snapshot.jpg"]
+    else:
+        lines = [f"in-sensor:     {base}/insensor.jsonl   (metadata only: no image leaves the sensor)"]
+    return Running("http", stack, [f"live view:     {view.url}{auth}", *lines, f"status:        {base}/status.json"],
                    {"url": url, "view": view.url, "token": view.token}, injector=server)
 
 
@@ -205,7 +207,10 @@ def serve(args: argparse.Namespace, camera_options: dict[str, str]) -> int:
     st = camera.stats
     extra = "" if camera.spec.insensor is None else \
         f"; in-sensor network ran on {st.insensor_runs}, skipped {st.insensor_skipped} (accelerator busy)"
-    print(f"stopped; {st.frames} frames made, {st.skipped} skipped{extra}", file=sys.stderr)
+    ps = pump.stats  # camera.stats.frames also counts frames the pump made ahead and threw away
+    paced = f" ({ps.frames} delivered by the pump, {ps.remade} remade after a control change)" \
+        if ps.frames or ps.remade else ""
+    print(f"stopped; {st.frames} frames made{paced}, {st.skipped} skipped{extra}", file=sys.stderr)
     print(f"ledger: {ledger_line(camera)}", file=sys.stderr)
     for r in running:
         stats = _fault_stats(r.injector if r.injector is not None else r.server)

@@ -332,11 +332,9 @@ def ego_preset(name: str) -> EgoMotion:
     return presets[name]
 
 
-SCENE_KINDS = ("street", "chart", "flat", "flicker")
-
-
 def make_scene(kind: str = "street", seed: int = 0, **options: Any) -> Scene:
-    """Build a scene by kind ('street', 'chart', 'flat', 'flicker') with that kind's keyword options."""
+    """Build a scene by kind ('street', 'chart', 'flat', 'flicker': the option table's ``SCENE_KINDS``) with that
+    kind's keyword options."""
     makers = {"street": make_street_scene, "chart": make_chart_scene, "flat": make_flat_scene,
               "flicker": make_flicker_scene}
     if kind not in makers:

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
+import re
 import subprocess
 import sys
 
@@ -169,3 +170,14 @@ def test_create_with_fps_keeps_the_line_length_it_is_given():
 def test_typed_scene_values_keep_their_precision():
     spec = CameraSpec.create("imx219", size=(640, 480), scene={"scene": "street", "speed": 12.3456789})
     assert dict(spec.scene_options)["speed"] == "12.3456789"
+
+
+def test_every_scene_kind_of_the_option_table_is_one_the_simulator_builds():
+    # the option table lists the kinds without importing the simulator; make_scene is the one that builds them
+    from rollcam.firmware.options import SCENE_KINDS
+    from rollcam.sim.scenegen import make_scene
+
+    for kind in SCENE_KINDS:
+        assert make_scene(kind, 0).cameras, kind
+    with pytest.raises(ConfigError, match=re.escape(str(list(SCENE_KINDS)))):
+        make_scene("moon", 0)

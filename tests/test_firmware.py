@@ -209,3 +209,17 @@ def test_frame_interval_and_next_frame():
     f0, f1 = c.next_frame(), c.next_frame()
     assert (f0.sequence, f1.sequence) == (0, 1)
     assert f1.timestamp_ns - f0.timestamp_ns == c.state.timing.frame_start_ns(1)
+
+
+def test_every_door_refuses_a_shutter_the_sensor_lacks():
+    # the serial SHUTTER command, serial OPT and an emu: URI agree: imx219 reads out rolling only
+    from rollcam.firmware.protocol import handle_line
+    from rollcam.firmware.spec import CameraSpec
+
+    c = FirmwareCamera(CameraSpec.from_options("imx219", {"size": "320x240"}))
+    assert handle_line(c, "SHUTTER GLOBAL").startswith("ERR")
+    assert handle_line(c, "OPT shutter global").startswith("ERR")
+    assert handle_line(c, "SHUTTER?") == "ROLLING"
+    with pytest.raises(ConfigError, match="only a rolling shutter"):
+        CameraSpec.from_options("imx219", {"shutter": "global"})
+    assert CameraSpec.from_options("ov9281", {}).shutter == "global"

@@ -222,6 +222,23 @@ def test_http_jsonl_part_headers_and_metadata_only() -> None:
     assert json.loads(lines[0])["ledger"]["mode"] == "meta" and len(lines) == 3
 
 
+
+def test_emulate_names_the_results_endpoint_not_a_stream_in_metadata_only_mode() -> None:
+    import argparse
+
+    from rollcam.host.emulate import start_http
+
+    args = argparse.Namespace(http=("127.0.0.1", 0), detector=None, quality=80, faults=None)
+    for output, want, absent in (("frame", "MJPEG stream:", "in-sensor:"), ("meta", "in-sensor:", "MJPEG")):
+        cam = FirmwareCamera(CameraSpec.from_options("letsroll", {"size": "320x180", "insensor": "personnet-raw",
+                                                                  "insensor_output": output}))
+        running = start_http(args, cam, None)
+        try:
+            text = "\n".join(running.lines)
+        finally:
+            running.server.close()
+        assert want in text and absent not in text, text
+
 def test_detect_scores_the_results_against_their_own_frames(tmp_path) -> None:
     from rollcam.host.detect import run_detect
     from rollcam.host.detectors import load_detector

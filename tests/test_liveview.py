@@ -267,3 +267,31 @@ def test_rollcam_view_command_prints_the_page_and_stops():
     assert done.returncode == 0, done.stderr
     assert "live view:" in done.stdout and "?token=" in done.stdout and "token required" in done.stdout
     assert time.monotonic() - t0 < 120
+
+
+@pytest.mark.parametrize("faults, whole", [("disconnect=3", 3), ("seed=1,cut=100%", 0)])
+def test_a_page_sees_the_camera_go_away_as_the_mjpeg_streams_do(faults, whole):
+    # disconnect=N: N whole frames, then the socket closes; a cut frame never arrives whole: it closes at once
+    cam = camera()
+    srv = MjpegServer(cam, "127.0.0.1", 0, faults=faults)
+    lv = LiveView(srv, CameraControls(cam))
+
+    async def run() -> tuple[int, Any]:
+        async with aiohttp.ClientSession() as s, s.ws_connect(local(srv) + "/view/ws") as ws:
+            n = 0
+            async for msg in ws:
+                n += msg.type == aiohttp.WSMsgType.BINARY
+            return n, ws.close_code
+
+    with srv, lv:
+        n, code = asyncio.run(asyncio.wait_for(run(), 60))
+        # the page reconnects (as its script does) and is served as before (every frame is cut under cut=100%)
+        again = asyncio.run(asyncio.wait_for(frames_after_replug(srv), 60)) if whole else 1
+    assert (n, code) == (whole, aiohttp.WSCloseCode.GOING_AWAY)
+    assert again == 1
+
+
+async def frames_after_replug(srv: MjpegServer) -> int:
+    await asyncio.sleep(0.6)  # past the REPLUG_S the camera stays away
+    async with aiohttp.ClientSession() as s, s.ws_connect(local(srv) + "/view/ws") as ws:
+        return len(await frames(ws, 1))

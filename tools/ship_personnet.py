@@ -110,15 +110,20 @@ def main(argv: list[str]) -> int:
     if hashlib.sha256(model).hexdigest() != fig["sha256"]:
         print(f"{bench} measured another model than {run / 'model.onnx'}", file=sys.stderr)
         return 2
-    dest.mkdir(parents=True, exist_ok=True)
-    shutil.copyfile(run / "model.onnx", dest / "model.onnx")
     fig = {k: v for k, v in fig.items() if k != "model"}
-    (dest / "personnet.json").write_text(json.dumps({"name": "personnet", "licence": "MIT", "figures": fig,
-                                                     "training": train}, indent=1) + "\n")
-    (dest / "README.md").write_text(readme(fig, train))
-    (dest / "LICENSE").write_text(LICENSE)
+    write_package(run, dest, "personnet", fig, train, readme(fig, train))
     print(f"shipped {run / 'model.onnx'} -> {dest}")
     return 0
+
+
+def write_package(run: Path, dest: Path, name: str, fig: dict[str, Any], train: dict[str, Any], card: str) -> None:
+    """DEST/model.onnx, DEST/<name>.json (figures + training card), DEST/README.md and DEST/LICENSE."""
+    dest.mkdir(parents=True, exist_ok=True)
+    shutil.copyfile(run / "model.onnx", dest / "model.onnx")
+    (dest / f"{name.replace('-', '_')}.json").write_text(
+        json.dumps({"name": name, "licence": "MIT", "figures": fig, "training": train}, indent=1) + "\n")
+    (dest / "README.md").write_text(card)
+    (dest / "LICENSE").write_text(LICENSE)
 
 
 if __name__ == "__main__":

@@ -15,14 +15,13 @@ from __future__ import annotations
 
 import hashlib
 import json
-import shutil
 import sys
 import time
 from pathlib import Path
 from typing import Any
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from ship_personnet import LICENSE  # the same MIT grant as personnet's
+from ship_personnet import write_package  # the same package layout and MIT grant as personnet's
 
 
 def measure(run: Path, data: Path) -> dict[str, Any]:
@@ -87,12 +86,7 @@ def main(argv: list[str]) -> int:
     dest = Path(argv[2]) if len(argv) == 3 else Path("host/detectors/models/personnet_raw")
     fig = measure(run, data)
     train = json.loads((run / "train.json").read_text())
-    dest.mkdir(parents=True, exist_ok=True)
-    shutil.copyfile(run / "model.onnx", dest / "model.onnx")
-    (dest / "personnet_raw.json").write_text(json.dumps({"name": "personnet-raw", "licence": "MIT", "figures": fig,
-                                                         "training": train}, indent=1) + "\n")
-    (dest / "README.md").write_text(readme(fig, train))
-    (dest / "LICENSE").write_text(LICENSE)
+    write_package(run, dest, "personnet-raw", fig, train, readme(fig, train))
     print(f"shipped {run / 'model.onnx'} -> {dest}: conf {fig['conf']}, {fig['macs']:,} MACs")
     return 0
 

@@ -306,17 +306,10 @@ class Buffer:
 
 
 @dataclass
-class QueryExtCtrl:
-    """``struct v4l2_query_ext_ctrl`` (``id`` may carry ``CtrlFlag.NEXT_CTRL``)."""
+class QueryExtCtrl(QueryCtrl):
+    """``struct v4l2_query_ext_ctrl``: ``v4l2_queryctrl``'s fields and the element layout (``id`` may carry
+    ``CtrlFlag.NEXT_CTRL``)."""
 
-    id: int
-    type: int = 0
-    name: str = ""
-    minimum: int = 0
-    maximum: int = 0
-    step: int = 0
-    default_value: int = 0
-    flags: int = 0
     elem_size: int = 4
     elems: int = 1
 

@@ -97,7 +97,7 @@ def render_sample(cfg: DatasetConfig, s: Sample) -> SampleResult:
     with open_camera(uri) as source:
         pair = source.read_pair()
         # the RS frame's IMU over its lines: rollcam eval --correct gyro corrects the stored RS image
-        imu = None if pair is None else imu_record(pair[1], source.device)
+        imu = None if pair is None or pair[1].imu is None else imu_record(pair[1], source.device)
     if pair is None:
         raise SourceError(f"source {uri!r} gave no frame")
     files: dict[str, bytes] = {}
