@@ -9,6 +9,8 @@ its output beside the image, or instead of it. The emulated camera does the same
   (default: what the network says it takes);
 - ``insensor_size=WxH``: the largest input the accelerator takes; a larger frame is binned by a whole factor
   first (colour sites kept: a Bayer mosaic is binned site by site), as a sensor's input-tensor path scales;
+- ``insensor_roi=X,Y,W,H``: the part of the frame the network sees (frame pixels; default the whole frame),
+  as the IMX500's inference region of interest; boxes still come back in the frame's pixels;
 - ``insensor_accel=NAME|GMACS``: the accelerator profile (``ACCELERATORS``) or a throughput in GMAC/s; the
   latency of a frame is the network's multiply-accumulates at its input size over the throughput;
 - ``insensor_output=frame|meta``: the image and the results, or the results only (metadata-only mode: the
@@ -94,6 +96,33 @@ def output_mode(text: str) -> str:
     return word
 
 
+def parse_roi(text: str) -> tuple[int, int, int, int] | None:
+    """An input region ``x,y,w,h`` (frame pixels, w and h at least 2), or None for ``none``/``full``."""
+    word = str(text).strip().lower()
+    if word in ("", "none", "full"):
+        return None
+    parts = word.replace(" ", "").split(",")
+    try:
+        x, y, w, h = (int(p) for p in parts)
+    except ValueError:
+        raise ValueError("expected x,y,w,h in whole frame pixels, or none") from None
+    if min(x, y) < 0 or min(w, h) < 2 or max(x + w, y + h) > 65536:
+        raise ValueError("expected x, y >= 0 and w, h >= 2 within 65536 pixels")
+    return (x, y, w, h)
+
+
+def roi_in(roi: tuple[int, int, int, int] | None, size: tuple[int, int], even: bool) -> tuple[int, int, int, int]:
+    """The input region within a ``size`` frame (the whole frame for None); ``even``: whole Bayer tiles (even
+    offsets and sizes), so the mosaic's colour pattern is the frame's."""
+    fw, fh = size
+    x, y, w, h = roi or (0, 0, fw, fh)
+    x, y = min(x, fw - 2), min(y, fh - 2)
+    w, h = max(min(w, fw - x), 2), max(min(h, fh - y), 2)
+    if even:
+        x, y, w, h = x - x % 2, y - y % 2, max(w - w % 2, 2), max(h - h % 2, 2)
+    return (x, y, w, h)
+
+
 def network_spec(text: str) -> str | None:
     """A network spec as text (None for ``none``/``off``), printable ASCII of at most ``MAX_SPEC``."""
     spec = str(text).strip()
@@ -113,6 +142,7 @@ class InSensorConfig:
     max_size: tuple[int, int] = DEFAULT_MAX_SIZE
     accel: Accelerator = ACCELERATORS["imx500"]
     output: str = "frame"
+    roi: tuple[int, int, int, int] | None = None
 
     def __post_init__(self) -> None:
         if self.input not in (None, "raw", "isp"):
@@ -138,7 +168,7 @@ class InSensorConfig:
 
 
 INSENSOR_FIELDS = {"insensor_input": "input", "insensor_size": "max_size", "insensor_accel": "accel",
-                   "insensor_output": "output"}
+                   "insensor_output": "output", "insensor_roi": "roi"}
 """Option name -> ``InSensorConfig`` field."""
 INSENSOR_OPTIONS = {"insensor", *INSENSOR_FIELDS}
 
@@ -168,7 +198,8 @@ def insensor_option_values(cfg: InSensorConfig | None) -> dict[str, Any]:
     """The ``insensor*`` options in effect."""
     c = cfg or InSensorConfig("none")
     return {"insensor": "none" if cfg is None else c.network, "insensor_input": c.input or "auto",
-            "insensor_size": c.max_size, "insensor_accel": c.accel.name, "insensor_output": c.output}
+            "insensor_size": c.max_size, "insensor_accel": c.accel.name, "insensor_output": c.output,
+            "insensor_roi": "none" if c.roi is None else ",".join(str(v) for v in c.roi)}
 
 
 # ----------------------------------------------------------------------------------------------- networks

@@ -14,13 +14,15 @@ however fast the host renders):
   latency of k frame periods, every (k+1)-th frame is inferred;
 - a frame carries the results done since the previous frame's input was complete, up to its own
   (``(input_ns of n-1, input_ns of n]``), so with any latency > 0 a result rides on a later frame; its ``seq``
-  says which frame it came from. A latency of 0 puts each result on its own frame.
+  says which frame it came from. A latency of 0 puts each result on its own frame. When frames were skipped
+  (never made: a consumer too slow), "the previous frame" is the last one made, so no result is lost.
 
-The network's input is the raw mosaic (``insensor_input=raw``: the ADC samples, whatever format the stream
-sends) or the ISP's picture (``isp``), binned by the smallest whole factor that fits ``insensor_size``; boxes
-come back in the frame's pixels. Frames are made ahead and made again after a change (``emu.pump``), so the
-stage keeps the last ``KEEP`` frames' runs by sequence number, as ``firmware.imu.FrameImu`` does: a frame made
-again for the same start reuses its run, and one made from a new start forgets the runs made ahead after it.
+The network's input is the raw mosaic (``insensor_input=raw``: the ADC samples, whatever format the stream sends)
+or the ISP's picture (``isp``), of the region ``insensor_roi`` (the whole frame by default), binned by the smallest
+whole factor that fits ``insensor_size``; boxes come back in the frame's pixels. Frames are made ahead and made
+again after a change (``emu.pump``), so the stage keeps the last ``KEEP`` frames' runs by sequence number, as
+``firmware.imu.FrameImu`` does: a frame made again for the same start reuses its run, and one made from a new start
+forgets the runs made ahead after it.
 In metadata-only mode (``insensor_output=meta``) the frame's image is dropped here: ``data`` is empty and
 ``meta['image']`` is False; size, timing and results remain.
 """
@@ -39,7 +41,7 @@ from rollcam.sim.frame import Frame
 from rollcam.sim.insensor import InSensorResult
 
 from .imu import frame_end_ns
-from .insensor import InSensorConfig, Network, load_network
+from .insensor import InSensorConfig, Network, load_network, roi_in
 from .spec import CameraSpec
 
 NO_IMAGE = np.zeros((0,), np.uint8)
@@ -72,7 +74,8 @@ def network_input(cfg: InSensorConfig, spec: CameraSpec, frame: Frame, samples: 
                   ) -> tuple[np.ndarray, int, int]:
     """The network's input image, its sample bits (8 for a picture) and the bin factor (boxes times it are
     frame pixels)."""
-    k = bin_factor((frame.width, frame.height), cfg.max_size)
+    x, y, w, h = roi_in(cfg.roi, (frame.width, frame.height), even=cfg.input == "raw")
+    k = bin_factor((w, h), cfg.max_size)
     if cfg.input == "raw":
         if spec.raw:
             bits = sf.pixel_format(frame.format).bits
@@ -81,12 +84,13 @@ def network_input(cfg: InSensorConfig, spec: CameraSpec, frame: Frame, samples: 
             if samples is None:
                 raise ValueError("insensor_input=raw on a frame made without the sensor model")
             bits, mosaic = spec.sensor.bit_depth, samples
-        return bin_mosaic(mosaic, k, spec.bayer_order), bits, k
+        return bin_mosaic(mosaic[y:y + h, x:x + w], k, spec.bayer_order), bits, k
     image = preview_frame(frame) if spec.raw else frame.data
+    image = image[y:y + h, x:x + w]
     if k > 1:
         import cv2
 
-        image = cv2.resize(image, (frame.width // k, frame.height // k), interpolation=cv2.INTER_AREA)
+        image = cv2.resize(image, (w // k, h // k), interpolation=cv2.INTER_AREA)
     return image, 8, k
 
 
@@ -121,7 +125,9 @@ class InSensorStage:
         self._runs = {k: v for k, v in self._runs.items() if seq - self.KEEP < k < seq}
         input_ns = frame_end_ns(spec, start)
         busy = max((r.done_ns for r in self._runs.values() if r.done_ns is not None), default=None)
-        before = self._runs.get(seq - 1)
+        # The window starts at the input of the frame made before this one: a frame the device skipped was
+        # never delivered, so the results due on it ride on the next frame made instead of being lost.
+        before = self._runs[max(self._runs)] if self._runs else None
         window = before.input_ns if before is not None else input_ns - spec.settings.timing.frame_period_ns
         accepted = busy is None or busy <= input_ns
         run = _Run(start, input_ns, input_ns + latency_ns if accepted else None, window)
@@ -174,7 +180,8 @@ class InSensorStage:
     def _infer(net: Network, cfg: InSensorConfig, frame: Frame, run: _Run, image: np.ndarray, bits: int, k: int,
                macs: int) -> InSensorResult:
         out = net.run(image, bits)
-        boxes = np.asarray(out.boxes, np.float32).reshape(-1, 4) * np.float32(k)
+        x, y, _, _ = roi_in(cfg.roi, (frame.width, frame.height), even=cfg.input == "raw")
+        boxes = np.asarray(out.boxes, np.float32).reshape(-1, 4) * np.float32(k) + np.float32([x, y, x, y])
         assert run.done_ns is not None
         return InSensorResult(seq=frame.sequence, boxes=boxes, scores=out.scores, classes=out.classes,
                               timestamp_ns=int(frame.timestamp_ns), line_time_ns=int(frame.line_time_ns),
@@ -212,7 +219,7 @@ def stream_ledger(spec: CameraSpec, stage: InSensorStage | None = None) -> Any:
     cfg = spec.insensor
     if cfg is None:
         return ledger(spec)
-    w, h = spec.size
+    _, _, w, h = roi_in(cfg.roi, spec.size, even=cfg.input == "raw")
     k = bin_factor((w, h), cfg.max_size)
     macs = int(load_network(cfg.network).macs(w // k, h // k))
     latest = stage.latest() if stage is not None else None

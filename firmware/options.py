@@ -186,6 +186,12 @@ def _accel(text: str) -> Any:
     return accelerator(text)
 
 
+def _roi(text: str) -> Any:
+    from .insensor import parse_roi
+
+    return parse_roi(text)
+
+
 def _insensor_output(text: str) -> str:
     from .insensor import output_mode
 
@@ -278,6 +284,8 @@ OPTIONS: dict[str, Option] = {o.name: o for o in (
                                                          "isp (the ISP's picture) (default: the network's)"),
     Option("insensor_size", _size, None, "largest in-sensor network input WxH; larger frames are binned by a whole "
                                          "factor (default: 640x640)"),
+    Option("insensor_roi", _roi, None, "in-sensor network input region x,y,w,h in frame pixels (default: the whole "
+                                       "frame); boxes still come back in frame pixels"),
     Option("insensor_accel", _accel, "imx500", "in-sensor accelerator: imx500 | a throughput in GMAC/s (latency = "
                                                "the network's MACs / throughput)"),
     Option("insensor_output", _insensor_output, "frame", "what leaves the chip: frame (image and results, also "

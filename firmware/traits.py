@@ -60,6 +60,7 @@ TRAITS: dict[str, SensorTraits] = {
     "imx477": SensorTraits("Sony", analog=GainCodec("smia", 1024), test_pattern_codes=_SMIA_TP),
     "imx378": SensorTraits("Sony", analog=GainCodec("smia", 1024), test_pattern_codes=_SMIA_TP),
     "imx708": SensorTraits("Sony", analog=GainCodec("smia", 1024), test_pattern_codes=_SMIA_TP),
+    "imx500": SensorTraits("Sony", analog=GainCodec("smia", 1024), test_pattern_codes=_SMIA_TP),
     # AR0234: the coarse/fine analog gain field is approximated as a linear code / 16.
     "ar0234": SensorTraits("onsemi", analog=GainCodec("linear", 16), digital=GainCodec("linear", 128),
                            hflip_bit=14, vflip_bit=15, stream_bits=0x04,

@@ -1,7 +1,8 @@
 """``rollcam run``'s work: serve emulated ``/dev/videoN`` nodes and run a program that sees them.
 
 Each device is a ``FirmwareCamera`` (from an ``emu:`` URI or a sensor name) behind an ``EmuDriver`` and a
-``DeviceNode``; one ``PreloadServer`` serves them on a Unix socket in a private temporary folder. The
+``DeviceNode``, and, when its camera runs an in-sensor network, a metadata node (``MetaDriver``) at the next
+free ``/dev/videoN``; one ``PreloadServer`` serves them on a Unix socket in a private temporary folder. The
 program runs with the preload library (``rollcam.emu.preload``) in ``LD_PRELOAD``, the socket and device
 paths in its environment, and ``rollcam/host/shims`` first on its ``PYTHONPATH`` (stand-in modules such as
 ``picamera2``). Its exit status is returned (128 + N when signal N ended it); the socket and folder go.
@@ -22,6 +23,7 @@ from rollcam.common.errors import ConfigError
 from rollcam.common.faults import FaultPlan
 from rollcam.emu.preload import environment, write_sysfs
 from rollcam.emu.v4l2.driver import EmuDriver
+from rollcam.emu.v4l2.meta import MetaDriver
 from rollcam.emu.v4l2.node import DeviceNode
 from rollcam.emu.v4l2.server import PreloadServer
 from rollcam.firmware.camera import FirmwareCamera
@@ -50,6 +52,16 @@ def build_camera(source: str) -> tuple[FirmwareCamera, FaultPlan]:
     return FirmwareCamera(spec), plan
 
 
+def _next_free(path: str, taken: set[str]) -> str:
+    """The first ``/dev/videoK`` after ``path``'s number that no device takes (``/dev/video0`` -> video1)."""
+    digits = len(path) - len(path.rstrip("0123456789"))
+    stem, n = (path[:-digits], int(path[-digits:])) if digits else (path, -1)
+    k = n + 1
+    while f"{stem}{k}" in taken:
+        k += 1
+    return f"{stem}{k}"
+
+
 def minor_of(path: str, index: int) -> int:
     """The minor number a node reports: the digits ending its path (video2 -> 2), else its index."""
     digits = len(path) - len(path.rstrip("0123456789"))
@@ -68,6 +80,12 @@ def serving(devices: Sequence[tuple[str, str]], *, realtime: bool = True) -> Ite
         for i, (path, source) in enumerate(devices):
             camera, faults = build_camera(source)
             nodes[path] = DeviceNode(EmuDriver(camera, realtime=realtime, faults=faults), path, minor_of(path, i))
+        for path, node in list(nodes.items()):
+            if node.driver.camera.spec.insensor is not None:  # its results on a metadata node, as uvcvideo's
+                meta_path = _next_free(path, set(nodes) | set(paths))
+                meta = DeviceNode(MetaDriver(node.driver), meta_path, minor_of(meta_path, len(nodes)))
+                meta.bus_minor = node.minor
+                nodes[meta_path] = meta
         server = PreloadServer(nodes, os.path.join(folder, "v4l2.sock"))
         write_sysfs(Path(folder) / "sys", [(n.path, n.minor, f"rollcam {n.driver.camera.sensor.name} emulator")
                                            for n in nodes.values()])

@@ -205,11 +205,11 @@ def test_http_jsonl_part_headers_and_metadata_only() -> None:
     assert seqs[-1] - seqs[0] - 2 <= cam.stats.skipped
     assert all(x["done_ns"] > x["input_ns"] and x["detections"] for x in lines[1:])
     carried = [json.loads(h["X-Insensor"]) for h in heads]
-    for h, c in zip(heads, carried, strict=True):  # a part carries the result of the frame before it
-        assert [x["seq"] for x in c] in ([int(h["X-Sequence"]) - 1], [])
+    for h, c in zip(heads, carried, strict=True):  # a part carries the result of the frame made before it
+        assert all(x["seq"] < int(h["X-Sequence"]) for x in c) and len(c) <= 1 + cam.stats.skipped
     assert any(carried) or cam.stats.skipped  # none only when the frames before were skipped (a loaded machine)
     assert status["ledger"]["rows"]["raw"]["bytes_per_frame"] == 180 * 326 + 8
-    assert all(r.seq == f.sequence - 1 and len(r.boxes) for f in got for r in f.insensor)
+    assert all(r.seq < f.sequence and len(r.boxes) for f in got for r in f.insensor)
 
     cam = FirmwareCamera(CameraSpec.from_options("letsroll", {"size": "320x180", "pedestrians": "10",
                                                               "insensor": "personnet-raw", "insensor_output": "meta"}))

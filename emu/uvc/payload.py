@@ -125,24 +125,33 @@ class PayloadPacker:
         self.send_step_ns = int(send_step_ns)  # one payload per (micro)frame: its SCR advances by this
         self.fid = 0
 
-    def buffer_size(self, frame_bytes: int) -> int:
-        """Bytes ``pack`` needs to build the payloads of a frame of ``frame_bytes``."""
-        return max(-(-frame_bytes // (self.payload_size - HEADER_LEN)), 1) * self.payload_size
+    def buffer_size(self, frame_bytes: int, extra: int = 0) -> int:
+        """Bytes ``pack`` needs to build the payloads of a frame of ``frame_bytes`` (``extra`` header bytes)."""
+        chunk = self.payload_size - HEADER_LEN
+        first = self.payload_size - HEADER_LEN - extra
+        return (1 + max(-(-(frame_bytes - first) // chunk), 0)) * self.payload_size
 
     def pack(self, data: bytes | np.ndarray, pts_ns: int, send_ns: int, *, error: bool = False,
-             out: np.ndarray | None = None) -> PayloadBatch:
-        """The payloads of one frame: PTS ``pts_ns``, SCR from ``send_ns`` on, EOF on the last, ERR if ``error``.
+             out: np.ndarray | None = None, extra: bytes = b"") -> PayloadBatch:
+        """The payloads of one frame: PTS ``pts_ns``, SCR from ``send_ns`` on, EOF on the last, ERR if ``error``;
+        ``extra`` (metadata items, ``uvc.metadata``) extends the first payload's header past the standard bytes.
 
-        ``out`` (uint8, at least ``buffer_size(len(data))`` bytes) is built in instead of a new buffer; a
-        streaming endpoint reuses one, so frames cost no fresh pages (the batch lives until ``out`` is reused).
+        ``out`` (uint8, at least ``buffer_size(len(data), len(extra))`` bytes) is built in instead of a new
+        buffer; a streaming endpoint reuses one, so frames cost no fresh pages (the batch lives until ``out`` is
+        reused).
         """
         raw = np.frombuffer(data, np.uint8) if isinstance(data, (bytes, bytearray, memoryview)) else \
             np.ascontiguousarray(data).reshape(-1).view(np.uint8)
         ps, chunk = self.payload_size, self.payload_size - HEADER_LEN
+        h0 = HEADER_LEN + len(extra)
+        if h0 > min(255, ps - 1):
+            raise ProtocolError(f"a {h0}-byte payload header does not fit 255 bytes and a {ps}-byte payload")
         size = raw.size
-        n = max(-(-size // chunk), 1)
+        first = min(size, ps - h0)  # the first payload's data, after its longer header
+        n = 1 + max(-(-(size - first) // chunk), 0)
         hdr = np.empty(n, _HDR)
         hdr["len"] = HEADER_LEN
+        hdr["len"][0] = h0
         info = BH_EOH | BH_PTS | BH_SCR | self.fid | (BH_ERR if error else 0)
         hdr["info"] = info
         hdr["info"][-1] = info | BH_EOF
@@ -150,16 +159,22 @@ class PayloadPacker:
         send = np.int64(send_ns) + np.arange(n, dtype=np.int64) * self.send_step_ns
         hdr["stc"] = ns_to_ticks(send, self.clock_hz) & 0xFFFFFFFF
         hdr["sof"] = (send // SOF_PERIOD_NS) & 0x7FF
-        total = n * HEADER_LEN + size
+        total = n * HEADER_LEN + len(extra) + size
         buf = np.empty(n * ps, np.uint8) if out is None or out.size < n * ps else out[: n * ps]
         grid = buf.reshape(n, ps)
         grid[:, :HEADER_LEN] = hdr.view(np.uint8).reshape(n, HEADER_LEN)
-        full = (n - 1) * chunk
-        grid[:-1, HEADER_LEN:] = raw[:full].reshape(n - 1, chunk)
-        tail = size - full
-        grid[-1, HEADER_LEN:HEADER_LEN + tail] = raw[full:]
+        grid[0, HEADER_LEN:h0] = np.frombuffer(extra, np.uint8)
+        grid[0, h0:h0 + first] = raw[:first]
         lengths = np.full(n, ps, np.int64)
-        lengths[-1] = HEADER_LEN + tail
+        if n == 1:
+            lengths[0] = h0 + first
+        else:
+            rest = raw[first:]
+            full = (n - 2) * chunk
+            grid[1:-1, HEADER_LEN:] = rest[:full].reshape(n - 2, chunk)
+            tail = rest.size - full
+            grid[-1, HEADER_LEN:HEADER_LEN + tail] = rest[full:]
+            lengths[-1] = HEADER_LEN + tail
         self.fid ^= 1
         return PayloadBatch(buf[:total], lengths, np.arange(n, dtype=np.int64) * ps)
 
@@ -178,6 +193,7 @@ class ParsedFrame:
     complete: bool
     payloads: int
     index: int = 0
+    extra: bytes = b""  # the first payload's header bytes after the standard fields (metadata items)
 
     def __repr__(self) -> str:
         return (f"ParsedFrame({len(self.data)} B, fid={self.fid}, pts_ns={self.pts_ns}, "
@@ -219,6 +235,7 @@ class PayloadParser:
         self._scr: tuple[int, int] | None = None
         self._err = False
         self._n = 0
+        self._extra = b""
         self._pts_high = 0
         self._last_pts: int | None = None
 
@@ -243,6 +260,7 @@ class PayloadParser:
             out.append(self._finish())
         if not self._n:
             self._fid = fid
+            self._extra = bytes(payload[need:hl])
         self._n += 1
         if info & BH_ERR:
             self._err = True
@@ -310,6 +328,7 @@ class PayloadParser:
                 out.append(self._finish())
             if not self._n:
                 self._fid = int(fid[a])
+                self._extra = bytes(mv[int(o[a]) + int(need[a]):int(o[a]) + int(hl[a])])
             self._n += b - a
             self._parts += [mv[x:y] for x, y in zip(starts[a:b], ends[a:b], strict=True) if y > x]
             if self._pts is None:
@@ -352,7 +371,7 @@ class PayloadParser:
         full_pts = self._unwrap(self._pts)
         frame = ParsedFrame(data, self._fid, self._pts,
                             None if full_pts is None else ticks_to_ns(full_pts, self.clock_hz), self._scr,
-                            self._err, complete, self._n, self.stats.frames)
+                            self._err, complete, self._n, self.stats.frames, self._extra)
         st = self.stats
         st.frames += 1
         st.complete += complete and not self._err
@@ -362,4 +381,5 @@ class PayloadParser:
         self._pts = self._scr = None
         self._err = False
         self._n = 0
+        self._extra = b""
         return frame

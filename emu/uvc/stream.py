@@ -14,6 +14,7 @@ from __future__ import annotations
 import errno
 from collections.abc import Callable
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 from rollcam.common.errors import DeviceError
@@ -221,11 +222,22 @@ class StreamEndpoint:
         self._error_frames -= err
         err = err or self.faults.hit("error", index)
         send_ns = now if self.realtime else p.frame_due_ns(index)
-        need = self._packer.buffer_size(data.size)
+        extra = insensor_item(frame, self._packer)
+        need = self._packer.buffer_size(data.size, len(extra))
         if self._buf.size < need:
             self._buf = np.empty(need, np.uint8)
         # The previous frame's payloads were all copied out by the reads that sent them: its buffer is free.
-        self._batch = self._packer.pack(data, frame.timestamp_ns, send_ns, error=err, out=self._buf)
+        self._batch = self._packer.pack(data, frame.timestamp_ns, send_ns, error=err, out=self._buf, extra=extra)
         self._pos = 0
         self.stats.frames_sent += 1
         return 0
+
+
+def insensor_item(frame: Frame, packer: Any) -> bytes:
+    """The frame's in-sensor result as a payload-header metadata item (``uvc.metadata``), or b"" (none, or a
+    payload too small to hold one beside the standard header)."""
+    from .metadata import MAX_HEADER, encode
+
+    if not frame.insensor or packer.payload_size <= MAX_HEADER:
+        return b""
+    return encode(frame.insensor, frame.sequence, packer.clock_hz)

@@ -36,8 +36,12 @@ class PixFormat(Struct):
                 ("quantization", u32), ("xfer_func", u32)]
 
 
+class MetaFormat(Struct):
+    _fields_ = [("dataformat", u32), ("buffersize", u32)]
+
+
 class _FormatUnion(C.Union):
-    _fields_ = [("pix", PixFormat), ("raw_data", u8 * 200), ("_align", C.c_void_p)]
+    _fields_ = [("pix", PixFormat), ("meta", MetaFormat), ("raw_data", u8 * 200), ("_align", C.c_void_p)]
 
 
 class Format(Struct):

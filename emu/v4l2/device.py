@@ -41,6 +41,7 @@ class CapturedBuffer:
     height: int
     data: np.ndarray = field(repr=False)
     levels: Levels | None = field(default=None, repr=False)
+    metadata: dict[str, Any] | None = field(default=None, repr=False)  # the metadata node's buffer of this frame
 
     @property
     def error(self) -> bool:
@@ -103,6 +104,8 @@ class Device(Closeable):
         """A device on a new FirmwareCamera of ``sensor`` (``realtime=False``: frames as fast as asked;
         ``faults``: a ``FaultPlan`` or its text, e.g. ``"drop=5%,error=2%,seed=1"``; ``rt_priority``: the
         real-time pump's waits run under SCHED_FIFO at that priority)."""
+        if "insensor" in camera_options:  # a network spec, as the option table takes it
+            camera_options["insensor_values"] = {"insensor": camera_options.pop("insensor")}
         camera = FirmwareCamera(sensor, scene=scene, clock=clock, **camera_options)
         return cls(EmuDriver(camera, realtime=realtime, bands=bands, faults=faults, rt_priority=rt_priority))
 
@@ -124,12 +127,19 @@ class Device(Closeable):
         """VIDIOC_S_FMT; returns the format set (rounded like TRY_FMT)."""
         return fn.set_format(self.driver, width, height, fourcc)
 
-    def stream(self, buffers: int = 4, frames: int | None = None, timeout_s: float | None = 5.0
-               ) -> Iterator[CapturedBuffer]:
-        """REQBUFS, QBUF all, STREAMON, then DQBUF/copy/QBUF; stops after ``frames`` (STREAMOFF, REQBUFS 0)."""
+    def stream(self, buffers: int = 4, frames: int | None = None, timeout_s: float | None = 5.0,
+               metadata: bool = False) -> Iterator[CapturedBuffer]:
+        """REQBUFS, QBUF all, STREAMON, then DQBUF/copy/QBUF; stops after ``frames`` (STREAMOFF, REQBUFS 0).
+        ``metadata``: stream the metadata node too (a camera with an in-sensor network), each buffer's
+        ``metadata`` the ``RCIS`` buffer of the same sequence (``meta.unpack``), None when it was lost."""
         d = self.driver
+        meta = self._metadata_node() if metadata else None
         n = fn.request_buffers(d, buffers)
         try:
+            if meta is not None:
+                for i in range(fn.request_buffers(meta, buffers)):
+                    fn.queue_buffer(meta, i)
+                fn.stream_on(meta)
             for i in range(n):
                 fn.queue_buffer(d, i)
             fn.stream_on(d)
@@ -139,7 +149,7 @@ class Device(Closeable):
                 f = d.fmt
                 levels = Levels.of_sensor(d.camera.sensor) if is_raw(f.pixelformat) else None
                 out = CapturedBuffer(buf.sequence, buf.timestamp_ns, buf.bytesused, buf.flags, f.pixelformat,
-                                     f.width, f.height, view.copy(), levels)
+                                     f.width, f.height, view.copy(), levels, _metadata_of(meta, buf.sequence))
                 fn.queue_buffer(d, buf.index)
                 count += 1
                 yield out
@@ -147,3 +157,30 @@ class Device(Closeable):
             if not d.queue.disconnected:
                 fn.stream_off(d)
                 fn.request_buffers(d, 0)
+            if meta is not None:
+                meta.close()
+
+    def _metadata_node(self) -> Any:
+        from .meta import MetaDriver
+
+        if self.driver.camera.spec.insensor is None:
+            raise ConfigError("metadata=True needs a camera with an in-sensor network (insensor=..., e.g. "
+                              "Device.open('imx219', insensor='personnet-raw'))")
+        return self.driver.meta or MetaDriver(self.driver)
+
+
+def _metadata_of(meta: Any, sequence: int) -> dict[str, Any] | None:
+    """The metadata node's buffer of ``sequence`` (filled as the image buffer completed), re-queued."""
+    from .meta import unpack
+    from .queue import V4L2Error
+
+    while meta is not None:
+        try:
+            buf, view = fn.dequeue_buffer(meta, block=False)
+        except V4L2Error:
+            return None  # none done: that frame's metadata was lost
+        doc = unpack(view.tobytes())
+        fn.queue_buffer(meta, buf.index)
+        if buf.sequence >= sequence:
+            return doc if buf.sequence == sequence else None
+    return None

@@ -52,6 +52,9 @@ class DriverStats(Stats):
 class EmuDriver:
     """Driver state of one emulated /dev/videoN: format, buffer queue, streaming, faults, statistics."""
 
+    buf_type = raw.BufType.VIDEO_CAPTURE
+    requests: frozenset[str] | None = None  # None: every request of the ioctl core
+
     def __init__(self, camera: FirmwareCamera, *, realtime: bool = True, bands: int = 8,
                  faults: FaultPlan | str | None = None, rt_priority: int | None = None,
                  alloc: Callable[[int, int], np.ndarray] | None = None) -> None:
@@ -70,6 +73,7 @@ class EmuDriver:
         self.ts0: int | None = None  # the stream's first timestamp (where an injected timestamp wrap counts from)
         self.stats = DriverStats()
         self._filling: tuple[int, Slot, np.ndarray] | None = None
+        self.meta: Any = None  # the metadata node's driver (``meta.MetaDriver``), filled as each buffer completes
 
     @property
     def fmt(self) -> raw.PixFormat:
@@ -176,10 +180,13 @@ class EmuDriver:
         t_ns = self.camera.host_ns(frame.timestamp_ns)
         if self.ts0 is None:
             self.ts0 = t_ns
-        self.queue.complete(slot, bytesused=size, sequence=self.faults.sequence(frame.sequence - self.seq0),
-                            timestamp_ns=self.faults.timestamp_ns(t_ns, self.ts0),
+        sequence = self.faults.sequence(frame.sequence - self.seq0)
+        timestamp_ns = self.faults.timestamp_ns(t_ns, self.ts0)
+        self.queue.complete(slot, bytesused=size, sequence=sequence, timestamp_ns=timestamp_ns,
                             error=inj.hit("error", frame.sequence))
         self.stats.delivered += 1
+        if self.meta is not None:
+            self.meta.deliver(frame, sequence, timestamp_ns)
         if self.on_change is not None:
             self.on_change()
 
@@ -210,8 +217,9 @@ def _pix_format(width: int, height: int, fourcc: str) -> raw.PixFormat:
 # ------------------------------------------------------------------------------------------------ handlers
 def _querycap(d: EmuDriver, _arg: Any) -> raw.Capability:
     caps = raw.Cap.VIDEO_CAPTURE | raw.Cap.STREAMING | raw.Cap.EXT_PIX_FORMAT
+    every = caps | (raw.Cap.META_CAPTURE if d.meta is not None else 0)  # the device's nodes together
     return raw.Capability("rollcam", f"rollcam {d.camera.sensor.name} emulator", "platform:rollcam-emu",
-                          0x00060800, int(caps | raw.Cap.DEVICE_CAPS), int(caps))
+                          0x00060800, int(every | raw.Cap.DEVICE_CAPS), int(caps))
 
 
 def _enum_fmt(d: EmuDriver, arg: raw.FmtDesc) -> raw.FmtDesc:

@@ -40,7 +40,8 @@ class Answer:
 def handle(node: DeviceNode, f: OpenFile, request: int, data: bytes) -> Answer:
     """Run one ioctl; V4L2Error carries the errno (the ext-controls array still comes back on error)."""
     name, struct = abi.BY_NUMBER.get(request, (None, None))
-    if name not in HANDLERS:
+    allowed = node.driver.requests
+    if name not in HANDLERS or (allowed is not None and name not in allowed):
         raise V4L2Error(errno.ENOTTY, f"ioctl {name or hex(request)} is not supported by this device")
     arg: Any = None
     size = 0 if struct is None else C.sizeof(struct)
@@ -57,7 +58,7 @@ def handle(node: DeviceNode, f: OpenFile, request: int, data: bytes) -> Answer:
             node.check_owner(f)
             if node.fileio is not None:
                 raise V4L2Error(errno.EBUSY, f"{name} while read() I/O owns the buffers")
-        before = ctrls.controls(node.driver) if name in _CONTROL_CHANGERS else None
+        before = ctrls.controls(node.driver) if name in _CONTROL_CHANGERS and _has_controls(node) else None
         extra = data[size:]
         try:
             out = HANDLERS[name](node, f, arg, extra) if name in _WITH_EXTRA else HANDLERS[name](node, f, arg)
@@ -70,9 +71,17 @@ def handle(node: DeviceNode, f: OpenFile, request: int, data: bytes) -> Answer:
     return Answer(int(out or 0), None if struct is None else bytes(arg))
 
 
-def _type(t: int) -> None:
-    if t != CAPTURE:
-        raise V4L2Error(errno.EINVAL, f"buffer type {t} is not VIDEO_CAPTURE")
+def _type(node: DeviceNode, t: int) -> None:
+    if t != node.driver.buf_type:
+        raise V4L2Error(errno.EINVAL, f"buffer type {t} is not {node.driver.buf_type.name}")
+
+
+def _has_controls(node: DeviceNode) -> bool:
+    return node.driver.buf_type == CAPTURE  # a metadata node has none (its camera's are the image node's)
+
+
+def _is_meta(node: DeviceNode) -> bool:
+    return node.driver.buf_type == raw.BufType.META_CAPTURE
 
 
 # ------------------------------------------------------------------------------------------- device and formats
@@ -80,15 +89,16 @@ def _querycap(node: DeviceNode, _f: OpenFile, a: abi.Capability) -> None:
     c = node.driver.ioctl(raw.Ioctl.QUERYCAP)
     abi.set_str(a.driver, c.driver)
     abi.set_str(a.card, c.card)
-    abi.set_str(a.bus_info, f"{c.bus_info}-{node.minor}")
+    abi.set_str(a.bus_info, f"{c.bus_info}-{node.bus_minor}")
     a.version = c.version
-    a.device_caps = c.device_caps | raw.Cap.READWRITE
+    rw = 0 if _is_meta(node) else raw.Cap.READWRITE  # vb2's read() emulation: on the image node only
+    a.device_caps = c.device_caps | rw
     a.capabilities = c.capabilities | raw.Cap.READWRITE
     a.reserved[:] = [0, 0, 0]
 
 
 def _enum_fmt(node: DeviceNode, _f: OpenFile, a: abi.FmtDesc) -> None:
-    _type(a.type)
+    _type(node, a.type)
     d = node.driver.ioctl(raw.Ioctl.ENUM_FMT, raw.FmtDesc(a.index))
     a.flags = d.flags
     abi.set_str(a.description, d.description)
@@ -110,18 +120,34 @@ def _get_pix(a: abi.Format) -> raw.PixFormat:
     return raw.PixFormat(pix.width, pix.height, raw.fourcc_text(pix.pixelformat))
 
 
+def _put_meta(a: abi.Format) -> None:
+    """The metadata node's one format, whatever was asked (as uvcvideo's meta node answers TRY/S_FMT)."""
+    from .meta import BUFFER_SIZE, META_FOURCC
+
+    C.memset(C.addressof(a.fmt), 0, C.sizeof(a.fmt))
+    a.fmt.meta.dataformat, a.fmt.meta.buffersize = raw.fourcc_code(META_FOURCC), BUFFER_SIZE
+
+
 def _g_fmt(node: DeviceNode, _f: OpenFile, a: abi.Format) -> None:
-    _type(a.type)
+    _type(node, a.type)
+    if _is_meta(node):
+        return _put_meta(a)
     _put_pix(a, node.driver.fmt)
 
 
 def _try_fmt(node: DeviceNode, _f: OpenFile, a: abi.Format) -> None:
-    _type(a.type)
+    _type(node, a.type)
+    if _is_meta(node):
+        return _put_meta(a)
     _put_pix(a, node.driver.ioctl(raw.Ioctl.TRY_FMT, _get_pix(a)))
 
 
 def _s_fmt(node: DeviceNode, f: OpenFile, a: abi.Format) -> None:
-    _type(a.type)
+    _type(node, a.type)
+    if _is_meta(node):
+        if node.driver.queue.slots and node.owner is not f:
+            raise V4L2Error(errno.EBUSY, "S_FMT while another file owns the buffers")
+        return _put_meta(a)
     want = _get_pix(a)
     if node.driver.queue.slots and (node.owner is not f or node.driver.ioctl(raw.Ioctl.TRY_FMT, want) !=
                                     node.driver.fmt):
@@ -154,13 +180,13 @@ def _parm(node: DeviceNode, a: abi.StreamParm, ival: tuple[int, int]) -> None:
 
 
 def _g_parm(node: DeviceNode, _f: OpenFile, a: abi.StreamParm) -> None:
-    _type(a.type)
+    _type(node, a.type)
     p = node.driver.ioctl(raw.Ioctl.G_PARM)
     _parm(node, a, (p.numerator, p.denominator))
 
 
 def _s_parm(node: DeviceNode, _f: OpenFile, a: abi.StreamParm) -> None:
-    _type(a.type)
+    _type(node, a.type)
     t = a.parm.capture.timeperframe
     p = node.driver.ioctl(raw.Ioctl.S_PARM, raw.StreamParm(numerator=t.numerator, denominator=t.denominator))
     _parm(node, a, (p.numerator, p.denominator))

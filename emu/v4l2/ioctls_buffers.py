@@ -12,7 +12,6 @@ from . import abi, raw
 from .node import DeviceNode, OpenFile
 from .queue import V4L2Error
 
-CAPTURE = raw.BufType.VIDEO_CAPTURE
 BUF_CAP_SUPPORTS_MMAP = 1
 BUF_CAP_SUPPORTS_ORPHANED_BUFS = 1 << 4  # REQBUFS 0 while mapped: the program's mappings stay valid (memfds)
 FLAG_REQUEST_FD = 0x00800000
@@ -20,9 +19,9 @@ _STATE_FLAGS = raw.BufFlag.QUEUED | raw.BufFlag.DONE | raw.BufFlag.ERROR
 _TIMESTAMP_FLAGS = raw.BufFlag.TIMESTAMP_MONOTONIC | raw.BufFlag.TSTAMP_SRC_SOE
 
 
-def _check(t: int, memory: int | None = None) -> None:
-    if t != CAPTURE:
-        raise V4L2Error(errno.EINVAL, f"buffer type {t} is not VIDEO_CAPTURE")
+def _check(node: DeviceNode, t: int, memory: int | None = None) -> None:
+    if t != node.driver.buf_type:
+        raise V4L2Error(errno.EINVAL, f"buffer type {t} is not {node.driver.buf_type.name}")
     if memory is not None and memory != raw.Memory.MMAP:
         raise V4L2Error(errno.EINVAL, f"memory {memory} is not MMAP (the only memory this device has)")
 
@@ -30,7 +29,7 @@ def _check(t: int, memory: int | None = None) -> None:
 def fill(node: DeviceNode, a: abi.Buffer, info: raw.Buffer) -> None:
     """``struct v4l2_buffer`` of a buffer's state."""
     C.memset(C.addressof(a), 0, C.sizeof(a))
-    a.index, a.type, a.bytesused, a.field = info.index, CAPTURE, info.bytesused, raw.Field.NONE
+    a.index, a.type, a.bytesused, a.field = info.index, node.driver.buf_type, info.bytesused, raw.Field.NONE
     flags = (info.flags & _STATE_FLAGS) | _TIMESTAMP_FLAGS
     if info.index in node.mapped:
         flags |= raw.BufFlag.MAPPED
@@ -42,7 +41,7 @@ def fill(node: DeviceNode, a: abi.Buffer, info: raw.Buffer) -> None:
 
 
 def _reqbufs(node: DeviceNode, f: OpenFile, a: abi.RequestBuffers) -> None:
-    _check(a.type)
+    _check(node, a.type)
     if a.memory != raw.Memory.MMAP:
         raise V4L2Error(errno.EINVAL, f"memory {a.memory} is not supported (MMAP only)")
     d = node.driver
@@ -57,12 +56,12 @@ def _reqbufs(node: DeviceNode, f: OpenFile, a: abi.RequestBuffers) -> None:
 
 
 def _querybuf(node: DeviceNode, _f: OpenFile, a: abi.Buffer) -> None:
-    _check(a.type)
+    _check(node, a.type)
     fill(node, a, node.driver.ioctl(raw.Ioctl.QUERYBUF, raw.Buffer(a.index)))
 
 
 def _qbuf(node: DeviceNode, _f: OpenFile, a: abi.Buffer) -> None:
-    _check(a.type, a.memory)
+    _check(node, a.type, a.memory)
     if a.flags & FLAG_REQUEST_FD:
         raise V4L2Error(errno.EBADR, "this device has no requests (media request API)")
     fill(node, a, node.driver.ioctl(raw.Ioctl.QBUF, raw.Buffer(a.index)))
@@ -70,7 +69,7 @@ def _qbuf(node: DeviceNode, _f: OpenFile, a: abi.Buffer) -> None:
 
 
 def _dqbuf(node: DeviceNode, _f: OpenFile, a: abi.Buffer) -> None:
-    _check(a.type, a.memory)
+    _check(node, a.type, a.memory)
     slot = node.driver.ioctl(raw.Ioctl.DQBUF, {"block": False})
     fill(node, a, slot.info)
 
@@ -78,7 +77,7 @@ def _dqbuf(node: DeviceNode, _f: OpenFile, a: abi.Buffer) -> None:
 def _expbuf(node: DeviceNode, _f: OpenFile, a: abi.ExportBuffer) -> Any:
     from .ioctls import Answer
 
-    _check(a.type)
+    _check(node, a.type)
     if a.plane != 0 or a.flags & ~(os.O_CLOEXEC | os.O_ACCMODE):
         raise V4L2Error(errno.EINVAL, f"plane {a.plane} / flags {a.flags:#x} are not valid")
     if a.index not in node.shm or a.index >= len(node.driver.queue.slots):
@@ -88,12 +87,12 @@ def _expbuf(node: DeviceNode, _f: OpenFile, a: abi.ExportBuffer) -> Any:
 
 
 def _streamon(node: DeviceNode, _f: OpenFile, a: C.c_int) -> None:
-    _check(a.value)
+    _check(node, a.value)
     node.driver.ioctl(raw.Ioctl.STREAMON)
 
 
 def _streamoff(node: DeviceNode, _f: OpenFile, a: C.c_int) -> None:
-    _check(a.value)
+    _check(node, a.value)
     node.driver.ioctl(raw.Ioctl.STREAMOFF)
     node.waiting_for_buffers = True
 

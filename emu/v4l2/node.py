@@ -74,6 +74,7 @@ class DeviceNode:
     def __init__(self, driver: EmuDriver, path: str = "/dev/video0", minor: int = 0) -> None:
         self.driver = driver
         self.path, self.minor = path, minor
+        self.bus_minor = minor  # QUERYCAP's bus_info: a metadata node shares its image node's (one device)
         self.lock = threading.RLock()
         self._levels = threading.Lock()  # sync() runs on the pump's thread too: it must not wait for self.lock
         self.files: list[OpenFile] = []
@@ -116,7 +117,8 @@ class DeviceNode:
     def free_queue(self) -> None:
         """STREAMOFF and REQBUFS 0 for the owner; nobody owns the queue after."""
         with self.lock:
-            before = ctrls.controls(self.driver)
+            has_controls = self.driver.buf_type == raw.BufType.VIDEO_CAPTURE  # a metadata node has none
+            before = ctrls.controls(self.driver) if has_controls else {}
             try:
                 self.driver.ioctl(raw.Ioctl.STREAMOFF)
                 self.driver.ioctl(raw.Ioctl.REQBUFS, raw.RequestBuffers(0))
@@ -125,7 +127,8 @@ class DeviceNode:
             self._free_shm()
             self.owner, self.fileio = None, None
             self.waiting_for_buffers = True
-            self.notify_controls(before, None)
+            if has_controls:
+                self.notify_controls(before, None)
 
     def check_owner(self, f: OpenFile) -> None:
         """EBUSY when another file owns the queue (vb2_queue_is_busy)."""
@@ -216,9 +219,10 @@ class DeviceNode:
             mask = select.POLLPRI if f.events.pending else 0
             if not events & (select.POLLIN | select.POLLRDNORM):
                 return mask
-            if start and not q.slots and self.fileio is None and self.owner is None:
+            if start and not q.slots and self.fileio is None and self.owner is None \
+                    and self.driver.buf_type == raw.BufType.VIDEO_CAPTURE:
                 try:
-                    self._start_fileio(f)
+                    _start_fileio(self, f)
                 except V4L2Error:
                     return mask | select.POLLERR
             if not q.streaming or self.waiting_for_buffers:
@@ -228,23 +232,15 @@ class DeviceNode:
             return mask
 
     # ------------------------------------------------------------------------------------ read() I/O
-    def _start_fileio(self, f: OpenFile) -> None:
-        d = self.driver
-        d.ioctl(raw.Ioctl.REQBUFS, raw.RequestBuffers(READ_BUFFERS))
-        self.reallocated()
-        for i in range(len(d.queue.slots)):
-            d.ioctl(raw.Ioctl.QBUF, raw.Buffer(i))
-        d.ioctl(raw.Ioctl.STREAMON)
-        self.owner, self.fileio, self.waiting_for_buffers = f, FileIO(), False
-        self.sync()
-
     def read(self, f: OpenFile, count: int) -> bytes:
         """read(): the next frame's bytes (or the rest of the one being read); EAGAIN while none is ready."""
         with self.lock:
+            if self.driver.buf_type != raw.BufType.VIDEO_CAPTURE:
+                raise V4L2Error(errno.EINVAL, "a metadata node has no read() I/O")
             if self.fileio is None:
                 if self.driver.queue.slots or self.owner is not None:
                     raise V4L2Error(errno.EBUSY, "read() while streaming I/O owns the buffers")
-                self._start_fileio(f)
+                _start_fileio(self, f)
             self.check_owner(f)
             io = self.fileio
             assert io is not None
@@ -270,7 +266,23 @@ class DeviceNode:
             self._free_shm()
 
 
+def _start_fileio(node: DeviceNode, f: OpenFile) -> None:
+    """vb2's read() emulation starts: buffers allocated, queued and streaming, owned by ``f``."""
+    d = node.driver
+    d.ioctl(raw.Ioctl.REQBUFS, raw.RequestBuffers(READ_BUFFERS))
+    node.reallocated()
+    for i in range(len(d.queue.slots)):
+        d.ioctl(raw.Ioctl.QBUF, raw.Buffer(i))
+    d.ioctl(raw.Ioctl.STREAMON)
+    node.owner, node.fileio, node.waiting_for_buffers = f, FileIO(), False
+    node.sync()
+
+
 def describe(node: DeviceNode) -> dict[str, Any]:
     """What a log line or ``rollcam run --json`` says about a node."""
     cam = node.driver.camera
+    if node.driver.buf_type != raw.BufType.VIDEO_CAPTURE:
+        from .meta import META_FOURCC
+
+        return {"path": node.path, "sensor": cam.sensor.name, "metadata": META_FOURCC}
     return {"path": node.path, "sensor": cam.sensor.name, "size": list(cam.size), "format": cam.pixel_format}

@@ -26,6 +26,7 @@ class Cap(enum.IntFlag):
     """``V4L2_CAP_*`` device capabilities."""
 
     VIDEO_CAPTURE = 0x00000001
+    META_CAPTURE = 0x00800000
     TIMEPERFRAME = 0x00001000  # v4l2_captureparm.capability
     EXT_PIX_FORMAT = 0x00200000
     READWRITE = 0x01000000
@@ -37,6 +38,7 @@ class BufType(enum.IntEnum):
     """``enum v4l2_buf_type`` (capture only here)."""
 
     VIDEO_CAPTURE = 1
+    META_CAPTURE = 13
 
 
 class Memory(enum.IntEnum):

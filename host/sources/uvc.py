@@ -52,8 +52,8 @@ from .base import (
 )
 
 OPTIONS = {"backend", "usbip", "busid", "format", "size", "fps", "exposure_us", "gain", "sensor", "decode", "frames",
-           "timeout_ms", "scene", "seed", "transfer", "realtime"}
-EMU_ONLY = {"scene", "seed", "transfer", "realtime"}
+           "timeout_ms", "scene", "seed", "transfer", "realtime", "insensor"}
+EMU_ONLY = {"scene", "seed", "transfer", "realtime", "insensor"}
 FORMAT_NAMES = {"yuyv": "YUYV", "nv12": "NV12", "mjpeg": "MJPG", "mjpg": "MJPG"}
 
 
@@ -182,7 +182,7 @@ def _emulated(uri: SourceURI, vid: int, pid: int, sensor: SensorConfig | None) -
     source and ``rollcam emulate`` use, behind a FirmwareProducer."""
     from rollcam.emu.uvc.pyusb_backend import EmulatedBackend  # needs pyusb
 
-    options = {k: uri.options[k] for k in ("scene", "seed", "size") if k in uri.options}
+    options = {k: uri.options[k] for k in ("scene", "seed", "size", "insensor") if k in uri.options}
     spec = CameraSpec.from_options(sensor or load_sensor("imx219"), options, f"source {uri.uri!r}", SourceError)
     function = UVCFunction(FirmwareProducer(FirmwareCamera(spec)), identity=DeviceIdentity(vendor_id=vid,
                            product_id=pid), transfer=uri.get("transfer", str, "iso"),
@@ -338,7 +338,20 @@ class UVCSource(CameraSource):
         meta = {"wire_format": fourcc, "pts": parsed.pts, "scr": parsed.scr, "payloads": parsed.payloads}
         return Frame(data=data, format=fmt, size=(w, h), sequence=parsed.index, timestamp_ns=int(t0),
                      line_time_ns=line_ns, readout=self.readout, exposure_ns=self.exposure_ns, shutter=self.shutter,
-                     row_times_ns=rows, meta=meta)
+                     row_times_ns=rows, meta=meta, insensor=self._insensor(parsed, int(t0), line_ns))
+
+    def _insensor(self, parsed: Any, t0: int, line_ns: int) -> tuple[Any, ...]:
+        """The in-sensor result in the frame's payload header (``emu.uvc.metadata``), if the camera sent one."""
+        if not parsed.extra or parsed.pts is None:
+            return ()
+        from rollcam.emu.uvc.metadata import decode as decode_item
+        from rollcam.emu.uvc.metadata import to_result
+
+        item = decode_item(parsed.extra, self.clock_hz)
+        if item is None:
+            return ()
+        return (to_result(item, parsed.pts, t0, self.clock_hz, parsed.index, line_time_ns=line_ns,
+                          readout=self.readout.value, exposure_ns=self.exposure_ns),)
 
     def info(self) -> dict[str, Any]:
         """Negotiated format, size, interval, clock, and the parser's counts."""

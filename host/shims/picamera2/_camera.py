@@ -28,6 +28,8 @@ from rollcam.sim import formats as sf
 from rollcam.sim.frame import Frame
 from rollcam.sim.hwconfig import SensorMode
 
+from . import _cnn
+
 CFA_CODES = {"RGGB": 0, "GRBG": 1, "GBRG": 2, "BGGR": 3, "mono": 5}
 """libcamera's ColorFilterArrangement values."""
 
@@ -104,6 +106,11 @@ class PiCamera:
     def __init__(self, source: str, num: int) -> None:
         self.source, self.num = source, num
         self.base = spec_of(source)
+        # A network named in the source (insensor=...) runs whatever IMX500() is given; else IMX500's does.
+        self._own_network = self.base.insensor is None
+        self.cnn = _cnn.program_of(num)
+        if self.cnn is not None and self._own_network:
+            self.base = self.base.with_options(self.cnn.options())
         self.device = FirmwareCamera(self.base)
         self.sensor = self.base.sensor
         self.modes = raw_modes(self.base)
@@ -189,6 +196,13 @@ class PiCamera:
             "RollcamShutter": frame.shutter, "RollcamExposureTimeNs": int(frame.exposure_ns),
             "RollcamFrameDurationNs": int(s.timing.frame_period_ns),
         }
+        cnn = self.cnn
+        if cnn is None and spec.insensor is not None:  # a network named in the source, no IMX500 object
+            cnn = _cnn.CnnProgram(spec.insensor.network, spec.insensor.network, spec.insensor.max_size)
+        if cnn is not None:
+            c = self.sensor.crop(s.mode)
+            md.update(_cnn.cnn_metadata(cnn, frame, (c.left, c.top, c.width, c.height),
+                                        (self.sensor.active_width, self.sensor.active_height)))
         for name in ("AeEnable", "AwbEnable", "LensPosition", "AfMode"):
             if name in self.extra:
                 md[name] = self.extra[name]
@@ -216,7 +230,21 @@ class PiCamera:
                            hflip=hflip, vflip=vflip, idle_only="mode")
         self.frame_limits_us, self.exposure_us, self.analogue_gain = (0, 1 << 62), 0, 0.0
         self.extra, self.scaler_crop = {}, None
+        self._sync_network()
         return self.device.pixel_format
+
+    def set_network(self, program: _cnn.CnnProgram) -> None:
+        """Run ``program``'s network (``IMX500``) from the next frame, with its inference region."""
+        self.cnn = program
+        self._sync_network()
+
+    def _sync_network(self) -> None:
+        if self.cnn is None:
+            return
+        options = {"insensor_roi": _cnn.roi_option(self.cnn, self.crop_limits(), self.device.size)}
+        if self._own_network:
+            options.update(self.cnn.options())
+        self.device.set_options(options)
 
     def raw_name(self) -> str:
         """libcamera's name of the raw format streamed now (its Bayer order follows the flips)."""

@@ -1,0 +1,73 @@
+"""Which rollcam network an IMX500 "network firmware" file runs on the emulated camera (rollcam's extra).
+
+A Pi script names a network as an ``.rpk`` file of Sony's model zoo
+(``/usr/share/imx500-models/imx500_network_ssd_mobilenetv2_fpnlite_320x320_pp.rpk``). The emulated IMX500 has
+no firmware to load: the file's name (its stem; the file need not exist) picks a row of ``ZOO``, a rollcam
+detector the in-sensor stage runs, its input tensor size (the accelerator's largest input) and the layout the
+real network's post-processed outputs have (box order, boxes normalised or in input pixels). In place of an
+``.rpk``, an ``.onnx`` file runs as ``onnx:PATH`` and any rollcam detector spec (``personnet-raw``,
+``ssdlite?conf=0.2``) as itself, both with the ``_pp`` layout of the default row. Rollcam's detectors find
+people; their class 0 is COCO's "person".
+"""
+
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass
+
+COCO_LABELS = (
+    "person", "bicycle", "car", "motorcycle", "airplane", "bus", "train", "truck", "boat", "traffic light",
+    "fire hydrant", "stop sign", "parking meter", "bench", "bird", "cat", "dog", "horse", "sheep", "cow",
+    "elephant", "bear", "zebra", "giraffe", "backpack", "umbrella", "handbag", "tie", "suitcase", "frisbee",
+    "skis", "snowboard", "sports ball", "kite", "baseball bat", "baseball glove", "skateboard", "surfboard",
+    "tennis racket", "bottle", "wine glass", "cup", "fork", "knife", "spoon", "bowl", "banana", "apple",
+    "sandwich", "orange", "broccoli", "carrot", "hot dog", "pizza", "donut", "cake", "chair", "couch",
+    "potted plant", "bed", "dining table", "toilet", "tv", "laptop", "mouse", "remote", "keyboard", "cell phone",
+    "microwave", "oven", "toaster", "sink", "refrigerator", "book", "clock", "vase", "scissors", "teddy bear",
+    "hair drier", "toothbrush",
+)
+"""The 80 COCO class names, in the order detection networks number them."""
+
+
+@dataclass(frozen=True)
+class ZooNetwork:
+    """One model-zoo network as the emulated IMX500 runs it."""
+
+    stem: str
+    detector: str
+    input_size: tuple[int, int]
+    bbox_normalization: bool = False
+    bbox_order: str = "yx"
+
+
+ZOO = {z.stem: z for z in (
+    ZooNetwork("imx500_network_ssd_mobilenetv2_fpnlite_320x320_pp", "personnet-raw", (320, 320)),
+    ZooNetwork("imx500_network_efficientdet_lite0_pp", "personnet-raw", (320, 320)),
+    ZooNetwork("imx500_network_nanodet_plus_416x416_pp", "personnet-raw", (416, 416)),
+    ZooNetwork("imx500_network_yolov8n_pp", "personnet-raw", (640, 640), bbox_normalization=True, bbox_order="xy"),
+    ZooNetwork("imx500_network_yolo11n_pp", "personnet-raw", (640, 640), bbox_normalization=True, bbox_order="xy"),
+)}
+"""Model-zoo object detectors (post-processed on chip) -> the rollcam detector run in their place: the
+study's raw-trained ``personnet-raw`` (it reads the mosaic, as an in-sensor network does), within the named
+network's input size, with that network's box layout (the yolo exports give input-tensor pixels, x first)."""
+DEFAULT_INPUT = (640, 640)
+
+
+def resolve(network_file: str) -> ZooNetwork:
+    """The network a script's ``network_file`` names (see the module docstring); RuntimeError when it is an
+    ``.rpk`` rollcam does not know."""
+    text = os.fspath(network_file).strip()
+    base = os.path.basename(text)
+    stem, ext = os.path.splitext(base)
+    if ext.lower() == ".rpk":
+        if stem in ZOO:
+            return ZOO[stem]
+        raise RuntimeError(f"IMX500: network firmware {network_file!r} is not one rollcam emulates; known: "
+                           f"{sorted(ZOO)} (or give an .onnx file or a rollcam detector spec)")
+    if ext.lower() == ".onnx":
+        if not os.path.isfile(text):
+            raise RuntimeError(f"Firmware file {text} does not exist.")
+        return ZooNetwork(stem, f"onnx:{os.path.abspath(text)}", DEFAULT_INPUT)
+    if not text:
+        raise RuntimeError("IMX500: no network file given")
+    return ZooNetwork(text.split("?", 1)[0], text, DEFAULT_INPUT)

@@ -1,0 +1,12 @@
+"""picamera2's host-side decoder of the yolov8 network's raw head: not emulated (the emulated IMX500's
+networks are post-processed on chip, ``_pp``: their outputs are boxes, scores and classes already)."""
+
+from __future__ import annotations
+
+from typing import Any
+
+
+def postprocess_yolov8_detection(*args: Any, **kwargs: Any) -> Any:
+    """Not emulated: RuntimeError saying so (use a ``_pp`` network, whose outputs need no decoding)."""
+    raise RuntimeError("rollcam's IMX500 runs post-processed (_pp) networks only; postprocess_yolov8_detection "
+                       "decodes a raw yolov8 head, which the emulated sensor does not send")

@@ -1,0 +1,196 @@
+"""The IMX500 (Raspberry Pi AI Camera) in the picamera2 stand-in: a script written as picamera2's object
+detection example runs unchanged, and the boxes it parses from the output tensors are the in-sensor
+stage's detections of the frame they came from, on the device clock.
+"""
+
+from __future__ import annotations
+
+import ctypes
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+from rollcam.host import standin_env
+
+pytest.importorskip("onnx")  # the in-sensor stage counts a network's operations from its graph
+
+EXAMPLES = Path(__file__).parent / "picamera2_examples"
+SOURCE = "emu:imx500?pedestrians=12"
+
+
+def run_detect(*args: str, source: str = SOURCE) -> dict:
+    done = subprocess.run([sys.executable, str(EXAMPLES / "imx500_detect.py"), *args], env=standin_env([source]),
+                          cwd=EXAMPLES, capture_output=True, text=True, timeout=900)
+    assert done.returncode == 0, done.stderr[-3000:]
+    return json.loads(done.stdout.strip().splitlines()[-1])
+
+
+def main_box(box: list[float], raw: tuple[int, int], main: tuple[int, int]) -> list[float]:
+    """A box in the raw frame's pixels (x0, y0, x1, y1) as (x, y, w, h) in the main stream's (the full field of
+    view scaled; the 4:3 main crop of a 4:3 mode trims under a pixel)."""
+    sx, sy = main[0] / raw[0], main[1] / raw[1]
+    return [box[0] * sx, box[1] * sy, (box[2] - box[0]) * sx, (box[3] - box[1]) * sy]
+
+
+def test_the_object_detection_example_gets_the_in_sensor_detections():
+    out = run_detect("--frames", "5")
+    assert out["input"] == [320, 320] and out["labels"] == 80 and out["raw"] == [2028, 1520]
+    assert out["roi"] == [0, 0, 4056, 3040]
+    records = out["records"]
+    with_tensors = [r for r in records if r["detections"] is not None]
+    assert len(with_tensors) >= len(records) - 1  # only the first frame can come before any result is done
+    for r in with_tensors:
+        period_ns = r["period_ns"]
+        assert abs(period_ns - 1e9 / 30) < 1e9 / 30 / 1000  # FrameRate 30, the intrinsics' inference rate
+        assert r["shapes"] == [[100, 4], [100], [100], [1]]
+        result = r["insensor"][-1]
+        # Timing: the result rides on a later frame, done within that frame's window on the device clock.
+        assert result["seq"] < r["seq"]
+        frames = r["seq"] - result["seq"]  # frame starts are whole periods apart (to the ns of exact line timing)
+        assert abs(r["device_ts"] - result["timestamp_ns"] - frames * period_ns) <= frames
+        assert result["input_ns"] < result["done_ns"] <= r["device_ts"] + (result["input_ns"] - result["timestamp_ns"])
+        assert r["kpi"] == [-(-(result["done_ns"] - result["input_ns"]) // 1000) / 1000, 0.0]
+        # The boxes the script parsed are the camera's detections, mapped into the main stream.
+        want = sorted((main_box(d["box"], (2028, 1520), (640, 480)), d["score"]) for d in result["detections"]
+                      if d["score"] > 0.3)
+        got = sorted((d["box"], d["score"]) for d in r["detections"])
+        assert len(got) == len(want) and all(d["label"] == "person" for d in r["detections"])
+        for (gb, gs), (wb, ws) in zip(got, want, strict=True):
+            assert gs == pytest.approx(ws, abs=1e-3)
+            assert np.allclose(gb, wb, atol=1.5), (gb, wb)
+    assert sum(len(r["detections"]) for r in with_tensors) >= len(with_tensors)  # people are found
+
+
+def test_the_detections_are_the_network_run_on_that_frame(rollcam_picamera2):
+    """What the stand-in sends for frame n is the in-sensor network run independently on frame n (made again
+    from its sequence number and start), in the yolo export's layout (x first, input-tensor pixels)."""
+    from rollcam.firmware.camera import FirmwareCamera
+    from rollcam.firmware.insensor import load_network
+    from rollcam.firmware.insensor_stage import network_input
+
+    picamera2 = rollcam_picamera2(SOURCE)
+    from picamera2.devices import IMX500
+
+    imx500 = IMX500("/usr/share/imx500-models/imx500_network_yolov8n_pp.rpk")
+    assert imx500.network_intrinsics.bbox_order == "xy" and imx500.network_intrinsics.bbox_normalization
+    with picamera2.Picamera2(imx500.camera_num) as picam2:
+        picam2.start(picam2.create_preview_configuration(main={"size": (320, 240)}))
+        for _ in range(20):
+            metadata = picam2.capture_metadata()
+            if metadata.get("RollcamInsensor"):
+                break
+        spec = picam2.rollcam_device.spec
+    result = metadata["RollcamInsensor"][-1]
+    assert spec.insensor.network == "personnet-raw" and spec.insensor.max_size == (640, 640)
+    frame, samples = FirmwareCamera(spec).imager.render_samples(spec, result["seq"], result["timestamp_ns"])
+    image, bits, k = network_input(spec.insensor, spec, frame, samples)
+    out = load_network(spec.insensor.network).run(image, bits)
+    boxes = np.asarray(out.boxes, np.float64).reshape(-1, 4) * k
+    got = np.array([d["box"] for d in result["detections"]], np.float64).reshape(-1, 4)
+    assert len(got) == len(boxes) > 0
+    assert np.allclose(np.sort(got, axis=0), np.sort(boxes, axis=0), atol=0.01)
+    outputs = imx500.get_outputs(metadata, add_batch=True)
+    n = int(outputs[3][0][0])
+    order = np.argsort(-np.asarray(out.scores), kind="stable")
+    assert n == len(boxes)
+    assert np.allclose(outputs[0][0][:n, 0], boxes[order, 0] / 2028 * 640, atol=0.01)  # x0, input pixels
+    assert np.allclose(outputs[0][0][:n, 1], boxes[order, 1] / 1520 * 640, atol=0.01)  # y0
+    assert np.allclose(outputs[1][0][:n], np.asarray(out.scores)[order], atol=1e-6)
+    assert not outputs[1][0][n:].any()  # unused slots are zero
+
+
+class OutputTensorInfo(ctypes.LittleEndianStructure):
+    """libcamera's per-tensor record, written here from its definition (not imported from the stand-in)."""
+
+    _fields_ = [("tensor_data_num", ctypes.c_uint32), ("num_dimensions", ctypes.c_uint32),
+                ("size", ctypes.c_uint16 * 16)]
+
+
+class CnnOutputTensorInfoExported(ctypes.LittleEndianStructure):
+    _fields_ = [("network_name", ctypes.c_char * 64), ("num_tensors", ctypes.c_uint32),
+                ("info", OutputTensorInfo * 16), ("frameCount", ctypes.c_uint8)]
+
+
+def test_tensor_info_has_libcamera_struct_layout(rollcam_picamera2):
+    rollcam_picamera2("imx500")
+    from picamera2 import _cnn
+
+    data = _cnn.tensor_info("imx500_network_ssd_mobilenetv2_fpnlite_320x320_pp", [(100, 4), (100,), (100,), (1,)],
+                            frame_count=300)
+    assert len(data) == ctypes.sizeof(CnnOutputTensorInfoExported) == 712
+    parsed = CnnOutputTensorInfoExported.from_buffer_copy(data)
+    assert parsed.network_name == b"imx500_network_ssd_mobilenetv2_fpnlite_320x320_pp"
+    assert parsed.num_tensors == 4 and parsed.frameCount == 300 % 256
+    assert [(t.tensor_data_num, t.num_dimensions, list(t.size)[: t.num_dimensions]) for t in parsed.info[:4]] == \
+        [(400, 2, [100, 4]), (100, 1, [100]), (100, 1, [100]), (1, 1, [1])]
+    assert all(t.num_dimensions == 0 for t in parsed.info[4:])
+
+
+def test_network_files_resolve_through_the_table(rollcam_picamera2, tmp_path):
+    rollcam_picamera2("imx500")
+    from picamera2.devices.imx500 import networks
+
+    ssd = networks.resolve("/usr/share/imx500-models/imx500_network_ssd_mobilenetv2_fpnlite_320x320_pp.rpk")
+    assert (ssd.detector, ssd.input_size, ssd.bbox_order) == ("personnet-raw", (320, 320), "yx")
+    with pytest.raises(RuntimeError, match=r"imx500_network_posenet\.rpk.*not one rollcam emulates"):
+        networks.resolve("/usr/share/imx500-models/imx500_network_posenet.rpk")
+    with pytest.raises(RuntimeError, match="does not exist"):
+        networks.resolve(str(tmp_path / "mine.onnx"))
+    (tmp_path / "mine.onnx").write_bytes(b"")
+    assert networks.resolve(str(tmp_path / "mine.onnx")).detector == f"onnx:{tmp_path / 'mine.onnx'}"
+    assert networks.resolve("personnet?conf=0.2").detector == "personnet?conf=0.2"
+    doc = Path(__file__).resolve().parents[1] / "docs" / "picamera2.md"
+    assert all(f"`{stem}`" in doc.read_text() for stem in networks.ZOO)
+
+
+def test_imx500_needs_an_imx500_camera(rollcam_picamera2):
+    rollcam_picamera2("imx219")
+    from picamera2.devices import IMX500
+
+    with pytest.raises(RuntimeError, match=r"dev-node not found.*ROLLCAM_PICAMERA2"):
+        IMX500("/usr/share/imx500-models/imx500_network_ssd_mobilenetv2_fpnlite_320x320_pp.rpk")
+
+
+def test_inference_roi_programs_the_in_sensor_stage(rollcam_picamera2):
+    picamera2 = rollcam_picamera2(SOURCE)
+    from picamera2.devices import IMX500
+
+    imx500 = IMX500("/usr/share/imx500-models/imx500_network_ssd_mobilenetv2_fpnlite_320x320_pp.rpk")
+    with picamera2.Picamera2(imx500.camera_num) as picam2:
+        picam2.configure(picam2.create_preview_configuration(main={"size": (640, 480)}))
+        assert picam2.rollcam_device.spec.insensor.roi is None
+        imx500.set_auto_aspect_ratio()  # 320x320: the centred square of the 4056x3040 array
+        assert imx500.config["roi"] == (508, 0, 3040, 3040)
+        assert picam2.rollcam_device.spec.insensor.roi == (254, 0, 1520, 1520)  # in the 2028x1520 mode's pixels
+        picam2.start()
+        request = picam2.capture_request()
+        try:
+            assert imx500.get_roi_scaled(request) == (80, 0, 480, 480)
+        finally:
+            request.release()
+        for _ in range(20):
+            metadata = picam2.capture_metadata()
+            if metadata.get("RollcamInsensor"):
+                break
+    result = metadata["RollcamInsensor"][-1]
+    assert result["input_size"][0] <= 320 and result["input_size"][1] <= 320
+    assert all(d["box"][0] >= 254 and d["box"][2] <= 254 + 1520 for d in result["detections"])
+
+
+def test_nanodet_decoder_recovers_a_box(rollcam_picamera2):
+    rollcam_picamera2("imx500")
+    from picamera2.devices.imx500 import postprocess_nanodet_detection
+    from picamera2.devices.imx500.postprocess_nanodet import anchors
+
+    a = anchors()[0]
+    raw = np.full((1, len(a), 80 + 32), -20.0, np.float32)
+    cell = int(np.flatnonzero((a[:, 0] == 200) & (a[:, 1] == 160) & (a[:, 2] == 8))[0])
+    raw[0, cell, 0] = 10.0  # a confident person
+    for side, bins in enumerate((3, 2, 4, 5)):  # left, top, right, bottom distances in strides
+        raw[0, cell, 80 + side * 8 + bins] = 30.0
+    boxes, scores, classes = postprocess_nanodet_detection(raw, conf=0.5)[0]
+    assert classes.tolist() == [0] and scores[0] == pytest.approx(1 / (1 + np.exp(-10.0)))
+    assert np.allclose(boxes[0], [160 - 16, 200 - 24, 160 + 40, 200 + 32], atol=1e-3)  # y0, x0, y1, x1
