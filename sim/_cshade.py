@@ -35,7 +35,7 @@ def library_path() -> Path:
     path = Path(__file__).with_name(LIBRARY_NAME)
     if not path.is_file():
         raise RollcamError(f"{path} is missing: the install builds the renderer's background shader; reinstall "
-                           "rollcam on a machine with a C compiler (pip install -e . in a checkout)")
+                           "rollcam on a machine with a C compiler (in a checkout: reinstall it editable)")
     return path
 
 
@@ -64,7 +64,7 @@ def check_layout(lib: ctypes.CDLL, expected: tuple[int, ...]) -> None:
     got = tuple(buf[: min(n, len(expected))])
     if n != len(expected) or got != expected:
         raise RollcamError(f"{LIBRARY_NAME} reads table columns {got} (of {n}), the renderer writes {expected}: "
-                           "the library is stale; reinstall rollcam (pip install -e . in a checkout)")
+                           "the library is stale; reinstall rollcam (in a checkout: reinstall it editable)")
 
 
 _LIB = _load()
