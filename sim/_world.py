@@ -1,8 +1,10 @@
-"""Numba kernels of the static world: camera poses and background ray casting (street, facades, sky).
+"""Numba kernels of the static world: camera poses, and the background (street, facades, sky) and sun shadows
+through the C shader.
 
 Part of the per-line renderer (``rollcam.sim._actors`` holds the actors, ``rollcam.sim._kernels`` the line
-painting, ``rollcam.sim._shade`` the materials a ray hits); table layouts are filled by ``rollcam.sim.compile``.
-Every function is pure, so every render path shades identically.
+painting, ``rollcam.sim._cshade`` loads the C shader, ``sim/rollcam_shade.c``, that casts each pixel's ray and
+shades what it hits); table layouts are filled by ``rollcam.sim.compile``. Every function is pure, so every
+render path shades identically.
 """
 
 from __future__ import annotations
@@ -12,18 +14,8 @@ import math
 import numpy as np
 from numba import njit, prange
 
+from ._cshade import background_line_c, check_layout, library, sun_blocked_c
 from ._jitcache import guard
-from ._shade import (
-    BG_FAST,
-    CURB_RGB,
-    NO_CELL,
-    asphalt_albedo,
-    facade_albedo,
-    fog_transmittance,
-    sidewalk_albedo,
-    sky,
-    value_noise,
-)
 
 # ---- camera table columns -------------------------------------------------------------------------------
 C_FX, C_FY, C_CX, C_CY, C_W, C_H, C_TRANSPOSED = 0, 1, 2, 3, 4, 5, 6
@@ -45,6 +37,15 @@ KIND_STREET, KIND_CHART, KIND_FLAT = 0, 1, 2
 # ---- building table ---------------------------------------------------------------------------------------
 B_SIDE, B_Y0, B_Y1, B_HEIGHT, B_RGB, B_WIN_RGB, B_FLOOR, B_WIN_W, B_WIN_SP, B_LIT = 0, 1, 2, 3, 4, 7, 10, 11, 12, 13
 BLD_COLS = 14
+NO_BUILDING_HEIGHT = -1e300
+"""Height of the building table's last row, the sentinel that the lookup's empty bins name (see ``compile``)."""
+
+SHADE_LAYOUT = (C_FX, C_FY, C_CX, C_CY, C_TRANSPOSED, L_SUN, L_SUN_RGB, L_AMB, L_HORIZON, L_ZENITH, L_HAZE, L_FOG,
+                L_GLOW, W_KIND, W_ROAD, W_CURB, W_FACADE, W_YHALF, W_ASPHALT, W_SIDEWALK, W_CROSS, W_SEED, W_LEVEL,
+                W_BIN, KIND_STREET, KIND_FLAT, B_Y0, B_HEIGHT, B_RGB, B_WIN_RGB, B_FLOOR, B_WIN_W, B_WIN_SP, B_LIT,
+                BLD_COLS)
+"""The columns the C shader reads, in the order ``rollcam_shade_layout`` reports them."""
+check_layout(library(), SHADE_LAYOUT)
 
 
 # ======================================================================================================
@@ -99,166 +100,27 @@ def to_camera(rot, pos, x, y, z, out):
 
 
 # ======================================================================================================
-# background
+# background (the C shader)
 # ======================================================================================================
 
 
-@njit(cache=True, fastmath=BG_FAST, error_model="numpy", inline="always")
-def street_bin(y, y_half, bin_m):
-    """Bin of the building lookup holding street coordinate ``y`` (the street repeats every 2 * y_half)."""
-    yy = y + y_half
-    yy -= math.floor(yy / (2.0 * y_half)) * (2.0 * y_half)  # periodic street; cheaper than Python's float %
-    return int(yy / bin_m)
-
-
-@njit(cache=True, fastmath=BG_FAST, inline="always")
-def building_at(world, lut, side, y):
-    """Index of the building on ``side`` (0 west, 1 east) at street coordinate ``y`` (periodic), or -1."""
-    i = street_bin(y, world[W_YHALF], world[W_BIN])
-    if i < 0 or i >= lut.shape[1]:
-        return -1
-    return lut[side, i]
-
-
-@njit(cache=True, fastmath=BG_FAST, error_model="numpy", inline="always")
-def sun_probe(px, py, pz, sun_x, sun_y, sun_z, facade_x, skip_side):
-    """Where the ray from point p towards the sun crosses a facade plane (street canyon shadows).
-
-    Returns (state, side, y, z): state 0 unshadowed, 1 shadowed (sun below the horizon), 2 shadowed exactly
-    when a building stands on ``side`` at street coordinate y and is taller than z.
-    """
-    if sun_z <= 0.0:
-        return 1, 0, 0.0, 0.0
-    if sun_x == 0.0:
-        return 0, 0, 0.0, 0.0
-    side = 1 if sun_x > 0 else 0
-    if side == skip_side:
-        return 0, 0, 0.0, 0.0
-    t = ((facade_x if side == 1 else -facade_x) - px) / sun_x
-    if t <= 0.0:
-        return 0, 0, 0.0, 0.0
-    return 2, side, py + t * sun_y, pz + t * sun_z
-
-
-@njit(cache=True, fastmath=BG_FAST, inline="always")
+@njit(cache=True, inline="always")
 def _sun_blocked(world, lut, bld, px, py, pz, light, skip_side):
-    """True when a facade stands between point ``p`` and the sun (street canyon shadows)."""
-    state, side, y, z = sun_probe(px, py, pz, light[L_SUN], light[L_SUN + 1], light[L_SUN + 2], world[W_FACADE],
-                                  skip_side)
-    if state != 2:
-        return state == 1
-    b = building_at(world, lut, side, y)
-    return b >= 0 and z < bld[b, B_HEIGHT]
+    """True when a facade stands between point ``p`` and the sun (street canyon shadows); ``skip_side``: the
+    facade (0 west, 1 east) the point is on, or -1."""
+    return sun_blocked_c(world.ctypes.data, lut.ctypes.data, lut.shape[1] - 1, bld.ctypes.data, light.ctypes.data,
+                         px, py, pz, skip_side) != 0
 
 
-@njit(cache=True, fastmath=BG_FAST, error_model="numpy")
+@njit(cache=True, inline="always")
 def background_line(world, lut, bld, light, cam, rot, pos, line, out_line):
-    """Render one render-space line of the background from pose (rot, pos) into ``out_line`` (n x 3).
+    """Render one render-space line of the background from pose (rot, pos) into ``out_line`` (n x 3 float32).
 
-    One function with no array-taking callee: arrays handed to a callee (even an inlined one) are
-    reference-counted per call, which in this loop cost more than the shading (see ``rollcam.sim._shade``).
-    Every table value the loop needs is read into a local first.
+    Every array must be C-contiguous (the kernels' tables and buffers are): the shader reads them by address.
     """
-    n = out_line.shape[0]
-    kind = int(world[W_KIND])
-    if kind != KIND_STREET:
-        # A flat level, or a chart's uniform matte board filling the view (no flat-field correction needed).
-        v0 = world[W_LEVEL] if kind == KIND_FLAT else world[W_ASPHALT]
-        v1 = world[W_LEVEL] if kind == KIND_FLAT else world[W_ASPHALT + 1]
-        v2 = world[W_LEVEL] if kind == KIND_FLAT else world[W_ASPHALT + 2]
-        for a in range(n):
-            out_line[a, 0], out_line[a, 1], out_line[a, 2] = v0, v1, v2
-        return
-    transposed = cam[C_TRANSPOSED] != 0.0
-    fx, fy_px, cx0, cy0 = cam[C_FX], cam[C_FY], cam[C_CX], cam[C_CY]
-    px, py, pz = pos[0], pos[1], pos[2]
-    xf, y_half, bin_m, n_bins = world[W_FACADE], world[W_YHALF], world[W_BIN], lut.shape[1]
-    seed = int(world[W_SEED])
-    road, curb, cross_y = world[W_ROAD], world[W_ROAD] + world[W_CURB], world[W_CROSS]
-    as_r, as_g, as_b = world[W_ASPHALT], world[W_ASPHALT + 1], world[W_ASPHALT + 2]
-    sw_r, sw_g, sw_b = world[W_SIDEWALK], world[W_SIDEWALK + 1], world[W_SIDEWALK + 2]
-    sun_x, sun_y, sun_z = light[L_SUN], light[L_SUN + 1], light[L_SUN + 2]
-    sun_r, sun_g, sun_b = light[L_SUN_RGB], light[L_SUN_RGB + 1], light[L_SUN_RGB + 2]
-    amb_r, amb_g, amb_b = light[L_AMB], light[L_AMB + 1], light[L_AMB + 2]
-    hz_r, hz_g, hz_b = light[L_HORIZON], light[L_HORIZON + 1], light[L_HORIZON + 2]
-    ze_r, ze_g, ze_b = light[L_ZENITH], light[L_ZENITH + 1], light[L_ZENITH + 2]
-    ha_r, ha_g, ha_b = light[L_HAZE], light[L_HAZE + 1], light[L_HAZE + 2]
-    inv_fog, glow = 1.0 / light[L_FOG], light[L_GLOW]
-    # Lattice cells of the four value noises (fine and coarse asphalt, sidewalk, facade), reused by neighbours.
-    c_fine, c_coarse, c_walk, c_wall = NO_CELL, NO_CELL, NO_CELL, NO_CELL
-    for a in range(n):
-        xi, yi = (line, a) if transposed else (a, line)
-        cx = (xi + 0.5 - cx0) / fx
-        cy = (yi + 0.5 - cy0) / fy_px
-        dx = cx * rot[0, 0] + cy * rot[1, 0] + rot[2, 0]
-        dy = cx * rot[0, 1] + cy * rot[1, 1] + rot[2, 1]
-        dz = cx * rot[0, 2] + cy * rot[1, 2] + rot[2, 2]
-        t_hit = 1e30
-        surf = 0  # 0 sky, 1 ground, 2 facade
-        side = 0
-        b_hit = 0
-        if dz < 0.0 and pz > 0.0:
-            t = -pz / dz
-            if abs(px + t * dx) < xf:
-                t_hit, surf = t, 1
-        if dx != 0.0:
-            side = 1 if dx > 0 else 0
-            t = ((xf if side == 1 else -xf) - px) / dx
-            if 0.0 < t < t_hit:
-                fz = pz + t * dz
-                if fz >= 0.0:
-                    i = street_bin(py + t * dy, y_half, bin_m)
-                    b = lut[side, i] if 0 <= i < n_bins else -1
-                    if b >= 0 and fz < bld[b, B_HEIGHT]:
-                        t_hit, surf, b_hit = t, 2, b
-        if surf == 0:
-            r, g, bl = sky(dx, dy, dz, sun_x, sun_y, sun_z, hz_r, hz_g, hz_b, ze_r, ze_g, ze_b, sun_r, sun_g, sun_b)
-            out_line[a, 0], out_line[a, 1], out_line[a, 2] = r, g, bl
-            continue
-        hx, hy, hz = px + t_hit * dx, py + t_hit * dy, pz + t_hit * dz
-        emit = 0.0
-        if surf == 1:
-            ax = abs(hx)
-            if ax < road:
-                n_fine, c_fine = value_noise(hx * 9.0, hy * 9.0, seed, c_fine)
-                n_coarse, c_coarse = value_noise(hx * 1.3, hy * 1.3, seed + 7, c_coarse)
-                ar, ag, ab = asphalt_albedo(hx, hy, n_fine * 0.6 + n_coarse * 0.4, road, cross_y, as_r, as_g, as_b)
-            elif ax < curb:
-                ar, ag, ab = CURB_RGB
-            else:
-                n_walk, c_walk = value_noise(hx * 4.0, hy * 4.0, seed + 11, c_walk)
-                ar, ag, ab = sidewalk_albedo(hx, hy, n_walk, seed, curb, sw_r, sw_g, sw_b)
-            ndotl = sun_z
-            skip = -1
-        else:
-            u = hy + y_half
-            u -= math.floor(u / (2.0 * y_half)) * (2.0 * y_half)
-            u -= y_half + bld[b_hit, B_Y0]
-            n_wall, c_wall = value_noise(u * 3.0, hz * 3.0, seed + b_hit * 131, c_wall)
-            ar, ag, ab, emit = facade_albedo(
-                u, hz, n_wall, seed + b_hit * 131, bld[b_hit, B_FLOOR], bld[b_hit, B_WIN_SP], bld[b_hit, B_WIN_W],
-                bld[b_hit, B_HEIGHT], bld[b_hit, B_RGB], bld[b_hit, B_RGB + 1], bld[b_hit, B_RGB + 2],
-                bld[b_hit, B_WIN_RGB], bld[b_hit, B_WIN_RGB + 1], bld[b_hit, B_WIN_RGB + 2], bld[b_hit, B_LIT], glow)
-            ndotl = -sun_x if side == 1 else sun_x
-            skip = side
-        lit = 0.0
-        if ndotl > 0.0:
-            state, s_side, s_y, s_z = sun_probe(hx, hy, hz, sun_x, sun_y, sun_z, xf, skip)
-            lit = 1.0
-            if state == 1:
-                lit = 0.0
-            elif state == 2:
-                i = street_bin(s_y, y_half, bin_m)
-                b = lut[s_side, i] if 0 <= i < n_bins else -1
-                if b >= 0 and s_z < bld[b, B_HEIGHT]:
-                    lit = 0.0
-        ndotl = max(ndotl, 0.0) * lit
-        dist = t_hit * math.sqrt(dx * dx + dy * dy + dz * dz)
-        f = fog_transmittance(dist * inv_fog)
-        g = 1.0 - f
-        out_line[a, 0] = (ar * (amb_r + sun_r * ndotl + emit)) * f + ha_r * g
-        out_line[a, 1] = (ag * (amb_g + sun_g * ndotl + emit)) * f + ha_g * g
-        out_line[a, 2] = (ab * (amb_b + sun_b * ndotl + emit)) * f + ha_b * g
+    background_line_c(world.ctypes.data, lut.ctypes.data, lut.shape[1] - 1, bld.ctypes.data, light.ctypes.data,
+                      cam.ctypes.data, rot.ctypes.data, pos.ctypes.data, line, out_line.ctypes.data,
+                      out_line.shape[0])
 
 
 @njit(cache=True, parallel=True, nogil=True)

@@ -16,7 +16,12 @@ BUILDING_BIN_M = 0.5
 
 @dataclass(frozen=True)
 class CompiledScene:
-    """The kernel tables of one scene: world, building lookup, lighting and actors."""
+    """The kernel tables of one scene: world, building lookup, lighting and actors.
+
+    ``building_lut`` (2 sides x (bins + 1), int64) gives the row of ``buildings`` standing in each street bin;
+    its last entry on each side and its empty bins name the table's last row, a sentinel no ray hits and no
+    shadow comes from (``_world.NO_BUILDING_HEIGHT``), so the C shader reads no table under a condition.
+    """
 
     world: np.ndarray
     building_lut: np.ndarray
@@ -54,8 +59,8 @@ def compile_scene(scene: Scene) -> CompiledScene:
     world[Wd.W_YHALF] = 1.0
     world[Wd.W_SEED] = scene.seed & 0x7FFFFFFF
     light = _compile_light(scene)
-    buildings = np.zeros((1, Wd.BLD_COLS))
-    lut = -np.ones((2, 1), np.int64)
+    buildings = np.zeros((0, Wd.BLD_COLS))
+    lut = -np.ones((2, 0), np.int64)
     if scene.kind == "street" and scene.street is not None:
         st = scene.street
         world[Wd.W_KIND] = Wd.KIND_STREET
@@ -75,7 +80,18 @@ def compile_scene(scene: Scene) -> CompiledScene:
         world[Wd.W_KIND] = Wd.KIND_FLAT
         world[Wd.W_LEVEL] = scene.flat_level
     actors, ids, classes, speeds = _compile_actors(scene)
+    lut, buildings = _with_sentinel(lut, buildings)
     return CompiledScene(world, lut, buildings, light, actors, ids, classes, speeds)
+
+
+def _with_sentinel(lut: np.ndarray, buildings: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The lookup (-1: no building) and table in the shader's layout: a sentinel row named by every empty bin
+    and by one more bin past the end on each side."""
+    n_bld = buildings.shape[0]
+    sentinel = np.zeros((1, Wd.BLD_COLS))
+    sentinel[0, Wd.B_HEIGHT] = Wd.NO_BUILDING_HEIGHT
+    padded = np.concatenate([np.where(lut < 0, n_bld, lut), np.full((2, 1), n_bld)], axis=1)
+    return np.ascontiguousarray(padded, np.int64), np.ascontiguousarray(np.concatenate([buildings, sentinel]))
 
 
 def _compile_light(scene: Scene) -> np.ndarray:
@@ -95,7 +111,7 @@ def _compile_light(scene: Scene) -> np.ndarray:
 def _compile_buildings(buildings, length_m: float) -> tuple[np.ndarray, np.ndarray]:
     n_bins = int(math.ceil(length_m / BUILDING_BIN_M))
     lut = -np.ones((2, n_bins), np.int64)
-    tab = np.zeros((max(len(buildings), 1), Wd.BLD_COLS))
+    tab = np.zeros((len(buildings), Wd.BLD_COLS))
     half = length_m / 2.0
     for i, b in enumerate(buildings):
         row = tab[i]

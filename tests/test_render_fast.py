@@ -1,16 +1,18 @@
 """The renderer's fast paths against their references: every ego-motion preset's exact RS frame against the
-brute-force renders, serial against threaded kernels, and the background's exact shortcuts (noise-cell reuse,
-the fog table) against the plain functions."""
+brute-force renders, serial against threaded kernels, and the C background shader against the numba shader it
+replaced (bit for bit) and its fog table against exp."""
 
 from __future__ import annotations
 
+import hashlib
 import math
 import threading
 
 import numba
 import numpy as np
 import pytest
-from rollcam.sim import _actors, _kernels, _shade, _world
+from rollcam.sim import _actors, _cshade, _kernels, _world
+from rollcam.sim.flicker_render import light_scene
 from rollcam.sim.render import Renderer
 from rollcam.sim.scenegen import ego_preset, make_street_scene
 
@@ -79,42 +81,68 @@ def test_renderer_threads_must_be_a_positive_count() -> None:
         Renderer(scene, threads=0)
 
 
-@numba.njit
-def _noise_both_ways(xs, ys, seed):
-    """Value noise along a path with the cell reused between points, and afresh at every point."""
-    reused, fresh = np.empty(xs.size), np.empty(xs.size)
-    cell = _shade.NO_CELL
-    for i in range(xs.size):
-        reused[i], cell = _shade.value_noise(xs[i], ys[i], seed, cell)
-        fresh[i], _ = _shade.value_noise(xs[i], ys[i], seed, _shade.NO_CELL)
-    return reused, fresh
+# sha256 (first 16 hex digits) of 320x180 float32 backgrounds rendered by round 3's numba shader (sim/_shade.py,
+# removed in round 4): the C shader must reproduce it bit for bit. (seed, ego, time of day, by column, t_s)
+_ROUND3_BACKGROUNDS = {
+    (0, "vehicle", "noon", False, 0.3): "9e7178f159101a7c",
+    (3, "drone", "dusk", False, 1.7): "a352753ed3e9c00f",
+    (5, "pan", "night", True, 0.9): "b44d25128f71d1a1",  # sun below the horizon
+    (7, "walk", "morning", True, 2.5): "3bffc063a3c589af",
+    (11, "none", "afternoon", False, 0.0): "c36cb838834e055e",
+    (2, "vehicle", "dawn", True, 4.0): "696b88406f5da3d4",
+}
+_ROUND3_LAMP_BACKGROUND = "05bacb1970c5c38b"  # seed 4, night, lamps on, the first lamp's light alone, t = 0.5 s
 
 
-def test_noise_cell_reuse_is_exact() -> None:
-    rng = np.random.default_rng(0)
-    # A slow path (long runs in one cell), a fast one (a new cell nearly every point) and negative coordinates.
-    xs = np.concatenate([np.linspace(-3.0, 5.0, 4000), rng.uniform(-50, 50, 500)])
-    ys = np.concatenate([np.linspace(7.0, -2.0, 4000), rng.uniform(-50, 50, 500)])
-    for seed in (0, 11, 2**31 - 1):
-        reused, fresh = _noise_both_ways(xs, ys, seed)
-        assert np.array_equal(reused, fresh)
-        assert fresh.min() >= 0.0 and fresh.max() < 1.0
+def _background_digest(scene, by_column: bool, t_s: float) -> str:
+    painter = Renderer(scene)._painter
+    out = np.empty((*painter.shape(by_column), 3), np.float32)
+    painter.background(by_column, t_s, out)
+    return hashlib.sha256(out.tobytes()).hexdigest()[:16]
 
 
-@numba.njit
-def _fog(xs):
-    out = np.empty(xs.size)
-    for i in range(xs.size):
-        out[i] = _shade.fog_transmittance(xs[i])
-    return out
+@pytest.mark.parametrize("case", sorted(_ROUND3_BACKGROUNDS))
+def test_c_shader_paints_the_numba_shaders_background_bit_for_bit(case) -> None:
+    seed, ego, tod, by_column, t_s = case
+    scene = make_street_scene(seed, n_pedestrians=0, width=320, height=180, ego=ego_preset(ego), time_of_day=tod)
+    assert _background_digest(scene, by_column, t_s) == _ROUND3_BACKGROUNDS[case]
+
+
+def test_c_shader_under_a_lamp_alone_matches_the_numba_shader() -> None:
+    # A lamp's light comes from straight above (sun_x == 0): no facade can shade, whatever the probe computes.
+    scene = make_street_scene(4, n_pedestrians=0, width=320, height=180, ego=ego_preset("vehicle"),
+                              time_of_day="night", lamps="on")
+    assert _background_digest(light_scene(scene, scene.lights[0]), False, 0.5) == _ROUND3_LAMP_BACKGROUND
+
+
+def test_a_shader_library_reading_other_table_columns_is_refused() -> None:
+    from rollcam.common.errors import RollcamError
+
+    _cshade.check_layout(_cshade.library(), _world.SHADE_LAYOUT)
+    moved = (_world.SHADE_LAYOUT[0] + 1, *_world.SHADE_LAYOUT[1:])
+    with pytest.raises(RollcamError, match="stale"):
+        _cshade.check_layout(_cshade.library(), moved)
 
 
 def test_fog_table_matches_exp() -> None:
-    xs = np.concatenate([np.linspace(0.0, 70.0, 200_001), [63.999, 64.0, 1e6]])
-    got = _fog(xs)
+    fog = np.vectorize(_cshade.library().rollcam_fog_transmittance, otypes=[np.float64])
+    xs = np.concatenate([np.linspace(0.0, 70.0, 20_001), [63.999, 64.0, 1e6, 1e300]])
+    got = fog(xs)
     want = np.exp(-xs)
     assert np.all(np.abs(got - want) <= 1e-10 * want + 1e-27)
-    assert got[-1] == 0.0 and math.isclose(got[0], 1.0)
+    assert got[-1] == 0.0 and got[-3] == 0.0 and math.isclose(got[0], 1.0)
+
+
+def test_value_noise_is_smooth_and_in_the_unit_interval() -> None:
+    noise = np.vectorize(_cshade.library().rollcam_value_noise, otypes=[np.float64])
+    rng = np.random.default_rng(0)
+    x, y = rng.uniform(-50, 50, 2000), rng.uniform(-50, 50, 2000)
+    for seed in (0, 11, 2**31 - 1):
+        v = noise(x, y, seed)
+        assert v.min() >= 0.0 and v.max() < 1.0 and v.std() > 0.1
+        # C1 smoothstep interpolation: a step of 1e-6 changes the value by at most ~1.5 * 1e-6 per axis
+        assert np.abs(noise(x + 1e-6, y, seed) - v).max() < 3e-6
+    assert not np.array_equal(noise(x, y, 0), noise(x, y, 1))
 
 
 def test_part_slots_share_a_time_used_by_several_entries_and_leave_single_uses_local() -> None:

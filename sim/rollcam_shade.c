@@ -1,0 +1,318 @@
+/* The street's background shader: ground, facades and sky along one render-space line (rollcam.sim._cshade).
+ *
+ * The one copy of the background's materials: every render path (the fast path, the brute-force reference,
+ * the static layer) shades through rollcam_background_line, and the walkers' sun test is rollcam_sun_blocked.
+ *
+ * Written for gcc to vectorise (8 pixels a step with AVX-512, 4 with AVX2; x86-64 builds carry both clones and
+ * a plain one, picked at load by the CPU): the pixel loop has no branches (every material is evaluated and the
+ * pixel's own selected), no calls, `restrict` pointers, and only the forms gcc 12's vectoriser accepts (the
+ * comments at each say which). It is compiled without -ffast-math and with -ffp-contract=off, so every clone
+ * performs the same IEEE operations in the same order: the image does not depend on which one runs.
+ *
+ * Tables: rollcam/sim/_world.py's layouts (rollcam_shade_layout reports the columns read here, and the loader
+ * checks them), with the building lookup and table as rollcam.sim.compile pads them: `lut` holds n_bins + 1
+ * entries per side, the last one and every empty bin naming row n_bld of `bld`, a sentinel building of height
+ * -1e300 that no ray hits and no shadow comes from (so no table read depends on a condition).
+ */
+#include <math.h>
+#include <stdint.h>
+
+/* ---- table columns (rollcam/sim/_world.py) ---- */
+enum { C_FX = 0, C_FY = 1, C_CX = 2, C_CY = 3, C_TRANSPOSED = 6 };
+enum { L_SUN = 0, L_SUN_RGB = 3, L_AMB = 6, L_HORIZON = 9, L_ZENITH = 12, L_HAZE = 15, L_FOG = 18, L_GLOW = 19 };
+enum { W_KIND = 0, W_ROAD = 1, W_CURB = 2, W_FACADE = 4, W_YHALF = 5, W_ASPHALT = 6, W_SIDEWALK = 9,
+       W_CROSS = 12, W_SEED = 13, W_LEVEL = 14, W_BIN = 15 };
+enum { KIND_STREET = 0, KIND_FLAT = 2 };
+enum { B_Y0 = 1, B_HEIGHT = 3, B_RGB = 4, B_WIN_RGB = 7, B_FLOOR = 10, B_WIN_W = 11, B_WIN_SP = 12, B_LIT = 13,
+       BLD_COLS = 14 };
+
+/* A condition in the pixel loop: as wide as a double, so that its vector masks match the double lanes (gcc
+ * does not vectorise selects mixing 32- and 64-bit masks). */
+typedef int64_t flag;
+
+#define FOG_STEPS 16
+#define FOG_N (64 * FOG_STEPS + 1)
+/* Largest hit coordinate (metres) shaded: beyond it the fog leaves only haze (the transmittance is 0 from 64 fog
+ * distances on), whatever the material, and below it every lattice and cell index (at most 9 per metre) fits
+ * an int32. */
+#define COORD_MAX 1.0e8
+
+#if defined(__x86_64__) && defined(__GNUC__) && !defined(__clang__) && !defined(ROLLCAM_NO_CLONES)
+#define CLONES __attribute__((target_clones("arch=x86-64-v4", "arch=x86-64-v3", "default")))
+#else
+#define CLONES
+#endif
+
+static double fog_table[FOG_N];
+/* FOG_N - 1 steps in x, set at load: a value the compiler cannot fold (folding it into fog_transmittance's clamp
+ * had gcc split the loop into branches it then would not vectorise). */
+static double fog_x_max;
+
+__attribute__((constructor)) static void fill_fog_table(void) {
+    for (int k = 0; k < FOG_N - 1; k++)
+        fog_table[k] = exp(-(double)k / FOG_STEPS);
+    fog_table[FOG_N - 1] = 0.0; /* x >= 64: transmittance 0 (below 2e-28) */
+    fog_x_max = (double)(FOG_N - 1) / FOG_STEPS;
+}
+
+/* v limited to +-COORD_MAX (NaN to -COORD_MAX), so that its conversion to a 32-bit integer is defined. */
+static inline __attribute__((always_inline)) double clampc(double v) {
+    return v > -COORD_MAX ? (v < COORD_MAX ? v : COORD_MAX) : -COORD_MAX;
+}
+
+/* Integer lattice hash to [0, 1) (32-bit wrap-around arithmetic). */
+static inline __attribute__((always_inline)) double hash01(int32_t ix, int32_t iy, uint32_t seed) {
+    uint32_t h = (uint32_t)ix * 374761393u + (uint32_t)iy * 668265263u + seed * 2147483647u;
+    h = (h ^ (h >> 13)) * 1274126177u;
+    h = h ^ (h >> 16);
+    return (double)(int32_t)(h & 0xFFFFFFu) * (1.0 / 16777216.0);
+}
+
+/* Smooth value noise in [0, 1) on the unit lattice. */
+static inline __attribute__((always_inline)) double value_noise(double x, double y, uint32_t seed) {
+    double fx0 = floor(x), fy0 = floor(y);
+    double fx = x - fx0, fy = y - fy0;
+    int32_t ix = (int32_t)fx0, iy = (int32_t)fy0;
+    double a = hash01(ix, iy, seed), b = hash01(ix + 1, iy, seed);
+    double c = hash01(ix, iy + 1, seed), d = hash01(ix + 1, iy + 1, seed);
+    double sx = fx * fx * (3.0 - 2.0 * fx), sy = fy * fy * (3.0 - 2.0 * fy);
+    return (a + (b - a) * sx) * (1.0 - sy) + (c + (d - c) * sx) * sy;
+}
+
+/* exp(-x) for x >= 0 to a relative 1e-10: the table's step (`table`: fog_table) and a degree-5 Taylor series
+ * of the rest; 0 from x = 64 (`x_max`: fog_x_max) on. */
+static inline __attribute__((always_inline)) double fog_transmittance(double x, const double *restrict table,
+                                                                      double x_max) {
+    double xc = x < x_max ? x : x_max;
+    int32_t k = (int32_t)(xc * FOG_STEPS);
+    double r = xc - k * (1.0 / FOG_STEPS);
+    double p = 1.0 - r * (1.0 - r * (0.5 - r * (1.0 / 6.0 - r * (1.0 / 24.0 - r * (1.0 / 120.0)))));
+    return table[k] * p;
+}
+
+/* Bin of the building lookup holding street coordinate y (the street repeats every 2 y_half), or n_bins (the
+ * lookup's sentinel entry) outside it. */
+static inline __attribute__((always_inline)) int32_t street_bin(double y, double y_half, double inv_period,
+                                                                double inv_bin, int32_t n_bins) {
+    double yy = clampc(y) + y_half;
+    yy -= floor(yy * inv_period) * (2.0 * y_half);
+    int32_t i = (int32_t)(yy * inv_bin);
+    return ((i >= 0) & (i < n_bins)) ? i : n_bins;
+}
+
+/* The sky in direction d (unnormalised): its horizon-to-zenith blend s and the sun's glow (weights of the
+ * horizon, zenith and sun colours). */
+static inline __attribute__((always_inline)) void sky_weights(double dx, double dy, double dz,
+                                                              const double *restrict light, double *s_out,
+                                                              double *glow_out) {
+    double n = sqrt(dx * dx + dy * dy + dz * dz);
+    double e = dz / n;
+    double s = sqrt(e > 0.0 ? e : 0.0);
+    double cosg = (dx * light[L_SUN] + dy * light[L_SUN + 1] + dz * light[L_SUN + 2]) / n;
+    double c2 = cosg * cosg, c4 = c2 * c2, c8 = c4 * c4, c16 = c8 * c8;
+    *s_out = s;
+    *glow_out = cosg > 0.0 ? c16 * c16 * 0.6 : 0.0;
+}
+
+/* Building row on `side` (0 west, 1 east) at street coordinate y (the sentinel row where none stands). */
+static inline __attribute__((always_inline)) int64_t building_at(const int64_t *restrict lut, int32_t n_bins,
+                                                                int side, double y, const double *restrict world) {
+    double y_half = world[W_YHALF];
+    return lut[side * (n_bins + 1) + street_bin(y, y_half, 1.0 / (2.0 * y_half), 1.0 / world[W_BIN], n_bins)];
+}
+
+/* 1 when a facade stands between point p and the sun (street canyon shadows); skip_side: the facade the point
+ * is on (-1: none). The pixel loop's shadow test, for one point. */
+int64_t rollcam_sun_blocked(const double *restrict world, const int64_t *restrict lut, int64_t n_bins,
+                            const double *restrict bld, const double *restrict light, double px, double py,
+                            double pz, int64_t skip_side) {
+    double sun_x = light[L_SUN], sun_y = light[L_SUN + 1], sun_z = light[L_SUN + 2];
+    if (sun_z <= 0.0)
+        return 1;
+    if (sun_x == 0.0)
+        return 0;
+    int side = sun_x > 0.0 ? 1 : 0;
+    if (side == skip_side)
+        return 0;
+    double xf = world[W_FACADE];
+    double t = ((side == 1 ? xf : -xf) - px) / sun_x;
+    if (t <= 0.0)
+        return 0;
+    int64_t b = building_at(lut, (int32_t)n_bins, side, py + t * sun_y, world);
+    return pz + t * sun_z < bld[b * BLD_COLS + B_HEIGHT];
+}
+
+/* One render-space line of the background from pose (rot, pos): `n` pixels of linear RGB into out (n x 3). */
+CLONES
+void rollcam_background_line(const double *restrict world, const int64_t *restrict lut, int64_t n_bins64,
+                             const double *restrict bld, const double *restrict light, const double *restrict cam,
+                             const double *restrict rot, const double *restrict pos, int64_t line,
+                             float *restrict out, int64_t n) {
+    int kind = (int)world[W_KIND];
+    if (kind != KIND_STREET) {
+        /* A flat level, or a chart's uniform matte board filling the view. */
+        for (int64_t a = 0; a < n; a++)
+            for (int c = 0; c < 3; c++)
+                out[3 * a + c] = (float)(kind == KIND_FLAT ? world[W_LEVEL] : world[W_ASPHALT + c]);
+        return;
+    }
+    const int32_t n_bins = (int32_t)n_bins64, stride = n_bins + 1;
+    const int transposed = cam[C_TRANSPOSED] != 0.0;
+    const double inv_fx = 1.0 / cam[C_FX], inv_fy = 1.0 / cam[C_FY], cx0 = cam[C_CX], cy0 = cam[C_CY];
+    const double px = pos[0], py = pos[1], pz = pos[2];
+    const double xf = world[W_FACADE], y_half = world[W_YHALF];
+    const double period = 2.0 * y_half, inv_period = 1.0 / period, inv_bin = 1.0 / world[W_BIN];
+    const uint32_t seed = (uint32_t)(int64_t)world[W_SEED];
+    const double road = world[W_ROAD], curb = world[W_ROAD] + world[W_CURB], cross_y = world[W_CROSS];
+    const double sun_x = light[L_SUN], sun_y = light[L_SUN + 1], sun_z = light[L_SUN + 2];
+    const double inv_fog = 1.0 / light[L_FOG], glow_emit = light[L_GLOW];
+    const int sun_side = sun_x > 0.0 ? 1 : 0;
+    /* The sun's conditions that hold for the whole line, as a factor of the loop (a condition taken from
+     * outside the loop into its masks stops gcc vectorising it): 0 below the horizon; with sun_x == 0 no
+     * facade can shade (the probe's ts is then infinite). */
+    const double sun_up = sun_z <= 0.0 ? 0.0 : 1.0;
+    const double sun_xf = sun_side == 1 ? xf : -xf;
+    const double r00 = rot[0], r01 = rot[1], r02 = rot[2], r10 = rot[3], r11 = rot[4], r12 = rot[5];
+    const double r20 = rot[6], r21 = rot[7], r22 = rot[8];
+    const double inv_tile = 1.0 / 0.6;
+    /* Table values the loop reads, as locals: a table read under a condition becomes a masked load gcc cannot
+     * vectorise. */
+    double asph[3], walk[3], amb[3], sun_rgb[3], haze[3], hor[3], zen[3];
+    for (int c = 0; c < 3; c++) {
+        asph[c] = world[W_ASPHALT + c], walk[c] = world[W_SIDEWALK + c];
+        amb[c] = light[L_AMB + c], sun_rgb[c] = light[L_SUN_RGB + c], haze[c] = light[L_HAZE + c];
+        hor[c] = light[L_HORIZON + c], zen[c] = light[L_ZENITH + c];
+    }
+    const double *restrict fog = fog_table; /* a pointer: gcc gathers from it, not from the global */
+    const double fog_max = fog_x_max;
+
+#pragma omp simd
+    for (int32_t a = 0; a < (int32_t)n; a++) {
+        /* Conditions combine with & and | (not && and ||) and values by selection, so the loop body has no
+         * branch for the vectoriser to give up on; every table read is at a valid (clamped) index. */
+        double xi = transposed ? (double)line : (double)a, yi = transposed ? (double)a : (double)line;
+        double cx = (xi + 0.5 - cx0) * inv_fx, cy = (yi + 0.5 - cy0) * inv_fy;
+        double dx = cx * r00 + cy * r10 + r20;
+        double dy = cx * r01 + cy * r11 + r21;
+        double dz = cx * r02 + cy * r12 + r22;
+        /* ---- what the ray hits: the ground (inside the facades), a facade, or the sky ---- */
+        double t_ground = -pz / dz;
+        flag ground = (dz < 0.0) & (pz > 0.0) & (fabs(px + t_ground * dx) < xf);
+        double t_hit = ground ? t_ground : 1e30;
+        flag side = dx > 0.0 ? 1 : 0;
+        double t_wall = ((side == 1 ? xf : -xf) - px) / dx;
+        double fz_w = pz + t_wall * dz;
+        int32_t bin_w = street_bin(py + t_wall * dy, y_half, inv_period, inv_bin, n_bins);
+        int64_t b_w = lut[side * stride + bin_w];
+        const int64_t bo = b_w * BLD_COLS; /* an index (not a pointer): the form gcc gathers with */
+        double top = bld[bo + B_HEIGHT];
+        flag wall = (dx != 0.0) & (t_wall > 0.0) & (t_wall < t_hit) & (fz_w >= 0.0) & (fz_w < top);
+        t_hit = wall ? t_wall : t_hit;
+        flag sky_px = !(wall | ground);
+        double hx = clampc(px + t_hit * dx), hy = clampc(py + t_hit * dy), hz = clampc(pz + t_hit * dz);
+
+        /* ---- ground: asphalt (two noises, markings), curb, sidewalk (tiles, one noise) ---- */
+        double ax = fabs(hx);
+        flag asphalt = ax < road, kerb = (!asphalt) & (ax < curb);
+        double gm = (hx + 100.0) - floor(hx + 100.0);
+        double cm = hy - floor(hy * (1.0 / 9.0)) * 9.0;
+        flag zebra_zone = (fabs(hy - cross_y) < 2.0) & (ax < road - 0.3);
+        flag centre = ax < 0.07, edge = (road - 0.35 < ax) & (ax < road - 0.2);
+        flag paint = zebra_zone ? gm < 0.5 : (centre ? cm < 3.0 : edge);
+        double tu = (ax - curb) * inv_tile, tv = hy * inv_tile;
+        double tiu = floor(tu), tiv = floor(tv);
+        /* one mask, not an | of two masks: the form gcc vectorises */
+        double grout_d = tu - tiu < tv - tiv ? tu - tiu : tv - tiv;
+        flag grout = grout_d < 0.04;
+
+        /* ---- facade: floors, window columns, shop fronts, lit windows ---- */
+        double u = hy + y_half;
+        u -= floor(u * inv_period) * period;
+        u -= y_half + bld[bo + B_Y0];
+        double floor_h = bld[bo + B_FLOOR], win_sp = bld[bo + B_WIN_SP], win_w = bld[bo + B_WIN_W];
+        double floor_i = floor(hz / floor_h);
+        double zz = hz - floor_i * floor_h;
+        double col_i = floor(u / win_sp);
+        double uu = u - col_i * win_sp;
+        double margin = 0.5 * (win_sp - win_w);
+        uint32_t seed_b = seed + (uint32_t)b_w * 131u;
+
+        /* ---- the noises and the cell hash, one set per pixel whatever it hit ---- */
+        double nx = wall ? u * 3.0 : (asphalt ? hx * 9.0 : hx * 4.0);
+        double ny = wall ? hz * 3.0 : (asphalt ? hy * 9.0 : hy * 4.0);
+        uint32_t nseed = wall ? seed_b : (asphalt ? seed : seed + 11u);
+        double noise_a = value_noise(nx, ny, nseed);
+        double noise_b = value_noise(hx * 1.3, hy * 1.3, seed + 7u); /* coarse asphalt grain */
+        int32_t hix = wall ? (int32_t)col_i : (int32_t)tiu;
+        int32_t hiy = wall ? (floor_i == 0.0 ? 17 : (int32_t)floor_i) : (int32_t)tiv;
+        double cell = hash01(hix, hiy, wall ? seed_b : seed + 3u);
+
+        /* facade */
+        double grain = 0.9 + 0.2 * noise_a;
+        flag cornice = hz > top - 0.6;
+        flag ground_floor = floor_i == 0.0;
+        flag shop = (!cornice) & ground_floor & (0.1 < zz) & (zz < 2.7) & (0.25 < uu) & (uu < win_sp - 0.25);
+        flag door = shop & (cell < 0.35);
+        flag window = (!cornice) & (!ground_floor) & (0.9 < zz) & (zz < 2.5) & (margin < uu) & (uu < win_sp - margin);
+        flag frame = window & ((zz < 1.0) | (zz > 2.4) | (uu < margin + 0.06) | (uu > win_sp - margin - 0.06));
+        double wk = 0.7 + 0.6 * cell, k_wall = cornice ? 0.75 : 1.0;
+        double emit = (wall & window & (cell < bld[bo + B_LIT])) ? glow_emit : 0.0;
+        /* ground */
+        double g_asph = 0.75 + 0.5 * (noise_a * 0.6 + noise_b * 0.4);
+        double g_walk = (0.85 + 0.3 * cell) * (grout ? 0.7 : 1.0) * (0.9 + 0.2 * noise_a);
+        static const double paint_rgb[3] = {0.62, 0.62, 0.60}, curb_rgb[3] = {0.45, 0.44, 0.42};
+        static const double door_rgb[3] = {0.0, 0.08, 0.06};
+        double alb[3];
+        for (int c = 0; c < 3; c++) {
+            double w_c = bld[bo + B_RGB + c] * grain * k_wall;
+            double shop_c = door ? (c == 0 ? 0.12 + 0.2 * cell : door_rgb[c]) : bld[bo + B_WIN_RGB + c] * 0.8;
+            double win_c = bld[bo + B_WIN_RGB + c] * wk;
+            win_c = frame ? win_c * 0.5 + 0.1 : win_c;
+            double fac_c = window ? win_c : (shop ? shop_c : w_c);
+            double asph_c = paint ? paint_rgb[c] : asph[c] * g_asph;
+            double walk_c = walk[c] * g_walk;
+            alb[c] = wall ? fac_c : (asphalt ? asph_c : (kerb ? curb_rgb[c] : walk_c));
+        }
+
+        /* ---- sun: facing it, and not in a facade's shadow ---- */
+        double ndotl = wall ? (side == 1 ? -sun_x : sun_x) : sun_z;
+        double ts = (sun_xf - hx) / sun_x;
+        int32_t bin_s = street_bin(hy + ts * sun_y, y_half, inv_period, inv_bin, n_bins);
+        int64_t b_s = lut[sun_side * stride + bin_s];
+        double h_s = bld[b_s * BLD_COLS + B_HEIGHT];
+        flag probe = !(wall & (side == sun_side)) & (ts > 0.0);
+        flag shadow = probe & (hz + ts * sun_z < h_s);
+        double lit = ndotl > 0.0 ? ndotl : 0.0;
+        lit = shadow ? 0.0 : lit;
+        lit = lit * sun_up; /* (sun_x == 0 or sun_z <= 0 hold for the whole line: see sun_up) */
+
+        /* ---- fog towards the haze colour; or the sky ---- */
+        double dist = t_hit * sqrt(dx * dx + dy * dy + dz * dz);
+        double f = fog_transmittance(dist * inv_fog, fog, fog_max);
+        double g = 1.0 - f;
+        double s_sky, glow;
+        sky_weights(dx, dy, dz, light, &s_sky, &glow);
+        for (int c = 0; c < 3; c++) {
+            double v = (alb[c] * (amb[c] + sun_rgb[c] * lit + emit)) * f + haze[c] * g;
+            double sky_c = hor[c] * (1.0 - s_sky) + zen[c] * s_sky + sun_rgb[c] * glow;
+            out[3 * a + c] = (float)(sky_px ? sky_c : v);
+        }
+    }
+}
+
+/* The fog and the noise for one point, for the tests. */
+double rollcam_fog_transmittance(double x) { return fog_transmittance(x, fog_table, fog_x_max); }
+
+double rollcam_value_noise(double x, double y, int64_t seed) { return value_noise(x, y, (uint32_t)seed); }
+
+/* The table columns this library reads, for the loader to check against rollcam/sim/_world.py. */
+int64_t rollcam_shade_layout(int64_t *out, int64_t n) {
+    static const int64_t cols[] = {C_FX, C_FY, C_CX, C_CY, C_TRANSPOSED, L_SUN, L_SUN_RGB, L_AMB, L_HORIZON,
+                                   L_ZENITH, L_HAZE, L_FOG, L_GLOW, W_KIND, W_ROAD, W_CURB, W_FACADE, W_YHALF,
+                                   W_ASPHALT, W_SIDEWALK, W_CROSS, W_SEED, W_LEVEL, W_BIN, KIND_STREET, KIND_FLAT,
+                                   B_Y0, B_HEIGHT, B_RGB, B_WIN_RGB, B_FLOOR, B_WIN_W, B_WIN_SP, B_LIT, BLD_COLS};
+    int64_t m = (int64_t)(sizeof cols / sizeof cols[0]);
+    for (int64_t i = 0; i < n && i < m; i++)
+        out[i] = cols[i];
+    return m;
+}
