@@ -14,6 +14,7 @@ import numpy as np
 from numba import njit, prange
 
 from ._body import (
+    A_ID,
     A_TYPE,
     P_BUILD,
     P_H,
@@ -49,7 +50,13 @@ from ._world import (
 
 # ---- part table (one actor at one time) ---------------------------------------------------------------------
 Q_KIND, Q_DEPTH, Q_AMB, Q_DIR, Q_LX, Q_LZ, Q_GEO, Q_YMIN, Q_YMAX = 0, 1, 2, 5, 8, 9, 10, 18, 19
-PART_COLS = 20
+Q_TEX, Q_TEXK, Q_TSEED = 20, 21, 22  # surface texture: contrast, lattice cells per pixel, seed (see _kernels)
+PART_COLS = 23
+# Surface texture per colour index (skin, hair, shirt, pants, shoes): contrast of the albedo's variation and the
+# size of its features on the body, m. Cloth folds and weave, hair strands, skin: what makes a photographed
+# person's surface vary, which detectors trained on photographs key on (benchmarks/realism.py measures it).
+TEX_CONTRAST = (0.10, 0.45, 0.40, 0.40, 0.25)
+TEX_CELL_M = (0.05, 0.02, 0.07, 0.07, 0.04)
 MAX_PARTS = 16
 PART_CAPSULE, PART_QUAD, PART_NONE = 0, 1, -1
 NEAR_M = 0.05
@@ -171,6 +178,7 @@ def actor_parts(act, world, lut, bld, light, cam, rot, pos, t, parts, scratch):
     seg, rad, col_idx, root, joints = scratch
     for p in range(MAX_PARTS):
         parts[p, Q_KIND] = PART_NONE
+        parts[p, Q_TEX] = 0.0
     typ = int(act[A_TYPE])
     if typ == TYPE_BAR:
         x0 = _bar_x0(act, t)
@@ -251,6 +259,10 @@ def actor_parts(act, world, lut, bld, light, cam, rot, pos, t, parts, scratch):
         parts[p, g + 4] = r_px
         parts[p, Q_YMIN] = min(ua1, ub1) - r_px
         parts[p, Q_YMAX] = max(ua1, ub1) + r_px
+        ci = col_idx[p]
+        parts[p, Q_TEX] = TEX_CONTRAST[ci]
+        parts[p, Q_TEXK] = rad[p] / (r_px * TEX_CELL_M[ci]) if r_px > 0.0 else 0.0  # cells per pixel
+        parts[p, Q_TSEED] = act[A_ID] * MAX_PARTS + p
 
 
 @njit(cache=True, inline="always")

@@ -29,13 +29,16 @@ from ._actors import (
     Q_KIND,
     Q_LX,
     Q_LZ,
+    Q_TEX,
+    Q_TEXK,
+    Q_TSEED,
     Q_YMAX,
     Q_YMIN,
     actor_parts,
     parts_scratch,
 )
 from ._jitcache import guard
-from ._world import C_MOVING, background_line
+from ._world import C_MOVING, C_TRANSPOSED, background_line
 
 # slots[o, k]: >= 0 row of the shared parts table; SLOT_NONE not needed; SLOT_LOCAL needed by a single line,
 # so its parts are computed on that line (no table round trip through memory).
@@ -141,6 +144,11 @@ def _collect_line(line, w, actors, obj_k, slots, parts_tab, local, include, gt_l
             shade[m, 0], shade[m, 1] = pt[p, Q_LX], pt[p, Q_LZ]
             for c in range(3):
                 shade[m, 2 + c], shade[m, 5 + c] = pt[p, Q_AMB + c], pt[p, Q_DIR + c]
+            shade[m, SH_TEX] = pt[p, Q_TEX]
+            if pt[p, Q_TEX] > 0.0:
+                for c in range(5):
+                    shade[m, SH_GEO + c] = pt[p, Q_GEO + c]
+                shade[m, SH_TEX + 1], shade[m, SH_TEX + 2] = pt[p, Q_TEXK], pt[p, Q_TSEED]
             span_l[m], span_r[m] = lohi[0], lohi[1]
             m += 1
             olo, ohi = min(olo, lohi[0]), max(ohi, lohi[1])
@@ -177,8 +185,57 @@ def _span_runs(span_l, span_r, m, w, ia, ib):
     return k
 
 
+SH_GEO, SH_TEX, SHADE_COLS = 8, 13, 16
+"""Columns of a span's shading record after the eight of Q_LX, Q_LZ, ambient and direct RGB: the capsule's axis
+and radius (Q_GEO..Q_GEO+4), then texture contrast, cells per pixel and seed."""
+
+
+@njit(cache=True, inline="always")
+def _lattice(ix, iy, seed):
+    """A value in [0, 1) for lattice point (ix, iy) of texture ``seed``: an integer hash (murmur3's finaliser)."""
+    h = (ix * 0x27D4EB2F + iy * 0x165667B1 + seed * 0x9E3779B1) & 0xFFFFFFFF
+    h ^= h >> 15
+    h = (h * 0x85EBCA6B) & 0xFFFFFFFF
+    h ^= h >> 13
+    h = (h * 0xC2B2AE35) & 0xFFFFFFFF
+    h ^= h >> 16
+    return h * (1.0 / 4294967296.0)
+
+
+@njit(cache=True, inline="always")
+def _value_noise(x, y, seed):
+    """Smooth value noise in [-1, 1] at lattice coordinates (x, y): smoothstep between hashed lattice values."""
+    fx, fy = math.floor(x), math.floor(y)
+    ix, iy = int(fx), int(fy)
+    tx, ty = x - fx, y - fy
+    tx, ty = tx * tx * (3.0 - 2.0 * tx), ty * ty * (3.0 - 2.0 * ty)
+    a = _lattice(ix, iy, seed) + tx * (_lattice(ix + 1, iy, seed) - _lattice(ix, iy, seed))
+    b = _lattice(ix, iy + 1, seed) + tx * (_lattice(ix + 1, iy + 1, seed) - _lattice(ix, iy + 1, seed))
+    return 2.0 * (a + ty * (b - a)) - 1.0
+
+
+@njit(cache=True, inline="always")
+def _texture(shade, e, x, yc, flip):
+    """Albedo factor of span ``e``'s part at render-space point (x, yc): 1 + contrast x value noise in coordinates
+    fixed to the part's axis (along it from its first end, across it from its axis), so the texture travels with
+    the part. ``flip`` (-1 for a transposed render) keeps the across coordinate the image's, whichever way lines run.
+    """
+    ax, ay, bx, by = shade[e, SH_GEO], shade[e, SH_GEO + 1], shade[e, SH_GEO + 2], shade[e, SH_GEO + 3]
+    dx, dy = bx - ax, by - ay
+    ln = math.sqrt(dx * dx + dy * dy)
+    if ln > 0.0:
+        dx, dy = dx / ln, dy / ln
+    else:
+        dx, dy = 0.0, 1.0
+    px, py = x - ax, yc - ay
+    k = shade[e, SH_TEX + 1]
+    along = (px * dx + py * dy) * k
+    across = (py * dx - px * dy) * k * flip
+    return 1.0 + shade[e, SH_TEX] * _value_noise(across, along, int(shade[e, SH_TEX + 2]))
+
+
 @njit(cache=True)
-def _paint_spans(lin, line, m, gt_vis, depth, idx_o, shade, span_l, span_r, owner, ia, ib, n_runs, order):
+def _paint_spans(lin, line, m, gt_vis, depth, idx_o, shade, span_l, span_r, owner, ia, ib, n_runs, order, flip):
     """Paint the collected spans over ``lin`` far to near (anti-aliased along the line); count visibility."""
     w = lin.shape[0]
     # Insertion sort, far first; ties keep actor/part order so every path paints identically.
@@ -197,6 +254,8 @@ def _paint_spans(lin, line, m, gt_vis, depth, idx_o, shade, span_l, span_r, owne
         i1 = min(int(math.ceil(xr)), w)
         mid, half = 0.5 * (xl + xr), 0.5 * (xr - xl)
         lx, lz = shade[e, 0], shade[e, 1]
+        textured = shade[e, SH_TEX] > 0.0
+        yc = line + 0.5
         for i in range(i0, i1):
             cov = min(xr, i + 1.0) - max(xl, float(i))
             if cov <= 0.0:
@@ -209,8 +268,9 @@ def _paint_spans(lin, line, m, gt_vis, depth, idx_o, shade, span_l, span_r, owne
             sh = lx * u + lz * math.sqrt(1.0 - u * u)
             if sh < 0.0:
                 sh = 0.0
+            f = _texture(shade, e, i + 0.5, yc, flip) if textured else 1.0
             for c in range(3):
-                v = shade[e, 2 + c] + shade[e, 5 + c] * sh
+                v = (shade[e, 2 + c] + shade[e, 5 + c] * sh) * f
                 lin[i, c] = lin[i, c] * (1.0 - cov) + v * cov
         for i in range(max(int(math.ceil(xl - 0.5)), 0), min(int(math.ceil(xr - 0.5)), w)):
             owner[i] = o
@@ -364,7 +424,8 @@ def _render_chunk(ch, n_chunks, world, lut_b, bld, light, cam, rot_tab, pos_tab,
     n = lines.shape[0]
     depth = np.empty(cap)
     idx_o = np.empty(cap, np.int64)
-    shade = np.empty((cap, 8))
+    shade = np.empty((cap, SHADE_COLS))
+    flip = -1.0 if cam[C_TRANSPOSED] != 0.0 else 1.0
     order = np.empty(cap, np.int64)  # scratch of every line: an allocation per line costs as much as its work
     lohi = np.empty(2)
     span_l = np.empty(cap)
@@ -403,7 +464,8 @@ def _render_chunk(ch, n_chunks, world, lut_b, bld, light, cam, rot_tab, pos_tab,
                     for r in range(n_runs):
                         lin[ia[r]:ib[r]] = bg_lin[line, ia[r]:ib[r]]
             if m > 0:
-                _paint_spans(lin, line, m, gt_vis, depth, idx_o, shade, span_l, span_r, owner, ia, ib, n_runs, order)
+                _paint_spans(lin, line, m, gt_vis, depth, idx_o, shade, span_l, span_r, owner, ia, ib, n_runs, order,
+                             flip)
             if seed and m == 0:
                 continue  # no actor pixel on this line: it is the composite, nothing to write
             if line_hit.shape[0] > 0:

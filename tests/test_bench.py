@@ -150,8 +150,14 @@ def test_every_study_reads_its_targets_in_one_shape(tiny) -> None:
     ptc = STUDIES["ptc"].targets({"errors": {"gain": 0.01, "read_noise": -0.2}})
     assert ptc["gain_error"]["pass"] is True and ptc["read_noise_error"]["pass"] is False
     assert missed(ptc) == ["read_noise_error (-0.2 |x| <= 0.05 failed)"]
-    assert STUDIES["hog"].targets({"recall": 0.4})["recall"]["pass"] is False
-    assert STUDIES["hog"].targets({"recall": None})["recall"]["pass"] is None  # no walker to find: n/a
+    def realism(ssd, hog):
+        return STUDIES["realism"].targets({"detectors": {
+            "ssdlite?tiles=3x2": {"at_precision_0.8": None if ssd is None else {"recall": ssd}},
+            "hog": {"at_default": {"recall": hog}}}})
+    t = realism(0.75, 0.4)
+    assert t["ssdlite recall at P>=0.8"]["pass"] is True and t["hog recall"]["pass"] is False
+    t = realism(None, None)  # precision never reaches 0.8 / no walker to find: n/a
+    assert t["ssdlite recall at P>=0.8"]["pass"] is None and t["hog recall"]["pass"] is None
 
 
 def test_soak_refuses_a_non_positive_duration() -> None:

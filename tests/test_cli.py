@@ -170,7 +170,7 @@ def test_list_json():
 def test_bench_lists_one_subcommand_per_study_each_with_json_and_check(capsys):
     from rollcam.benchmarks.studies import STUDIES
 
-    assert list(STUDIES) == ["render", "hog", "detect", "ptc", "sensor", "uvc", "soak", "mjpeg", "dataset", "imu",
+    assert list(STUDIES) == ["render", "realism", "detect", "ptc", "sensor", "uvc", "soak", "mjpeg", "dataset", "imu",
                             "view", "preload", "personnet", "flicker", "insensor"]
     with pytest.raises(SystemExit) as exc:
         main(["bench", "--help"])
@@ -232,7 +232,7 @@ def test_usage_errors_are_one_error_line_and_exit_2(capsys, argv, words):
 
 
 @pytest.mark.parametrize("argv, new", [
-    (["--quick"], "rollcam bench render --quick"), (["--hog"], "rollcam bench hog"),
+    (["--quick"], "rollcam bench render --quick"), (["--hog"], "rollcam bench realism"),
     (["--detect"], "rollcam bench detect"), (["--ptc"], "rollcam bench ptc"),
     (["--ptc", "imx477"], "rollcam bench ptc imx477"), (["--sensor"], "rollcam bench sensor"),
     (["--uvc"], "rollcam bench uvc"), (["--soak", "--minutes", "1"], "rollcam bench soak"),
@@ -490,7 +490,7 @@ def test_progress_is_one_refreshing_line():
     assert text.count("\n") == 1 and text.endswith("\n") and text.count("\r") >= 4  # redrawn in place
     assert "capture 4/4" in text and "frame/s" in text and "ETA" in text
     steps = io.StringIO()
-    bar = Progress(label="bench hog", stream=steps, enabled=True)
+    bar = Progress(label="bench realism", stream=steps, enabled=True)
     for i in range(100):
         bar.status(f"frame {i + 1}/100")
     bar.close()

@@ -12,7 +12,7 @@ from typing import Any
 
 from rollcam.common.errors import ConfigError
 
-OLD_FLAGS = {"--quick": "render --quick", "--hog": "hog", "--detect": "detect", "--ptc": "ptc", "--sensor": "sensor",
+OLD_FLAGS = {"--quick": "render --quick", "--hog": "realism", "--detect": "detect", "--ptc": "ptc", "--sensor": "sensor",
              "--uvc": "uvc", "--soak": "soak", "--dataset": "dataset"}
 """The flags that picked a study before ``rollcam bench STUDY`` -> the subcommand that replaces each."""
 
