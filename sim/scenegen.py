@@ -135,6 +135,36 @@ def make_pedestrian(rng: np.random.Generator, pid: int, lane_x_m: float, lane_y_
     )
 
 
+CROWD_STREAM = 0xC0FFEE
+"""Child stream of a street's seed for who stands and who walks together: drawn apart from the layout's own
+generator, so a seed's buildings, cameras and walkers' lanes and clothes stay where they were."""
+STANDING_P, COMPANION_P, COMPANION_GAP_M = 0.12, 0.2, (0.55, 0.75)
+"""Share of walkers standing still (waiting, talking, looking at a phone), share walking beside the previous
+walker, and the lateral gap between two walking together, m."""
+
+
+def _crowd_behaviour(rng: np.random.Generator, peds: list[Pedestrian], walk_lo: float, walk_hi: float
+                     ) -> list[Pedestrian]:
+    """A street crowd is not all lone walkers: some stand still and some walk in pairs, side by side."""
+    out: list[Pedestrian] = []
+    for i, p in enumerate(peds):
+        r = rng.random()
+        gap = float(rng.uniform(*COMPANION_GAP_M))
+        prev = out[i - 1] if i else None
+        if r < STANDING_P:
+            p = replace(p, speed_mps=0.0)
+        elif (r < STANDING_P + COMPANION_P and prev is not None and prev.speed_mps > 0.0
+              and abs(prev.lane_x_m) >= walk_lo):
+            # beside the previous walker, towards the roomier side of the sidewalk; same pace and direction
+            side = 1.0 if abs(prev.lane_x_m) + gap <= walk_hi else -1.0
+            lane_x = math.copysign(abs(prev.lane_x_m) + side * gap, prev.lane_x_m)
+            p = replace(p, lane_x_m=lane_x, lane_y_center_m=prev.lane_y_center_m,
+                        lane_half_length_m=prev.lane_half_length_m, start_offset_m=prev.start_offset_m,
+                        speed_mps=prev.speed_mps, direction=prev.direction)
+        out.append(p)
+    return out
+
+
 def _buildings(rng: np.random.Generator, length_m: float) -> tuple[Building, ...]:
     out = []
     for side in (-1, 1):
@@ -259,6 +289,7 @@ def make_street_scene(
         base_speed = float(rng.uniform(0.8, 2.0))
         peds.append(make_pedestrian(rng, i + 1, lane_x, float(rng.uniform(-6, 6)), float(rng.uniform(14, 32)),
                                     base_speed * mult))
+    peds = _crowd_behaviour(np.random.default_rng([seed, CROWD_STREAM]), peds, walk_lo, walk_hi)
     cams = _street_cameras(rng, street, n_cameras, width, height, focal_mm, sensor_width_mm,
                            ego if ego is not None else EgoMotion())
     lighting, lights = street_lights(time_of_day, TIMES_OF_DAY[time_of_day], **lamp_options)
