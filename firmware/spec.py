@@ -1,7 +1,8 @@
 """``CameraSpec``: the one frozen, validated description of an emulated camera.
 
 Sensor, output size, frame and line length, shutter, readout, exposure, gain, pixel format, sensor-model stages,
-blur bound, flips, test pattern, scene, IMU and in-sensor network (``insensor``): everything that decides a
+blur bound, lens (vignetting, PSF), ISP picture steps (sharpening, JPEG), flips, test pattern, scene, IMU and
+in-sensor network (``insensor``): everything that decides a
 frame's bytes besides the frame's sequence number and start time. It is validated once, when it is made
 (``dataclasses.replace`` re-validates), and never changes; a device that is reprogrammed holds a new one. Every
 front door builds or replaces it: ``from_options`` for text (``emu:`` URIs, ``rollcam emulate`` flags,
@@ -23,10 +24,13 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from rollcam.common.errors import ConfigError, RollcamError
+from rollcam.common.values import JPEG_QUALITY
 from rollcam.sim import formats as sf
 from rollcam.sim.hwconfig import SensorConfig, load_sensor
 from rollcam.sim.imu import ImuParams
+from rollcam.sim.isp import PictureSteps
 from rollcam.sim.noise import parse_stages
+from rollcam.sim.optics import LensOptics
 from rollcam.sim.scene import Scene
 from rollcam.sim.scenegen import ego_preset, make_scene
 from rollcam.sim.sensor import flipped_cfa
@@ -56,6 +60,11 @@ class CameraSpec:
     physics: bool | None = None
     blur_px: float = 0.5
     noise: frozenset[str] | None = None
+    vignette: float = 0.0
+    lens_blur_px: float = 0.0
+    defocus_px: float = 0.0
+    sharpen: float = 0.0
+    jpeg_quality: int = 0
     serial: str = "0001"
     noise_seed: int = 0
     hflip: bool = False
@@ -165,6 +174,24 @@ class CameraSpec:
         return self.pixel_format != "BGR3" or (self.insensor is not None and self.insensor.input == "raw")
 
     @property
+    def lens(self) -> LensOptics:
+        """The lens in front of the sensor (vignetting, PSF): every format, before the sensor."""
+        return LensOptics(self.vignette, self.lens_blur_px, self.defocus_px)
+
+    @property
+    def picture_steps(self) -> PictureSteps:
+        """The ISP's last steps on the picture (sharpening, JPEG): none for raw formats, which bypass the ISP,
+        and no JPEG round trip for MJPG, whose encoder is the compression (``mjpeg_quality``)."""
+        if self.raw:
+            return PictureSteps()
+        return PictureSteps(self.sharpen, 0 if self.pixel_format == "MJPG" else self.jpeg_quality)
+
+    @property
+    def mjpeg_quality(self) -> int:
+        """The quality an MJPG stream of this camera is encoded at: ``jpeg_quality``, else the default."""
+        return self.jpeg_quality or JPEG_QUALITY
+
+    @property
     def output_format(self) -> str:
         """The fourcc frames carry: a raw one in the Bayer order the flips give (RG10 with hflip is GR10)."""
         return self.flipped(self.pixel_format)
@@ -212,7 +239,9 @@ class CameraSpec:
         scene.update(scene=self.scene, seed=self.seed, camera=self.camera, **dict(self.scene_options))
         return {**scene, "size": self.size, "fps": s.timing.fps, "shutter": s.shutter, "readout": s.readout.value,
                 "exposure_us": s.exposure_ns / 1000, "gain": self.gain, "format": self.output_format,
-                "physics": self.uses_physics, "blur_px": self.blur_px, "serial": self.serial,
+                "physics": self.uses_physics, "blur_px": self.blur_px, "vignette": self.vignette,
+                "lens_blur_px": self.lens_blur_px, "defocus_px": self.defocus_px, "sharpen": self.sharpen,
+                "jpeg_quality": self.jpeg_quality, "serial": self.serial,
                 "noise": (parse_stages(None) if self.noise is None else self.noise) - {"quantization"},
                 "noise_seed": self.noise_seed, "hflip": self.hflip, "vflip": self.vflip,
                 "test_pattern": self.test_pattern, **imu_option_values(self.sensor, self.imu),
@@ -274,6 +303,8 @@ def _check_values(spec: CameraSpec) -> None:
     if not isinstance(spec.blur_px, (int, float)) or not 0 <= spec.blur_px <= MAX_BLUR_PX:
         raise ConfigError(f"blur_px must be a number in 0..{MAX_BLUR_PX:g} (0: no motion blur), got "
                           f"{spec.blur_px!r}")
+    LensOptics(spec.vignette, spec.lens_blur_px, spec.defocus_px)  # each refuses a value out of its range
+    PictureSteps(spec.sharpen, spec.jpeg_quality)
     t = spec.settings.timing
     if t.fps < MIN_FPS:
         raise ConfigError(f"a frame of {t.frame_length_lines} lines lasts {1 / t.fps:.3g} s, longer than the longest "

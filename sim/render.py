@@ -202,6 +202,16 @@ class Renderer:
                                   n_along, line_of=line_of)
         return self._composite.accumulate(p, layer, line_of, out, hits, by_column)
 
+    def encode(self, linear: np.ndarray) -> np.ndarray:
+        """The 8-bit BGR image ``(H, W, 3)`` of a linear RGB one, encoded as the renderer encodes its lines (gain,
+        clip, sRGB curve), for images changed after the render (the lens, ``rollcam.sim.optics``)."""
+        lin = np.ascontiguousarray(linear, np.float32)
+        if lin.ndim != 3 or lin.shape[2] != 3:
+            raise ConfigError(f"a linear image is (H, W, 3), got shape {lin.shape}")
+        out = np.empty(lin.shape, np.uint8)
+        K.encode_line(lin.reshape(-1, 3), self.gain, self._painter.lut, out.reshape(-1, 3))
+        return out
+
     def reference_frame(self, t_ns: int, *, by_column: bool = False, linear: bool = False) -> RenderResult:
         """One full render with every line at ``t_ns`` and no shortcuts: every line painted over the bare
         background with every actor tested against it (no static-actor composite, no touched-line culling)."""

@@ -28,8 +28,9 @@ from .exposure import DEFAULT_BOUND_PX, integrate, plan_samples
 from .formats import pixel_format as fourcc_of
 from .frame import Box, Frame, ObjectTruth
 from .hwconfig import SensorConfig, SensorMode
+from .optics import LensOptics
 from .render import Renderer
-from .render_result import LineTruth
+from .render_result import LinearFrame, LineTruth
 from .scene import Scene
 from .sensor import SensorPipeline, flip
 from .timing import LineTiming, Readout, line_sample_times_ns
@@ -179,7 +180,8 @@ class SyntheticCamera:
     def __init__(self, sensor: SensorConfig, scene: Scene, camera: int | str = 0, *, start_ns: int = 0,
                  pixel_format: str = "BGR3", physics: bool | None = None, blur_px: float | None = DEFAULT_BOUND_PX,
                  noise: frozenset[str] | None = None, serial: str = "0", noise_seed: int = 0, hflip: bool = False,
-                 vflip: bool = False, settings: StreamSettings | None = None, **programming) -> None:
+                 vflip: bool = False, optics: LensOptics | None = None, settings: StreamSettings | None = None,
+                 **programming) -> None:
         self.sensor = sensor
         self.scene = scene
         if settings is not None and programming:
@@ -202,6 +204,8 @@ class SyntheticCamera:
         if not self.physics and self.pixel_format != "BGR3":
             raise ConfigError(f"pixel format {pixel_format!r} needs the sensor model (physics on)")
         self.blur_px = blur_px or None
+        self.optics = optics or LensOptics()
+        self._optics_buf: np.ndarray | None = None  # the lens's output, reused frame to frame as the radiance is
         self.pipeline: SensorPipeline | None = None
         # The ADC samples (uint16 H x W, output orientation) of the last frame made through the sensor model: the
         # raw mosaic an in-sensor network reads even when the stream's format is an ISP picture.
@@ -266,6 +270,11 @@ class SyntheticCamera:
         if self.pipeline is not None:
             res, data, extra = self._sensor_frame(index, times, shutter)
             fourcc = self.pipeline.fourcc
+        elif self.optics.on:  # the lens acts on linear radiance, before the 8-bit encoding
+            res = self.renderer.render_lines(times, by_column=by_col, linear=True)
+            assert res.linear is not None
+            res.image = self.renderer.encode(self.optics.apply(res.linear))
+            extra = {"optics": self.optics.info()}
         else:
             res = self.renderer.render_lines(times, by_column=by_col)
         t_ref = timestamp_ns + s.exposure_ns // 2
@@ -320,6 +329,10 @@ class SyntheticCamera:
             extra.update(blur_bound_px=self.blur_px, blur_samples_max=int(plan.n.max()),
                          blur_evaluations=plan.evaluations, blur_capped=plan.capped)
         assert radiance is not None
+        if self.optics.on:  # the lens, on the light each pixel integrated, before the sensor's noise
+            self._optics_buf = self.optics.apply(radiance, self._optics_buf)
+            radiance = LinearFrame(None, self._optics_buf, np.ones(n_lines, np.bool_), by_col)
+            extra["optics"] = self.optics.info()
         dn = pipe.samples(radiance, s.exposure_ns, index)
         self.last_samples = dn
         return res, pipe.encode(dn), extra

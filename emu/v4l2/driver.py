@@ -162,7 +162,7 @@ class EmuDriver:
     def _payload(self, frame: Frame) -> np.ndarray:
         fourcc = self.fmt.pixelformat
         # A raw frame is already in its fourcc's layout (the sensor's samples); renders are encoded.
-        data = transcode(frame, fourcc)
+        data = transcode(frame, fourcc, quality=self.camera.spec.mjpeg_quality)
         return np.ascontiguousarray(data).reshape(-1).view(np.uint8)
 
     def _deliver(self, slot: Slot, frame: Frame, size: int) -> None:
