@@ -72,15 +72,28 @@ class LensOptics:
         return {k: v for k, v in (("vignette", self.vignette), ("lens_blur_px", self.blur_sigma_px),
                                   ("defocus_px", self.defocus_px)) if v}
 
-    def apply(self, radiance: np.ndarray | LinearFrame, out: np.ndarray | None = None) -> np.ndarray:
+    @property
+    def reach_lines(self) -> int:
+        """Kernel half-size in lines: how far an output pixel's inputs lie (0 without blur)."""
+        r = max(int(math.ceil(4.0 * self.blur_sigma_px)), 1) if self.blur_sigma_px else 0
+        return r + (int(math.ceil(self.defocus_px + 0.5)) if self.defocus_px else 0)
+
+    def apply(self, radiance: np.ndarray | LinearFrame, out: np.ndarray | None = None,
+              scratch: np.ndarray | None = None) -> np.ndarray:
         """Linear radiance ``(lines, along, 3)`` (an array, or a ``LinearFrame`` in its render orientation)
-        through the lens, as a fresh (or ``out``) C-contiguous float32 array in the same orientation."""
-        src = _whole(radiance)
-        if out is None or out.shape != src.shape or out.dtype != np.float32 or not out.flags.c_contiguous:
-            out = np.empty(src.shape, np.float32)
-        if not self.on:
-            np.copyto(out, src)
-            return out
+        through the lens: a C-contiguous float32 array in the same orientation. ``out`` and ``scratch`` are
+        reusable buffers of that shape (fresh ones when None or of another shape); the result is one of them.
+        The input is never written."""
+        shape = _shape(radiance)
+        bufs = [b if b is not None and b.shape == shape and b.dtype == np.float32 and b.flags.c_contiguous
+                else np.empty(shape, np.float32) for b in (out, scratch)]
+        return self.filter(_whole(radiance, bufs[1]), bufs, 0, shape[0])
+
+    def filter(self, src: np.ndarray, bufs: list[np.ndarray], first: int, n_lines: int) -> np.ndarray:
+        """Lines ``first ..`` of a frame of ``n_lines`` (``src``, C-contiguous float32; the vignette is placed by
+        ``first``) through the lens, ping-ponging between ``bufs`` (two buffers of ``src``'s shape, neither of
+        them ``src`` unless it is ``bufs[1]``); returns the one holding the result. Lines within
+        ``reach_lines`` of a cut edge of ``src`` are only valid at a true frame edge."""
         import cv2
 
         steps = []
@@ -91,27 +104,107 @@ class LensOptics:
             disc = disc_kernel(self.defocus_px)
             steps.append(lambda a, dst: cv2.filter2D(a, cv2.CV_32F, disc, dst=dst, borderType=_BORDER))
         if self.vignette:
-            gain = _vignette_rgb(self.vignette, src.shape[0], src.shape[1])
+            gain = _vignette_rgb(self.vignette, n_lines, src.shape[1])[first:first + src.shape[0]]
             steps.append(lambda a, dst: np.multiply(a, gain, out=dst))
-        img = src
-        for i, step in enumerate(steps):
-            img = step(img, out if i == len(steps) - 1 else None)
-        return out
+        if not steps:
+            np.copyto(bufs[0], src)
+            return bufs[0]
+        for step in steps:  # never writing the input
+            dst = bufs[0] if src is not bufs[0] else bufs[1]
+            step(src, dst)
+            src = dst
+        return src
 
 
-def _whole(radiance: np.ndarray | LinearFrame) -> np.ndarray:
-    """The frame as one C-contiguous float32 array in its own orientation."""
+class LensStage:
+    """A ``LensOptics`` applied frame after frame to one camera's radiance, doing only the work a frame needs.
+
+    The lens image of the renderer's static composite is computed once and shared (read-only, as the composite
+    is); a frame then re-filters only its painted lines and those within ``reach_lines`` of them, from slabs
+    padded by ``reach_lines`` on each side, so the lines it returns equal ``LensOptics.apply`` of the whole
+    frame. A moving camera (no composite) filters every line.
+    """
+
+    def __init__(self, optics: LensOptics) -> None:
+        self.optics = optics
+        self._static: tuple[np.ndarray, np.ndarray] | None = None  # (composite, its lens image)
+        self._bufs: list[np.ndarray] = []
+
+    def radiance(self, frame: LinearFrame) -> LinearFrame:
+        """``frame`` through the lens, as a ``LinearFrame`` of the same orientation (lines in this stage's
+        reusable buffer, valid until the next call)."""
+        n_lines = frame.lines.shape[0]
+        out = self._buffer(0, frame.lines.shape)
+        if frame.static is None:
+            whole = self.optics.apply(frame, out, self._buffer(1, frame.lines.shape))
+            return LinearFrame(None, whole, np.ones(n_lines, np.bool_), frame.by_column)
+        static = self.static_image(frame.static)
+        reach = self.optics.reach_lines
+        todo = _dilate(frame.painted, reach)
+        for a, b in runs(todo):
+            lo, hi = max(a - reach, 0), min(b + reach, n_lines)
+            src = self._buffer(1, (hi - lo, *frame.lines.shape[1:]))
+            np.copyto(src, frame.static[lo:hi])
+            idx = np.flatnonzero(frame.painted[lo:hi])
+            src[idx] = frame.lines[lo + idx]
+            slab = self.optics.filter(src, [self._buffer(2, src.shape), src], lo, n_lines)
+            out[a:b] = slab[a - lo:b - lo]
+        return LinearFrame(static, out, todo, frame.by_column)
+
+    def static_image(self, static: np.ndarray) -> np.ndarray:
+        """The lens image of a renderer's static composite (read-only), computed on first use."""
+        hit = self._static
+        owner = static if static.base is None else static.base
+        if hit is None or hit[0] is not owner:
+            image = self.optics.apply(static)
+            image.flags.writeable = False
+            hit = self._static = (owner, image)
+        return hit[1]
+
+    def _buffer(self, k: int, shape: tuple[int, ...]) -> np.ndarray:
+        """Scratch buffer ``k`` viewed as ``shape`` (grown when too small; its pages stay mapped frame to frame)."""
+        while len(self._bufs) <= k:
+            self._bufs.append(np.empty(0, np.float32))
+        size = int(np.prod(shape))
+        if self._bufs[k].size < size:
+            self._bufs[k] = np.empty(size, np.float32)
+        return self._bufs[k][:size].reshape(shape)
+
+
+def _shape(radiance: np.ndarray | LinearFrame) -> tuple[int, int, int]:
+    a = radiance.lines if isinstance(radiance, LinearFrame) else np.asarray(radiance)
+    if a.ndim != 3 or a.shape[2] != 3:
+        raise ConfigError(f"radiance must be (lines, along, 3), got shape {a.shape}")
+    return a.shape  # type: ignore[return-value]
+
+
+def _whole(radiance: np.ndarray | LinearFrame, scratch: np.ndarray) -> np.ndarray:
+    """The frame as one C-contiguous float32 array in its own orientation (a LinearFrame over a composite is
+    assembled in ``scratch``)."""
     if isinstance(radiance, LinearFrame):
         if radiance.static is None:
             return np.ascontiguousarray(radiance.lines, np.float32)
-        whole = radiance.static.copy()
+        np.copyto(scratch, radiance.static)
         idx = np.flatnonzero(radiance.painted)
-        whole[idx] = radiance.lines[idx]
-        return whole
-    a = np.ascontiguousarray(radiance, np.float32)
-    if a.ndim != 3 or a.shape[2] != 3:
-        raise ConfigError(f"radiance must be (lines, along, 3), got shape {a.shape}")
-    return a
+        scratch[idx] = radiance.lines[idx]
+        return scratch
+    return np.ascontiguousarray(radiance, np.float32)
+
+
+def runs(mask: np.ndarray) -> list[tuple[int, int]]:
+    """The ``[start, end)`` runs of True in a 1-D bool mask."""
+    edges = np.flatnonzero(np.diff(np.concatenate(([False], mask, [False])).astype(np.int8)))
+    return list(zip(edges[0::2].tolist(), edges[1::2].tolist(), strict=True))
+
+
+def _dilate(mask: np.ndarray, reach: int) -> np.ndarray:
+    """``mask`` with every True spread ``reach`` entries either way."""
+    if reach == 0 or not mask.any():
+        return mask.copy()
+    c = np.concatenate(([0], np.cumsum(mask, dtype=np.int64)))
+    n = mask.shape[0]
+    i = np.arange(n)
+    return c[np.minimum(i + reach + 1, n)] - c[np.maximum(i - reach, 0)] > 0
 
 
 @functools.lru_cache(maxsize=8)
