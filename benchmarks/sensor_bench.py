@@ -144,7 +144,7 @@ def adaptive_blur(size: tuple[int, int] = (1920, 1080), frame: int = 3, seed: in
             "point_sampled_max_abs_err_dn": round(float(err_point.max()), 2), "target_ratio": 5.0}
 
 
-PHONE_LENS = LensOptics(vignette=0.3, blur_sigma_px=1.0)
+PHONE_LENS = LensOptics(vignette=0.3, lens_blur_px=1.0)
 """The lens of the ``optics`` measurement's whole frames: a phone camera's light fall-off and softness."""
 PHONE_ISP = PictureSteps(sharpen=1.0, jpeg_quality=85)
 
@@ -159,8 +159,8 @@ def optics_costs(size: tuple[int, int] = (1920, 1080), frames: int = 5, seed: in
     assert lin is not None
     picture = plain.frame(0).data
     buf = np.empty(lin.shape, np.float32)
-    lens = {"vignette_0.3": LensOptics(vignette=0.3), "lens_blur_1px": LensOptics(blur_sigma_px=1.0),
-            "lens_blur_2px": LensOptics(blur_sigma_px=2.0), "defocus_2px": LensOptics(defocus_px=2.0),
+    lens = {"vignette_0.3": LensOptics(vignette=0.3), "lens_blur_1px": LensOptics(lens_blur_px=1.0),
+            "lens_blur_2px": LensOptics(lens_blur_px=2.0), "defocus_2px": LensOptics(defocus_px=2.0),
             "defocus_8px": LensOptics(defocus_px=8.0)}
     steps = {"sharpen_1": PictureSteps(sharpen=1.0), "jpeg_85": PictureSteps(jpeg_quality=85),
              "jpeg_50": PictureSteps(jpeg_quality=50)}

@@ -10,7 +10,7 @@ does no work at all.
   (1 + k d^2)^-2 at distance d px from the optical centre (the image centre), k from the corner value. A
   real lens adds mechanical vignetting that falls faster at the very edge; a corner value is what lens data
   sheets quote (relative illumination).
-- **Blur** is a Gaussian PSF of standard deviation ``blur_sigma_px`` (aberrations and diffraction lumped
+- **Blur** is a Gaussian PSF of standard deviation ``lens_blur_px`` (aberrations and diffraction lumped
   together), integrated over each pixel's aperture (so the sampled kernel keeps the configured variance: a
   point's image has variance sigma^2 + 1/12, Sheppard's correction for the pixel), and a defocus disc
   (pillbox) of radius ``defocus_px``, the circle of confusion of a geometric-optics defocus, also integrated
@@ -47,11 +47,11 @@ class LensOptics:
     """Vignetting and PSF of the lens (see the module docstring); all zero: no lens effect, no work."""
 
     vignette: float = 0.0
-    blur_sigma_px: float = 0.0
+    lens_blur_px: float = 0.0
     defocus_px: float = 0.0
 
     def __post_init__(self) -> None:
-        for name, hi in (("vignette", MAX_VIGNETTE), ("blur_sigma_px", MAX_BLUR_SIGMA_PX),
+        for name, hi in (("vignette", MAX_VIGNETTE), ("lens_blur_px", MAX_BLUR_SIGMA_PX),
                          ("defocus_px", MAX_DEFOCUS_PX)):
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, (int, float)) or not 0 <= value <= hi:
@@ -60,22 +60,22 @@ class LensOptics:
     @property
     def on(self) -> bool:
         """True when the lens changes the image."""
-        return bool(self.vignette or self.blur_sigma_px or self.defocus_px)
+        return bool(self.vignette or self.lens_blur_px or self.defocus_px)
 
     @property
     def psf_radius_px(self) -> float:
         """How far the PSF reaches, px: 3 sigma of the Gaussian plus the disc's radius (the RS mixing bound)."""
-        return 3.0 * self.blur_sigma_px + self.defocus_px
+        return 3.0 * self.lens_blur_px + self.defocus_px
 
     def info(self) -> dict[str, float]:
         """What a frame's metadata records about the lens (the effects that are on)."""
-        return {k: v for k, v in (("vignette", self.vignette), ("lens_blur_px", self.blur_sigma_px),
+        return {k: v for k, v in (("vignette", self.vignette), ("lens_blur_px", self.lens_blur_px),
                                   ("defocus_px", self.defocus_px)) if v}
 
     @property
     def reach_lines(self) -> int:
         """Kernel half-size in lines: how far an output pixel's inputs lie (0 without blur)."""
-        r = max(int(math.ceil(4.0 * self.blur_sigma_px)), 1) if self.blur_sigma_px else 0
+        r = max(int(math.ceil(4.0 * self.lens_blur_px)), 1) if self.lens_blur_px else 0
         return r + (int(math.ceil(self.defocus_px + 0.5)) if self.defocus_px else 0)
 
     def apply(self, radiance: np.ndarray | LinearFrame, out: np.ndarray | None = None,
@@ -97,8 +97,8 @@ class LensOptics:
         import cv2
 
         steps = []
-        if self.blur_sigma_px:
-            k = gaussian_kernel(self.blur_sigma_px)
+        if self.lens_blur_px:
+            k = gaussian_kernel(self.lens_blur_px)
             steps.append(lambda a, dst: cv2.sepFilter2D(a, cv2.CV_32F, k, k, dst=dst, borderType=_BORDER))
         if self.defocus_px:
             disc = disc_kernel(self.defocus_px)
