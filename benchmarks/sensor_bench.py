@@ -20,7 +20,8 @@ Measurements on a seeded street of the study's pedestrians (20 walkers, static c
   radiance of one IMX219 1920x1080 street frame, and each ISP picture step (``rollcam.sim.isp.PictureSteps``:
   sharpening, a JPEG round trip) on its 8-bit picture; then whole clean BGR3 frames with every effect off (the
   path with no lens work), with a phone-like lens (vignette 0.3, 1 px PSF: the linear render and its encoding
-  added) and with the lens and both ISP steps. Medians, ms per frame.
+  added) and with the lens and both ISP steps, and whole raw pRAA frames (blur bound 0.5 px) without and with
+  that lens. Medians, ms per frame.
 """
 
 from __future__ import annotations
@@ -173,6 +174,10 @@ def optics_costs(size: tuple[int, int] = (1920, 1080), frames: int = 5, seed: in
     out["frame_off_ms"] = round(_median_ms(lambda i: plain.frame(i), frames), 3)
     out["frame_lens_ms"] = round(_median_ms(lambda i: lensed.frame(i), frames), 3)
     out["frame_lens_isp_ms"] = round(_median_ms(lambda i: PHONE_ISP.apply(lensed.frame(i).data), frames), 3)
+    raw, raw_lens = (SyntheticCamera(sensor, scene, size=size, pixel_format="pRAA", optics=o)
+                     for o in (None, PHONE_LENS))
+    out["raw_frame_off_ms"] = round(_median_ms(lambda i: raw.frame(i), frames), 3)
+    out["raw_frame_lens_ms"] = round(_median_ms(lambda i: raw_lens.frame(i), frames), 3)
     return out
 
 
@@ -210,9 +215,9 @@ def format_sensor_bench(doc: dict[str, Any]) -> str:
               f"{a['point_sampled_mean_abs_err_dn']}, max {a['point_sampled_max_abs_err_dn']} DN)"]
     p = doc.get("optics")
     if p:
-        effects = ", ".join(f"{k[:-3]} {v} ms" for k, v in p.items() if k.endswith("_ms") and not
-                            k.startswith("frame_"))
+        effects = ", ".join(f"{k[:-3]} {v} ms" for k, v in p.items() if k.endswith("_ms") and "frame_" not in k)
         lines += [f"optics {p['sensor']} {p['size']} per frame: {effects}",
                   f"  clean BGR3 frame: effects off {p['frame_off_ms']} ms, phone lens {p['frame_lens_ms']} ms, "
-                  f"lens + sharpen + JPEG {p['frame_lens_isp_ms']} ms"]
+                  f"lens + sharpen + JPEG {p['frame_lens_isp_ms']} ms; raw pRAA frame: off {p['raw_frame_off_ms']} "
+                  f"ms, phone lens {p['raw_frame_lens_ms']} ms"]
     return "\n".join(lines)

@@ -12,6 +12,10 @@ instead: each line integrates the scene over its own exposure window with adapti
 (``rollcam.sim.exposure``, bound ``blur_px``; None samples mid-exposure only), then EMVA 1288 noise, the
 ADC, and the requested raw layout or the preview ISP (``rollcam.sim.sensor``). Ground truth stays the
 mid-exposure one.
+
+``optics`` (a ``rollcam.sim.optics.LensOptics``: vignetting, PSF) puts a lens in front of the sensor: on the
+sensor path it acts on the integrated radiance before the EMVA model, on the clean path on the linear render
+before its 8-bit encoding; off (the default) it does no work.
 """
 
 from __future__ import annotations
