@@ -9,8 +9,8 @@ A raw format is the sensor model's output (EMVA noise, fixed patterns keyed by t
 noise by frame sequence, the ADC and the raw layout). A processed format is a BGR picture: the sensor
 model's preview ISP when physics is on (the default for every format but BGR3), else the clean render; the
 lens (``spec.lens``: vignetting, blur) acts inside the SyntheticCamera on linear radiance, for every format;
-``finish`` runs the ISP's last steps on a processed picture (``spec.picture_steps``: sharpening, JPEG), and
-``encode`` turns it into the processed layout (YUYV, NV12, MJPG at ``spec.mjpeg_quality``, ...); transports
+``finish`` runs the ISP's last steps on a processed picture (``picture_steps``: sharpening, JPEG), and
+``encode`` turns it into the processed layout (YUYV, NV12, MJPG at ``mjpeg_quality``, ...); transports
 encode it to their wire formats. A test pattern in a raw format is the BGR pattern sampled through the colour filter
 (``rollcam.sim.formats.mosaic``) at full scale of the format's bits, without noise or black level.
 
@@ -28,16 +28,18 @@ from collections.abc import Callable
 
 import numpy as np
 from rollcam.common.errors import ConfigError
+from rollcam.common.values import JPEG_QUALITY
 from rollcam.sim import formats as sf
 from rollcam.sim.codecs import codec
 from rollcam.sim.frame import Frame
+from rollcam.sim.isp import PictureSteps
 from rollcam.sim.synthetic import SyntheticCamera
 
 from .imu import FrameImu, with_imu
 from .patterns import render_pattern
 from .spec import CameraSpec, scene_of
 
-_AFTER_RENDER = ("test_pattern", "sharpen", "jpeg_quality")  # fields that change frames, not the SyntheticCamera
+_AFTER_RENDER = ("test_pattern", "picture")  # fields that change frames, not the SyntheticCamera
 _WARM_KINDS: set[tuple] = set()  # process-wide, as numba's compiled kernels are
 
 
@@ -46,7 +48,7 @@ def kernel_kind(spec: CameraSpec) -> tuple:
     packing), leaving out values that only change numbers: size, timing, exposure, gain, seeds."""
     return (spec.sensor.name, spec.pixel_format, spec.uses_physics, spec.blur_px > 0, spec.noise, spec.hflip,
             spec.vflip, spec.shutter, spec.readout, spec.scene, spec.test_pattern != "none", spec.imu is not None,
-            spec.rs_correct, spec.lens.on, spec.picture_steps.on)
+            spec.rs_correct, spec.lens.on, picture_steps(spec).on)
 
 
 def warm(spec: CameraSpec, imager: Imager | None = None) -> None:
@@ -125,11 +127,24 @@ class Imager:
         return finish(dataclasses.replace(frame, data=image, objects=(), meta=meta), spec), dn
 
 
+def picture_steps(spec: CameraSpec) -> PictureSteps:
+    """The ISP's last steps a frame of ``spec`` goes through: ``spec.picture``, none for raw formats (they bypass
+    the ISP) and no JPEG round trip for MJPG, whose encoder is the compression (``mjpeg_quality``)."""
+    if spec.raw:
+        return PictureSteps()
+    return dataclasses.replace(spec.picture, jpeg_quality=0) if spec.pixel_format == "MJPG" else spec.picture
+
+
+def mjpeg_quality(spec: CameraSpec) -> int:
+    """The quality an MJPG stream of ``spec`` is encoded at: its ``jpeg_quality``, else the default."""
+    return spec.picture.jpeg_quality or JPEG_QUALITY
+
+
 def finish(frame: Frame, spec: CameraSpec) -> Frame:
-    """A processed frame through the ISP's last steps (``spec.picture_steps``: sharpening, then the JPEG its
-    encoder leaves), after every other step of the picture (the gyro correction included); raw frames and
-    frames without a step on are returned as they are."""
-    steps = spec.picture_steps
+    """A processed frame through the ISP's last steps (``picture_steps``: sharpening, then the JPEG its encoder
+    leaves), after every other step of the picture (the gyro correction included); raw frames and frames
+    without a step on are returned as they are."""
+    steps = picture_steps(spec)
     if not steps.on or not frame.data.size:
         return frame
     return dataclasses.replace(frame, data=steps.apply(frame.data), meta={**frame.meta, "isp": steps.info()})
@@ -137,11 +152,11 @@ def finish(frame: Frame, spec: CameraSpec) -> Frame:
 
 def encode(frame: Frame, spec: CameraSpec) -> Frame:
     """A device frame in ``spec``'s processed format (raw frames and BGR3 are returned as they are; MJPG at
-    ``spec.mjpeg_quality``)."""
+    ``mjpeg_quality``)."""
     fourcc = spec.pixel_format
     if spec.raw or frame.format == fourcc or not frame.data.size:  # no data: metadata-only mode
         return frame
-    return dataclasses.replace(frame, data=codec(fourcc).encode(frame.data, quality=spec.mjpeg_quality),
+    return dataclasses.replace(frame, data=codec(fourcc).encode(frame.data, quality=mjpeg_quality(spec)),
                                format=fourcc)
 
 

@@ -33,7 +33,7 @@ from .formats import pixel_format as fourcc_of
 from .frame import Box, Frame, ObjectTruth
 from .hwconfig import SensorConfig, SensorMode
 from .optics import LensOptics, LensStage, runs
-from .render import Renderer
+from .render import Renderer, encode_linear
 from .render_result import LinearFrame, LineTruth
 from .scene import Scene
 from .sensor import SensorPipeline, flip
@@ -350,12 +350,12 @@ class SyntheticCamera:
         """The 8-bit image (render orientation) of the lens's radiance: the static composite's lens image encoded
         once, then only the lines the lens re-filtered."""
         if lens.static is None:
-            return self.renderer.encode(lens.lines)
+            return encode_linear(lens.lines, self.renderer.gain)
         if self._lens_u8 is None or self._lens_u8[0] is not lens.static:
-            self._lens_u8 = (lens.static, self.renderer.encode(lens.static))
+            self._lens_u8 = (lens.static, encode_linear(lens.static, self.renderer.gain))
         image = self._lens_u8[1].copy()
         for a, b in runs(lens.painted):
-            image[a:b] = self.renderer.encode(lens.lines[a:b])
+            image[a:b] = encode_linear(lens.lines[a:b], self.renderer.gain)
         return image
 
     def frames(self, n: int | None = None, shutter: str | None = None, first: int = 0) -> Iterator[Frame]:
