@@ -16,6 +16,12 @@ Measurements on a seeded street of the study's pedestrians (20 walkers, static c
   against fixed dense sampling (every line at one sample per 0.05 px of the fastest motion): scene
   evaluations (line renders), wall time, and the error of the adaptive and of the mid-exposure point-sampled
   frame against the dense one, in 8-bit sRGB DN over every pixel and channel.
+- ``optics``: each lens effect (``rollcam.sim.optics``: vignetting, Gaussian PSF, defocus disc) on the linear
+  radiance of one IMX219 1920x1080 street frame, and each ISP picture step (``rollcam.sim.isp.PictureSteps``:
+  sharpening, a JPEG round trip) on its 8-bit picture; then whole clean BGR3 frames with every effect off (the
+  path with no lens work), with a phone-like lens (vignette 0.3, 1 px PSF: the linear render and its encoding
+  added) and with the lens and both ISP steps, and whole raw pRAA frames (blur bound 0.5 px) without and with
+  that lens. Medians, ms per frame.
 """
 
 from __future__ import annotations
@@ -28,7 +34,8 @@ import numpy as np
 from rollcam.sim.codecs import codec
 from rollcam.sim.exposure import DEFAULT_BOUND_PX, dense_plan, integrate, plan_samples
 from rollcam.sim.hwconfig import load_sensor
-from rollcam.sim.isp import preview
+from rollcam.sim.isp import PictureSteps, preview
+from rollcam.sim.optics import LensOptics
 from rollcam.sim.render import srgb_lut
 from rollcam.sim.scenegen import make_street_scene
 from rollcam.sim.synthetic import SyntheticCamera
@@ -138,11 +145,47 @@ def adaptive_blur(size: tuple[int, int] = (1920, 1080), frame: int = 3, seed: in
             "point_sampled_max_abs_err_dn": round(float(err_point.max()), 2), "target_ratio": 5.0}
 
 
+PHONE_LENS = LensOptics(vignette=0.3, lens_blur_px=1.0)
+"""The lens of the ``optics`` measurement's whole frames: a phone camera's light fall-off and softness."""
+PHONE_ISP = PictureSteps(sharpen=1.0, jpeg_quality=85)
+
+
+def optics_costs(size: tuple[int, int] = (1920, 1080), frames: int = 5, seed: int = 0) -> dict[str, Any]:
+    """Milliseconds per frame of each lens effect and ISP picture step, and of whole clean frames with them
+    (see the module docstring)."""
+    sensor = load_sensor("imx219")
+    scene = make_street_scene(seed, speed="normal", width=size[0], height=size[1])
+    plain = SyntheticCamera(sensor, scene, size=size)
+    lin = plain.renderer.render_lines(plain.line_times_ns(0), linear=True).linear
+    assert lin is not None
+    picture = plain.frame(0).data
+    buf = np.empty(lin.shape, np.float32)
+    lens = {"vignette_0.3": LensOptics(vignette=0.3), "lens_blur_1px": LensOptics(lens_blur_px=1.0),
+            "lens_blur_2px": LensOptics(lens_blur_px=2.0), "defocus_2px": LensOptics(defocus_px=2.0),
+            "defocus_8px": LensOptics(defocus_px=8.0)}
+    steps = {"sharpen_1": PictureSteps(sharpen=1.0), "jpeg_85": PictureSteps(jpeg_quality=85),
+             "jpeg_50": PictureSteps(jpeg_quality=50)}
+    out: dict[str, Any] = {"sensor": "imx219", "size": f"{size[0]}x{size[1]}"}
+    for name, optics in lens.items():
+        out[f"{name}_ms"] = round(_median_ms(lambda i, o=optics: o.apply(lin, buf), frames), 3)
+    for name, step in steps.items():
+        out[f"{name}_ms"] = round(_median_ms(lambda i, st=step: st.apply(picture), frames), 3)
+    lensed = SyntheticCamera(sensor, scene, size=size, optics=PHONE_LENS)
+    out["frame_off_ms"] = round(_median_ms(lambda i: plain.frame(i), frames), 3)
+    out["frame_lens_ms"] = round(_median_ms(lambda i: lensed.frame(i), frames), 3)
+    out["frame_lens_isp_ms"] = round(_median_ms(lambda i: PHONE_ISP.apply(lensed.frame(i).data), frames), 3)
+    raw, raw_lens = (SyntheticCamera(sensor, scene, size=size, pixel_format="pRAA", optics=o)
+                     for o in (None, PHONE_LENS))
+    out["raw_frame_off_ms"] = round(_median_ms(lambda i: raw.frame(i), frames), 3)
+    out["raw_frame_lens_ms"] = round(_median_ms(lambda i: raw_lens.frame(i), frames), 3)
+    return out
+
+
 def run_sensor_bench(quick: bool = False) -> dict[str, Any]:
-    """All three measurements; ``quick`` runs them at 480x270."""
+    """All four measurements; ``quick`` runs them at 480x270."""
     size = (480, 270) if quick else (1920, 1080)
     return {"sensor_overhead": sensor_overhead(size), "raw_streams": raw_streams(size),
-            "adaptive_blur": adaptive_blur(size)}
+            "adaptive_blur": adaptive_blur(size), "optics": optics_costs(size)}
 
 
 def format_sensor_bench(doc: dict[str, Any]) -> str:
@@ -170,4 +213,11 @@ def format_sensor_bench(doc: dict[str, Any]) -> str:
               f"  {verdict} {a['evaluation_ratio']}x fewer evaluations (target >= {a['target_ratio']}x); error vs "
               f"dense: mean {a['mean_abs_err_dn']} DN, max {a['max_abs_err_dn']} DN (point-sampled: mean "
               f"{a['point_sampled_mean_abs_err_dn']}, max {a['point_sampled_max_abs_err_dn']} DN)"]
+    p = doc.get("optics")
+    if p:
+        effects = ", ".join(f"{k[:-3]} {v} ms" for k, v in p.items() if k.endswith("_ms") and "frame_" not in k)
+        lines += [f"optics {p['sensor']} {p['size']} per frame: {effects}",
+                  f"  clean BGR3 frame: effects off {p['frame_off_ms']} ms, phone lens {p['frame_lens_ms']} ms, "
+                  f"lens + sharpen + JPEG {p['frame_lens_isp_ms']} ms; raw pRAA frame: off {p['raw_frame_off_ms']} "
+                  f"ms, phone lens {p['raw_frame_lens_ms']} ms"]
     return "\n".join(lines)

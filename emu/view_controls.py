@@ -80,6 +80,11 @@ PAGE_CONTROLS: dict[str, PageControl] = {c.name: c for c in (
     PageControl("vflip", "flip", "bool", idle_only=True),
     PageControl("format", "format", "choice", lambda cam: [f.strip() for f in cam.formats], idle_only=True),
     PageControl("physics", "sensor model", "bool"),
+    PageControl("vignette", "vignetting", "number"),
+    PageControl("lens_blur_px", "lens blur", "number", unit="px"),
+    PageControl("defocus_px", "defocus", "number", unit="px"),
+    PageControl("sharpen", "sharpening", "number"),
+    PageControl("jpeg_quality", "JPEG quality", "number"),
 )}
 """The page's controls, in the order it shows them (each is an option of ``OPTIONS``)."""
 

@@ -7,9 +7,11 @@ scene bottom-up, and a raw stream's Bayer order follows the flips as the sensor'
 
 A raw format is the sensor model's output (EMVA noise, fixed patterns keyed by the serial number, temporal
 noise by frame sequence, the ADC and the raw layout). A processed format is a BGR picture: the sensor
-model's preview ISP when physics is on (the default for every format but BGR3), else the clean render;
-``encode`` turns it into the processed layout (YUYV, NV12, ...), and transports encode it to their wire
-formats. A test pattern in a raw format is the BGR pattern sampled through the colour filter
+model's preview ISP when physics is on (the default for every format but BGR3), else the clean render; the
+lens (``spec.lens``: vignetting, blur) acts inside the SyntheticCamera on linear radiance, for every format;
+``finish`` runs the ISP's last steps on a processed picture (``picture_steps``: sharpening, JPEG), and
+``encode`` turns it into the processed layout (YUYV, NV12, MJPG at ``mjpeg_quality``, ...); transports
+encode it to their wire formats. A test pattern in a raw format is the BGR pattern sampled through the colour filter
 (``rollcam.sim.formats.mosaic``) at full scale of the format's bits, without noise or black level.
 
 ``warm`` makes the first frame of a new kind of programming once, before a device's clock starts: the render
@@ -26,16 +28,18 @@ from collections.abc import Callable
 
 import numpy as np
 from rollcam.common.errors import ConfigError
+from rollcam.common.values import JPEG_QUALITY
 from rollcam.sim import formats as sf
 from rollcam.sim.codecs import codec
 from rollcam.sim.frame import Frame
+from rollcam.sim.isp import PictureSteps
 from rollcam.sim.synthetic import SyntheticCamera
 
 from .imu import FrameImu, with_imu
 from .patterns import render_pattern
 from .spec import CameraSpec, scene_of
 
-_PATTERN_ONLY = ("test_pattern",)  # spec fields that change frames without a new SyntheticCamera
+_AFTER_RENDER = ("test_pattern", "picture")  # fields that change frames, not the SyntheticCamera
 _WARM_KINDS: set[tuple] = set()  # process-wide, as numba's compiled kernels are
 
 
@@ -44,7 +48,7 @@ def kernel_kind(spec: CameraSpec) -> tuple:
     packing), leaving out values that only change numbers: size, timing, exposure, gain, seeds."""
     return (spec.sensor.name, spec.pixel_format, spec.uses_physics, spec.blur_px > 0, spec.noise, spec.hflip,
             spec.vflip, spec.shutter, spec.readout, spec.scene, spec.test_pattern != "none", spec.imu is not None,
-            spec.rs_correct)
+            spec.rs_correct, spec.lens.on, picture_steps(spec).on)
 
 
 def warm(spec: CameraSpec, imager: Imager | None = None) -> None:
@@ -71,7 +75,8 @@ def synthetic_camera(spec: CameraSpec) -> SyntheticCamera:
     fourcc = spec.pixel_format if spec.raw else "BGR3"
     return SyntheticCamera(spec.sensor, scene_of(spec), spec.camera, settings=spec.settings, pixel_format=fourcc,
                            physics=spec.uses_physics, blur_px=spec.blur_px or None, noise=spec.noise,
-                           serial=spec.serial, noise_seed=spec.noise_seed, hflip=spec.hflip, vflip=spec.vflip)
+                           serial=spec.serial, noise_seed=spec.noise_seed, hflip=spec.hflip, vflip=spec.vflip,
+                           optics=spec.lens)
 
 
 class Imager:
@@ -112,26 +117,51 @@ class Imager:
         meta = {**frame.meta, "bayer_order": spec.bayer_order, "test_pattern": pattern,
                 "pixel_format": spec.output_format}
         if pattern == "none":
-            return dataclasses.replace(frame, meta=meta), samples
+            return finish(dataclasses.replace(frame, meta=meta), spec), samples
         image = render_pattern(pattern, frame.width, frame.height)
         bits = spec.sensor.bit_depth
         dn = sf.mosaic(image, spec.bayer_order).astype(np.uint16) << (bits - 8)  # hwconfig: 8..16 bits
         if spec.raw:
             data = codec(frame.format).encode(dn, sample_bits=bits)
             return dataclasses.replace(frame, data=data, objects=(), meta=meta), dn
-        return dataclasses.replace(frame, data=image, objects=(), meta=meta), dn
+        return finish(dataclasses.replace(frame, data=image, objects=(), meta=meta), spec), dn
+
+
+def picture_steps(spec: CameraSpec) -> PictureSteps:
+    """The ISP's last steps a frame of ``spec`` goes through: ``spec.picture``, none for raw formats (they bypass
+    the ISP) and no JPEG round trip for MJPG, whose encoder is the compression (``mjpeg_quality``)."""
+    if spec.raw:
+        return PictureSteps()
+    return dataclasses.replace(spec.picture, jpeg_quality=0) if spec.pixel_format == "MJPG" else spec.picture
+
+
+def mjpeg_quality(spec: CameraSpec) -> int:
+    """The quality an MJPG stream of ``spec`` is encoded at: its ``jpeg_quality``, else the default."""
+    return spec.picture.jpeg_quality or JPEG_QUALITY
+
+
+def finish(frame: Frame, spec: CameraSpec) -> Frame:
+    """A processed frame through the ISP's last steps (``picture_steps``: sharpening, then the JPEG its encoder
+    leaves), after every other step of the picture (the gyro correction included); raw frames and frames
+    without a step on are returned as they are."""
+    steps = picture_steps(spec)
+    if not steps.on or not frame.data.size:
+        return frame
+    return dataclasses.replace(frame, data=steps.apply(frame.data), meta={**frame.meta, "isp": steps.info()})
 
 
 def encode(frame: Frame, spec: CameraSpec) -> Frame:
-    """A device frame in ``spec``'s processed format (raw frames and BGR3 are returned as they are)."""
+    """A device frame in ``spec``'s processed format (raw frames and BGR3 are returned as they are; MJPG at
+    ``mjpeg_quality``)."""
     fourcc = spec.pixel_format
     if spec.raw or frame.format == fourcc or not frame.data.size:  # no data: metadata-only mode
         return frame
-    return dataclasses.replace(frame, data=codec(fourcc).encode(frame.data), format=fourcc)
+    return dataclasses.replace(frame, data=codec(fourcc).encode(frame.data, quality=mjpeg_quality(spec)),
+                               format=fourcc)
 
 
 def _same_pixels(a: CameraSpec, b: CameraSpec) -> bool:
-    """True when ``a`` and ``b`` differ at most in fields applied after the render (the test pattern)."""
+    """True when ``a`` and ``b`` differ at most in fields applied after the render (test pattern, ISP steps)."""
     if a.sensor is not b.sensor:
         return False
-    return dataclasses.replace(a, **{k: getattr(b, k) for k in _PATTERN_ONLY}) == b
+    return dataclasses.replace(a, **{k: getattr(b, k) for k in _AFTER_RENDER}) == b

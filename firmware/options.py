@@ -21,6 +21,7 @@ from typing import Any
 
 from rollcam.common.errors import ConfigError, RollcamError
 from rollcam.common.values import (
+    JPEG_QUALITY,
     finite_float,
     non_negative_float,
     non_negative_int,
@@ -174,6 +175,17 @@ def _size(text: str) -> tuple[int, int]:
 _seed = bounded(non_negative_int, 0, MAX_SEED)
 
 
+def _sim_bounded(parse: Callable[[str], Any], module: str, limit: str) -> Callable[[str], Any]:
+    """``bounded(parse, 0, module.limit)``, the limit read from the simulator module that owns it when a value is
+    parsed (so the table itself loads no numpy)."""
+    def check(text: str) -> Any:
+        import importlib
+
+        return bounded(parse, 0, getattr(importlib.import_module(module), limit))(text)
+    check.__doc__ = parse.__doc__
+    return check
+
+
 def _network(text: str) -> str | None:
     from .insensor import network_spec
 
@@ -250,12 +262,24 @@ OPTIONS: dict[str, Option] = {o.name: o for o in (
     Option("gain", positive_float, 1.0, "linear total gain (analog first, then digital, as drivers split it)"),
     Option("format", _fourcc, "BGR3", "pixel format: BGR3 | YUYV | UYVY | NV12 | YU12 | RGB3 | XR24 | GREY | MJPG "
                                       "or a raw fourcc of the sensor (RG10, pRAA, Y10, ...)"),
-    Option("physics", parse_bool, None, "sensor model (exposure integration, EMVA noise, ADC): default on for "
-                                        "every format but BGR3"),
+    Option("physics", parse_bool, None, "sensor model (exposure integration, EMVA noise, ADC; processed formats "
+                                        "through the preview ISP): default on for every format but BGR3 (the "
+                                        "clean render; physics=on gives it the sensor's noise)"),
     Option("blur_px", bounded(non_negative_float, 0.0, MAX_BLUR_PX), 0.5,
            "sensor model: motion-blur bound in px (0: mid-exposure only)"),
     Option("noise", _noise, None, "sensor model: on | off | comma list of shot, dark, read, dsnu, prnu, "
                                   "saturation (default: on)"),
+    Option("vignette", _sim_bounded(non_negative_float, "rollcam.sim.optics", "MAX_VIGNETTE"), 0.0,
+           "lens: fraction of the light lost at the image corners, cos^4 falloff (0: none; 0.3: a phone lens)"),
+    Option("lens_blur_px", _sim_bounded(non_negative_float, "rollcam.sim.optics", "MAX_BLUR_SIGMA_PX"), 0.0,
+           "lens: Gaussian point-spread function, sigma in px (0: a perfect lens)"),
+    Option("defocus_px", _sim_bounded(non_negative_float, "rollcam.sim.optics", "MAX_DEFOCUS_PX"), 0.0,
+           "lens: defocus disc (circle of confusion) radius in px (0: in focus)"),
+    Option("sharpen", _sim_bounded(non_negative_float, "rollcam.sim.isp", "MAX_SHARPEN"), 0.0,
+           "ISP: unsharp-mask amount on the luma, processed formats (0: off; ~1: a phone's ISP)"),
+    Option("jpeg_quality", bounded(non_negative_int, 0, 100), 0,
+           "ISP: JPEG compression left in the picture at quality 1..100, processed formats (0: off); with "
+           f"format=MJPG the encoder's quality (0: {JPEG_QUALITY})"),
     Option("serial", _text, "0001", "device serial number (fixes the DSNU/PRNU patterns)"),
     Option("noise_seed", _seed, 0, "temporal noise seed"),
     Option("hflip", parse_bool, False, "mirror left-right (raw: the Bayer order changes as the sensor's does)"),

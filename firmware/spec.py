@@ -1,9 +1,10 @@
 """``CameraSpec``: the one frozen, validated description of an emulated camera.
 
 Sensor, output size, frame and line length, shutter, readout, exposure, gain, pixel format, sensor-model stages,
-blur bound, flips, test pattern, scene, IMU and in-sensor network (``insensor``): everything that decides a
-frame's bytes besides the frame's sequence number and start time. It is validated once, when it is made
-(``dataclasses.replace`` re-validates), and never changes; a device that is reprogrammed holds a new one. Every
+blur bound, lens (``lens``: vignetting, PSF), ISP picture steps (``picture``: sharpening, JPEG), flips, test
+pattern, scene, IMU and in-sensor network (``insensor``): everything that decides a frame's bytes besides the
+frame's sequence number and start time. It is validated once, when it is made (``dataclasses.replace``
+re-validates), and never changes; a device that is reprogrammed holds a new one. Every
 front door builds or replaces it: ``from_options`` for text (``emu:`` URIs, ``rollcam emulate`` flags,
 ``rollcam://`` URLs, serial ``SCENE``), ``create`` for typed values, and the firmware's controls, registers,
 V4L2 and UVC requests through ``rollcam.firmware.controls.SensorState``.
@@ -26,7 +27,9 @@ from rollcam.common.errors import ConfigError, RollcamError
 from rollcam.sim import formats as sf
 from rollcam.sim.hwconfig import SensorConfig, load_sensor
 from rollcam.sim.imu import ImuParams
+from rollcam.sim.isp import PictureSteps
 from rollcam.sim.noise import parse_stages
+from rollcam.sim.optics import LensOptics
 from rollcam.sim.scene import Scene
 from rollcam.sim.scenegen import ego_preset, make_scene
 from rollcam.sim.sensor import flipped_cfa
@@ -56,6 +59,8 @@ class CameraSpec:
     physics: bool | None = None
     blur_px: float = 0.5
     noise: frozenset[str] | None = None
+    lens: LensOptics = field(default_factory=LensOptics)
+    picture: PictureSteps = field(default_factory=PictureSteps)
     serial: str = "0001"
     noise_seed: int = 0
     hflip: bool = False
@@ -135,7 +140,7 @@ class CameraSpec:
             current = {"seed": self.seed, "camera": self.camera}
         merged = {**current, **options}
         values = parse_options(merged, owner, ConfigError)
-        changes = _fields(values)
+        changes = _fields(values, self)
         if "imu_values" in changes:
             changes["imu"] = resolve_imu(self.sensor, self.imu, changes.pop("imu_values"))
         if "insensor_values" in changes:
@@ -212,9 +217,9 @@ class CameraSpec:
         scene.update(scene=self.scene, seed=self.seed, camera=self.camera, **dict(self.scene_options))
         return {**scene, "size": self.size, "fps": s.timing.fps, "shutter": s.shutter, "readout": s.readout.value,
                 "exposure_us": s.exposure_ns / 1000, "gain": self.gain, "format": self.output_format,
-                "physics": self.uses_physics, "blur_px": self.blur_px, "serial": self.serial,
+                "physics": self.uses_physics, "blur_px": self.blur_px, "serial": self.serial, **vars(self.lens),
                 "noise": (parse_stages(None) if self.noise is None else self.noise) - {"quantization"},
-                "noise_seed": self.noise_seed, "hflip": self.hflip, "vflip": self.vflip,
+                "noise_seed": self.noise_seed, "hflip": self.hflip, "vflip": self.vflip, **vars(self.picture),
                 "test_pattern": self.test_pattern, **imu_option_values(self.sensor, self.imu),
                 "rs_correct": self.rs_correct, **insensor_option_values(self.insensor)}
 
@@ -274,6 +279,9 @@ def _check_values(spec: CameraSpec) -> None:
     if not isinstance(spec.blur_px, (int, float)) or not 0 <= spec.blur_px <= MAX_BLUR_PX:
         raise ConfigError(f"blur_px must be a number in 0..{MAX_BLUR_PX:g} (0: no motion blur), got "
                           f"{spec.blur_px!r}")
+    if not isinstance(spec.lens, LensOptics) or not isinstance(spec.picture, PictureSteps):
+        raise ConfigError(f"lens must be a LensOptics and picture a PictureSteps, got {spec.lens!r} and "
+                          f"{spec.picture!r}")
     t = spec.settings.timing
     if t.fps < MIN_FPS:
         raise ConfigError(f"a frame of {t.frame_length_lines} lines lasts {1 / t.fps:.3g} s, longer than the longest "
@@ -300,8 +308,9 @@ def _check_values(spec: CameraSpec) -> None:
     scene_of(spec).camera(spec.camera)  # the scene is built (and cached) now: bad options fail here
 
 
-def _fields(values: dict[str, Any]) -> dict[str, Any]:
-    """Parsed option values -> ``create`` keywords."""
+def _fields(values: dict[str, Any], current: CameraSpec | None = None) -> dict[str, Any]:
+    """Parsed option values -> ``create`` keywords (a grouped field from ``current``'s, else its default, with
+    the options given changed)."""
     out = _scene_fields({k: v for k, v in values.items() if k in _SCENE_NAMES})
     imu = {k: v for k, v in values.items() if k in IMU_OPTIONS}
     if imu:
@@ -316,7 +325,22 @@ def _fields(values: dict[str, Any]) -> dict[str, Any]:
             out["exposure_ns"] = round(value * 1000)
         else:
             out[_FIELD_OF.get(name, name)] = value
+    _group(out, {} if current is None else {"lens": current.lens, "picture": current.picture})
     return out
+
+
+_GROUPS = {"lens": (LensOptics, tuple(f.name for f in dataclasses.fields(LensOptics))),
+           "picture": (PictureSteps, tuple(f.name for f in dataclasses.fields(PictureSteps)))}
+"""Fields that hold several options (the lens's, the ISP picture steps'), by the options they hold."""
+
+
+def _group(fields: dict[str, Any], current: Mapping[str, Any]) -> None:
+    """Options of a grouped field (``vignette=``, ``sharpen=``, ...) in ``fields`` replaced by that field: the
+    ``current`` value (or the default) with them changed."""
+    for name, (kind, members) in _GROUPS.items():
+        given = {k: fields.pop(k) for k in members if k in fields}
+        if given:
+            fields[name] = dataclasses.replace(current.get(name) or kind(), **given)
 
 
 def _scene_fields(values: dict[str, Any]) -> dict[str, Any]:

@@ -109,6 +109,77 @@ def tone_lut(n: int, params: IspParams, gains: tuple[float, float, float]) -> np
     return lut
 
 
+MAX_SHARPEN = 4.0
+"""Largest unsharp-mask amount (a phone ISP's default is about 0.5..1.5; beyond 4 every edge rings)."""
+SHARPEN_SIGMA_PX = 1.0
+"""Radius (Gaussian sigma, px) of the unsharp mask's blur: the detail band a camera ISP boosts."""
+
+
+@dataclass(frozen=True)
+class PictureSteps:
+    """The ISP's last steps on its 8-bit picture, after demosaic and gamma: unsharp-mask sharpening of the luma
+    by ``sharpen`` (0: off), then the camera encoder's JPEG compression at ``jpeg_quality`` (0: off; 1..100
+    as libjpeg's quality scale), left in the picture as a decoder would see it. All off: no work."""
+
+    sharpen: float = 0.0
+    jpeg_quality: int = 0
+
+    def __post_init__(self) -> None:
+        if isinstance(self.sharpen, bool) or not isinstance(self.sharpen, (int, float)) \
+                or not 0 <= self.sharpen <= MAX_SHARPEN:
+            raise ConfigError(f"sharpen must be a number in 0..{MAX_SHARPEN:g}, got {self.sharpen!r}")
+        if isinstance(self.jpeg_quality, bool) or not isinstance(self.jpeg_quality, (int, np.integer)) \
+                or not 0 <= self.jpeg_quality <= 100:
+            raise ConfigError(f"jpeg_quality must be a whole number in 0..100 (0: off), got {self.jpeg_quality!r}")
+
+    @property
+    def on(self) -> bool:
+        """True when a step changes the picture."""
+        return bool(self.sharpen or self.jpeg_quality)
+
+    def info(self) -> dict[str, float]:
+        """What a frame's metadata records about these steps (the ones that are on)."""
+        return {k: v for k, v in (("sharpen", self.sharpen), ("jpeg_quality", self.jpeg_quality)) if v}
+
+    def apply(self, bgr: np.ndarray) -> np.ndarray:
+        """The 8-bit BGR picture after these steps (``bgr`` itself when all are off)."""
+        if self.sharpen:
+            bgr = sharpen(bgr, self.sharpen)
+        if self.jpeg_quality:
+            from .codecs import codec  # the one JPEG codec (it imports this module)
+
+            jpeg = codec("MJPG")
+            bgr = jpeg.decode(jpeg.encode(bgr, quality=int(self.jpeg_quality)))
+        return bgr
+
+
+def sharpen(bgr: np.ndarray, amount: float, sigma_px: float = SHARPEN_SIGMA_PX) -> np.ndarray:
+    """Unsharp mask on the luma: every channel plus ``amount`` x (Y - Gaussian(Y, ``sigma_px``)), BT.601 Y,
+    rounded and clipped to 8 bits. Luma only, as camera ISPs do, so edges gain contrast without colour
+    fringes."""
+    import cv2
+
+    img = np.ascontiguousarray(bgr)
+    y = cv2.cvtColor(img, cv2.COLOR_BGR2GRAY).astype(np.float32)
+    low = cv2.GaussianBlur(y, (0, 0), sigma_px, borderType=cv2.BORDER_REFLECT)
+    out = np.empty_like(img)
+    _add_detail(img.reshape(-1, 3), y.reshape(-1), low.reshape(-1), np.float32(amount), out.reshape(-1, 3))
+    return out
+
+
+@njit(cache=True, parallel=True)
+def _add_detail(img, y, low, amount, out):
+    """out[i, c] = img[i, c] + amount * (y[i] - low[i]), rounded and clipped to 0..255."""
+    n = img.shape[0]
+    step = 1 << 14
+    for chunk in prange((n + step - 1) // step):
+        for i in range(chunk * step, min(n, (chunk + 1) * step)):
+            d = amount * (y[i] - low[i]) + np.float32(0.5)
+            for c in range(3):
+                v = min(max(np.float32(img[i, c]) + d, np.float32(0.0)), np.float32(255.0))
+                out[i, c] = np.uint8(v)
+
+
 @njit(cache=True, parallel=True)
 def _apply_lut(rgb, lut, out):
     """out[i, c] = lut[c, rgb[i, c]] over the flattened pixels."""

@@ -28,7 +28,7 @@ from .frame import ObjectTruth
 from .render_result import LinearFrame, LineTruth, RenderResult, object_truths
 from .scene import Camera, Scene
 
-__all__ = ["LineTruth", "LinearFrame", "RenderResult", "Renderer", "srgb_lut"]
+__all__ = ["LineTruth", "LinearFrame", "RenderResult", "Renderer", "encode_linear", "srgb_lut"]
 
 
 def srgb_lut() -> np.ndarray:
@@ -39,6 +39,18 @@ def srgb_lut() -> np.ndarray:
 
 
 _SRGB = srgb_lut()
+
+
+def encode_linear(linear: np.ndarray, gain: float) -> np.ndarray:
+    """The 8-bit BGR image ``(H, W, 3)`` of a linear RGB one, encoded as a renderer of ``gain`` (``Renderer.gain``)
+    encodes its lines (scale, clip, sRGB curve): for images changed after the render (the lens,
+    ``rollcam.sim.optics``)."""
+    lin = np.ascontiguousarray(linear, np.float32)
+    if lin.ndim != 3 or lin.shape[2] != 3:
+        raise ConfigError(f"a linear image is (H, W, 3), got shape {lin.shape}")
+    out = np.empty(lin.shape, np.uint8)
+    K.encode_line(lin.reshape(-1, 3), float(gain), _SRGB, out.reshape(-1, 3))
+    return out
 
 
 class Renderer:

@@ -12,6 +12,10 @@ instead: each line integrates the scene over its own exposure window with adapti
 (``rollcam.sim.exposure``, bound ``blur_px``; None samples mid-exposure only), then EMVA 1288 noise, the
 ADC, and the requested raw layout or the preview ISP (``rollcam.sim.sensor``). Ground truth stays the
 mid-exposure one.
+
+``optics`` (a ``rollcam.sim.optics.LensOptics``: vignetting, PSF) puts a lens in front of the sensor: on the
+sensor path it acts on the integrated radiance before the EMVA model, on the clean path on the linear render
+before its 8-bit encoding; off (the default) it does no work.
 """
 
 from __future__ import annotations
@@ -28,8 +32,9 @@ from .exposure import DEFAULT_BOUND_PX, integrate, plan_samples
 from .formats import pixel_format as fourcc_of
 from .frame import Box, Frame, ObjectTruth
 from .hwconfig import SensorConfig, SensorMode
-from .render import Renderer
-from .render_result import LineTruth
+from .optics import LensOptics, LensStage, runs
+from .render import Renderer, encode_linear
+from .render_result import LinearFrame, LineTruth
 from .scene import Scene
 from .sensor import SensorPipeline, flip
 from .timing import LineTiming, Readout, line_sample_times_ns
@@ -179,7 +184,8 @@ class SyntheticCamera:
     def __init__(self, sensor: SensorConfig, scene: Scene, camera: int | str = 0, *, start_ns: int = 0,
                  pixel_format: str = "BGR3", physics: bool | None = None, blur_px: float | None = DEFAULT_BOUND_PX,
                  noise: frozenset[str] | None = None, serial: str = "0", noise_seed: int = 0, hflip: bool = False,
-                 vflip: bool = False, settings: StreamSettings | None = None, **programming) -> None:
+                 vflip: bool = False, optics: LensOptics | None = None, settings: StreamSettings | None = None,
+                 **programming) -> None:
         self.sensor = sensor
         self.scene = scene
         if settings is not None and programming:
@@ -202,6 +208,9 @@ class SyntheticCamera:
         if not self.physics and self.pixel_format != "BGR3":
             raise ConfigError(f"pixel format {pixel_format!r} needs the sensor model (physics on)")
         self.blur_px = blur_px or None
+        self.optics = optics or LensOptics()
+        self._lens = LensStage(self.optics)  # keeps the lens image of the renderer's static composite
+        self._lens_u8: tuple[np.ndarray, np.ndarray] | None = None  # (that image, its 8-bit encoding)
         self.pipeline: SensorPipeline | None = None
         # The ADC samples (uint16 H x W, output orientation) of the last frame made through the sensor model: the
         # raw mosaic an in-sensor network reads even when the stream's format is an ISP picture.
@@ -266,6 +275,12 @@ class SyntheticCamera:
         if self.pipeline is not None:
             res, data, extra = self._sensor_frame(index, times, shutter)
             fourcc = self.pipeline.fourcc
+        elif self.optics.on:  # the lens acts on linear radiance, before the 8-bit encoding
+            res = self.renderer.render_linear(times, by_column=by_col, out=self._radiance(by_col))
+            assert res.radiance is not None
+            image = self._encode(self._lens.radiance(res.radiance))
+            res.image = np.ascontiguousarray(image.transpose(1, 0, 2)) if by_col else image
+            extra = {"optics": self.optics.info()}
         else:
             res = self.renderer.render_lines(times, by_column=by_col)
         t_ref = timestamp_ns + s.exposure_ns // 2
@@ -305,24 +320,43 @@ class SyntheticCamera:
         by_col = s.readout.by_column
         starts = mid_times - s.exposure_ns // 2
         extra: dict = pipe.info()
-        n_lines, n_along = (s.width, s.height) if by_col else (s.height, s.width)
-        if self._radiance_buf is None or self._radiance_buf.shape[:2] != (n_lines, n_along):
-            self._radiance_buf = np.empty((n_lines, n_along, 3), np.float32)
         if self.blur_px is None:
             # Linear only, static lines read in place from the renderer's cache (no frame-sized copies).
-            res = self.renderer.render_linear(mid_times, by_column=by_col, out=self._radiance_buf)
+            res = self.renderer.render_linear(mid_times, by_column=by_col, out=self._radiance(by_col))
             radiance = res.radiance
             extra["blur_samples_max"] = 1
         else:
             plan = plan_samples(self.renderer, starts, s.exposure_ns, by_column=by_col, bound_px=self.blur_px)
-            radiance = integrate(self.renderer, plan, by_column=by_col, out=self._radiance_buf).radiance
+            radiance = integrate(self.renderer, plan, by_column=by_col, out=self._radiance(by_col)).radiance
             res = self.renderer.render_lines(mid_times, by_column=by_col, truth_only=True)
             extra.update(blur_bound_px=self.blur_px, blur_samples_max=int(plan.n.max()),
                          blur_evaluations=plan.evaluations, blur_capped=plan.capped)
         assert radiance is not None
+        if self.optics.on:  # the lens, on the light each pixel integrated, before the sensor's noise
+            radiance = self._lens.radiance(radiance)
+            extra["optics"] = self.optics.info()
         dn = pipe.samples(radiance, s.exposure_ns, index)
         self.last_samples = dn
         return res, pipe.encode(dn), extra
+
+    def _radiance(self, by_column: bool) -> np.ndarray:
+        """The reusable float32 radiance buffer of a render in this orientation."""
+        shape = (*self.renderer.render_shape(by_column), 3)
+        if self._radiance_buf is None or self._radiance_buf.shape != shape:
+            self._radiance_buf = np.empty(shape, np.float32)
+        return self._radiance_buf
+
+    def _encode(self, lens: LinearFrame) -> np.ndarray:
+        """The 8-bit image (render orientation) of the lens's radiance: the static composite's lens image encoded
+        once, then only the lines the lens re-filtered."""
+        if lens.static is None:
+            return encode_linear(lens.lines, self.renderer.gain)
+        if self._lens_u8 is None or self._lens_u8[0] is not lens.static:
+            self._lens_u8 = (lens.static, encode_linear(lens.static, self.renderer.gain))
+        image = self._lens_u8[1].copy()
+        for a, b in runs(lens.painted):
+            image[a:b] = encode_linear(lens.lines[a:b], self.renderer.gain)
+        return image
 
     def frames(self, n: int | None = None, shutter: str | None = None, first: int = 0) -> Iterator[Frame]:
         """Consecutive frames (forever when ``n`` is None)."""

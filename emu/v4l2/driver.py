@@ -23,6 +23,7 @@ from rollcam.common.lifecycle import Stats
 from rollcam.emu.pump import FramePump
 from rollcam.firmware.camera import FirmwareCamera, FramePlan
 from rollcam.firmware.controls import CONTROLS
+from rollcam.firmware.imaging import mjpeg_quality
 from rollcam.firmware.pixfmt import device_format
 from rollcam.sim.codecs import transcode
 from rollcam.sim.frame import Frame
@@ -162,7 +163,7 @@ class EmuDriver:
     def _payload(self, frame: Frame) -> np.ndarray:
         fourcc = self.fmt.pixelformat
         # A raw frame is already in its fourcc's layout (the sensor's samples); renders are encoded.
-        data = transcode(frame, fourcc)
+        data = transcode(frame, fourcc, quality=mjpeg_quality(self.camera.spec))
         return np.ascontiguousarray(data).reshape(-1).view(np.uint8)
 
     def _deliver(self, slot: Slot, frame: Frame, size: int) -> None:

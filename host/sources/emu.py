@@ -4,7 +4,8 @@ The options are the emulated camera's option table (``rollcam.firmware.options``
 emulate`` flags, ``rollcam://`` URLs and the serial ``OPT``/``SCENE`` commands read): ``scene``, ``seed``,
 ``camera``, the scene kind's own (``time``, ``speed``, ``pedestrians``, ``ego``; ``vx``; ``level``), ``size``,
 ``fps``, ``shutter``, ``readout``, ``exposure_us``, ``gain`` (linear total), ``format``, ``physics``,
-``blur_px``, ``noise``, ``serial``, ``noise_seed``, ``hflip``, ``vflip``, ``test_pattern``, the IMU's and the
+``blur_px``, ``noise``, the lens's and the ISP's (``vignette``, ``lens_blur_px``, ``defocus_px``, ``sharpen``,
+``jpeg_quality``: docs/optics.md), ``serial``, ``noise_seed``, ``hflip``, ``vflip``, ``test_pattern``, the IMU's and the
 in-sensor network's (``insensor=personnet-raw``: frames carry its results, docs/insensor.md). Three more belong to
 the source: ``start_ns`` (device clock at frame 0), ``frames`` (stop after N frames; endless by default) and
 ``faults`` (a ``rollcam.common.faults`` plan, e.g. ``faults=drop=5,error=2,seed=3``; in process ``drop`` skips
