@@ -26,7 +26,9 @@ from pathlib import Path
 import numpy as np
 from rollcam.common.errors import ConfigError
 from rollcam.host.detectors import load_detector
-from rollcam.sim.render import Renderer
+from rollcam.sim.isp import PictureSteps
+from rollcam.sim.optics import LensOptics
+from rollcam.sim.render import Renderer, encode_linear
 from rollcam.sim.scenegen import DAYLIGHT, TIMES_OF_DAY, make_street_scene
 
 HEIGHT_BINS_PX = (128, 160, 200, 256, 384)
@@ -183,13 +185,19 @@ def realism(
     n_pedestrians: int = 30,
     frame_spacing_s: float = 4.0,
     precision_floor: float = PRECISION_FLOOR,
+    lens: LensOptics | None = None,
+    picture: PictureSteps | None = None,
 ) -> dict:
     """Each detector's recall and precision on unoccluded, untruncated pedestrians of seeded street scenes.
 
     Scene ``i`` uses seed ``seed + i`` and time of day ``times[i % len(times)]``; every camera of it is rendered
     global-shutter at ``frames_per_camera`` instants ``frame_spacing_s`` apart, and every detector runs on the
-    same full-resolution frames. ``progress(done, total)`` is called after each frame. Returns a JSON-able dict.
+    same full-resolution frames, through the camera's ``lens`` and ISP ``picture`` steps when given
+    (``rollcam.sim.optics``, ``rollcam.sim.isp``). ``progress(done, total)`` is called after each frame. Returns a
+    JSON-able dict.
     """
+    lens = lens if lens is not None and lens.on else None
+    picture = picture if picture is not None and picture.on else None
     if n_scenes < 1 or frames_per_camera < 1 or not times or not detectors:
         raise ConfigError(f"need n_scenes >= 1, frames_per_camera >= 1, some times of day and detectors, got "
                           f"{n_scenes!r}, {frames_per_camera!r}, {times!r}, {detectors!r}")
@@ -210,13 +218,15 @@ def realism(
             renderer = Renderer(scene, cam)
             for k in range(frames_per_camera):
                 t_ns = int((1.0 + k * frame_spacing_s) * 1e9)
-                res = renderer.render_lines(np.full(height, t_ns, np.int64))
+                res = renderer.render_lines(np.full(height, t_ns, np.int64), linear=lens is not None)
                 kept, ignored = fair_walkers(res, renderer.actor_classes, width, height, min_height_px, min_visible)
+                image = res.image if lens is None else encode_linear(lens.apply(res.linear), renderer.gain)
+                image = image if picture is None else picture.apply(image)
                 heights.extend(b[3] - b[1] for b in kept)
                 tods.extend([tod] * len(kept))
                 for spec, det in dets_by_spec.items():
                     t0 = time.perf_counter()
-                    found = det.detect(res.image)
+                    found = det.detect(image)
                     tallies[spec].seconds += time.perf_counter() - t0
                     tallies[spec].add([(tuple(map(float, b)), float(s)) for b, s in
                                        zip(found.boxes, found.scores, strict=True)], kept, ignored)
@@ -240,6 +250,7 @@ def realism(
             "frames_per_camera": frames_per_camera, "frame_spacing_s": frame_spacing_s,
             "n_pedestrians_per_scene": n_pedestrians, "detect_resolution": "full", "iou_min": IOU_MIN,
             "precision_floor": precision_floor, "shutter": "global",
+            "lens": {} if lens is None else lens.info(), "picture": {} if picture is None else picture.info(),
         },
     }
 

@@ -99,6 +99,27 @@ def _realism_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--times", default="daylight", metavar="LIST",
                    help="times of day, comma list, 'daylight' (morning, noon, afternoon: the targets') or 'all'")
     p.add_argument("--gallery", metavar="DIR", help="also write a contact sheet per time of day into DIR")
+    p.add_argument("--lens", metavar="K=V,...", default="",
+                   help="the lens in front of the sensor, e.g. vignette=0.3,lens_blur_px=1 (docs/optics.md)")
+    p.add_argument("--picture", metavar="K=V,...", default="",
+                   help="the ISP's last steps, e.g. sharpen=0.5,jpeg_quality=85 (docs/optics.md)")
+
+
+def _steps(kind: type, flag: str, text: str) -> Any:
+    """A ``LensOptics`` / ``PictureSteps`` from ``--lens`` / ``--picture`` text (``name=value`` pairs)."""
+    import dataclasses
+
+    fields = {f.name: f.type for f in dataclasses.fields(kind)}
+    values: dict[str, Any] = {}
+    for item in filter(None, text.split(",")):
+        name, sep, raw = item.partition("=")
+        if not sep or name not in fields:
+            raise ConfigError(f"{flag}: {item!r} is not NAME=VALUE with NAME one of {sorted(fields)}")
+        try:
+            values[name] = int(raw) if name == "jpeg_quality" else float(raw)
+        except ValueError:
+            raise ConfigError(f"{flag}: {name}={raw!r} is not a number") from None
+    return kind(**values)
 
 
 def _realism(args: argparse.Namespace, progress: Any) -> tuple[Doc, str]:
@@ -110,7 +131,11 @@ def _realism(args: argparse.Namespace, progress: Any) -> tuple[Doc, str]:
     bad = [t for t in times if t not in TIMES_OF_DAY]
     if bad:
         raise ConfigError(f"--times: {bad[0]!r} is not one of {list(TIMES_OF_DAY)}, 'daylight' or 'all'")
+    from rollcam.sim.isp import PictureSteps
+    from rollcam.sim.optics import LensOptics
+
     doc = realism(detectors=args.detector or DETECTORS, n_scenes=args.scenes, seed=args.seed, times=times,
+                  lens=_steps(LensOptics, "--lens", args.lens), picture=_steps(PictureSteps, "--picture", args.picture),
                   progress=lambda done, total: progress.status(f"frame {done}/{total}"))
     write_json(args.out, "realism.json", doc)
     if args.gallery:
