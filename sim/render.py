@@ -70,6 +70,7 @@ class Renderer:
         tables = self._painter.tables
         self.actor_ids, self.actor_classes = tables.actor_ids, tables.actor_classes
         self.actor_speeds_mps = tables.actor_speeds_mps
+        self.actor_labelled = tables.actor_labelled  # False for props: scenery, no truth record
         self._all = np.ones(self.n_actors, np.bool_)
 
     # ------------------------------------------------------------------ the scene as the renderer sees it
@@ -80,7 +81,7 @@ class Renderer:
 
     @property
     def n_actors(self) -> int:
-        """Number of actors (pedestrians, chart bars) in the scene."""
+        """Number of actors (pedestrians, chart bars, prop rows) in the scene."""
         return self._painter.n_actors
 
     @property
@@ -234,13 +235,15 @@ class Renderer:
     def object_truth(self, frame_truth: LineTruth, reference_time_ns: int, by_column: bool = False,
                      gs_truth: LineTruth | None = None) -> tuple[ObjectTruth, ...]:
         """Per-object ground truth of a frame: RS boxes from ``frame_truth``, GS boxes at the reference time
-        (rendered here unless ``gs_truth`` is given). Objects with no pixel under either shutter are left out.
+        (rendered here unless ``gs_truth`` is given). Objects with no pixel under either shutter are left out, and
+        so are props (scenery: they only hide objects).
         """
         if gs_truth is None:
             n_lines = self.render_shape(by_column)[0]
             gs_truth = self.render_lines(np.full(n_lines, reference_time_ns, np.int64), by_column=by_column,
                                          truth_only=True).truth
-        return object_truths(frame_truth, gs_truth, self.actor_ids, self.actor_classes, self.actor_speeds_mps)
+        return object_truths(frame_truth, gs_truth, self.actor_ids, self.actor_classes, self.actor_speeds_mps,
+                             self.actor_labelled)
 
 
 def _check_times(times_ns: np.ndarray, n_lines: int) -> np.ndarray:
