@@ -51,6 +51,7 @@ class BenchConfig:
     height: int = 1080
     n_pedestrians: int = 20
     seed: int = 0
+    props: bool = False  # street props (parked cars, trees, poles, ...) in the scene
     scenes: tuple[str, ...] = tuple(SCENES)
     bands: tuple[int, ...] = (1, 2, 4, 8, 16, 64, 256)
     footage_fps: tuple[int | str, ...] = (240, 960, LINE_RATE)
@@ -143,7 +144,7 @@ def _camera(cfg: BenchConfig, scene: str, size: tuple[int, int] | None = None) -
     speed, ego = SCENES[scene]
     w, h = size or (cfg.width, cfg.height)
     street = make_street_scene(cfg.seed, speed=speed, n_pedestrians=cfg.n_pedestrians, width=w, height=h,
-                               ego=ego_preset(ego))
+                               ego=ego_preset(ego), props=cfg.props)
     return SyntheticCamera(load_sensor(SENSOR), street, size=(w, h))
 
 

@@ -75,6 +75,7 @@ def _render_arguments(p: argparse.ArgumentParser) -> None:
                    help="frame size (default: the study's 1920x1080)")
     p.add_argument("--scenes", type=value_type(name_list), default=None,
                    help="comma-separated subset of normal,fast,normal_ego,fast_ego,pan_ego,walk_ego,drone_ego")
+    p.add_argument("--props", action="store_true", help="street props in the scenes (parked cars, trees, poles, ...)")
 
 
 def _render(args: argparse.Namespace, progress: Any) -> tuple[Doc, str]:
@@ -82,6 +83,8 @@ def _render(args: argparse.Namespace, progress: Any) -> tuple[Doc, str]:
     from .render_report import format_table
 
     overrides = {"scenes": args.scenes} if args.scenes else {}
+    if args.props:
+        overrides["props"] = True
     doc = run_bench(*args.size, quick=args.quick, out_dir=args.out, progress=progress.status, **overrides)
     return doc, format_table(doc)
 

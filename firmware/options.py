@@ -247,6 +247,8 @@ OPTIONS: dict[str, Option] = {o.name: o for o in (
     Option("pedestrians", bounded(non_negative_int, 0, MAX_PEDESTRIANS), 20, "street: number of walkers",
            ("street",), "n_pedestrians"),
     Option("ego", _ego, "none", "street: camera motion none | pan | walk | vehicle | drone | calib", ("street",)),
+    Option("props", parse_bool, False, "street: parked cars, trees, lamp poles, signs, benches and bins (scenery: "
+                                       "they hide walkers, no truth records): on | off", ("street",)),
     Option("vx", bounded(finite_float, -MAX_VX_PX_S, MAX_VX_PX_S), 2000.0, "chart: bar speed, px/s",
            ("chart",), "vx_px_s"),
     Option("level", bounded(non_negative_float, 0.0, MAX_LEVEL), 0.5,

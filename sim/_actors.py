@@ -1,8 +1,10 @@
-"""Numba kernels of the renderer's actors: render-space bounds, parts and image speeds of walkers and chart bars.
+"""Numba kernels of the renderer's actors: render-space bounds, parts and image speeds of walkers, chart bars and
+street props.
 
-The walker model is ``rollcam.sim._body``, camera poses and the street's shading ``rollcam.sim._world``; the
-line kernels of ``rollcam.sim._kernels`` intersect and paint the parts these functions produce, whose table
-(one actor at one time) is laid out here. Every function is pure, so every render path draws identical parts.
+The walker model is ``rollcam.sim._body``, the props' ``rollcam.sim._props``, camera poses and the street's
+shading ``rollcam.sim._world``; the line kernels of ``rollcam.sim._kernels`` intersect and paint the parts these
+functions produce, whose table (one actor at one time) is laid out in ``rollcam.sim._parts``. Every function is
+pure, so every render path draws identical parts.
 Render space as in ``rollcam.sim._kernels``: a transposed camera (column readout) swaps x and y.
 """
 
@@ -26,10 +28,35 @@ from ._body import (
     R_WIDTH,
     R_X0,
     TYPE_BAR,
+    TYPE_PROP,
     pedestrian_root,
     pedestrian_skeleton,
 )
 from ._jitcache import guard
+from ._parts import (
+    MAX_PARTS,
+    N_VERTS,
+    NEAR_M,
+    PART_CAPSULE,
+    PART_COLS,
+    PART_NONE,
+    PART_QUAD,
+    Q_AMB,
+    Q_DEPTH,
+    Q_DIR,
+    Q_GEO,
+    Q_KIND,
+    Q_LX,
+    Q_LZ,
+    Q_TEX,
+    Q_TEXK,
+    Q_TSEED,
+    Q_YMAX,
+    Q_YMIN,
+    capsule_part,
+    sun_in_view,
+)
+from ._props import PROP_BOX, prop_box, prop_parts, prop_ref_y
 from ._world import (
     C_CX,
     C_CY,
@@ -40,7 +67,6 @@ from ._world import (
     C_W,
     KIND_STREET,
     L_AMB,
-    L_SUN,
     L_SUN_RGB,
     W_KIND,
     W_YHALF,
@@ -48,18 +74,11 @@ from ._world import (
     to_camera,
 )
 
-# ---- part table (one actor at one time) ---------------------------------------------------------------------
-Q_KIND, Q_DEPTH, Q_AMB, Q_DIR, Q_LX, Q_LZ, Q_GEO, Q_YMIN, Q_YMAX = 0, 1, 2, 5, 8, 9, 10, 18, 19
-Q_TEX, Q_TEXK, Q_TSEED = 20, 21, 22  # surface texture: contrast, lattice cells per pixel, seed (see _kernels)
-PART_COLS = 23
 # Surface texture per colour index (skin, hair, shirt, pants, shoes): contrast of the albedo's variation and the
 # size of its features on the body, m. Cloth folds and weave, hair strands, skin: what makes a photographed
 # person's surface vary, which detectors trained on photographs key on (benchmarks/realism.py measures it).
 TEX_CONTRAST = (0.10, 0.45, 0.40, 0.40, 0.25)
 TEX_CELL_M = (0.05, 0.02, 0.07, 0.07, 0.04)
-MAX_PARTS = 16
-PART_CAPSULE, PART_QUAD, PART_NONE = 0, 1, -1
-NEAR_M = 0.05
 BODY_LATERAL, BODY_FORWARD, BODY_TOP = 0.25, 0.40, 1.02  # walker bounds, fractions of height (see actor_bounds)
 PART_RADIUS_MAX = 0.1  # walker part radii, fraction of height x build (the largest in _body is 0.08)
 N_CHUNKS = 16  # parallel work units; scratch buffers are allocated once per unit, not per item
@@ -109,20 +128,36 @@ def actor_bounds(act, world, cam, rot, pos, t, dt, out, root, pc, uv):
         else:
             out[0], out[1], out[2], out[3] = -big, big, xs0, xs1
         return
+    if typ == TYPE_PROP:
+        box = np.empty(PROP_BOX)
+        r_max = prop_box(act, _lane_shift(world, pos, prop_ref_y(act)), box)
+        box_bounds(cam, rot, pos, box[0], box[1], box[2], box[3], box[4], box[5], cam[C_FX] * r_max / NEAR_M,
+                   out, pc, uv)
+        return
     pedestrian_root(act, t, root)
     root[1] += _lane_shift(world, pos, root[1])
     h = act[P_H]
     # Body reach from the root, with margin: arms and hips at most 0.18 h x build sideways, feet and hands
     # at most 0.32 h forward or back, head top at 1.007 h (tests/test_render.py checks the containment).
     lat = BODY_LATERAL * h * max(act[P_BUILD], 1.0)
-    e = BODY_FORWARD * h
+    ey = BODY_FORWARD * h + abs(act[P_SPEED]) * dt  # walkers move along Y only, at most speed * dt either way
+    pad = cam[C_FX] * PART_RADIUS_MAX * h * max(act[P_BUILD], 1.0) / NEAR_M
+    # Feet dip a little below the ground plane.
+    box_bounds(cam, rot, pos, root[0] - lat, root[0] + lat, root[1] - ey, root[1] + ey, -0.02 * h, BODY_TOP * h,
+               pad, out, pc, uv)
+
+
+@njit(cache=True)
+def box_bounds(cam, rot, pos, x0, x1, y0, y1, z0, z1, pad_px, out, pc, uv):
+    """Render-space box (ymin, ymax, xmin, xmax) of the world box [x0, x1] x [y0, y1] x [z0, z1] seen from
+    (rot, pos), for parts inside it whose pixel radius is at most ``pad_px`` at the near plane."""
+    out[0], out[1], out[2], out[3] = 1e30, -1e30, 1e30, -1e30
     n_behind = 0
-    ey = e + abs(act[P_SPEED]) * dt  # walkers move along Y only, at most speed * dt either way
     corners = np.empty((8, 3))
     for i in range(8):
-        x = root[0] + (lat if i & 1 else -lat)
-        y = root[1] + (ey if i & 2 else -ey)
-        z = BODY_TOP * h if i & 4 else -0.02 * h  # feet dip a little below the ground plane
+        x = x1 if i & 1 else x0
+        y = y1 if i & 2 else y0
+        z = z1 if i & 4 else z0
         to_camera(rot, pos, x, y, z, pc)
         corners[i, 0], corners[i, 1], corners[i, 2] = pc[0], pc[1], pc[2]
         if pc[2] < NEAR_M:
@@ -149,8 +184,7 @@ def actor_bounds(act, world, cam, rot, pos, t, dt, out, root, pc, uv):
                          corners[i, 1] + f * (corners[j, 1] - corners[i, 1]), NEAR_M, uv)
                 out[2], out[3] = min(out[2], uv[0]), max(out[3], uv[0])
                 out[0], out[1] = min(out[0], uv[1]), max(out[1], uv[1])
-        pad = cam[C_FX] * PART_RADIUS_MAX * h * max(act[P_BUILD], 1.0) / NEAR_M
-        out[0], out[1], out[2], out[3] = out[0] - pad, out[1] + pad, out[2] - pad, out[3] + pad
+        out[0], out[1], out[2], out[3] = out[0] - pad_px, out[1] + pad_px, out[2] - pad_px, out[3] + pad_px
 
 
 @njit(cache=True, inline="always")
@@ -168,6 +202,7 @@ def _set_quad(parts, p, x0, y0, x1, y1, x2, y2, x3, y3):
     g = Q_GEO
     parts[p, g], parts[p, g + 1], parts[p, g + 2], parts[p, g + 3] = x0, y0, x1, y1
     parts[p, g + 4], parts[p, g + 5], parts[p, g + 6], parts[p, g + 7] = x2, y2, x3, y3
+    parts[p, g + 8], parts[p, g + 9] = x0, y0  # a quad's fifth vertex is its first (see rollcam.sim._parts)
     parts[p, Q_YMIN] = min(min(y0, y1), min(y2, y3))
     parts[p, Q_YMAX] = max(max(y0, y1), max(y2, y3))
 
@@ -175,11 +210,14 @@ def _set_quad(parts, p, x0, y0, x1, y1, x2, y2, x3, y3):
 @njit(cache=True)
 def actor_parts(act, world, lut, bld, light, cam, rot, pos, t, parts, scratch):
     """Fill ``parts`` (MAX_PARTS x PART_COLS) with the render-space primitives of an actor at time ``t``."""
-    seg, rad, col_idx, root, joints = scratch
+    seg, rad, col_idx, root, joints, poly = scratch
     for p in range(MAX_PARTS):
         parts[p, Q_KIND] = PART_NONE
         parts[p, Q_TEX] = 0.0
     typ = int(act[A_TYPE])
+    if typ == TYPE_PROP:
+        prop_parts(act, _lane_shift(world, pos, prop_ref_y(act)), world, lut, bld, light, cam, rot, pos, parts, poly)
+        return
     if typ == TYPE_BAR:
         x0 = _bar_x0(act, t)
         x1 = x0 + act[R_WIDTH]
@@ -204,16 +242,8 @@ def actor_parts(act, world, lut, bld, light, cam, rot, pos, t, parts, scratch):
             seg[p, 4] += shift
     # Sun on the walker: blocked by the street canyon at chest height.
     lit = 0.0 if _sun_blocked(world, lut, bld, root[0], root[1], 0.7 * act[P_H], light, -1) else 1.0
-    # Sun direction in camera frame, reduced to the image-plane x / viewing-axis z for cylinder shading.
-    sx = rot[0, 0] * light[L_SUN] + rot[0, 1] * light[L_SUN + 1] + rot[0, 2] * light[L_SUN + 2]
-    sz = -(rot[2, 0] * light[L_SUN] + rot[2, 1] * light[L_SUN + 1] + rot[2, 2] * light[L_SUN + 2])
-    sy_up = light[L_SUN + 2]
-    nrm = math.sqrt(sx * sx + sz * sz) + 1e-12
-    horiz = math.sqrt(max(0.0, 1.0 - sy_up * sy_up))
-    lxv, lzv = sx / nrm * horiz, sz / nrm * horiz
-    # Pose, intrinsics and lights as scalars: arrays handed to a helper are reference-counted per call, which
-    # on an RS frame (parts recomputed on every line a walker touches) cost more than the arithmetic. Every
-    # expression keeps ``to_camera``'s and ``_project``'s operation order, so the parts are bit-identical.
+    # Pose, intrinsics and lights as scalars (see ``capsule_part``). Every expression keeps ``to_camera``'s and
+    # ``_project``'s operation order, so the parts are bit-identical.
     r00, r01, r02 = rot[0, 0], rot[0, 1], rot[0, 2]
     r10, r11, r12 = rot[1, 0], rot[1, 1], rot[1, 2]
     r20, r21, r22 = rot[2, 0], rot[2, 1], rot[2, 2]
@@ -222,7 +252,7 @@ def actor_parts(act, world, lut, bld, light, cam, rot, pos, t, parts, scratch):
     transposed = cam[C_TRANSPOSED] != 0.0
     amb_r, amb_g, amb_b = light[L_AMB], light[L_AMB + 1], light[L_AMB + 2]
     sun_r, sun_g, sun_b = light[L_SUN_RGB] * lit, light[L_SUN_RGB + 1] * lit, light[L_SUN_RGB + 2] * lit
-    lx_part = 0.0 if transposed else lxv  # a transposed line runs along the image's y axis
+    lx_part, lzv = sun_in_view(rot, light, transposed)
     for p in range(n):
         dx, dy, dz = seg[p, 0] - p0, seg[p, 1] - p1, seg[p, 2] - p2
         a0 = r00 * dx + r01 * dy + r02 * dz
@@ -232,37 +262,13 @@ def actor_parts(act, world, lut, bld, light, cam, rot, pos, t, parts, scratch):
         b0 = r00 * dx + r01 * dy + r02 * dz
         b1 = r10 * dx + r11 * dy + r12 * dz
         b2 = r20 * dx + r21 * dy + r22 * dz
-        if a2 < NEAR_M and b2 < NEAR_M:
-            continue
-        # Clip the segment at the near plane so parts crossing the camera plane stay finite.
-        if a2 < NEAR_M:
-            f = (NEAR_M - a2) / (b2 - a2)
-            a0, a1, a2 = a0 + f * (b0 - a0), a1 + f * (b1 - a1), a2 + f * (b2 - a2)
-        elif b2 < NEAR_M:
-            f = (NEAR_M - b2) / (a2 - b2)
-            b0, b1, b2 = b0 + f * (a0 - b0), b1 + f * (a1 - b1), b2 + f * (a2 - b2)
-        zm = 0.5 * (a2 + b2)
-        ua0, ua1 = fx * a0 / a2 + cx, fy * a1 / a2 + cy
-        ub0, ub1 = fx * b0 / b2 + cx, fy * b1 / b2 + cy
-        if transposed:
-            ua0, ua1, ub0, ub1 = ua1, ua0, ub1, ub0
-        r_px = fx * rad[p] / zm
         base = P_SKIN + 3 * col_idx[p]
-        alb_r, alb_g, alb_b = act[base], act[base + 1], act[base + 2]
-        parts[p, Q_KIND] = PART_CAPSULE
-        parts[p, Q_DEPTH] = zm
-        parts[p, Q_AMB], parts[p, Q_AMB + 1], parts[p, Q_AMB + 2] = alb_r * amb_r, alb_g * amb_g, alb_b * amb_b
-        parts[p, Q_DIR], parts[p, Q_DIR + 1], parts[p, Q_DIR + 2] = alb_r * sun_r, alb_g * sun_g, alb_b * sun_b
-        parts[p, Q_LX], parts[p, Q_LZ] = lx_part, lzv
-        g = Q_GEO
-        parts[p, g], parts[p, g + 1], parts[p, g + 2], parts[p, g + 3] = ua0, ua1, ub0, ub1
-        parts[p, g + 4] = r_px
-        parts[p, Q_YMIN] = min(ua1, ub1) - r_px
-        parts[p, Q_YMAX] = max(ua1, ub1) + r_px
-        ci = col_idx[p]
-        parts[p, Q_TEX] = TEX_CONTRAST[ci]
-        parts[p, Q_TEXK] = rad[p] / (r_px * TEX_CELL_M[ci]) if r_px > 0.0 else 0.0  # cells per pixel
-        parts[p, Q_TSEED] = act[A_ID] * MAX_PARTS + p
+        if capsule_part(parts, p, a0, a1, a2, b0, b1, b2, rad[p], act[base], act[base + 1], act[base + 2],
+                        fx, fy, cx, cy, transposed, amb_r, amb_g, amb_b, sun_r, sun_g, sun_b, lx_part, lzv):
+            ci, r_px = col_idx[p], parts[p, Q_GEO + 4]
+            parts[p, Q_TEX] = TEX_CONTRAST[ci]
+            parts[p, Q_TEXK] = rad[p] / (r_px * TEX_CELL_M[ci]) if r_px > 0.0 else 0.0  # cells per pixel
+            parts[p, Q_TSEED] = act[A_ID] * MAX_PARTS + p
 
 
 @njit(cache=True, inline="always")
@@ -291,7 +297,8 @@ def actor_speeds(actors, world, lut, bld, light, cam, rot_tab, pos_tab, times, o
         if int(actors[o, A_TYPE]) == TYPE_BAR:
             out[o] = abs(actors[o, R_VX])
             continue
-        if not actors[o, P_H] > 0.0:  # a zero-size walker shows no pixel (and has no stride to walk by)
+        if int(actors[o, A_TYPE]) != TYPE_PROP and not actors[o, P_H] > 0.0:
+            # a zero-size walker shows no pixel (and has no stride to walk by)
             out[o] = 0.0
             continue
         actor_parts(actors[o], world, lut, bld, light, cam, rot_tab[0], pos_tab[0], times[0], pa, scratch)
@@ -299,6 +306,9 @@ def actor_speeds(actors, world, lut, bld, light, cam, rot_tab, pos_tab, times, o
             actor_parts(actors[o], world, lut, bld, light, cam, rot_tab[k], pos_tab[k], times[k], pb, scratch)
             dt = times[k] - times[k - 1]
             for p in range(MAX_PARTS):
+                if pa[p, Q_KIND] == PART_QUAD and pb[p, Q_KIND] == PART_QUAD:
+                    best = max(best, _polygon_shift(pa, pb, p, x_lo, x_hi, y_lo, y_hi) / dt)
+                    continue
                 if pa[p, Q_KIND] != PART_CAPSULE or pb[p, Q_KIND] != PART_CAPSULE:
                     continue
                 off = True
@@ -324,9 +334,32 @@ def actor_speeds(actors, world, lut, bld, light, cam, rot_tab, pos_tab, times, o
 
 
 @njit(cache=True)
+def _polygon_shift(pa, pb, p, x_lo, x_hi, y_lo, y_hi):
+    """Largest move of a polygon part's vertices from ``pa`` to ``pb`` (0 when off the image at both), with the
+    vertices clamped to the image's margin as ``actor_speeds`` clamps a capsule's end points."""
+    g = Q_GEO
+    off = True
+    for q in (pa, pb):
+        xs_lo, xs_hi = 1e300, -1e300
+        for v in range(N_VERTS):
+            xs_lo, xs_hi = min(xs_lo, q[p, g + 2 * v]), max(xs_hi, q[p, g + 2 * v])
+        if not (xs_hi < x_lo or xs_lo > x_hi or q[p, Q_YMAX] < y_lo or q[p, Q_YMIN] > y_hi):
+            off = False
+    if off:
+        return 0.0
+    d = 0.0
+    for v in range(N_VERTS):
+        dx = _clamped(pb[p, g + 2 * v], x_lo, x_hi) - _clamped(pa[p, g + 2 * v], x_lo, x_hi)
+        dy = _clamped(pb[p, g + 2 * v + 1], y_lo, y_hi) - _clamped(pa[p, g + 2 * v + 1], y_lo, y_hi)
+        d = max(d, math.hypot(dx, dy))
+    return d
+
+
+@njit(cache=True)
 def parts_scratch():
     """Scratch buffers ``actor_parts`` needs, allocated once per parallel work unit."""
-    return np.empty((MAX_PARTS, 6)), np.empty(MAX_PARTS), np.empty(MAX_PARTS, np.int64), np.empty(4), np.empty((5, 3))
+    return (np.empty((MAX_PARTS, 6)), np.empty(MAX_PARTS), np.empty(MAX_PARTS, np.int64), np.empty(4), np.empty((5, 3)),
+            np.empty((2 * N_VERTS, 3)))
 
 
 @njit(cache=True)

@@ -22,6 +22,7 @@ P_LONG_HAIR, P_SLEEVES, P_STRIDE, P_SKIN, P_HAIR, P_SHIRT, P_PANTS, P_SHOES = 13
 R_X0, R_WIDTH, R_VX, R_PERIOD, R_RGB = 4, 5, 6, 7, 8
 ACTOR_COLS = 32
 TYPE_PEDESTRIAN, TYPE_BAR = 0, 1
+TYPE_PROP = 2  # street props: their columns in rollcam.sim._props
 
 
 

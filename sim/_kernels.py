@@ -19,6 +19,7 @@ from numba import njit, prange
 from ._actors import (
     MAX_PARTS,
     N_CHUNKS,
+    N_VERTS,
     PART_COLS,
     PART_NONE,
     PART_QUAD,
@@ -66,8 +67,8 @@ def part_span(parts, p, yc, lohi):
     lohi[0], lohi[1] = 1e30, -1e30
     g = Q_GEO
     if parts[p, Q_KIND] == PART_QUAD:
-        for e in range(4):
-            f = (e + 1) % 4
+        for e in range(N_VERTS):
+            f = (e + 1) % N_VERTS
             _edge(parts[p, g + 2 * e], parts[p, g + 2 * e + 1], parts[p, g + 2 * f], parts[p, g + 2 * f + 1],
                   yc, lohi)
         return

@@ -2,16 +2,22 @@
 
 from __future__ import annotations
 
+import itertools
 import math
 from dataclasses import dataclass
 
 import numpy as np
 
 from . import _body as B
+from . import _props as Pr
 from . import _world as Wd
-from .scene import Camera, Scene
+from .scene import Camera, Prop, Scene
 
 BUILDING_BIN_M = 0.5
+PROP_ID_BASE = 1_000_000
+"""Props' actor ids start here (walkers and bars count from 1), so no prop shares an id with an object."""
+CAR_SLICE_M = 1.2
+"""Longest slice of a parked car: each is its own actor row, drawn at its own depth (see ``rollcam.sim._props``)."""
 
 
 @dataclass(frozen=True)
@@ -31,6 +37,7 @@ class CompiledScene:
     actor_ids: tuple[int, ...]
     actor_classes: tuple[str, ...]
     actor_speeds_mps: tuple[float, ...]
+    actor_labelled: tuple[bool, ...]  # False for scenery (props): drawn and hiding others, but no truth record
 
 
 def compile_camera(cam: Camera, transposed: bool = False) -> np.ndarray:
@@ -80,8 +87,17 @@ def compile_scene(scene: Scene) -> CompiledScene:
         world[Wd.W_KIND] = Wd.KIND_FLAT
         world[Wd.W_LEVEL] = scene.flat_level
     actors, ids, classes, speeds = _compile_actors(scene)
+    labelled = (True,) * len(ids)
+    if scene.props:
+        props = [_prop_rows(prop, PROP_ID_BASE + i) for i, prop in enumerate(scene.props)]
+        rows = [row for rs in props for row in rs]
+        actors = np.concatenate([actors, np.array(rows)])
+        ids += tuple(PROP_ID_BASE + i for i, rs in enumerate(props) for _ in rs)
+        classes += tuple(prop.kind for prop, rs in zip(scene.props, props, strict=True) for _ in rs)
+        speeds += (0.0,) * len(rows)
+        labelled += (False,) * len(rows)
     lut, buildings = _with_sentinel(lut, buildings)
-    return CompiledScene(world, lut, buildings, light, actors, ids, classes, speeds)
+    return CompiledScene(world, lut, buildings, light, actors, ids, classes, speeds, labelled)
 
 
 def _with_sentinel(lut: np.ndarray, buildings: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -161,3 +177,40 @@ def _compile_actors(scene: Scene) -> tuple[np.ndarray, tuple[int, ...], tuple[st
             speeds.append(0.0)  # image-plane target: no world speed
     actors = np.array(rows) if rows else np.zeros((0, B.ACTOR_COLS))
     return actors, tuple(ids), tuple(classes), tuple(speeds)
+
+
+def _prop_rows(prop: Prop, actor_id: int) -> list[np.ndarray]:
+    """The actor rows of one prop (``rollcam.sim._props``' columns): one, or a parked car's slices."""
+    a = np.zeros(B.ACTOR_COLS)
+    a[B.A_TYPE], a[B.A_STATIC], a[B.A_SPEED], a[B.A_ID] = B.TYPE_PROP, 1.0, 0.0, actor_id
+    a[Pr.G_KIND] = Pr.PROP_CODES[prop.kind]
+    a[Pr.G_X], a[Pr.G_Y] = prop.x_m, prop.y_m
+    a[Pr.G_L], a[Pr.G_W], a[Pr.G_H], a[Pr.G_DIR] = prop.length_m, prop.width_m, prop.height_m, float(prop.facing)
+    a[Pr.G_RGB : Pr.G_RGB + 3] = prop.color
+    a[Pr.G_RGB2 : Pr.G_RGB2 + 3] = prop.color2
+    length, h = prop.length_m, prop.height_m
+    if prop.kind == "car":
+        # Body to 62 % of the height; the cabin over the middle, nearer the back (a bonnet longer than the boot).
+        lo, hi = (-0.30 * length, 0.25 * length) if prop.facing > 0 else (-0.25 * length, 0.30 * length)
+        a[Pr.G_A], a[Pr.G_B], a[Pr.G_C] = 0.62 * h, lo, hi
+        n = max(1, math.ceil(length / CAR_SLICE_M))
+        cuts = np.linspace(-length / 2, length / 2, n + 1)
+        rows = []
+        for s0, s1 in itertools.pairwise(cuts):
+            row = a.copy()
+            row[Pr.G_S0], row[Pr.G_S1] = s0, s1
+            rows.append(row)
+        return rows
+    if prop.kind == "tree":
+        crown = prop.width_m / 2
+        a[Pr.G_A], a[Pr.G_B], a[Pr.G_C] = 0.05 + 0.02 * h, h - 1.8 * crown, crown
+        a[Pr.G_DIR] = (prop.x_m * 7.1 + prop.y_m * 3.7) % (2 * math.pi)  # the crown's turn, radians
+    elif prop.kind == "pole":
+        a[Pr.G_A], a[Pr.G_B] = 0.07, 1.2  # pole radius, lamp arm
+    elif prop.kind == "sign":
+        a[Pr.G_A] = prop.width_m  # plate size
+    elif prop.kind == "bench":
+        a[Pr.G_A] = 0.45  # seat height
+    else:
+        a[Pr.G_A] = prop.width_m / 2  # bin radius
+    return [a]

@@ -67,14 +67,15 @@ def render_masks(renderer: Renderer, times_ns: np.ndarray, *, by_column: bool = 
     ut_ns, line_k = np.unique(times_ns, return_inverse=True)
     # The renderer's own seconds for these times (render_lines converts the same way).
     parts = renderer.actor_parts(ut_ns.astype(np.float64) * 1e-9, by_column=by_column)
-    ids = np.asarray(renderer.actor_ids, np.int64)
+    # Props are scenery: their pixels read as background (0) and hide the objects behind them.
+    ids = np.where(renderer.actor_labelled, np.asarray(renderer.actor_ids, np.int64), 0)
     owner = np.zeros((n_lines, n_along), np.int32)
     cover = np.zeros((len(ids), n_lines, n_along), np.bool_)
     if len(ids):
         _mask_lines(parts, line_k.astype(np.int64), ids, owner, cover)
     if by_column:
         owner, cover = owner.T.copy(), cover.transpose(0, 2, 1)
-    return owner, {int(i): np.ascontiguousarray(cover[o]) for o, i in enumerate(ids) if cover[o].any()}
+    return owner, {int(i): np.ascontiguousarray(cover[o]) for o, i in enumerate(ids) if i != 0 and cover[o].any()}
 
 
 

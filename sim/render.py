@@ -79,9 +79,9 @@ class Renderer:
         self._painter = Painter(scene, self.camera, float(gain), _SRGB, threads)
         self._composite = Compositor(self._painter)
         self.camera_moving = self.camera.ego.moving
-        tables = self._painter.tables
-        self.actor_ids, self.actor_classes = tables.actor_ids, tables.actor_classes
-        self.actor_speeds_mps = tables.actor_speeds_mps
+        t = self._painter.tables  # actor_labelled: False for props (scenery, no truth record)
+        self.actor_ids, self.actor_classes, self.actor_speeds_mps = t.actor_ids, t.actor_classes, t.actor_speeds_mps
+        self.actor_labelled = t.actor_labelled
         self._all = np.ones(self.n_actors, np.bool_)
 
     # ------------------------------------------------------------------ the scene as the renderer sees it
@@ -92,7 +92,7 @@ class Renderer:
 
     @property
     def n_actors(self) -> int:
-        """Number of actors (pedestrians, chart bars) in the scene."""
+        """Number of actors (pedestrians, chart bars, prop rows) in the scene."""
         return self._painter.n_actors
 
     @property
@@ -246,13 +246,13 @@ class Renderer:
     def object_truth(self, frame_truth: LineTruth, reference_time_ns: int, by_column: bool = False,
                      gs_truth: LineTruth | None = None) -> tuple[ObjectTruth, ...]:
         """Per-object ground truth of a frame: RS boxes from ``frame_truth``, GS boxes at the reference time
-        (rendered here unless ``gs_truth`` is given). Objects with no pixel under either shutter are left out.
-        """
+        (rendered unless ``gs_truth`` is given). Props and objects with no pixel under either shutter are left out."""
         if gs_truth is None:
             n_lines = self.render_shape(by_column)[0]
             gs_truth = self.render_lines(np.full(n_lines, reference_time_ns, np.int64), by_column=by_column,
                                          truth_only=True).truth
-        return object_truths(frame_truth, gs_truth, self.actor_ids, self.actor_classes, self.actor_speeds_mps)
+        return object_truths(frame_truth, gs_truth, self.actor_ids, self.actor_classes, self.actor_speeds_mps,
+                             self.actor_labelled)
 
 
 def _check_times(times_ns: np.ndarray, n_lines: int) -> np.ndarray:

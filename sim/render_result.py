@@ -98,15 +98,16 @@ class LinearFrame:
 
 
 def object_truths(frame_truth: LineTruth, gs_truth: LineTruth, ids: Sequence[int], classes: Sequence[str],
-                  speeds_mps: Sequence[float]) -> tuple[ObjectTruth, ...]:
+                  speeds_mps: Sequence[float], labelled: Sequence[bool] | None = None) -> tuple[ObjectTruth, ...]:
     """Per-object truth of a frame: RS boxes from ``frame_truth``, GS boxes from ``gs_truth`` (every line at the
-    reference instant), visibility in the frame's own shutter. Objects with no pixel under either are left out."""
+    reference instant), visibility in the frame's own shutter. Objects with no pixel under either are left out,
+    and so are actors not ``labelled`` (scenery such as street props; default: every actor is labelled)."""
     rs_boxes = frame_truth.boxes()
     gs_boxes = gs_truth.boxes()
     vis = frame_truth.visible_fraction()
     out = []
     for o in range(len(ids)):
-        if rs_boxes[o] is None and gs_boxes[o] is None:
+        if (rs_boxes[o] is None and gs_boxes[o] is None) or (labelled is not None and not labelled[o]):
             continue
         out.append(ObjectTruth(ids[o], classes[o], gs_boxes[o], rs_boxes[o], float(vis[o]), float(speeds_mps[o])))
     return tuple(out)

@@ -1,4 +1,4 @@
-"""The scene as plain, frozen data: street layout, lighting, modulated lights, pedestrians, charts, cameras.
+"""The scene as plain, frozen data: street layout, lighting, modulated lights, pedestrians, props, charts, cameras.
 
 Everything moves analytically in time, so any instant can be evaluated directly (no stepping). Renderers,
 sensor models and ground truth read a Scene and never mutate it. World frame: X across the street (east),
@@ -103,6 +103,32 @@ class Pedestrian:
     def stride_length_m(self) -> float:
         """Length of one full gait cycle (two steps)."""
         return 0.82 * self.height_m
+
+
+PROP_KINDS = ("car", "tree", "pole", "sign", "bench", "bin")
+"""Kinds of street prop: parked car, tree, lamp pole, traffic sign, bench, litter bin."""
+
+
+@dataclass(frozen=True)
+class Prop:
+    """Static street clutter: a parked car, a tree, a lamp pole, a sign, a bench or a bin, standing on the ground.
+
+    Props hide what is behind them (the walkers' visibility counts them) but are scenery, not objects: frames
+    carry no truth record of them. Sizes are of the footprint's box (``length_m`` along Y, ``width_m`` along X)
+    and the height; ``color`` is the body, bark, pole or seat, ``color2`` the windows, crown, lamp head, sign
+    plate or bench legs. ``facing`` is +1/-1: the way a car's front points along Y, a sign's plate faces along Y,
+    a bench's seat and a lamp's arm point along X.
+    """
+
+    kind: str
+    x_m: float
+    y_m: float
+    length_m: float
+    width_m: float
+    height_m: float
+    color: RGB
+    color2: RGB
+    facing: int = 1
 
 
 @dataclass(frozen=True)
@@ -213,6 +239,7 @@ class Scene:
     chart: Chart | None = None
     flat_level: float = 0.5
     lights: tuple[ModulatedLight, ...] = ()  # time-modulated lights, on top of the steady ``lighting``
+    props: tuple[Prop, ...] = ()  # street clutter (static actors without truth records)
 
     @property
     def time_of_day(self) -> str:

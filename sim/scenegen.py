@@ -26,6 +26,7 @@ from .scene import (
     Scene,
     Street,
 )
+from .streetprops import street_props
 
 # The study's virtual camera: 35 mm lens on a 16:9 digital filmback (36 x 20.25 mm), 1920x1080.
 STUDY_FOCAL_MM = 35.0
@@ -254,11 +255,14 @@ def make_street_scene(
     focal_mm: float = STUDY_FOCAL_MM,
     sensor_width_mm: float = STUDY_SENSOR_WIDTH_MM,
     ego: EgoMotion | None = None,
+    props: bool = False,
     **lamp_options: Any,
 ) -> Scene:
     """A seeded city street with a crowd walking on the sidewalks and crossing lanes, and several cameras.
 
     Walkers' base speeds are drawn up to 2 m/s and scaled by ``speed`` ('normal' 1x, 'fast' 10x).
+    ``props`` adds parked cars, trees, lamp poles, signs, benches and bins (``rollcam.sim.streetprops``, from
+    their own generator: the rest of the scene is the same either way).
     ``lamp_options`` are ``street_lights``' (street lamps and LED signs, on at dusk and night by default).
     """
     if time_of_day not in TIMES_OF_DAY:
@@ -293,7 +297,9 @@ def make_street_scene(
     cams = _street_cameras(rng, street, n_cameras, width, height, focal_mm, sensor_width_mm,
                            ego if ego is not None else EgoMotion())
     lighting, lights = street_lights(time_of_day, TIMES_OF_DAY[time_of_day], **lamp_options)
-    return Scene("street", seed, lighting, cams, street=street, pedestrians=tuple(peds), lights=lights)
+    clutter = street_props(int(seed), street, peds, cams) if props else ()
+    return Scene("street", seed, lighting, cams, street=street, pedestrians=tuple(peds), lights=lights,
+                 props=clutter)
 
 
 def make_chart_scene(seed: int = 0, *, vx_px_s: float = 2000.0, pitch_px: float = 64.0, bar_width_px: float = 24.0,

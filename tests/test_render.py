@@ -29,10 +29,12 @@ def _times(n: int, t0: int, readout: str, line_scale: int = 1) -> np.ndarray:
     camera=st.integers(0, 4),
     t0=st.sampled_from([0, 123_456_789, 30 * DAY_NS + 7]),
     line_scale=st.sampled_from([1, 20]),
+    props=st.booleans(),
 )
-def test_fast_path_equals_brute_force_reference(seed, speed, readout, ego, camera, t0, line_scale):
+def test_fast_path_equals_brute_force_reference(seed, speed, readout, ego, camera, t0, line_scale, props):
     """RS from the per-line path equals the study's method (line r of full render r) within 1 DN."""
-    scene = make_street_scene(seed, speed=speed, width=80, height=45, ego=ego_preset(ego), n_pedestrians=12)
+    scene = make_street_scene(seed, speed=speed, width=80, height=45, ego=ego_preset(ego), n_pedestrians=12,
+                              props=props)
     r = Renderer(scene, camera)
     by_col = Readout(readout).by_column
     times = _times(80 if by_col else 45, t0, readout, line_scale)

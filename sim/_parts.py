@@ -1,0 +1,82 @@
+"""The part table the render kernels share: one actor's render-space primitives at one time, and the capsule
+writer every kind of actor uses.
+
+``rollcam.sim._actors`` fills it for walkers and chart bars and ``rollcam.sim._props`` for street props; the line
+kernels of ``rollcam.sim._kernels`` intersect and paint it. A row is a capsule (end points and a radius from
+``Q_GEO``, shaded as a cylinder across its span by ``Q_LX``/``Q_LZ``) or a convex polygon of up to ``N_VERTS``
+vertices (flat: with ``Q_LX = Q_LZ = 0`` its colour is ``Q_AMB``); a quad repeats its first vertex as the fifth,
+which a near-plane clip of a quad may need. ``Q_YMIN``..``Q_YMAX`` is the range of lines the part can reach.
+"""
+
+from __future__ import annotations
+
+import math
+
+from numba import njit
+
+from ._jitcache import guard
+from ._world import L_SUN
+
+Q_KIND, Q_DEPTH, Q_AMB, Q_DIR, Q_LX, Q_LZ, Q_GEO = 0, 1, 2, 5, 8, 9, 10
+N_VERTS = 5
+Q_YMIN, Q_YMAX = Q_GEO + 2 * N_VERTS, Q_GEO + 2 * N_VERTS + 1
+Q_TEX, Q_TEXK, Q_TSEED = Q_YMAX + 1, Q_YMAX + 2, Q_YMAX + 3
+"""Surface texture of a capsule (``rollcam.sim._kernels._texture``): contrast (0: none), lattice cells per pixel,
+seed."""
+PART_COLS = Q_TSEED + 1
+MAX_PARTS = 16
+PART_CAPSULE, PART_QUAD, PART_NONE = 0, 1, -1
+NEAR_M = 0.05
+"""The camera's near plane, m: parts are clipped there so parts crossing the camera plane stay finite."""
+
+
+@njit(cache=True, inline="always")
+def sun_in_view(rot, light, transposed):
+    """The sun seen from pose ``rot`` for cylinder shading: (image-plane x along the line, viewing-axis z)."""
+    sx = rot[0, 0] * light[L_SUN] + rot[0, 1] * light[L_SUN + 1] + rot[0, 2] * light[L_SUN + 2]
+    sz = -(rot[2, 0] * light[L_SUN] + rot[2, 1] * light[L_SUN + 1] + rot[2, 2] * light[L_SUN + 2])
+    sy_up = light[L_SUN + 2]
+    nrm = math.sqrt(sx * sx + sz * sz) + 1e-12
+    horiz = math.sqrt(max(0.0, 1.0 - sy_up * sy_up))
+    lxv, lzv = sx / nrm * horiz, sz / nrm * horiz
+    return (0.0 if transposed else lxv), lzv  # a transposed line runs along the image's y axis
+
+
+@njit(cache=True, inline="always")
+def capsule_part(parts, p, a0, a1, a2, b0, b1, b2, rad, alb_r, alb_g, alb_b, fx, fy, cx, cy, transposed,
+                 amb_r, amb_g, amb_b, sun_r, sun_g, sun_b, lx_part, lzv):
+    """Write row ``p``: the capsule from camera-frame ``a`` to ``b`` of radius ``rad`` m, albedo ``alb``, under
+    ambient ``amb`` and (already shadowed) sun ``sun``; False (row untouched) when wholly behind the near plane.
+
+    Scalars, not arrays: an array handed to a helper is reference-counted per call, which on an RS frame (parts
+    recomputed on every line an actor touches) cost more than the arithmetic.
+    """
+    if a2 < NEAR_M and b2 < NEAR_M:
+        return False
+    # Clip the segment at the near plane so parts crossing the camera plane stay finite.
+    if a2 < NEAR_M:
+        f = (NEAR_M - a2) / (b2 - a2)
+        a0, a1, a2 = a0 + f * (b0 - a0), a1 + f * (b1 - a1), a2 + f * (b2 - a2)
+    elif b2 < NEAR_M:
+        f = (NEAR_M - b2) / (a2 - b2)
+        b0, b1, b2 = b0 + f * (a0 - b0), b1 + f * (a1 - b1), b2 + f * (a2 - b2)
+    zm = 0.5 * (a2 + b2)
+    ua0, ua1 = fx * a0 / a2 + cx, fy * a1 / a2 + cy
+    ub0, ub1 = fx * b0 / b2 + cx, fy * b1 / b2 + cy
+    if transposed:
+        ua0, ua1, ub0, ub1 = ua1, ua0, ub1, ub0
+    r_px = fx * rad / zm
+    parts[p, Q_KIND] = PART_CAPSULE
+    parts[p, Q_DEPTH] = zm
+    parts[p, Q_AMB], parts[p, Q_AMB + 1], parts[p, Q_AMB + 2] = alb_r * amb_r, alb_g * amb_g, alb_b * amb_b
+    parts[p, Q_DIR], parts[p, Q_DIR + 1], parts[p, Q_DIR + 2] = alb_r * sun_r, alb_g * sun_g, alb_b * sun_b
+    parts[p, Q_LX], parts[p, Q_LZ] = lx_part, lzv
+    g = Q_GEO
+    parts[p, g], parts[p, g + 1], parts[p, g + 2], parts[p, g + 3] = ua0, ua1, ub0, ub1
+    parts[p, g + 4] = r_px
+    parts[p, Q_YMIN] = min(ua1, ub1) - r_px
+    parts[p, Q_YMAX] = max(ua1, ub1) + r_px
+    return True
+
+
+guard(__name__)  # after every kernel and import: see rollcam.sim._jitcache
