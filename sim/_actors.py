@@ -20,6 +20,7 @@ from ._body import (
     A_TYPE,
     P_BUILD,
     P_H,
+    P_HAIR,
     P_SKIN,
     P_SPEED,
     R_PERIOD,
@@ -44,7 +45,9 @@ from ._parts import (
     Q_AMB,
     Q_DEPTH,
     Q_DIR,
+    Q_FACE,
     Q_GEO,
+    Q_HAIR,
     Q_KIND,
     Q_LX,
     Q_LZ,
@@ -79,6 +82,20 @@ from ._world import (
 # person's surface vary, which detectors trained on photographs key on (benchmarks/realism.py measures it).
 TEX_CONTRAST = (0.10, 0.45, 0.40, 0.40, 0.25)
 TEX_CELL_M = (0.05, 0.02, 0.07, 0.07, 0.04)
+NO_FACE = -2.0
+"""``Q_FACE`` of a part that is not a head."""
+
+
+@njit(cache=True, inline="always")
+def _face_dir(parts, fx, fy, fz, vx, vy, vz):
+    """Store in head row 0 the (cos, sin) of its face's angle from the camera: ``f`` is the walker's heading and
+    ``v`` the head's position, both in the camera frame; sin > 0 turns the face to the image's right."""
+    nv = math.sqrt(vx * vx + vy * vy + vz * vz)
+    vx, vy, vz = vx / nv, vy / nv, vz / nv
+    c = -(fx * vx + fy * vy + fz * vz)  # 1: looking straight into the camera
+    s = fx - (fx * vx + fy * vy + fz * vz) * vx  # the heading's image-horizontal part, across the view ray
+    n = math.sqrt(c * c + s * s)
+    parts[0, Q_FACE], parts[0, Q_FACE + 1] = (c / n, s / n) if n > 0.0 else (0.0, 1.0)
 BODY_LATERAL, BODY_FORWARD, BODY_TOP = 0.25, 0.40, 1.02  # walker bounds, fractions of height (see actor_bounds)
 PART_RADIUS_MAX = 0.1  # walker part radii, fraction of height x build (the largest in _body is 0.08)
 N_CHUNKS = 16  # parallel work units; scratch buffers are allocated once per unit, not per item
@@ -213,7 +230,9 @@ def actor_parts(act, world, lut, bld, light, cam, rot, pos, t, parts, scratch):
     seg, rad, col_idx, root, joints, poly = scratch
     for p in range(MAX_PARTS):
         parts[p, Q_KIND] = PART_NONE
-        parts[p, Q_TEX] = 0.0
+        for q in range(Q_TEX, PART_COLS):  # no texture and no face unless a walker's capsule sets them
+            parts[p, q] = 0.0
+        parts[p, Q_FACE] = NO_FACE
     typ = int(act[A_TYPE])
     if typ == TYPE_PROP:
         prop_parts(act, _lane_shift(world, pos, prop_ref_y(act)), world, lut, bld, light, cam, rot, pos, parts, poly)
@@ -269,6 +288,10 @@ def actor_parts(act, world, lut, bld, light, cam, rot, pos, t, parts, scratch):
             parts[p, Q_TEX] = TEX_CONTRAST[ci]
             parts[p, Q_TEXK] = rad[p] / (r_px * TEX_CELL_M[ci]) if r_px > 0.0 else 0.0  # cells per pixel
             parts[p, Q_TSEED] = act[A_ID] * MAX_PARTS + p
+            if p == 0:  # the head: which way its face looks, seen from the camera
+                _face_dir(parts, r01 * root[2], r11 * root[2], r21 * root[2], a0 + b0, a1 + b1, a2 + b2)
+                for c in range(3):
+                    parts[p, Q_HAIR + c] = act[P_HAIR + c] / max(act[P_SKIN + c], 1e-6)
 
 
 @njit(cache=True, inline="always")

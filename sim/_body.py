@@ -55,7 +55,8 @@ def _limb(px, py, pz, fwd_x, fwd_y, ang, length, out, i):
 def pedestrian_skeleton(act, t, seg, rad, col_idx, root, joints):
     """World-space capsules of a walker at time ``t``: seg[p] = (ax, ay, az, bx, by, bz), rad[p] metres.
 
-    ``col_idx[p]`` selects the colour (0 skin, 1 hair, 2 shirt, 3 pants, 4 shoes); ``root`` (4) receives
+    Part 0 is the head (its face is drawn on it: ``rollcam.sim._kernels``). ``col_idx[p]`` selects the colour
+    (0 skin, 1 hair, 2 shirt, 3 pants, 4 shoes); ``root`` (4) receives
     the root state (see ``pedestrian_root``) and ``joints`` (5 x 3) is scratch. Returns the part count.
     """
     pedestrian_root(act, t, root)
@@ -141,6 +142,14 @@ def pedestrian_skeleton(act, t, seg, rad, col_idx, root, joints):
         seg[n, 0], seg[n, 1], seg[n, 2] = joints[3, 0], joints[3, 1], joints[3, 2]
         seg[n, 3], seg[n, 4], seg[n, 5] = joints[4, 0], joints[4, 1], joints[4, 2]
         rad[n], col_idx[n] = 0.029 * h, 2 if act[P_SLEEVES] > 0 else 0
+        n += 1
+        # hand: on from the wrist along the forearm, a little narrower than it
+        hand = 0.055 / 0.19  # of the forearm (0.19 h): the hand reaches 0.055 h past the wrist
+        seg[n, 0], seg[n, 1], seg[n, 2] = joints[4, 0], joints[4, 1], joints[4, 2]
+        seg[n, 3] = joints[4, 0] + hand * (joints[4, 0] - joints[3, 0])
+        seg[n, 4] = joints[4, 1] + hand * (joints[4, 1] - joints[3, 1])
+        seg[n, 5] = joints[4, 2] + hand * (joints[4, 2] - joints[3, 2])
+        rad[n], col_idx[n] = 0.024 * h, 0
         n += 1
     return n
 

@@ -26,6 +26,7 @@ from ._actors import (
     Q_AMB,
     Q_DEPTH,
     Q_DIR,
+    Q_FACE,
     Q_GEO,
     Q_KIND,
     Q_LX,
@@ -150,6 +151,8 @@ def _collect_line(line, w, actors, obj_k, slots, parts_tab, local, include, gt_l
                 for c in range(5):
                     shade[m, SH_GEO + c] = pt[p, Q_GEO + c]
                 shade[m, SH_TEX + 1], shade[m, SH_TEX + 2] = pt[p, Q_TEXK], pt[p, Q_TSEED]
+                for c in range(5):
+                    shade[m, SH_FACE + c] = pt[p, Q_FACE + c]
             span_l[m], span_r[m] = lohi[0], lohi[1]
             m += 1
             olo, ohi = min(olo, lohi[0]), max(ohi, lohi[1])
@@ -186,9 +189,46 @@ def _span_runs(span_l, span_r, m, w, ia, ib):
     return k
 
 
-SH_GEO, SH_TEX, SHADE_COLS = 8, 13, 16
+SH_GEO, SH_TEX, SH_FACE, SHADE_COLS = 8, 13, 16, 21
 """Columns of a span's shading record after the eight of Q_LX, Q_LZ, ambient and direct RGB: the capsule's axis
-and radius (Q_GEO..Q_GEO+4), then texture contrast, cells per pixel and seed."""
+and radius (Q_GEO..Q_GEO+4), texture contrast, cells per pixel and seed, then a head's face (Q_FACE: cos, sin;
+Q_HAIR: hair over skin albedo, RGB)."""
+EYE_X, EYE_Y, EYE_RX, EYE_RY = 0.34, 0.12, 0.13, 0.075
+BROW_Y, BROW_RX, BROW_RY = 0.29, 0.18, 0.04
+MOUTH_Y, MOUTH_RX, MOUTH_RY = -0.43, 0.2, 0.05
+"""Face features on a unit head sphere, in head radii from its centre (x across the face, y up): eyes (their
+socket's shadow and iris, darkened), brows (hair-coloured), mouth (darkened); proportions of an adult face."""
+
+
+@njit(cache=True, inline="always")
+def _face(x, y, half_len, c, s):
+    """What a head shows at (x, y) (head radii from its centre, y up; ``half_len`` the straight part's half
+    length): (albedo factor, hair) for a face looking (cos c, sin s) from the camera. Hair covers the back and
+    the top of the head above the hairline; the face has eyes, brows and a mouth."""
+    ys = y - min(max(y, -half_len), half_len)  # on the capsule's cap spheres, or its straight middle
+    q = 1.0 - x * x - ys * ys
+    if q <= 0.0:
+        return 1.0, False
+    z = math.sqrt(q)
+    xf = x * c - z * s  # across the face
+    zf = x * s + z * c  # out of the face (> 0: its front half)
+    if ys > 0.45 + 0.1 * xf * xf or (zf < -0.05 and ys > -0.6) or (abs(xf) > 0.8 and ys > -0.1 and zf < 0.5):
+        return 1.0, True
+    if zf < 0.3:
+        return 1.0, False
+    for ex in (-EYE_X, EYE_X):
+        dx = (xf - ex) / BROW_RX
+        dy = (y - BROW_Y) / BROW_RY
+        if dx * dx + dy * dy < 1.0:
+            return 1.0, True
+        dx = (xf - ex) / EYE_RX
+        dy = (y - EYE_Y) / EYE_RY
+        if dx * dx + dy * dy < 1.0:
+            return 0.35, False
+    dx, dy = xf / MOUTH_RX, (y - MOUTH_Y) / MOUTH_RY
+    if dx * dx + dy * dy < 1.0:
+        return 0.6, False
+    return 1.0, False
 
 
 @njit(cache=True, inline="always")
@@ -217,9 +257,10 @@ def _value_noise(x, y, seed):
 
 @njit(cache=True, inline="always")
 def _texture(shade, e, x, yc, flip):
-    """Albedo factor of span ``e``'s part at render-space point (x, yc): 1 + contrast x value noise in coordinates
-    fixed to the part's axis (along it from its first end, across it from its axis), so the texture travels with
-    the part. ``flip`` (-1 for a transposed render) keeps the across coordinate the image's, whichever way lines run.
+    """Albedo factors (R, G, B) of span ``e``'s part at render-space point (x, yc): 1 + contrast x value noise in
+    coordinates fixed to the part's axis (along it from its first end, across it from its axis), so the texture
+    travels with the part, and on a head its face and hair. ``flip`` (-1 for a transposed render) keeps the
+    across coordinate the image's, whichever way lines run.
     """
     ax, ay, bx, by = shade[e, SH_GEO], shade[e, SH_GEO + 1], shade[e, SH_GEO + 2], shade[e, SH_GEO + 3]
     dx, dy = bx - ax, by - ay
@@ -229,10 +270,17 @@ def _texture(shade, e, x, yc, flip):
     else:
         dx, dy = 0.0, 1.0
     px, py = x - ax, yc - ay
+    along_px = px * dx + py * dy
+    across_px = (py * dx - px * dy) * flip
     k = shade[e, SH_TEX + 1]
-    along = (px * dx + py * dy) * k
-    across = (py * dx - px * dy) * k * flip
-    return 1.0 + shade[e, SH_TEX] * _value_noise(across, along, int(shade[e, SH_TEX + 2]))
+    f = 1.0 + shade[e, SH_TEX] * _value_noise(across_px * k, along_px * k, int(shade[e, SH_TEX + 2]))
+    if shade[e, SH_FACE] < -1.0:
+        return f, f, f
+    r = shade[e, SH_GEO + 4]
+    g, hair = _face(across_px / r, (along_px - 0.5 * ln) / r, 0.5 * ln / r, shade[e, SH_FACE], shade[e, SH_FACE + 1])
+    if hair:
+        return f * shade[e, SH_FACE + 2], f * shade[e, SH_FACE + 3], f * shade[e, SH_FACE + 4]
+    return f * g, f * g, f * g
 
 
 @njit(cache=True)
@@ -269,9 +317,9 @@ def _paint_spans(lin, line, m, gt_vis, depth, idx_o, shade, span_l, span_r, owne
             sh = lx * u + lz * math.sqrt(1.0 - u * u)
             if sh < 0.0:
                 sh = 0.0
-            f = _texture(shade, e, i + 0.5, yc, flip) if textured else 1.0
+            f0, f1, f2 = _texture(shade, e, i + 0.5, yc, flip) if textured else (1.0, 1.0, 1.0)
             for c in range(3):
-                v = (shade[e, 2 + c] + shade[e, 5 + c] * sh) * f
+                v = (shade[e, 2 + c] + shade[e, 5 + c] * sh) * (f0 if c == 0 else f1 if c == 1 else f2)
                 lin[i, c] = lin[i, c] * (1.0 - cov) + v * cov
         for i in range(max(int(math.ceil(xl - 0.5)), 0), min(int(math.ceil(xr - 0.5)), w)):
             owner[i] = o

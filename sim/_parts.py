@@ -23,8 +23,11 @@ Q_YMIN, Q_YMAX = Q_GEO + 2 * N_VERTS, Q_GEO + 2 * N_VERTS + 1
 Q_TEX, Q_TEXK, Q_TSEED = Q_YMAX + 1, Q_YMAX + 2, Q_YMAX + 3
 """Surface texture of a capsule (``rollcam.sim._kernels._texture``): contrast (0: none), lattice cells per pixel,
 seed."""
-PART_COLS = Q_TSEED + 1
-MAX_PARTS = 16
+Q_FACE, Q_HAIR = Q_TSEED + 1, Q_TSEED + 3
+"""A head's face: the direction it looks, (cos, sin) of its angle from the camera (cos < -1: no face), and the
+hair's albedo over the skin's per channel (hairline, brows)."""
+PART_COLS = Q_HAIR + 3
+MAX_PARTS = 18
 PART_CAPSULE, PART_QUAD, PART_NONE = 0, 1, -1
 NEAR_M = 0.05
 """The camera's near plane, m: parts are clipped there so parts crossing the camera plane stay finite."""
