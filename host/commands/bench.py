@@ -12,8 +12,8 @@ from typing import Any
 
 from rollcam.common.errors import ConfigError
 
-OLD_FLAGS = {"--quick": "render --quick", "--hog": "realism", "--detect": "detect", "--ptc": "ptc", "--sensor": "sensor",
-             "--uvc": "uvc", "--soak": "soak", "--dataset": "dataset"}
+OLD_FLAGS = {"--quick": "render --quick", "--hog": "realism", "--detect": "detect", "--ptc": "ptc",
+             "--sensor": "sensor", "--uvc": "uvc", "--soak": "soak", "--dataset": "dataset"}
 """The flags that picked a study before ``rollcam bench STUDY`` -> the subcommand that replaces each."""
 
 
