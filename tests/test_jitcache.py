@@ -107,7 +107,7 @@ def test_every_module_with_cached_kernels_is_guarded():
     # The line kernel compiles in the actors, which compile in the walker, the props, the part writer and the
     # world (whose materials are the C shader's, called by name, not compiled in).
     actors = {"_body.py", "_parts.py", "_props.py", "_world.py"}
-    assert {p.name for p in _jitcache.compiled_in("rollcam.sim._kernels")} == actors | {"_actors.py"}
+    assert {p.name for p in _jitcache.compiled_in("rollcam.sim._kernels")} == actors | {"_actors.py", "_texture.py"}
     assert {p.name for p in _jitcache.compiled_in("rollcam.sim._actors")} == actors
     assert _jitcache.compiled_in("rollcam.sim._world") == frozenset()
     assert _jitcache.compiled_in("rollcam.sim._body") == frozenset()

@@ -1,0 +1,106 @@
+"""Walker surface texture and faces for the span painter of ``rollcam.sim._kernels``: value noise fixed to a
+part's axis, and the features of a head seen from the camera."""
+
+from __future__ import annotations
+
+import math
+
+from numba import njit
+
+from ._jitcache import guard
+
+SH_GEO, SH_TEX, SH_FACE, SHADE_COLS = 8, 13, 16, 21
+"""Columns of a span's shading record after the eight of Q_LX, Q_LZ, ambient and direct RGB: the capsule's axis
+and radius (Q_GEO..Q_GEO+4), texture contrast, cells per pixel and seed, then a head's face (Q_FACE: cos, sin;
+Q_HAIR: hair over skin albedo, RGB)."""
+EYE_X, EYE_Y, EYE_RX, EYE_RY = 0.34, 0.12, 0.13, 0.075
+BROW_Y, BROW_RX, BROW_RY = 0.29, 0.18, 0.04
+MOUTH_Y, MOUTH_RX, MOUTH_RY = -0.43, 0.2, 0.05
+"""Face features on a unit head sphere, in head radii from its centre (x across the face, y up): eyes (their
+socket's shadow and iris, darkened), brows (hair-coloured), mouth (darkened); proportions of an adult face."""
+
+
+@njit(cache=True, inline="always")
+def _face(x, y, half_len, c, s):
+    """What a head shows at (x, y) (head radii from its centre, y up; ``half_len`` the straight part's half
+    length): (albedo factor, hair) for a face looking (cos c, sin s) from the camera. Hair covers the back and
+    the top of the head above the hairline; the face has eyes, brows and a mouth."""
+    ys = y - min(max(y, -half_len), half_len)  # on the capsule's cap spheres, or its straight middle
+    q = 1.0 - x * x - ys * ys
+    if q <= 0.0:
+        return 1.0, False
+    z = math.sqrt(q)
+    xf = x * c - z * s  # across the face
+    zf = x * s + z * c  # out of the face (> 0: its front half)
+    if ys > 0.45 + 0.1 * xf * xf or (zf < -0.05 and ys > -0.6) or (abs(xf) > 0.8 and ys > -0.1 and zf < 0.5):
+        return 1.0, True
+    if zf < 0.3:
+        return 1.0, False
+    for ex in (-EYE_X, EYE_X):
+        dx = (xf - ex) / BROW_RX
+        dy = (y - BROW_Y) / BROW_RY
+        if dx * dx + dy * dy < 1.0:
+            return 1.0, True
+        dx = (xf - ex) / EYE_RX
+        dy = (y - EYE_Y) / EYE_RY
+        if dx * dx + dy * dy < 1.0:
+            return 0.35, False
+    dx, dy = xf / MOUTH_RX, (y - MOUTH_Y) / MOUTH_RY
+    if dx * dx + dy * dy < 1.0:
+        return 0.6, False
+    return 1.0, False
+
+
+@njit(cache=True, inline="always")
+def _lattice(ix, iy, seed):
+    """A value in [0, 1) for lattice point (ix, iy) of texture ``seed``: an integer hash (murmur3's finaliser)."""
+    h = (ix * 0x27D4EB2F + iy * 0x165667B1 + seed * 0x9E3779B1) & 0xFFFFFFFF
+    h ^= h >> 15
+    h = (h * 0x85EBCA6B) & 0xFFFFFFFF
+    h ^= h >> 13
+    h = (h * 0xC2B2AE35) & 0xFFFFFFFF
+    h ^= h >> 16
+    return h * (1.0 / 4294967296.0)
+
+
+@njit(cache=True, inline="always")
+def _value_noise(x, y, seed):
+    """Smooth value noise in [-1, 1] at lattice coordinates (x, y): smoothstep between hashed lattice values."""
+    fx, fy = math.floor(x), math.floor(y)
+    ix, iy = int(fx), int(fy)
+    tx, ty = x - fx, y - fy
+    tx, ty = tx * tx * (3.0 - 2.0 * tx), ty * ty * (3.0 - 2.0 * ty)
+    a = _lattice(ix, iy, seed) + tx * (_lattice(ix + 1, iy, seed) - _lattice(ix, iy, seed))
+    b = _lattice(ix, iy + 1, seed) + tx * (_lattice(ix + 1, iy + 1, seed) - _lattice(ix, iy + 1, seed))
+    return 2.0 * (a + ty * (b - a)) - 1.0
+
+
+@njit(cache=True, inline="always")
+def _texture(shade, e, x, yc, flip):
+    """Albedo factors (R, G, B) of span ``e``'s part at render-space point (x, yc): 1 + contrast x value noise in
+    coordinates fixed to the part's axis (along it from its first end, across it from its axis), so the texture
+    travels with the part, and on a head its face and hair. ``flip`` (-1 for a transposed render) keeps the
+    across coordinate the image's, whichever way lines run.
+    """
+    ax, ay, bx, by = shade[e, SH_GEO], shade[e, SH_GEO + 1], shade[e, SH_GEO + 2], shade[e, SH_GEO + 3]
+    dx, dy = bx - ax, by - ay
+    ln = math.sqrt(dx * dx + dy * dy)
+    if ln > 0.0:
+        dx, dy = dx / ln, dy / ln
+    else:
+        dx, dy = 0.0, 1.0
+    px, py = x - ax, yc - ay
+    along_px = px * dx + py * dy
+    across_px = (py * dx - px * dy) * flip
+    k = shade[e, SH_TEX + 1]
+    f = 1.0 + shade[e, SH_TEX] * _value_noise(across_px * k, along_px * k, int(shade[e, SH_TEX + 2]))
+    if shade[e, SH_FACE] < -1.0:
+        return f, f, f
+    r = shade[e, SH_GEO + 4]
+    g, hair = _face(across_px / r, (along_px - 0.5 * ln) / r, 0.5 * ln / r, shade[e, SH_FACE], shade[e, SH_FACE + 1])
+    if hair:
+        return f * shade[e, SH_FACE + 2], f * shade[e, SH_FACE + 3], f * shade[e, SH_FACE + 4]
+    return f * g, f * g, f * g
+
+
+guard(__name__)  # after every kernel and import: see rollcam.sim._jitcache
