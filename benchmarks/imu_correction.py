@@ -6,7 +6,8 @@ shutters; each RS frame is corrected from the device's gyro (``rollcam.sim.rscor
 method, from its dense optical flow to the previous RS frame (``rollcam.host.flowcorrect``), and compared
 with the GS frame: mean absolute error (8-bit, over pixels whose source lies inside the frame for both
 corrections), box error (mean absolute edge offset from the GS box, px: the RS box as rendered, and as each
-correction maps it), each correction's time per frame (median), and optionally the recall of a detector
+correction maps it; objects whose GS or RS box meets the frame's edge are left out and counted, since a clipped
+box is not the object's extent and the flow has no pixels beyond the edge), each correction's time per frame (median), and optionally the recall of a detector
 against the GS boxes on GS, RS and both corrections (the study's two pipelines side by side).
 """
 
@@ -25,6 +26,11 @@ METHODS = ("rs", "gyro", "flow")
 
 def _box_error(a: Any, b: Any) -> float:
     return float(np.mean(np.abs(np.subtract(a, b))))
+
+
+def _at_edge(box: Any, w: int, h: int) -> bool:
+    x0, y0, x1, y1 = box
+    return x0 <= 0 or y0 <= 0 or x1 >= w or y1 >= h
 
 
 def _gyro_box(box: Any, rot: np.ndarray, k: tuple, w: int, h: int) -> tuple[float, float, float, float]:
@@ -76,6 +82,7 @@ def correction_case(options: str, size: tuple[int, int], frames: int, detector: 
     ms: dict[str, list[float]] = {"gyro": [], "flow": []}
     pr = {k: RunningPR() for k in ("gs", *METHODS)}
     prev = None
+    edge = 0
     for _ in range(frames + 1):  # the first pair only gives the flow its previous frame
         gs, rs = src.read_pair()
         if prev is None:
@@ -110,6 +117,9 @@ def correction_case(options: str, size: tuple[int, int], frames: int, detector: 
             fb = _flow_box(truth.left[index[o.id]], truth.right[index[o.id]], shift, w, h)
             if fb is None:
                 continue
+            if _at_edge(o.box_gs, w, h) or _at_edge(o.box_rs, w, h):
+                edge += 1
+                continue
             box["rs"].append(_box_error(o.box_rs, o.box_gs))
             box["gyro"].append(_box_error(_gyro_box(o.box_rs, rot, k, w, h), o.box_gs))
             box["flow"].append(_box_error(fb, o.box_gs))
@@ -119,7 +129,7 @@ def correction_case(options: str, size: tuple[int, int], frames: int, detector: 
         prev = rs
     src.close()
     doc: dict[str, Any] = {
-        "uri": uri, "frames": frames, "boxes": len(box["rs"]),
+        "uri": uri, "frames": frames, "boxes": len(box["rs"]), "edge_boxes": edge,
         "mae_vs_gs": {m: float(np.mean(v)) for m, v in mae.items()},
         "box_error_px": {m: float(np.mean(v)) if v else None for m, v in box.items()},
         "correct_ms": {m: float(np.median(v)) for m, v in ms.items()}}

@@ -15,13 +15,15 @@ frame already exposing keeps the settings it started with.
 When rendering is slower than the frame rate for longer than the pool lasts, a frame whose readout has
 ended is still handed out (late) unless the next one made is due as well; then it is skipped, as are frames
 planned after their readout ended: the stream's sequence numbers show the gap, and the camera's
-``stats['skipped']`` counts it. An exception on the pump's thread stops it; ``check()`` and
+``stats['skipped']`` counts it. A skipped frame's in-sensor results ride on the next frame handed out, so no
+result done on the device is lost. An exception on the pump's thread stops it; ``check()`` and
 ``close()`` re-raise it.
 """
 
 from __future__ import annotations
 
 import collections
+import dataclasses
 import os
 import threading
 import time
@@ -231,7 +233,10 @@ class FramePump(Closeable):
         band = made.bands_out
         if band == 0:
             if len(pool) > 1 and cam.clock_ns() > pool[1].plan.due_ns:  # a newer frame is due too: skip this
-                pool.popleft()
+                skipped = pool.popleft()
+                if skipped.frame.insensor:  # the in-sensor results it carried ride on the next frame instead
+                    pool[0].frame = dataclasses.replace(
+                        pool[0].frame, insensor=skipped.frame.insensor + (pool[0].frame.insensor or ()))
                 self.stats.late_skipped += 1
                 with cam.lock:
                     cam.stats.skipped += 1

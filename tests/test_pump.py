@@ -106,3 +106,39 @@ def test_frames_made_ahead_follow_a_change_from_the_first_frame_exposed_after_it
         assert exposure_ns == (new if start_ns >= changed_ns else old), (seq, start_ns, changed_ns)
     assert any(start >= changed_ns for _, start, _ in log.frames_seen)
     assert pump.stats.remade >= 1  # frames had been made ahead with the old exposure, and were made again
+
+
+def test_a_skipped_frames_insensor_results_ride_on_the_next_frame_handed_out():
+    """A consumer that stalls makes the pump skip frames it had made ahead; the in-sensor results those frames
+    carried are not lost: every result of a frame before the last one handed out reaches the sink, once, in
+    order."""
+    import time
+
+    from rollcam.firmware.spec import CameraSpec
+
+    cam = FirmwareCamera(CameraSpec.from_options("letsroll", {"size": "320x180", "pedestrians": "4", "fps": "10",
+                                                              "insensor": "personnet-raw"}))
+    got: list[tuple[int, list[int]]] = []
+    enough = threading.Event()
+
+    class Stalling:
+        def on_band(self, frame, plan, band, n_bands) -> None:
+            pass
+
+        def on_frame(self, frame, plan) -> None:
+            got.append((frame.sequence, [r.seq for r in frame.insensor or ()]))
+            if len(got) % 4 == 3:
+                time.sleep(0.55)  # 5.5 frame periods: the frames made ahead are all late by the next hand-out
+            if len(got) >= 12:
+                enough.set()
+
+    with FramePump(cam, bands=2) as pump:
+        pump.add_sink(Stalling())
+        cam.stream_on()
+        assert enough.wait(60)
+        cam.stream_off()
+    assert pump.error is None and pump.stats.late_skipped > 0
+    carried = [s for _, seqs in got for s in seqs]
+    assert carried == sorted(set(carried))
+    last = got[-1][0]
+    assert {r.seq for r in cam.insensor.recent(1 << 62) if r.seq < last} <= set(carried)

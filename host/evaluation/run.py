@@ -23,7 +23,8 @@ def _save(path: Path, sets: list[EvalSet], dets: list[list[Dets]]) -> None:
         if s.same_images_as is not None:  # another set's images: their lines are written once
             continue
         for e, d in zip(s.images, ds, strict=True):
-            items = [{"box": [round(float(v), 2) for v in b], "score": round(float(sc), 6), "cls": int(c)}
+            # full precision (shortest round-trip repr): scored again, the file gives exactly the live numbers
+            items = [{"box": [float(v) for v in b], "score": float(sc), "cls": int(c)}
                      for b, sc, c in zip(d.boxes, d.scores, d.classes, strict=True)]
             lines.append(json.dumps({"image": e.key, "detections": items}))
     path.parent.mkdir(parents=True, exist_ok=True)
