@@ -7,8 +7,9 @@ method, from its dense optical flow to the previous RS frame (``rollcam.host.flo
 with the GS frame: mean absolute error (8-bit, over pixels whose source lies inside the frame for both
 corrections), box error (mean absolute edge offset from the GS box, px: the RS box as rendered, and as each
 correction maps it; objects whose GS or RS box meets the frame's edge are left out and counted, since a clipped
-box is not the object's extent and the flow has no pixels beyond the edge), each correction's time per frame (median), and optionally the recall of a detector
-against the GS boxes on GS, RS and both corrections (the study's two pipelines side by side).
+box is not the object's extent and the flow has no pixels beyond the edge), each correction's time per frame
+(median), and optionally the recall of a detector against the GS boxes on GS, RS and both corrections (the
+study's two pipelines side by side).
 """
 
 from __future__ import annotations
