@@ -256,6 +256,41 @@ def test_render_ahead_offers_the_newest_completed_frame_and_counts_the_rest():
     assert not fn.streaming and fn.stream._ahead is None
 
 
+def test_a_replaced_frames_insensor_results_ride_on_the_frame_that_replaced_it():
+    """A host slower than the frames: the slot's untaken frame is replaced, and the in-sensor results it
+    carried come with the frame that replaced it, so every frame rendered is reported once, in order."""
+    import dataclasses
+    import time
+    import types
+
+    from rollcam.emu.uvc.ahead import RenderAhead
+
+    class Carrying(FakeProducer):
+        def frame(self, index):
+            return dataclasses.replace(super().frame(index), insensor=(f"r{index}",))
+
+    t0 = time.monotonic_ns()
+    producer = Carrying(intervals_ns=(10_000_000,), clock=lambda: time.monotonic_ns() - t0)
+    producer.configure(64, 48, 10_000_000)
+    stats = types.SimpleNamespace(frames_dropped=0)
+    ahead = RenderAhead(producer, lambda f: f.data.reshape(-1), stats)
+    taken = []
+    try:
+        while len(taken) < 4:
+            got = ahead.take()
+            if isinstance(got, int):
+                time.sleep(got / 1e9)
+                continue
+            taken.append(got)
+            time.sleep(0.035)  # three and a half frames
+    finally:
+        ahead.stop()
+    last = taken[-1][0]
+    seen = [r for _, f, _ in taken for r in f.insensor]
+    assert stats.frames_dropped > 0 and len(seen) > len(taken)
+    assert seen == [f"r{i}" for i in producer.rendered if i <= last]
+
+
 def test_realtime_isochronous_endpoint_keeps_the_bus_pace():
     """A high-speed bus serves an isochronous endpoint once per service interval (125 us at bInterval 1):
     however fast the host asks, packets (full or empty) arrive at no more than 8,000 a second of device time,

@@ -4,12 +4,14 @@ reads, and the newest completed one waits for the host.
 Frame ``i`` is rendered and encoded while frame ``i-1`` is read out (from frame ``i-1``'s due time on), and
 is offered at its own due time, so a host that keeps up gets each frame as it falls due instead of waiting
 for its render. One frame waits in the slot: a frame the host has not taken when the next one completes is
-replaced by it, and a renderer that falls behind skips to the newest frame due; both count as dropped.
+replaced by it (its in-sensor results ride on the frame that replaced it), and a renderer that falls behind
+skips to the newest frame due; both count as dropped.
 """
 
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import threading
 import time
 from collections.abc import Callable
@@ -85,6 +87,9 @@ class RenderAhead:
             with self._cond:
                 if self._slot is not None:
                     self.stats.frames_dropped += 1  # the host never took the previous frame
+                    if self._slot[1].insensor:  # its in-sensor results ride on this one instead
+                        frame = dataclasses.replace(
+                            frame, insensor=self._slot[1].insensor + (frame.insensor or ()))
                 self._slot = (i, frame, data)
                 self._next_due = p.frame_due_ns(i + 1)
             i += 1
