@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from rollcam.common.errors import ConfigError, MissingDependencyError
 from rollcam.host.detectors import load_detector
-from rollcam.host.detectors.ops import iou_matrix, letterbox, nms, tile_windows
+from rollcam.host.detectors.ops import iou_matrix, letterbox, nms, suppress_contained, tile_windows
 
 onnx = pytest.importorskip("onnx")
 pytest.importorskip("onnxruntime")
@@ -94,6 +94,20 @@ def test_tiling_finds_boxes_in_each_tile_and_merges(yolo_model):
     d = det.detect(np.zeros((64, 256, 3), np.uint8))
     # each 128x64 tile has the class-1 box at (48, 0, 80, 64) in tile pixels
     np.testing.assert_allclose(np.sort(d.boxes[:, 0]), [48, 176], atol=1e-3)
+
+
+def test_a_piece_inside_a_better_box_is_suppressed_before_nms():
+    """A person cut by a tile border: the piece (IoU 0.56 with the whole, so NMS at 0.45 would not remove it, but
+    lying wholly inside it) goes when the whole scores higher; scoring higher itself it removes the whole
+    (the measure is symmetric: the smaller's area); another class, or a box less than half inside, stays."""
+    whole, piece = [100, 10, 140, 110], [100, 10, 140, 66]
+    assert iou_matrix([whole], [piece])[0, 0] > 0.45
+    boxes = np.array([whole, piece, [130, 60, 170, 110], [60, 10, 90, 40]], np.float32)
+    keep = suppress_contained(boxes, np.array([0.9, 0.6, 0.5, 0.4]), np.array([0, 0, 0, 0]))
+    assert keep.tolist() == [0, 2, 3]  # the third lies 25 % inside the whole: a neighbour, kept
+    assert suppress_contained(boxes, np.array([0.5, 0.9, 0.4, 0.3]), np.zeros(4, int)).tolist() == [1, 2, 3]
+    assert suppress_contained(boxes, np.array([0.9, 0.6, 0.5, 0.4]), np.array([0, 1, 0, 0])).tolist() == [0, 1, 2, 3]
+    assert suppress_contained(np.zeros((0, 4)), np.zeros(0), np.zeros(0, int)).tolist() == []
 
 
 def test_bad_onnx_specs(tmp_path, yolo_model):

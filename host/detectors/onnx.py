@@ -16,7 +16,9 @@ with dynamic input size; 640x640 YOLO, 300x300 SSD), ``letterbox`` (1/0; default
 ``bgr`` (1 feeds BGR instead of RGB), ``max_det`` (300), ``threads`` (onnxruntime intra-op threads),
 ``device`` (``cpu``, or ``cuda`` with onnxruntime-gpu installed), ``tiles`` (CxR: also run the model on
 C x R overlapping tiles and merge, for small pedestrians in large frames), ``overlap`` (tile overlap
-fraction, 0.2), ``full`` (1/0: with tiles, also run the whole frame; 1),
+fraction, 0.2), ``full`` (1/0: with tiles, also run the whole frame; 1), ``merge`` (``ios``: before NMS, a
+box removes the lower-scoring ones that lie inside it by at least ``merge_ios`` (0.5) of the smaller's area,
+see ``ops.suppress_contained``; ``nms``: plain NMS over all tiles),
 ``input`` (``bgr`` or ``raw``: a raw model gets the sensor mosaic, scaled to 0..1 by ``bits``, the mosaic's
 bit depth; default the full range of its dtype. Give raw models frames at their input size, or use tiles of
 it: resizing a mosaic blends its colour sites). A model's metadata may set the defaults of ``input`` and
@@ -36,10 +38,10 @@ from rollcam.common.errors import ConfigError, MissingDependencyError, require
 from rollcam.common.values import fraction, parse_bool, positive_int
 
 from .base import Detections, DetectorSpec
-from .ops import Placement, letterbox, nms, stretch, tile_windows
+from .ops import Placement, letterbox, nms, stretch, suppress_contained, tile_windows
 
 OPTIONS = {"conf", "iou", "classes", "class_offset", "size", "letterbox", "bgr", "max_det", "threads", "tiles",
-           "overlap", "full", "layout", "box", "norm", "input", "bits", "device"}
+           "overlap", "full", "merge", "merge_ios", "layout", "box", "norm", "input", "bits", "device"}
 LAYOUTS = ("auto", "yolo", "ssd")
 SSD_ROLES = {"boxes": ("box",), "scores": ("score",), "classes": ("class", "label"), "num": ("num", "count")}
 """Role of each SSD output -> substrings its name contains (first match wins, case-insensitive)."""
@@ -130,7 +132,8 @@ class OnnxDetector:
                  classes: tuple[int, ...] | None = None, class_offset: int = 0, size: tuple[int, int] | None = None,
                  letterbox_input: bool | None = None, bgr: bool = False, max_det: int = 300,
                  threads: int | None = None, tiles: tuple[int, int] | None = None,
-                 overlap: float = 0.2, full: bool = True, layout: str = "auto", box: str = "yxyx",
+                 overlap: float = 0.2, full: bool = True, merge: str = "ios", merge_ios: float = 0.5,
+                 layout: str = "auto", box: str = "yxyx",
                  norm: bool | None = None, input: Literal["bgr", "raw"] | None = None, bits: int | None = None,
                  device: str = "cpu", name: str = "onnx", class_names: dict[int, str] | None = None) -> None:
         ort = import_onnxruntime()
@@ -162,6 +165,7 @@ class OnnxDetector:
         self.keep_classes = None if classes is None else np.asarray(classes, np.int32)
         self.class_offset, self.bgr, self.box, self.norm = class_offset, bgr, box, norm
         self.tiles, self.overlap, self.full = tiles, overlap, full
+        self.merge, self.merge_ios = merge, merge_ios
         self.layout = self._find_layout(layout)
         inp = self._session.get_inputs()[0]
         self._input_name = inp.name
@@ -289,6 +293,9 @@ class OnnxDetector:
         boxes = np.concatenate([p.boxes for p in parts])
         scores = np.concatenate([p.scores for p in parts])
         classes = np.concatenate([p.classes for p in parts])
+        if self.tiles is not None and self.merge == "ios":
+            inside = suppress_contained(boxes, scores, classes, self.merge_ios)
+            boxes, scores, classes = boxes[inside], scores[inside], classes[inside]
         keep = nms(boxes, scores, classes, self.iou, self.max_det)
         return Detections(boxes[keep], scores[keep], classes[keep])
 
@@ -311,6 +318,7 @@ def detector_options(spec: DetectorSpec) -> dict[str, Any]:
         "bgr": spec.get("bgr", parse_bool, False), "max_det": spec.get("max_det", positive_int, 300),
         "threads": spec.get("threads", positive_int), "tiles": spec.get("tiles", _pair),
         "overlap": spec.get("overlap", _overlap, 0.2), "full": spec.get("full", parse_bool, True),
+        "merge": spec.get("merge", _choice("ios", "nms"), "ios"), "merge_ios": spec.get("merge_ios", fraction, 0.5),
         "layout": spec.get("layout", _choice(*LAYOUTS), "auto"),
         "box": spec.get("box", _choice("yxyx", "xyxy"), "yxyx"),
         "norm": spec.get("norm", parse_bool), "input": spec.get("input", _choice("bgr", "raw")),

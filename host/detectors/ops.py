@@ -101,3 +101,30 @@ def tile_windows(width: int, height: int, cols: int, rows: int, overlap: float) 
     for y0, y1 in spans(rows, height):
         for x0, x1 in spans(cols, width):
             yield x0, y0, x1, y1
+
+
+
+def suppress_contained(boxes: np.ndarray, scores: np.ndarray, classes: np.ndarray,
+                       ios_threshold: float = 0.5) -> np.ndarray:
+    """Indices kept (best first) when, best score first, a box removes every lower-scoring box of its class
+    whose intersection with it is at least ``ios_threshold`` of the smaller one's area (intersection over
+    smaller, as SAHI matches sliced predictions): one of the two lies mostly inside the other. Tiled detection needs it: a person a tile border cuts is found there as a piece, and
+    the whole frame or the next tile finds the whole person around it; the piece and the whole overlap by less
+    than an IoU threshold, so NMS keeps both."""
+    b = np.asarray(boxes, np.float64).reshape(-1, 4)
+    s = np.asarray(scores, np.float64).reshape(-1)
+    c = np.asarray(classes).reshape(-1)
+    if not len(b):
+        return np.zeros(0, np.int64)
+    iw = np.clip(np.minimum(b[:, None, 2], b[None, :, 2]) - np.maximum(b[:, None, 0], b[None, :, 0]), 0, None)
+    ih = np.clip(np.minimum(b[:, None, 3], b[None, :, 3]) - np.maximum(b[:, None, 1], b[None, :, 1]), 0, None)
+    area = np.maximum((b[:, 2] - b[:, 0]) * (b[:, 3] - b[:, 1]), 1e-12)
+    inside = (iw * ih >= ios_threshold * np.minimum(area[:, None], area[None, :])) & (c[:, None] == c[None, :])
+    order = np.argsort(-s, kind="stable")
+    alive = np.ones(len(b), bool)
+    for i in order:
+        if alive[i]:
+            gone = inside[i] & alive
+            gone[i] = False
+            alive &= ~gone
+    return order[alive[order]]
