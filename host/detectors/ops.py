@@ -108,9 +108,10 @@ def suppress_contained(boxes: np.ndarray, scores: np.ndarray, classes: np.ndarra
                        ios_threshold: float = 0.5) -> np.ndarray:
     """Indices kept (best first) when, best score first, a box removes every lower-scoring box of its class
     whose intersection with it is at least ``ios_threshold`` of the smaller one's area (intersection over
-    smaller, as SAHI matches sliced predictions): one of the two lies mostly inside the other. Tiled detection needs it: a person a tile border cuts is found there as a piece, and
-    the whole frame or the next tile finds the whole person around it; the piece and the whole overlap by less
-    than an IoU threshold, so NMS keeps both."""
+    smaller, as SAHI matches sliced predictions): one of the two lies mostly inside the other. Tiled detection
+    needs it: a person a tile border cuts is found there as a piece, and the whole frame or the next tile finds
+    the whole person around it; the piece and the whole overlap by less than an IoU threshold, so NMS keeps
+    both."""
     b = np.asarray(boxes, np.float64).reshape(-1, 4)
     s = np.asarray(scores, np.float64).reshape(-1)
     c = np.asarray(classes).reshape(-1)
