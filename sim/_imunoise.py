@@ -18,17 +18,16 @@ import numpy as np
 from numba import njit, prange
 
 from ._jitcache import guard
-from ._rng import mix, normal_pair
+from ._rng import GOLD, mix, normal_pair
 
 WALK_LEVELS = 48
-_GOLD = np.uint64(0x9E3779B97F4A7C15)
 
 
 @njit(cache=True, inline="always")
 def _z(key, stream, level, index):
     """One standard normal for (key, stream, level, index)."""
-    h = mix(key ^ (np.uint64(stream * 64 + level + 1) * _GOLD))
-    h = mix(h ^ (np.uint64(index) * _GOLD + np.uint64(0x632BE59BD9B4E019)))
+    h = mix(key ^ (np.uint64(stream * 64 + level + 1) * GOLD))
+    h = mix(h ^ (np.uint64(index) * GOLD + np.uint64(0x632BE59BD9B4E019)))
     return float(normal_pair(h)[0])
 
 

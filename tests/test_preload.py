@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import json
 import os
-import shutil
 import subprocess
 import sys
 import textwrap
@@ -14,6 +13,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from programs import need
 from rollcam.common.errors import RollcamError
 from rollcam.emu import preload as preload_package
 from rollcam.emu.preload import LIBRARY_NAME
@@ -23,13 +23,6 @@ LIB = Path(preload_package.__file__).with_name(LIBRARY_NAME)
 pytestmark = pytest.mark.skipif(not LIB.is_file(), reason=f"{LIB} not built (pip install -e . with a C compiler)")
 SOURCE = "emu:imx219?size=640x480&scene=street&format=YUYV"
 FRAME = 640 * 480 * 2
-
-
-def need(program: str) -> str:
-    path = shutil.which(program)
-    if path is None:
-        pytest.skip(f"{program} is not installed")
-    return path
 
 
 @pytest.fixture(scope="module")

@@ -5,13 +5,13 @@ timestamp; v4l2-ctl lists and streams it, v4l2-compliance passes it, and a Pytho
 from __future__ import annotations
 
 import json
-import shutil
 import subprocess
 import sys
 import textwrap
 from pathlib import Path
 
 import pytest
+from programs import need
 from rollcam.emu import preload as preload_package
 from rollcam.emu.preload import LIBRARY_NAME
 from rollcam.host.preload import program_environment, serving
@@ -20,13 +20,6 @@ pytest.importorskip("onnx")  # the in-sensor stage counts a network's operations
 LIB = Path(preload_package.__file__).with_name(LIBRARY_NAME)
 pytestmark = pytest.mark.skipif(not LIB.is_file(), reason=f"{LIB} not built (pip install -e . with a C compiler)")
 SOURCE = "emu:imx219?size=640x480&speed=fast&pedestrians=12&format=YUYV&insensor=personnet-raw"
-
-
-def need(program: str) -> str:
-    path = shutil.which(program)
-    if path is None:
-        pytest.skip(f"{program} is not installed (apt-get install v4l-utils)")
-    return path
 
 
 @pytest.fixture(scope="module")
