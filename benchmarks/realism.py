@@ -187,13 +187,15 @@ def realism(
     precision_floor: float = PRECISION_FLOOR,
     lens: LensOptics | None = None,
     picture: PictureSteps | None = None,
+    shadows: bool = False,
 ) -> dict:
     """Each detector's recall and precision on unoccluded, untruncated pedestrians of seeded street scenes.
 
     Scene ``i`` uses seed ``seed + i`` and time of day ``times[i % len(times)]``; every camera of it is rendered
     global-shutter at ``frames_per_camera`` instants ``frame_spacing_s`` apart, and every detector runs on the
     same full-resolution frames, through the camera's ``lens`` and ISP ``picture`` steps when given
-    (``rollcam.sim.optics``, ``rollcam.sim.isp``). ``progress(done, total)`` is called after each frame. Returns a
+    (``rollcam.sim.optics``, ``rollcam.sim.isp``), with the walkers' contact shadows when ``shadows``.
+    ``progress(done, total)`` is called after each frame. Returns a
     JSON-able dict.
     """
     lens = lens if lens is not None and lens.on else None
@@ -211,7 +213,7 @@ def realism(
     for i in range(n_scenes):
         tod = times[i % len(times)]
         scene = make_street_scene(seed + i, time_of_day=tod, n_pedestrians=n_pedestrians, width=width,
-                                  height=height)
+                                  height=height, shadows=shadows)
         if total is None:
             total = n_scenes * len(scene.cameras) * frames_per_camera
         for cam in range(len(scene.cameras)):
@@ -249,7 +251,7 @@ def realism(
             "min_height_px": min_height_px, "min_visible": min_visible, "times": list(times),
             "frames_per_camera": frames_per_camera, "frame_spacing_s": frame_spacing_s,
             "n_pedestrians_per_scene": n_pedestrians, "detect_resolution": "full", "iou_min": IOU_MIN,
-            "precision_floor": precision_floor, "shutter": "global",
+            "precision_floor": precision_floor, "shutter": "global", "shadows": shadows,
             "lens": {} if lens is None else lens.info(), "picture": {} if picture is None else picture.info(),
         },
     }

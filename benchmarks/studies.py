@@ -106,6 +106,7 @@ def _realism_arguments(p: argparse.ArgumentParser) -> None:
                    help="the lens in front of the sensor, e.g. vignette=0.3,lens_blur_px=1 (docs/optics.md)")
     p.add_argument("--picture", metavar="K=V,...", default="",
                    help="the ISP's last steps, e.g. sharpen=0.5,jpeg_quality=85 (docs/optics.md)")
+    p.add_argument("--shadows", action="store_true", help="contact shadows under the walkers (emu: shadows=on)")
 
 
 def _steps(kind: type, flag: str, text: str) -> Any:
@@ -139,7 +140,7 @@ def _realism(args: argparse.Namespace, progress: Any) -> tuple[Doc, str]:
 
     doc = realism(detectors=args.detector or DETECTORS, n_scenes=args.scenes, seed=args.seed, times=times,
                   lens=_steps(LensOptics, "--lens", args.lens), picture=_steps(PictureSteps, "--picture", args.picture),
-                  progress=lambda done, total: progress.status(f"frame {done}/{total}"))
+                  shadows=args.shadows, progress=lambda done, total: progress.status(f"frame {done}/{total}"))
     write_json(args.out, "realism.json", doc)
     if args.gallery:
         doc["gallery"] = [str(p) for p in write_gallery(args.gallery, seed=args.seed)]

@@ -21,6 +21,7 @@ from ._body import (
     P_BUILD,
     P_H,
     P_HAIR,
+    P_SHADOW,
     P_SKIN,
     P_SPEED,
     R_PERIOD,
@@ -57,6 +58,7 @@ from ._parts import (
     Q_YMAX,
     Q_YMIN,
     capsule_part,
+    shadow_part,
     sun_in_view,
 )
 from ._props import PROP_BOX, prop_box, prop_parts, prop_ref_y
@@ -99,6 +101,13 @@ def _face_dir(parts, fx, fy, fz, vx, vy, vz):
 BODY_LATERAL, BODY_FORWARD, BODY_TOP = 0.25, 0.40, 1.02  # walker bounds, fractions of height (see actor_bounds)
 PART_RADIUS_MAX = 0.1  # walker part radii, fraction of height x build (the largest in _body is 0.08)
 N_CHUNKS = 16  # parallel work units; scratch buffers are allocated once per unit, not per item
+
+
+TEX_SEED_PARTS = 18
+"""Texture seeds are actor id x this + part (the part count when they were made: the look stays the same)."""
+SHADOW_SIDE, SHADOW_ALONG = 0.14, 0.2
+"""A contact shadow's semi-axes on the ground: across the walk as a fraction of the walker's width (its height x
+build), along it as a fraction of its height (the feet's reach; both inside BODY_LATERAL and BODY_FORWARD)."""
 
 
 @njit(cache=True, inline="always")
@@ -287,11 +296,39 @@ def actor_parts(act, world, lut, bld, light, cam, rot, pos, t, parts, scratch):
             ci, r_px = col_idx[p], parts[p, Q_GEO + 4]
             parts[p, Q_TEX] = TEX_CONTRAST[ci]
             parts[p, Q_TEXK] = rad[p] / (r_px * TEX_CELL_M[ci]) if r_px > 0.0 else 0.0  # cells per pixel
-            parts[p, Q_TSEED] = act[A_ID] * MAX_PARTS + p
+            parts[p, Q_TSEED] = act[A_ID] * TEX_SEED_PARTS + p
             if p == 0:  # the head: which way its face looks, seen from the camera
                 _face_dir(parts, r01 * root[2], r11 * root[2], r21 * root[2], a0 + b0, a1 + b1, a2 + b2)
                 for c in range(3):
                     parts[p, Q_HAIR + c] = act[P_HAIR + c] / max(act[P_SKIN + c], 1e-6)
+    if act[P_SHADOW] > 0.0 and n < MAX_PARTS:
+        _contact_shadow(parts, n, root[0], root[1], act[P_H] * max(act[P_BUILD], 1.0), act[P_H], act[P_SHADOW],
+                        cam, rot, pos)
+
+
+@njit(cache=True)
+def _contact_shadow(parts, p, x, y, width_m, h, strength, cam, rot, pos):
+    """Row ``p``: the contact shadow of a walker standing at ground point (x, y): an ellipse on the ground,
+    SHADOW_SIDE x width across and SHADOW_ALONG x height along the walk (inside the walker's bounds box, so on
+    every line the walker is drawn), seen as the ellipse filling its image's bounding box."""
+    a, b = SHADOW_SIDE * width_m, SHADOW_ALONG * h
+    u0, u1, v0, v1, z_mid = 1e30, -1e30, 1e30, -1e30, 0.0
+    for k in range(5):
+        gx = x + (a if k == 1 else -a if k == 2 else 0.0)
+        gy = y + (b if k == 3 else -b if k == 4 else 0.0)
+        dx, dy, dz = gx - pos[0], gy - pos[1], -pos[2]
+        cz = rot[2, 0] * dx + rot[2, 1] * dy + rot[2, 2] * dz
+        if cz < NEAR_M:
+            return  # reaching behind the camera: no shadow drawn
+        u = cam[C_FX] * (rot[0, 0] * dx + rot[0, 1] * dy + rot[0, 2] * dz) / cz + cam[C_CX]
+        v = cam[C_FY] * (rot[1, 0] * dx + rot[1, 1] * dy + rot[1, 2] * dz) / cz + cam[C_CY]
+        if cam[C_TRANSPOSED] != 0.0:
+            u, v = v, u
+        u0, u1, v0, v1 = min(u0, u), max(u1, u), min(v0, v), max(v1, v)
+        if k == 0:
+            z_mid = cz
+    # Sorted behind the walker's own parts (its feet stand on it), in front of what lies farther off.
+    shadow_part(parts, p, u0, v0, u1, v1, z_mid + b, strength)
 
 
 @njit(cache=True, inline="always")

@@ -18,6 +18,7 @@ A_TYPE, A_STATIC, A_SPEED, A_ID = 0, 1, 2, 3
 # pedestrian
 P_LANE_X, P_YC, P_HALF, P_OFF, P_SPEED, P_H, P_BUILD, P_PHASE, P_DIR = 4, 5, 6, 7, 8, 9, 10, 11, 12
 P_LONG_HAIR, P_SLEEVES, P_STRIDE, P_SKIN, P_HAIR, P_SHIRT, P_PANTS, P_SHOES = 13, 14, 15, 16, 19, 22, 25, 28
+P_SHADOW = 31  # contact shadow strength at its centre (0: none)
 # chart bar
 R_X0, R_WIDTH, R_VX, R_PERIOD, R_RGB = 4, 5, 6, 7, 8
 ACTOR_COLS = 32

@@ -40,6 +40,7 @@ from ._actors import (
     parts_scratch,
 )
 from ._jitcache import guard
+from ._parts import PART_SHADOW
 from ._texture import SH_FACE, SH_GEO, SH_TEX, SHADE_COLS, _texture
 from ._world import C_MOVING, C_TRANSPOSED, background_line
 
@@ -68,6 +69,12 @@ def part_span(parts, p, yc, lohi):
     """Continuous x-interval of part ``p`` on the line through ``yc``; lohi = (inf, -inf) when empty."""
     lohi[0], lohi[1] = 1e30, -1e30
     g = Q_GEO
+    if parts[p, Q_KIND] == PART_SHADOW:
+        dv = (yc - parts[p, g + 1]) / parts[p, g + 3]
+        if abs(dv) < 1.0:
+            d = parts[p, g + 2] * math.sqrt(1.0 - dv * dv)
+            lohi[0], lohi[1] = parts[p, g] - d, parts[p, g] + d
+        return
     if parts[p, Q_KIND] == PART_QUAD:
         for e in range(N_VERTS):
             f = (e + 1) % N_VERTS
@@ -135,10 +142,14 @@ def _collect_line(line, w, actors, obj_k, slots, parts_tab, local, include, gt_l
         pt = parts_tab[s] if s >= 0 else local[o]
         olo, ohi = 1e30, -1e30
         m0 = m
+        shadows = 0
         for p in range(MAX_PARTS):
             if pt[p, Q_KIND] == PART_NONE:
                 continue
             if yc < pt[p, Q_YMIN] or yc > pt[p, Q_YMAX]:
+                continue
+            if pt[p, Q_KIND] == PART_SHADOW:
+                shadows += 1  # after the body's spans: no part of the actor's extent or area
                 continue
             part_span(pt, p, yc, lohi)
             if lohi[1] <= lohi[0] or lohi[1] <= 0.0 or lohi[0] >= w:
@@ -162,6 +173,20 @@ def _collect_line(line, w, actors, obj_k, slots, parts_tab, local, include, gt_l
         if ohi > olo:
             gt_l[o, line] = max(olo, 0.0)
             gt_r[o, line] = min(ohi, float(w))
+        for p in range(MAX_PARTS if shadows else 0):
+            if pt[p, Q_KIND] != PART_SHADOW or yc < pt[p, Q_YMIN] or yc > pt[p, Q_YMAX]:
+                continue
+            part_span(pt, p, yc, lohi)
+            if lohi[1] <= lohi[0] or lohi[1] <= 0.0 or lohi[0] >= w:
+                continue
+            depth[m], idx_o[m] = pt[p, Q_DEPTH], o
+            for c in range(SH_TEX + 1):
+                shade[m, c] = 0.0
+            shade[m, 2] = -pt[p, Q_AMB]  # a negative ambient marks a shadow (see _paint_spans)
+            for c in range(4):
+                shade[m, SH_GEO + c] = pt[p, Q_GEO + c]
+            span_l[m], span_r[m] = lohi[0], lohi[1]
+            m += 1
     return m
 
 
@@ -191,6 +216,26 @@ def _span_runs(span_l, span_r, m, w, ia, ib):
 
 
 @njit(cache=True)
+def _darken(lin, line, shade, e, xl, xr, i0, i1):
+    """A contact shadow's span: what is painted under it keeps 1 - s (1 - r^2)^2 of its light, r the pixel's
+    elliptical radius from the shadow's centre and s its strength (soft to nothing at the rim)."""
+    s = -shade[e, 2]
+    cx, cy, rx, ry = shade[e, SH_GEO], shade[e, SH_GEO + 1], shade[e, SH_GEO + 2], shade[e, SH_GEO + 3]
+    dv = (line + 0.5 - cy) / ry
+    for i in range(i0, i1):
+        cov = min(xr, i + 1.0) - max(xl, float(i))
+        if cov <= 0.0:
+            continue
+        du = (i + 0.5 - cx) / rx
+        q = 1.0 - du * du - dv * dv
+        if q <= 0.0:
+            continue
+        f = 1.0 - cov * s * q * q
+        for c in range(3):
+            lin[i, c] = lin[i, c] * f
+
+
+@njit(cache=True)
 def _paint_spans(lin, line, m, gt_vis, depth, idx_o, shade, span_l, span_r, owner, ia, ib, n_runs, order, flip):
     """Paint the collected spans over ``lin`` far to near (anti-aliased along the line); count visibility."""
     w = lin.shape[0]
@@ -208,6 +253,9 @@ def _paint_spans(lin, line, m, gt_vis, depth, idx_o, shade, span_l, span_r, owne
         xl, xr = span_l[e], span_r[e]
         i0 = max(int(math.floor(xl)), 0)
         i1 = min(int(math.ceil(xr)), w)
+        if shade[e, 2] < 0.0:
+            _darken(lin, line, shade, e, xl, xr, i0, i1)
+            continue
         mid, half = 0.5 * (xl + xr), 0.5 * (xr - xl)
         lx, lz = shade[e, 0], shade[e, 1]
         textured = shade[e, SH_TEX] > 0.0

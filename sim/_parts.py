@@ -5,7 +5,10 @@ writer every kind of actor uses.
 kernels of ``rollcam.sim._kernels`` intersect and paint it. A row is a capsule (end points and a radius from
 ``Q_GEO``, shaded as a cylinder across its span by ``Q_LX``/``Q_LZ``) or a convex polygon of up to ``N_VERTS``
 vertices (flat: with ``Q_LX = Q_LZ = 0`` its colour is ``Q_AMB``); a quad repeats its first vertex as the fifth,
-which a near-plane clip of a quad may need. ``Q_YMIN``..``Q_YMAX`` is the range of lines the part can reach.
+which a near-plane clip of a quad may need. A contact shadow (``shadow_part``) is an ellipse on the image,
+centre and semi-axes from ``Q_GEO``, strength in ``Q_AMB``: it darkens what lies under it instead of hiding
+it, and is no part of its actor's extent or visibility. ``Q_YMIN``..``Q_YMAX`` is the range of lines the part
+can reach.
 """
 
 from __future__ import annotations
@@ -27,8 +30,8 @@ Q_FACE, Q_HAIR = Q_TSEED + 1, Q_TSEED + 3
 """A head's face: the direction it looks, (cos, sin) of its angle from the camera (cos < -1: no face), and the
 hair's albedo over the skin's per channel (hairline, brows)."""
 PART_COLS = Q_HAIR + 3
-MAX_PARTS = 18
-PART_CAPSULE, PART_QUAD, PART_NONE = 0, 1, -1
+MAX_PARTS = 19  # a walker's 18 capsules and its contact shadow
+PART_CAPSULE, PART_QUAD, PART_SHADOW, PART_NONE = 0, 1, 2, -1
 NEAR_M = 0.05
 """The camera's near plane, m: parts are clipped there so parts crossing the camera plane stay finite."""
 
@@ -80,6 +83,23 @@ def capsule_part(parts, p, a0, a1, a2, b0, b1, b2, rad, alb_r, alb_g, alb_b, fx,
     parts[p, Q_YMIN] = min(ua1, ub1) - r_px
     parts[p, Q_YMAX] = max(ua1, ub1) + r_px
     return True
+
+
+@njit(cache=True, inline="always")
+def shadow_part(parts, p, u0, v0, u1, v1, depth, strength):
+    """Write row ``p``: a contact shadow filling the image box [u0, u1] x [v0, v1] (render space) as an ellipse,
+    taking ``strength`` of the light at its centre, sorted at ``depth``."""
+    parts[p, Q_KIND] = PART_SHADOW
+    parts[p, Q_DEPTH] = depth
+    parts[p, Q_AMB] = strength
+    parts[p, Q_AMB + 1], parts[p, Q_AMB + 2] = 0.0, 0.0
+    for c in range(3):
+        parts[p, Q_DIR + c] = 0.0
+    parts[p, Q_LX], parts[p, Q_LZ] = 0.0, 0.0
+    g = Q_GEO
+    parts[p, g], parts[p, g + 1] = 0.5 * (u0 + u1), 0.5 * (v0 + v1)
+    parts[p, g + 2], parts[p, g + 3] = max(0.5 * (u1 - u0), 1e-6), max(0.5 * (v1 - v0), 1e-6)
+    parts[p, Q_YMIN], parts[p, Q_YMAX] = v0, v1
 
 
 guard(__name__)  # after every kernel and import: see rollcam.sim._jitcache

@@ -154,6 +154,7 @@ def _compile_actors(scene: Scene) -> tuple[np.ndarray, tuple[int, ...], tuple[st
         a[B.P_PHASE], a[B.P_DIR] = p.gait_phase, float(p.direction)
         a[B.P_LONG_HAIR], a[B.P_SLEEVES] = float(p.long_hair), float(p.long_sleeves)
         a[B.P_STRIDE] = p.stride_length_m
+        a[B.P_SHADOW] = scene.contact_shadow
         for off, rgb in ((B.P_SKIN, p.skin), (B.P_HAIR, p.hair), (B.P_SHIRT, p.shirt), (B.P_PANTS, p.pants),
                          (B.P_SHOES, p.shoes)):
             a[off : off + 3] = rgb

@@ -21,6 +21,7 @@ from rollcam.common.files import OS_FS, RENAME_ONLY_FS, FileSystem, write_atomic
 from . import _actors as A
 from ._jitcache import guard
 from ._kernels import part_span
+from ._parts import PART_SHADOW
 from .render import Renderer
 
 
@@ -38,7 +39,7 @@ def _mask_lines(parts, line_k, ids, owner, cover):
         for o in range(n_act):
             pt = parts[o, k]
             for p in range(A.MAX_PARTS):
-                if pt[p, A.Q_KIND] == A.PART_NONE or yc < pt[p, A.Q_YMIN] or yc > pt[p, A.Q_YMAX]:
+                if pt[p, A.Q_KIND] in (A.PART_NONE, PART_SHADOW) or yc < pt[p, A.Q_YMIN] or yc > pt[p, A.Q_YMAX]:
                     continue
                 part_span(pt, p, yc, lohi)
                 if lohi[1] <= lohi[0] or lohi[1] <= 0.0 or lohi[0] >= n_along:

@@ -243,6 +243,10 @@ def street_lights(time_of_day: str, lighting: Lighting, *, lamps: str = "auto", 
     return lighting, tuple(out)
 
 
+CONTACT_SHADOW = 0.55
+"""How much of the ground's light a walker's contact shadow takes at its centre (it falls to none at its rim)."""
+
+
 def make_street_scene(
     seed: int = 0,
     *,
@@ -256,13 +260,15 @@ def make_street_scene(
     sensor_width_mm: float = STUDY_SENSOR_WIDTH_MM,
     ego: EgoMotion | None = None,
     props: bool = False,
+    shadows: bool = False,
     **lamp_options: Any,
 ) -> Scene:
     """A seeded city street with a crowd walking on the sidewalks and crossing lanes, and several cameras.
 
     Walkers' base speeds are drawn up to 2 m/s and scaled by ``speed`` ('normal' 1x, 'fast' 10x).
     ``props`` adds parked cars, trees, lamp poles, signs, benches and bins (``rollcam.sim.streetprops``, from
-    their own generator: the rest of the scene is the same either way).
+    their own generator: the rest of the scene is the same either way). ``shadows`` darkens the ground under each
+    walker's feet (``CONTACT_SHADOW`` at the centre: the sky and sun the body hides from the ground there).
     ``lamp_options`` are ``street_lights``' (street lamps and LED signs, on at dusk and night by default).
     """
     if time_of_day not in TIMES_OF_DAY:
@@ -299,7 +305,7 @@ def make_street_scene(
     lighting, lights = street_lights(time_of_day, TIMES_OF_DAY[time_of_day], **lamp_options)
     clutter = street_props(int(seed), street, peds, cams) if props else ()
     return Scene("street", seed, lighting, cams, street=street, pedestrians=tuple(peds), lights=lights,
-                 props=clutter)
+                 props=clutter, contact_shadow=CONTACT_SHADOW if shadows else 0.0)
 
 
 def make_chart_scene(seed: int = 0, *, vx_px_s: float = 2000.0, pitch_px: float = 64.0, bar_width_px: float = 24.0,

@@ -21,11 +21,14 @@ def _rs_times(renderer: Renderer, t0_ns: int, line_ns: int = 31_000) -> np.ndarr
     return t0_ns + line_ns * np.arange(renderer.render_shape()[0], dtype=np.int64)
 
 
-@pytest.mark.parametrize(("ego", "props"), [("none", False), ("pan", False), ("walk", False), ("vehicle", False),
-                                           ("drone", False), ("none", True), ("vehicle", True), ("drone", True)])
-def test_exact_rs_equals_brute_force_for_every_ego_preset(ego: str, props: bool) -> None:
+@pytest.mark.parametrize(("ego", "props", "shadows"),
+                         [("none", False, False), ("pan", False, False), ("walk", False, False),
+                          ("vehicle", False, False), ("drone", False, False), ("none", True, False),
+                          ("vehicle", True, False), ("drone", True, False), ("none", False, True),
+                          ("walk", True, True)])
+def test_exact_rs_equals_brute_force_for_every_ego_preset(ego: str, props: bool, shadows: bool) -> None:
     scene = make_street_scene(3, speed="fast", width=96, height=54, n_pedestrians=20, ego=ego_preset(ego),
-                              props=props)
+                              props=props, shadows=shadows)
     r = Renderer(scene)
     times = _rs_times(r, 1_234_567_891)
     fast = r.render_lines(times)
