@@ -310,13 +310,11 @@ def actor_parts(act, world, lut, bld, light, cam, rot, pos, t, parts, scratch):
 def _contact_shadow(parts, p, x, y, width_m, h, strength, cam, rot, pos):
     """Row ``p``: the contact shadow of a walker standing at ground point (x, y): an ellipse on the ground,
     SHADOW_SIDE x width across and SHADOW_ALONG x height along the walk (inside the walker's bounds box, so on
-    every line the walker is drawn), seen as the ellipse filling its image's bounding box."""
+    every line the walker is drawn), seen as the ellipse its projected centre and axis ends span."""
     a, b = SHADOW_SIDE * width_m, SHADOW_ALONG * h
-    u0, u1, v0, v1, z_mid = 1e30, -1e30, 1e30, -1e30, 0.0
-    for k in range(5):
-        gx = x + (a if k == 1 else -a if k == 2 else 0.0)
-        gy = y + (b if k == 3 else -b if k == 4 else 0.0)
-        dx, dy, dz = gx - pos[0], gy - pos[1], -pos[2]
+    cu, cv, pu, pv, qu, qv, z_mid = 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0
+    for k in range(3):
+        dx, dy, dz = x + (a if k == 1 else 0.0) - pos[0], y + (b if k == 2 else 0.0) - pos[1], -pos[2]
         cz = rot[2, 0] * dx + rot[2, 1] * dy + rot[2, 2] * dz
         if cz < NEAR_M:
             return  # reaching behind the camera: no shadow drawn
@@ -324,11 +322,14 @@ def _contact_shadow(parts, p, x, y, width_m, h, strength, cam, rot, pos):
         v = cam[C_FY] * (rot[1, 0] * dx + rot[1, 1] * dy + rot[1, 2] * dz) / cz + cam[C_CY]
         if cam[C_TRANSPOSED] != 0.0:
             u, v = v, u
-        u0, u1, v0, v1 = min(u0, u), max(u1, u), min(v0, v), max(v1, v)
         if k == 0:
-            z_mid = cz
+            cu, cv, z_mid = u, v, cz
+        elif k == 1:
+            pu, pv = u - cu, v - cv
+        else:
+            qu, qv = u - cu, v - cv
     # Sorted behind the walker's own parts (its feet stand on it), in front of what lies farther off.
-    shadow_part(parts, p, u0, v0, u1, v1, z_mid + b, strength)
+    shadow_part(parts, p, cu, cv, pu, pv, qu, qv, z_mid + b, strength)
 
 
 @njit(cache=True, inline="always")

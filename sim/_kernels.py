@@ -69,11 +69,16 @@ def part_span(parts, p, yc, lohi):
     """Continuous x-interval of part ``p`` on the line through ``yc``; lohi = (inf, -inf) when empty."""
     lohi[0], lohi[1] = 1e30, -1e30
     g = Q_GEO
-    if parts[p, Q_KIND] == PART_SHADOW:
-        dv = (yc - parts[p, g + 1]) / parts[p, g + 3]
-        if abs(dv) < 1.0:
-            d = parts[p, g + 2] * math.sqrt(1.0 - dv * dv)
-            lohi[0], lohi[1] = parts[p, g] - d, parts[p, g] + d
+    if parts[p, Q_KIND] == PART_SHADOW:  # |N (x - c)| <= 1 on the line: a quadratic in x
+        n00, n01, n10, n11 = parts[p, g + 2], parts[p, g + 3], parts[p, g + 4], parts[p, g + 5]
+        dv = yc - parts[p, g + 1]
+        qa = n00 * n00 + n10 * n10
+        qb = dv * (n00 * n01 + n10 * n11)
+        qc = dv * dv * (n01 * n01 + n11 * n11) - 1.0
+        disc = qb * qb - qa * qc
+        if disc > 0.0 and qa > 0.0:
+            r = math.sqrt(disc)
+            lohi[0], lohi[1] = parts[p, g] + (-qb - r) / qa, parts[p, g] + (-qb + r) / qa
         return
     if parts[p, Q_KIND] == PART_QUAD:
         for e in range(N_VERTS):
@@ -183,8 +188,9 @@ def _collect_line(line, w, actors, obj_k, slots, parts_tab, local, include, gt_l
             for c in range(SH_TEX + 1):
                 shade[m, c] = 0.0
             shade[m, 2] = -pt[p, Q_AMB]  # a negative ambient marks a shadow (see _paint_spans)
-            for c in range(4):
+            for c in range(5):
                 shade[m, SH_GEO + c] = pt[p, Q_GEO + c]
+            shade[m, 1] = pt[p, Q_GEO + 5]
             span_l[m], span_r[m] = lohi[0], lohi[1]
             m += 1
     return m
@@ -218,16 +224,19 @@ def _span_runs(span_l, span_r, m, w, ia, ib):
 @njit(cache=True)
 def _darken(lin, line, shade, e, xl, xr, i0, i1):
     """A contact shadow's span: what is painted under it keeps 1 - s (1 - r^2)^2 of its light, r the pixel's
-    elliptical radius from the shadow's centre and s its strength (soft to nothing at the rim)."""
+    elliptical radius from the shadow's centre and s its strength (soft to nothing at the rim). Its shade row:
+    strength (negated) at 2, centre at SH_GEO, the inverse shape matrix at SH_GEO + 2.. and 1."""
     s = -shade[e, 2]
-    cx, cy, rx, ry = shade[e, SH_GEO], shade[e, SH_GEO + 1], shade[e, SH_GEO + 2], shade[e, SH_GEO + 3]
-    dv = (line + 0.5 - cy) / ry
+    cx, cy = shade[e, SH_GEO], shade[e, SH_GEO + 1]
+    n00, n01, n10, n11 = shade[e, SH_GEO + 2], shade[e, SH_GEO + 3], shade[e, SH_GEO + 4], shade[e, 1]
+    dv = line + 0.5 - cy
     for i in range(i0, i1):
         cov = min(xr, i + 1.0) - max(xl, float(i))
         if cov <= 0.0:
             continue
-        du = (i + 0.5 - cx) / rx
-        q = 1.0 - du * du - dv * dv
+        du = i + 0.5 - cx
+        ra, rb = n00 * du + n01 * dv, n10 * du + n11 * dv
+        q = 1.0 - ra * ra - rb * rb
         if q <= 0.0:
             continue
         f = 1.0 - cov * s * q * q

@@ -6,7 +6,7 @@ kernels of ``rollcam.sim._kernels`` intersect and paint it. A row is a capsule (
 ``Q_GEO``, shaded as a cylinder across its span by ``Q_LX``/``Q_LZ``) or a convex polygon of up to ``N_VERTS``
 vertices (flat: with ``Q_LX = Q_LZ = 0`` its colour is ``Q_AMB``); a quad repeats its first vertex as the fifth,
 which a near-plane clip of a quad may need. A contact shadow (``shadow_part``) is an ellipse on the image,
-centre and semi-axes from ``Q_GEO``, strength in ``Q_AMB``: it darkens what lies under it instead of hiding
+centre and inverse shape matrix from ``Q_GEO``, strength in ``Q_AMB``: it darkens what lies under it instead of hiding
 it, and is no part of its actor's extent or visibility. ``Q_YMIN``..``Q_YMAX`` is the range of lines the part
 can reach.
 """
@@ -86,9 +86,14 @@ def capsule_part(parts, p, a0, a1, a2, b0, b1, b2, rad, alb_r, alb_g, alb_b, fx,
 
 
 @njit(cache=True, inline="always")
-def shadow_part(parts, p, u0, v0, u1, v1, depth, strength):
-    """Write row ``p``: a contact shadow filling the image box [u0, u1] x [v0, v1] (render space) as an ellipse,
-    taking ``strength`` of the light at its centre, sorted at ``depth``."""
+def shadow_part(parts, p, cu, cv, pu, pv, qu, qv, depth, strength):
+    """Write row ``p``: a contact shadow, the ellipse ``c + P cos t + Q sin t`` of centre ``c`` and conjugate
+    semi-diameters ``P``, ``Q`` (render space: a ground ellipse's centre and axis ends, projected), taking
+    ``strength`` of the light at its centre, sorted at ``depth``. ``Q_GEO`` holds the centre and the inverse
+    of [P Q] (a pixel's elliptical radius is the length of that matrix times its offset from the centre)."""
+    det = pu * qv - qu * pv
+    if abs(det) < 1e-9:
+        return
     parts[p, Q_KIND] = PART_SHADOW
     parts[p, Q_DEPTH] = depth
     parts[p, Q_AMB] = strength
@@ -97,9 +102,10 @@ def shadow_part(parts, p, u0, v0, u1, v1, depth, strength):
         parts[p, Q_DIR + c] = 0.0
     parts[p, Q_LX], parts[p, Q_LZ] = 0.0, 0.0
     g = Q_GEO
-    parts[p, g], parts[p, g + 1] = 0.5 * (u0 + u1), 0.5 * (v0 + v1)
-    parts[p, g + 2], parts[p, g + 3] = max(0.5 * (u1 - u0), 1e-6), max(0.5 * (v1 - v0), 1e-6)
-    parts[p, Q_YMIN], parts[p, Q_YMAX] = v0, v1
-
+    parts[p, g], parts[p, g + 1] = cu, cv
+    parts[p, g + 2], parts[p, g + 3] = qv / det, -qu / det
+    parts[p, g + 4], parts[p, g + 5] = -pv / det, pu / det
+    half = math.sqrt(pv * pv + qv * qv)
+    parts[p, Q_YMIN], parts[p, Q_YMAX] = cv - half, cv + half
 
 guard(__name__)  # after every kernel and import: see rollcam.sim._jitcache
