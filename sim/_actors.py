@@ -312,7 +312,7 @@ def _contact_shadow(parts, p, x, y, width_m, h, strength, cam, rot, pos):
     SHADOW_SIDE x width across and SHADOW_ALONG x height along the walk (inside the walker's bounds box, so on
     every line the walker is drawn), seen as the ellipse its projected centre and axis ends span."""
     a, b = SHADOW_SIDE * width_m, SHADOW_ALONG * h
-    cu, cv, pu, pv, qu, qv, z_mid = 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0
+    cu, cv, pu, pv, qu, qv = 0.0, 0.0, 0.0, 0.0, 0.0, 0.0
     for k in range(3):
         dx, dy, dz = x + (a if k == 1 else 0.0) - pos[0], y + (b if k == 2 else 0.0) - pos[1], -pos[2]
         cz = rot[2, 0] * dx + rot[2, 1] * dy + rot[2, 2] * dz
@@ -323,13 +323,12 @@ def _contact_shadow(parts, p, x, y, width_m, h, strength, cam, rot, pos):
         if cam[C_TRANSPOSED] != 0.0:
             u, v = v, u
         if k == 0:
-            cu, cv, z_mid = u, v, cz
+            cu, cv = u, v
         elif k == 1:
             pu, pv = u - cu, v - cv
         else:
             qu, qv = u - cu, v - cv
-    # Sorted behind the walker's own parts (its feet stand on it), in front of what lies farther off.
-    shadow_part(parts, p, cu, cv, pu, pv, qu, qv, z_mid + b, strength)
+    shadow_part(parts, p, cu, cv, pu, pv, qu, qv, strength)
 
 
 @njit(cache=True, inline="always")

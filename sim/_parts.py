@@ -85,17 +85,22 @@ def capsule_part(parts, p, a0, a1, a2, b0, b1, b2, rad, alb_r, alb_g, alb_b, fx,
     return True
 
 
+SHADOW_DEPTH = 1e30
+"""A shadow's depth in the painter's order: farthest, so it darkens only the background (the ground it lies
+on) and every actor is painted over it: where an actor is seen, the ground on that ray lies behind it."""
+
+
 @njit(cache=True, inline="always")
-def shadow_part(parts, p, cu, cv, pu, pv, qu, qv, depth, strength):
+def shadow_part(parts, p, cu, cv, pu, pv, qu, qv, strength):
     """Write row ``p``: a contact shadow, the ellipse ``c + P cos t + Q sin t`` of centre ``c`` and conjugate
     semi-diameters ``P``, ``Q`` (render space: a ground ellipse's centre and axis ends, projected), taking
-    ``strength`` of the light at its centre, sorted at ``depth``. ``Q_GEO`` holds the centre and the inverse
+    ``strength`` of the light at its centre. ``Q_GEO`` holds the centre and the inverse
     of [P Q] (a pixel's elliptical radius is the length of that matrix times its offset from the centre)."""
     det = pu * qv - qu * pv
     if abs(det) < 1e-9:
         return
     parts[p, Q_KIND] = PART_SHADOW
-    parts[p, Q_DEPTH] = depth
+    parts[p, Q_DEPTH] = SHADOW_DEPTH
     parts[p, Q_AMB] = strength
     parts[p, Q_AMB + 1], parts[p, Q_AMB + 2] = 0.0, 0.0
     for c in range(3):

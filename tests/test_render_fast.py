@@ -25,7 +25,7 @@ def _rs_times(renderer: Renderer, t0_ns: int, line_ns: int = 31_000) -> np.ndarr
                          [("none", False, False), ("pan", False, False), ("walk", False, False),
                           ("vehicle", False, False), ("drone", False, False), ("none", True, False),
                           ("vehicle", True, False), ("drone", True, False), ("none", False, True),
-                          ("walk", True, True)])
+                          ("none", True, True), ("walk", True, True)])
 def test_exact_rs_equals_brute_force_for_every_ego_preset(ego: str, props: bool, shadows: bool) -> None:
     scene = make_street_scene(3, speed="fast", width=96, height=54, n_pedestrians=20, ego=ego_preset(ego),
                               props=props, shadows=shadows)
