@@ -19,6 +19,9 @@ from ._body import (
     A_ID,
     A_TYPE,
     P_BUILD,
+    P_CAST_S,
+    P_CAST_X,
+    P_CAST_Y,
     P_H,
     P_HAIR,
     P_SHADOW,
@@ -108,6 +111,10 @@ TEX_SEED_PARTS = 18
 SHADOW_SIDE, SHADOW_ALONG = 0.14, 0.2
 """A contact shadow's semi-axes on the ground: across the walk as a fraction of the walker's width (its height x
 build), along it as a fraction of its height (the feet's reach; both inside BODY_LATERAL and BODY_FORWARD)."""
+CAST_SIDE, CAST_FOOT, CAST_EDGE = 0.13, 0.08, 3.0
+"""The sun's shadow of a walker: an ellipse from its feet to where the sun puts its head's shadow, as wide as
+CAST_SIDE x its width either side, reaching CAST_FOOT x its height past both ends, with a dark core and a
+soft rim (CAST_EDGE: see ``shadow_part``)."""
 
 
 @njit(cache=True, inline="always")
@@ -168,9 +175,11 @@ def actor_bounds(act, world, cam, rot, pos, t, dt, out, root, pc, uv):
     lat = BODY_LATERAL * h * max(act[P_BUILD], 1.0)
     ey = BODY_FORWARD * h + abs(act[P_SPEED]) * dt  # walkers move along Y only, at most speed * dt either way
     pad = cam[C_FX] * PART_RADIUS_MAX * h * max(act[P_BUILD], 1.0) / NEAR_M
-    # Feet dip a little below the ground plane.
-    box_bounds(cam, rot, pos, root[0] - lat, root[0] + lat, root[1] - ey, root[1] + ey, -0.02 * h, BODY_TOP * h,
-               pad, out, pc, uv)
+    # Feet dip a little below the ground plane; the sun's shadow reaches out along the ground.
+    x0, x1, y0, y1 = root[0] - lat, root[0] + lat, root[1] - ey, root[1] + ey
+    cx, cy = act[P_CAST_X] * h, act[P_CAST_Y] * h
+    x0, x1, y0, y1 = min(x0, x0 + cx), max(x1, x1 + cx), min(y0, y0 + cy), max(y1, y1 + cy)
+    box_bounds(cam, rot, pos, x0, x1, y0, y1, -0.02 * h, BODY_TOP * h, pad, out, pc, uv)
 
 
 @njit(cache=True)
@@ -301,20 +310,32 @@ def actor_parts(act, world, lut, bld, light, cam, rot, pos, t, parts, scratch):
                 _face_dir(parts, r01 * root[2], r11 * root[2], r21 * root[2], a0 + b0, a1 + b1, a2 + b2)
                 for c in range(3):
                     parts[p, Q_HAIR + c] = act[P_HAIR + c] / max(act[P_SKIN + c], 1e-6)
-    if act[P_SHADOW] > 0.0 and n < MAX_PARTS:
-        _contact_shadow(parts, n, root[0], root[1], act[P_H] * max(act[P_BUILD], 1.0), act[P_H], act[P_SHADOW],
-                        cam, rot, pos)
+    if act[P_SHADOW] > 0.0 and n + 1 < MAX_PARTS:
+        width = act[P_H] * max(act[P_BUILD], 1.0)
+        s = act[P_SHADOW]
+        _ground_shadow(parts, n, root[0], root[1], SHADOW_SIDE * width, 0.0, 0.0, SHADOW_ALONG * act[P_H],
+                       s, s, s, 1.0, cam, rot, pos)
+        cx, cy = act[P_CAST_X] * act[P_H], act[P_CAST_Y] * act[P_H]
+        reach = math.hypot(cx, cy)
+        if lit > 0.0 and reach > 0.0:
+            ux, uy = cx / reach, cy / reach
+            gx, gy = root[0] + 0.5 * cx, root[1] + 0.5 * cy
+            if not _sun_blocked(world, lut, bld, gx, gy, 0.05, light, -1):  # not in a facade's shadow
+                along, side = 0.5 * reach + CAST_FOOT * act[P_H], CAST_SIDE * width
+                _ground_shadow(parts, n + 1, gx, gy, -uy * side, ux * side, ux * along, uy * along,
+                               act[P_CAST_S], act[P_CAST_S + 1], act[P_CAST_S + 2], CAST_EDGE, cam, rot, pos)
 
 
 @njit(cache=True)
-def _contact_shadow(parts, p, x, y, width_m, h, strength, cam, rot, pos):
-    """Row ``p``: the contact shadow of a walker standing at ground point (x, y): an ellipse on the ground,
-    SHADOW_SIDE x width across and SHADOW_ALONG x height along the walk (inside the walker's bounds box, so on
-    every line the walker is drawn), seen as the ellipse its projected centre and axis ends span."""
-    a, b = SHADOW_SIDE * width_m, SHADOW_ALONG * h
+def _ground_shadow(parts, p, x, y, ax, ay, bx, by, s_r, s_g, s_b, edge, cam, rot, pos):
+    """Row ``p``: a shadow on the ground, the ellipse of centre (x, y) and semi-axes (ax, ay), (bx, by) (world
+    m, inside the walker's bounds box, so drawn on every line the walker is), seen as the image ellipse its
+    projected centre and axis ends span; strength per channel and edge sharpness as ``shadow_part``'s."""
     cu, cv, pu, pv, qu, qv = 0.0, 0.0, 0.0, 0.0, 0.0, 0.0
     for k in range(3):
-        dx, dy, dz = x + (a if k == 1 else 0.0) - pos[0], y + (b if k == 2 else 0.0) - pos[1], -pos[2]
+        dx = x + (ax if k == 1 else bx if k == 2 else 0.0) - pos[0]
+        dy = y + (ay if k == 1 else by if k == 2 else 0.0) - pos[1]
+        dz = -pos[2]
         cz = rot[2, 0] * dx + rot[2, 1] * dy + rot[2, 2] * dz
         if cz < NEAR_M:
             return  # reaching behind the camera: no shadow drawn
@@ -328,7 +349,7 @@ def _contact_shadow(parts, p, x, y, width_m, h, strength, cam, rot, pos):
             pu, pv = u - cu, v - cv
         else:
             qu, qv = u - cu, v - cv
-    shadow_part(parts, p, cu, cv, pu, pv, qu, qv, strength)
+    shadow_part(parts, p, cu, cv, pu, pv, qu, qv, s_r, s_g, s_b, edge)
 
 
 @njit(cache=True, inline="always")

@@ -19,9 +19,10 @@ A_TYPE, A_STATIC, A_SPEED, A_ID = 0, 1, 2, 3
 P_LANE_X, P_YC, P_HALF, P_OFF, P_SPEED, P_H, P_BUILD, P_PHASE, P_DIR = 4, 5, 6, 7, 8, 9, 10, 11, 12
 P_LONG_HAIR, P_SLEEVES, P_STRIDE, P_SKIN, P_HAIR, P_SHIRT, P_PANTS, P_SHOES = 13, 14, 15, 16, 19, 22, 25, 28
 P_SHADOW = 31  # contact shadow strength at its centre (0: none)
+P_CAST_X, P_CAST_Y, P_CAST_S = 32, 33, 34  # sun's cast shadow: ground offset per metre of height; strength RGB
 # chart bar
 R_X0, R_WIDTH, R_VX, R_PERIOD, R_RGB = 4, 5, 6, 7, 8
-ACTOR_COLS = 32
+ACTOR_COLS = 37
 TYPE_PEDESTRIAN, TYPE_BAR = 0, 1
 TYPE_PROP = 2  # street props: their columns in rollcam.sim._props
 

@@ -41,7 +41,7 @@ from ._actors import (
 )
 from ._jitcache import guard
 from ._parts import PART_SHADOW
-from ._texture import SH_FACE, SH_GEO, SH_TEX, SHADE_COLS, _texture
+from ._texture import SH_FACE, SH_GEO, SH_TEX, SHADE_COLS, SHADOW_MARK, _darken, _texture
 from ._world import C_MOVING, C_TRANSPOSED, background_line
 
 # slots[o, k]: >= 0 row of the shared parts table; SLOT_NONE not needed; SLOT_LOCAL needed by a single line,
@@ -187,7 +187,10 @@ def _collect_line(line, w, actors, obj_k, slots, parts_tab, local, include, gt_l
             depth[m], idx_o[m] = pt[p, Q_DEPTH], o
             for c in range(SH_TEX + 1):
                 shade[m, c] = 0.0
-            shade[m, 2] = -pt[p, Q_AMB]  # a negative ambient marks a shadow (see _paint_spans)
+            shade[m, 0] = SHADOW_MARK  # (a body part's Q_LX lies in [-1, 1])
+            for c in range(3):
+                shade[m, 2 + c] = pt[p, Q_AMB + c]
+            shade[m, 5] = pt[p, Q_DIR]
             for c in range(5):
                 shade[m, SH_GEO + c] = pt[p, Q_GEO + c]
             shade[m, 1] = pt[p, Q_GEO + 5]
@@ -222,29 +225,6 @@ def _span_runs(span_l, span_r, m, w, ia, ib):
 
 
 @njit(cache=True)
-def _darken(lin, line, shade, e, xl, xr, i0, i1):
-    """A contact shadow's span: what is painted under it keeps 1 - s (1 - r^2)^2 of its light, r the pixel's
-    elliptical radius from the shadow's centre and s its strength (soft to nothing at the rim). Its shade row:
-    strength (negated) at 2, centre at SH_GEO, the inverse shape matrix at SH_GEO + 2.. and 1."""
-    s = -shade[e, 2]
-    cx, cy = shade[e, SH_GEO], shade[e, SH_GEO + 1]
-    n00, n01, n10, n11 = shade[e, SH_GEO + 2], shade[e, SH_GEO + 3], shade[e, SH_GEO + 4], shade[e, 1]
-    dv = line + 0.5 - cy
-    for i in range(i0, i1):
-        cov = min(xr, i + 1.0) - max(xl, float(i))
-        if cov <= 0.0:
-            continue
-        du = i + 0.5 - cx
-        ra, rb = n00 * du + n01 * dv, n10 * du + n11 * dv
-        q = 1.0 - ra * ra - rb * rb
-        if q <= 0.0:
-            continue
-        f = 1.0 - cov * s * q * q
-        for c in range(3):
-            lin[i, c] = lin[i, c] * f
-
-
-@njit(cache=True)
 def _paint_spans(lin, line, m, gt_vis, depth, idx_o, shade, span_l, span_r, owner, ia, ib, n_runs, order, flip):
     """Paint the collected spans over ``lin`` far to near (anti-aliased along the line); count visibility."""
     w = lin.shape[0]
@@ -262,7 +242,7 @@ def _paint_spans(lin, line, m, gt_vis, depth, idx_o, shade, span_l, span_r, owne
         xl, xr = span_l[e], span_r[e]
         i0 = max(int(math.floor(xl)), 0)
         i1 = min(int(math.ceil(xr)), w)
-        if shade[e, 2] < 0.0:
+        if shade[e, 0] == SHADOW_MARK:
             _darken(lin, line, shade, e, xl, xr, i0, i1)
             continue
         mid, half = 0.5 * (xl + xr), 0.5 * (xr - xl)

@@ -30,7 +30,7 @@ Q_FACE, Q_HAIR = Q_TSEED + 1, Q_TSEED + 3
 """A head's face: the direction it looks, (cos, sin) of its angle from the camera (cos < -1: no face), and the
 hair's albedo over the skin's per channel (hairline, brows)."""
 PART_COLS = Q_HAIR + 3
-MAX_PARTS = 19  # a walker's 18 capsules and its contact shadow
+MAX_PARTS = 20  # a walker's 18 capsules, its contact shadow and its sun shadow
 PART_CAPSULE, PART_QUAD, PART_SHADOW, PART_NONE = 0, 1, 2, -1
 NEAR_M = 0.05
 """The camera's near plane, m: parts are clipped there so parts crossing the camera plane stay finite."""
@@ -91,20 +91,21 @@ on) and every actor is painted over it: where an actor is seen, the ground on th
 
 
 @njit(cache=True, inline="always")
-def shadow_part(parts, p, cu, cv, pu, pv, qu, qv, strength):
-    """Write row ``p``: a contact shadow, the ellipse ``c + P cos t + Q sin t`` of centre ``c`` and conjugate
-    semi-diameters ``P``, ``Q`` (render space: a ground ellipse's centre and axis ends, projected), taking
-    ``strength`` of the light at its centre. ``Q_GEO`` holds the centre and the inverse
-    of [P Q] (a pixel's elliptical radius is the length of that matrix times its offset from the centre)."""
+def shadow_part(parts, p, cu, cv, pu, pv, qu, qv, s_r, s_g, s_b, edge):
+    """Write row ``p``: a shadow, the ellipse ``c + P cos t + Q sin t`` of centre ``c`` and conjugate
+    semi-diameters ``P``, ``Q`` (render space: a ground ellipse's centre and axis ends, projected). What lies
+    under it keeps ``1 - s min(1, edge (1 - r^2))^2`` of its light per channel, ``s`` = (``s_r``, ``s_g``,
+    ``s_b``) and r the elliptical radius: ``edge`` 1 fades from the centre, larger gives a flat core and a
+    rim that fades over the outer 1 / edge of r^2. ``Q_GEO`` holds the centre and the inverse of [P Q] (a
+    pixel's r is the length of that matrix times its offset from the centre), ``Q_AMB`` the strengths and
+    ``Q_DIR`` the edge."""
     det = pu * qv - qu * pv
     if abs(det) < 1e-9:
         return
     parts[p, Q_KIND] = PART_SHADOW
     parts[p, Q_DEPTH] = SHADOW_DEPTH
-    parts[p, Q_AMB] = strength
-    parts[p, Q_AMB + 1], parts[p, Q_AMB + 2] = 0.0, 0.0
-    for c in range(3):
-        parts[p, Q_DIR + c] = 0.0
+    parts[p, Q_AMB], parts[p, Q_AMB + 1], parts[p, Q_AMB + 2] = s_r, s_g, s_b
+    parts[p, Q_DIR], parts[p, Q_DIR + 1], parts[p, Q_DIR + 2] = edge, 0.0, 0.0
     parts[p, Q_LX], parts[p, Q_LZ] = 0.0, 0.0
     g = Q_GEO
     parts[p, g], parts[p, g + 1] = cu, cv

@@ -1,5 +1,5 @@
-"""Walker surface texture and faces for the span painter of ``rollcam.sim._kernels``: value noise fixed to a
-part's axis, and the features of a head seen from the camera."""
+"""Walker surface texture, faces and shadows for the span painter of ``rollcam.sim._kernels``: value noise
+fixed to a part's axis, the features of a head seen from the camera, and the ground shadows' darkening."""
 
 from __future__ import annotations
 
@@ -13,6 +13,8 @@ SH_GEO, SH_TEX, SH_FACE, SHADE_COLS = 8, 13, 16, 21
 """Columns of a span's shading record after the eight of Q_LX, Q_LZ, ambient and direct RGB: the capsule's axis
 and radius (Q_GEO..Q_GEO+4), texture contrast, cells per pixel and seed, then a head's face (Q_FACE: cos, sin;
 Q_HAIR: hair over skin albedo, RGB)."""
+SHADOW_MARK = -9.0
+"""shade[m, 0] of a shadow's span (a body part's there, its Q_LX, lies in [-1, 1]; see ``_darken``)."""
 EYE_X, EYE_Y, EYE_RX, EYE_RY = 0.34, 0.12, 0.13, 0.075
 BROW_Y, BROW_RX, BROW_RY = 0.29, 0.18, 0.04
 MOUTH_Y, MOUTH_RX, MOUTH_RY = -0.43, 0.2, 0.05
@@ -102,5 +104,27 @@ def _texture(shade, e, x, yc, flip):
         return f * shade[e, SH_FACE + 2], f * shade[e, SH_FACE + 3], f * shade[e, SH_FACE + 4]
     return f * g, f * g, f * g
 
+
+@njit(cache=True)
+def _darken(lin, line, shade, e, xl, xr, i0, i1):
+    """A shadow's span: what is painted under it keeps ``1 - s min(1, edge (1 - r^2))^2`` of its light per
+    channel (see ``rollcam.sim._parts.shadow_part``). Its shade row: SHADOW_MARK at 0, the strengths at 2..4,
+    the edge at 5, the centre at SH_GEO and the inverse shape matrix at SH_GEO + 2.. and 1."""
+    cx, cy = shade[e, SH_GEO], shade[e, SH_GEO + 1]
+    n00, n01, n10, n11 = shade[e, SH_GEO + 2], shade[e, SH_GEO + 3], shade[e, SH_GEO + 4], shade[e, 1]
+    edge = shade[e, 5]
+    dv = line + 0.5 - cy
+    for i in range(i0, i1):
+        cov = min(xr, i + 1.0) - max(xl, float(i))
+        if cov <= 0.0:
+            continue
+        du = i + 0.5 - cx
+        ra, rb = n00 * du + n01 * dv, n10 * du + n11 * dv
+        q = min(edge * (1.0 - ra * ra - rb * rb), 1.0)
+        if q <= 0.0:
+            continue
+        q = cov * q * q
+        for c in range(3):
+            lin[i, c] = lin[i, c] * (1.0 - shade[e, 2 + c] * q)
 
 guard(__name__)  # after every kernel and import: see rollcam.sim._jitcache

@@ -11,7 +11,7 @@ import numpy as np
 from . import _body as B
 from . import _props as Pr
 from . import _world as Wd
-from .scene import Camera, Prop, Scene
+from .scene import Camera, Lighting, Prop, Scene
 
 BUILDING_BIN_M = 0.5
 PROP_ID_BASE = 1_000_000
@@ -142,8 +142,25 @@ def _compile_buildings(buildings, length_m: float) -> tuple[np.ndarray, np.ndarr
     return tab, lut
 
 
+CAST_MIN_ELEVATION_DEG = 15.0
+"""Below this sun elevation walkers cast no sun shadow (it would reach past their bounds: 3.7 x their height)."""
+
+
+def _cast_shadow(lighting: Lighting) -> tuple[float, float, tuple[float, float, float]]:
+    """A walker's sun shadow under ``lighting``: where it ends on the ground per metre of the walker's height
+    (x, y), and the share of the ground's light it takes per channel (the sun's, over sun and sky); none when
+    the sun is lower than CAST_MIN_ELEVATION_DEG."""
+    sx, sy, sz = lighting.sun_direction
+    if lighting.sun_elevation_deg < CAST_MIN_ELEVATION_DEG or max(lighting.sun_rgb) <= 0.0:
+        return 0.0, 0.0, (0.0, 0.0, 0.0)
+    share = tuple(float(s * sz / (s * sz + a)) if s * sz + a > 0 else 0.0
+                  for s, a in zip(lighting.sun_rgb, lighting.ambient_rgb, strict=True))
+    return -sx / sz, -sy / sz, (share[0], share[1], share[2])
+
+
 def _compile_actors(scene: Scene) -> tuple[np.ndarray, tuple[int, ...], tuple[str, ...], tuple[float, ...]]:
     rows, ids, classes, speeds = [], [], [], []
+    cast = _cast_shadow(scene.lighting)
     for p in scene.pedestrians:
         a = np.zeros(B.ACTOR_COLS)
         a[B.A_TYPE] = B.TYPE_PEDESTRIAN
@@ -155,6 +172,8 @@ def _compile_actors(scene: Scene) -> tuple[np.ndarray, tuple[int, ...], tuple[st
         a[B.P_LONG_HAIR], a[B.P_SLEEVES] = float(p.long_hair), float(p.long_sleeves)
         a[B.P_STRIDE] = p.stride_length_m
         a[B.P_SHADOW] = scene.contact_shadow
+        if scene.contact_shadow > 0.0:
+            a[B.P_CAST_X], a[B.P_CAST_Y], a[B.P_CAST_S : B.P_CAST_S + 3] = cast
         for off, rgb in ((B.P_SKIN, p.skin), (B.P_HAIR, p.hair), (B.P_SHIRT, p.shirt), (B.P_PANTS, p.pants),
                          (B.P_SHOES, p.shoes)):
             a[off : off + 3] = rgb
