@@ -3,7 +3,7 @@
 # its dataset, train it, measure it, and copy the model with its cards and licence into the package.
 #   tools/train_personnet.sh [OUT]      (default OUT: rollcam_out/personnet; rerun to resume)
 # The dataset build and the training each resume from where an interruption left them. Cost on this project's
-# shared 2-core machine: ~4 min to render, ~45 min to train (one thread), ~5 min to measure.
+# shared 2-core machine: ~4 min to render, ~30 min to train (one thread), ~1 min to measure.
 # ROLLCAM and PYTHON name the programs (default: rollcam and python on PATH).
 set -eu
 OUT=${1:-rollcam_out/personnet}
