@@ -187,14 +187,14 @@ def realism(
     precision_floor: float = PRECISION_FLOOR,
     lens: LensOptics | None = None,
     picture: PictureSteps | None = None,
-    shadows: bool = False,
+    shadows: bool = True,
 ) -> dict:
     """Each detector's recall and precision on unoccluded, untruncated pedestrians of seeded street scenes.
 
     Scene ``i`` uses seed ``seed + i`` and time of day ``times[i % len(times)]``; every camera of it is rendered
     global-shutter at ``frames_per_camera`` instants ``frame_spacing_s`` apart, and every detector runs on the
     same full-resolution frames, through the camera's ``lens`` and ISP ``picture`` steps when given
-    (``rollcam.sim.optics``, ``rollcam.sim.isp``), with the walkers' contact shadows when ``shadows``.
+    (``rollcam.sim.optics``, ``rollcam.sim.isp``), with the walkers' shadows unless not ``shadows``.
     ``progress(done, total)`` is called after each frame. Returns a
     JSON-able dict.
     """

@@ -106,7 +106,8 @@ def _realism_arguments(p: argparse.ArgumentParser) -> None:
                    help="the lens in front of the sensor, e.g. vignette=0.3,lens_blur_px=1 (docs/optics.md)")
     p.add_argument("--picture", metavar="K=V,...", default="",
                    help="the ISP's last steps, e.g. sharpen=0.5,jpeg_quality=85 (docs/optics.md)")
-    p.add_argument("--shadows", action="store_true", help="contact shadows under the walkers (emu: shadows=on)")
+    p.add_argument("--no-shadows", dest="shadows", action="store_false",
+                   help="the walkers without their shadows on the ground (emu: shadows=off)")
 
 
 def _steps(kind: type, flag: str, text: str) -> Any:

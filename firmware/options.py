@@ -249,7 +249,8 @@ OPTIONS: dict[str, Option] = {o.name: o for o in (
     Option("ego", _ego, "none", "street: camera motion none | pan | walk | vehicle | drone | calib", ("street",)),
     Option("props", parse_bool, False, "street: parked cars, trees, lamp poles, signs, benches and bins (scenery: "
                                        "they hide walkers, no truth records): on | off", ("street",)),
-    Option("shadows", parse_bool, False, "street: contact shadows on the ground under the walkers: on | off",
+    Option("shadows", parse_bool, True, "street: the walkers' shadows on the ground (contact; the sun's in daylight): "
+                                        "on | off",
            ("street",)),
     Option("vx", bounded(finite_float, -MAX_VX_PX_S, MAX_VX_PX_S), 2000.0, "chart: bar speed, px/s",
            ("chart",), "vx_px_s"),

@@ -61,7 +61,7 @@ from ._parts import (
     Q_YMAX,
     Q_YMIN,
     capsule_part,
-    shadow_part,
+    ground_shadow,
     sun_in_view,
 )
 from ._props import PROP_BOX, prop_box, prop_parts, prop_ref_y
@@ -313,7 +313,7 @@ def actor_parts(act, world, lut, bld, light, cam, rot, pos, t, parts, scratch):
     if act[P_SHADOW] > 0.0 and n + 1 < MAX_PARTS:
         width = act[P_H] * max(act[P_BUILD], 1.0)
         s = act[P_SHADOW]
-        _ground_shadow(parts, n, root[0], root[1], SHADOW_SIDE * width, 0.0, 0.0, SHADOW_ALONG * act[P_H],
+        ground_shadow(parts, n, root[0], root[1], SHADOW_SIDE * width, 0.0, 0.0, SHADOW_ALONG * act[P_H],
                        s, s, s, 1.0, cam, rot, pos)
         cx, cy = act[P_CAST_X] * act[P_H], act[P_CAST_Y] * act[P_H]
         reach = math.hypot(cx, cy)
@@ -322,34 +322,8 @@ def actor_parts(act, world, lut, bld, light, cam, rot, pos, t, parts, scratch):
             gx, gy = root[0] + 0.5 * cx, root[1] + 0.5 * cy
             if not _sun_blocked(world, lut, bld, gx, gy, 0.05, light, -1):  # not in a facade's shadow
                 along, side = 0.5 * reach + CAST_FOOT * act[P_H], CAST_SIDE * width
-                _ground_shadow(parts, n + 1, gx, gy, -uy * side, ux * side, ux * along, uy * along,
+                ground_shadow(parts, n + 1, gx, gy, -uy * side, ux * side, ux * along, uy * along,
                                act[P_CAST_S], act[P_CAST_S + 1], act[P_CAST_S + 2], CAST_EDGE, cam, rot, pos)
-
-
-@njit(cache=True)
-def _ground_shadow(parts, p, x, y, ax, ay, bx, by, s_r, s_g, s_b, edge, cam, rot, pos):
-    """Row ``p``: a shadow on the ground, the ellipse of centre (x, y) and semi-axes (ax, ay), (bx, by) (world
-    m, inside the walker's bounds box, so drawn on every line the walker is), seen as the image ellipse its
-    projected centre and axis ends span; strength per channel and edge sharpness as ``shadow_part``'s."""
-    cu, cv, pu, pv, qu, qv = 0.0, 0.0, 0.0, 0.0, 0.0, 0.0
-    for k in range(3):
-        dx = x + (ax if k == 1 else bx if k == 2 else 0.0) - pos[0]
-        dy = y + (ay if k == 1 else by if k == 2 else 0.0) - pos[1]
-        dz = -pos[2]
-        cz = rot[2, 0] * dx + rot[2, 1] * dy + rot[2, 2] * dz
-        if cz < NEAR_M:
-            return  # reaching behind the camera: no shadow drawn
-        u = cam[C_FX] * (rot[0, 0] * dx + rot[0, 1] * dy + rot[0, 2] * dz) / cz + cam[C_CX]
-        v = cam[C_FY] * (rot[1, 0] * dx + rot[1, 1] * dy + rot[1, 2] * dz) / cz + cam[C_CY]
-        if cam[C_TRANSPOSED] != 0.0:
-            u, v = v, u
-        if k == 0:
-            cu, cv = u, v
-        elif k == 1:
-            pu, pv = u - cu, v - cv
-        else:
-            qu, qv = u - cu, v - cv
-    shadow_part(parts, p, cu, cv, pu, pv, qu, qv, s_r, s_g, s_b, edge)
 
 
 @njit(cache=True, inline="always")

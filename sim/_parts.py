@@ -18,7 +18,7 @@ import math
 from numba import njit
 
 from ._jitcache import guard
-from ._world import L_SUN
+from ._world import C_CX, C_CY, C_FX, C_FY, C_TRANSPOSED, L_SUN
 
 Q_KIND, Q_DEPTH, Q_AMB, Q_DIR, Q_LX, Q_LZ, Q_GEO = 0, 1, 2, 5, 8, 9, 10
 N_VERTS = 5
@@ -113,5 +113,43 @@ def shadow_part(parts, p, cu, cv, pu, pv, qu, qv, s_r, s_g, s_b, edge):
     parts[p, g + 4], parts[p, g + 5] = -pv / det, pu / det
     half = math.sqrt(pv * pv + qv * qv)
     parts[p, Q_YMIN], parts[p, Q_YMAX] = cv - half, cv + half
+
+@njit(cache=True)
+def ground_shadow(parts, p, x, y, ax, ay, bx, by, s_r, s_g, s_b, edge, cam, rot, pos):
+    """Row ``p``: a shadow on the ground, the ellipse of centre (x, y) and semi-axes (ax, ay), (bx, by) (world
+    m), seen as the image ellipse its projected centre and axis ends span, shrunk where perspective would take
+    it past the image box of its world rectangle (which lies in the walker's bounds box: so the shadow is drawn
+    on every line it reaches, on every path); none when that box reaches behind the camera or would shrink it
+    below half. Strength per channel and edge sharpness as ``shadow_part``'s."""
+    cu, cv, pu, pv, qu, qv = 0.0, 0.0, 0.0, 0.0, 0.0, 0.0
+    u_lo, u_hi, v_lo, v_hi = 1e300, -1e300, 1e300, -1e300
+    for k in range(7):  # centre, the two axis ends, then the rectangle's four corners
+        sa = 1.0 if k == 1 or k == 3 or k == 4 else -1.0 if k == 5 or k == 6 else 0.0
+        sb = 1.0 if k == 2 or k == 3 or k == 5 else -1.0 if k == 4 or k == 6 else 0.0
+        dx = x + sa * ax + sb * bx - pos[0]
+        dy = y + sa * ay + sb * by - pos[1]
+        dz = -pos[2]
+        cz = rot[2, 0] * dx + rot[2, 1] * dy + rot[2, 2] * dz
+        if cz < NEAR_M:
+            return  # reaching behind the camera: no shadow drawn
+        u = cam[C_FX] * (rot[0, 0] * dx + rot[0, 1] * dy + rot[0, 2] * dz) / cz + cam[C_CX]
+        v = cam[C_FY] * (rot[1, 0] * dx + rot[1, 1] * dy + rot[1, 2] * dz) / cz + cam[C_CY]
+        if cam[C_TRANSPOSED] != 0.0:
+            u, v = v, u
+        if k == 0:
+            cu, cv = u, v
+        elif k == 1:
+            pu, pv = u - cu, v - cv
+        elif k == 2:
+            qu, qv = u - cu, v - cv
+        else:
+            u_lo, u_hi, v_lo, v_hi = min(u_lo, u), max(u_hi, u), min(v_lo, v), max(v_hi, v)
+    hu, hv = math.hypot(pu, qu), math.hypot(pv, qv)  # the ellipse's half extents
+    f = min(1.0, (cu - u_lo) / max(hu, 1e-12), (u_hi - cu) / max(hu, 1e-12), (cv - v_lo) / max(hv, 1e-12),
+            (v_hi - cv) / max(hv, 1e-12))
+    if f < 0.5:
+        return
+    f *= 1.0 - 1e-9  # strictly inside, whatever the rounding of the extents
+    shadow_part(parts, p, cu, cv, f * pu, f * pv, f * qu, f * qv, s_r, s_g, s_b, edge)
 
 guard(__name__)  # after every kernel and import: see rollcam.sim._jitcache

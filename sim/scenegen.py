@@ -260,15 +260,16 @@ def make_street_scene(
     sensor_width_mm: float = STUDY_SENSOR_WIDTH_MM,
     ego: EgoMotion | None = None,
     props: bool = False,
-    shadows: bool = False,
+    shadows: bool = True,
     **lamp_options: Any,
 ) -> Scene:
     """A seeded city street with a crowd walking on the sidewalks and crossing lanes, and several cameras.
 
     Walkers' base speeds are drawn up to 2 m/s and scaled by ``speed`` ('normal' 1x, 'fast' 10x).
     ``props`` adds parked cars, trees, lamp poles, signs, benches and bins (``rollcam.sim.streetprops``, from
-    their own generator: the rest of the scene is the same either way). ``shadows`` darkens the ground under each
-    walker's feet (``CONTACT_SHADOW`` at the centre: the sky and sun the body hides from the ground there).
+    their own generator: the rest of the scene is the same either way). ``shadows`` (on by default) darkens the
+    ground under each walker's feet (``CONTACT_SHADOW`` at the centre: the sky and sun the body hides from the
+    ground there) and, in daylight, along its sun shadow (``rollcam.sim.compile``).
     ``lamp_options`` are ``street_lights``' (street lamps and LED signs, on at dusk and night by default).
     """
     if time_of_day not in TIMES_OF_DAY:
