@@ -240,7 +240,7 @@ class Scene:
     flat_level: float = 0.5
     lights: tuple[ModulatedLight, ...] = ()  # time-modulated lights, on top of the steady ``lighting``
     props: tuple[Prop, ...] = ()  # street clutter (static actors without truth records)
-    contact_shadow: float = 0.0  # darkening of the ground under each walker's feet at its centre (0: none)
+    contact_shadow: float = 0.0  # ground darkening under each walker at its centre; > 0 also casts sun shadows
 
     @property
     def time_of_day(self) -> str:
