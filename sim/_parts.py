@@ -5,10 +5,10 @@ writer every kind of actor uses.
 kernels of ``rollcam.sim._kernels`` intersect and paint it. A row is a capsule (end points and a radius from
 ``Q_GEO``, shaded as a cylinder across its span by ``Q_LX``/``Q_LZ``) or a convex polygon of up to ``N_VERTS``
 vertices (flat: with ``Q_LX = Q_LZ = 0`` its colour is ``Q_AMB``); a quad repeats its first vertex as the fifth,
-which a near-plane clip of a quad may need. A contact shadow (``shadow_part``) is an ellipse on the image,
-centre and inverse shape matrix from ``Q_GEO``, strength in ``Q_AMB``: it darkens what lies under it instead of hiding
-it, and is no part of its actor's extent or visibility. ``Q_YMIN``..``Q_YMAX`` is the range of lines the part
-can reach.
+which a near-plane clip of a quad may need. A shadow (``shadow_part``, ``ground_shadow``) is an ellipse on the
+image, centre and inverse shape matrix from ``Q_GEO``, strengths in ``Q_AMB``, edge in ``Q_DIR``: it darkens
+what lies under it instead of hiding it, and is no part of its actor's extent or visibility.
+``Q_YMIN``..``Q_YMAX`` is the range of lines the part can reach.
 """
 
 from __future__ import annotations
@@ -114,6 +114,7 @@ def shadow_part(parts, p, cu, cv, pu, pv, qu, qv, s_r, s_g, s_b, edge):
     half = math.sqrt(pv * pv + qv * qv)
     parts[p, Q_YMIN], parts[p, Q_YMAX] = cv - half, cv + half
 
+
 @njit(cache=True)
 def ground_shadow(parts, p, x, y, ax, ay, bx, by, s_r, s_g, s_b, edge, cam, rot, pos):
     """Row ``p``: a shadow on the ground, the ellipse of centre (x, y) and semi-axes (ax, ay), (bx, by) (world
@@ -151,5 +152,6 @@ def ground_shadow(parts, p, x, y, ax, ay, bx, by, s_r, s_g, s_b, edge, cam, rot,
         return
     f *= 1.0 - 1e-9  # strictly inside, whatever the rounding of the extents
     shadow_part(parts, p, cu, cv, f * pu, f * pv, f * qu, f * qv, s_r, s_g, s_b, edge)
+
 
 guard(__name__)  # after every kernel and import: see rollcam.sim._jitcache

@@ -127,4 +127,5 @@ def _darken(lin, line, shade, e, xl, xr, i0, i1):
         for c in range(3):
             lin[i, c] = lin[i, c] * (1.0 - shade[e, 2 + c] * q)
 
+
 guard(__name__)  # after every kernel and import: see rollcam.sim._jitcache
