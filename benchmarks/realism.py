@@ -194,7 +194,7 @@ def realism(
     Scene ``i`` uses seed ``seed + i`` and time of day ``times[i % len(times)]``; every camera of it is rendered
     global-shutter at ``frames_per_camera`` instants ``frame_spacing_s`` apart, and every detector runs on the
     same full-resolution frames, through the camera's ``lens`` and ISP ``picture`` steps when given
-    (``rollcam.sim.optics``, ``rollcam.sim.isp``), with the walkers' shadows unless not ``shadows``.
+    (``rollcam.sim.optics``, ``rollcam.sim.isp``), with the walkers' shadows when ``shadows`` (the default).
     ``progress(done, total)`` is called after each frame. Returns a
     JSON-able dict.
     """
