@@ -135,6 +135,33 @@ def test_ops():
     assert wins[0][0] == 0 and wins[-1][2] == 100 and wins[0][2] > wins[1][0]
 
 
+def _nms_by_definition(boxes, scores, classes, threshold, max_det):
+    """Greedy NMS spelled out: best first, keep a box unless a kept box of its class overlaps it too much."""
+    kept: list[int] = []
+    for i in sorted(range(len(boxes)), key=lambda i: -scores[i]):  # sorted() is stable: ties in input order
+        if len(kept) == max_det:
+            break
+        if all(classes[k] != classes[i] or iou_matrix([boxes[k]], [boxes[i]])[0, 0] <= threshold for k in kept):
+            kept.append(i)
+    return kept
+
+
+def test_nms_keeps_what_greedy_suppression_keeps_by_definition():
+    rng = np.random.default_rng(7)
+    for _ in range(300):
+        n = int(rng.integers(0, 60))
+        xy = rng.uniform(-20, 200, (n, 2))
+        boxes = np.concatenate([xy, xy + rng.uniform(0, 60, (n, 2))], axis=1).astype(np.float32)
+        scores = np.round(rng.uniform(0, 1, n), 1)  # coarse scores: many ties
+        classes = rng.integers(0, 3, n)
+        threshold, max_det = float(rng.choice([0.0, 0.3, 0.45, 0.7])), int(rng.integers(1, 40))
+        keep = nms(boxes, scores, classes, threshold, max_det)
+        assert keep.dtype == np.int64
+        assert keep.tolist() == _nms_by_definition(boxes, scores, classes, threshold, max_det)
+    assert nms(np.zeros((0, 4)), np.zeros(0), np.zeros(0), 0.5).tolist() == []
+    assert nms(np.array([[0, 0, 1, 1]]), np.array([1.0]), np.array([0]), 0.5, max_det=0).tolist() == []
+
+
 def test_ssdlite_is_packaged_and_finds_a_rendered_pedestrian():
     from rollcam.host import open_camera
     from rollcam.host.detectors.ops import iou_matrix

@@ -1,6 +1,7 @@
 """Image and box operations the CNN detectors share: letterboxing, resizing, NMS and tiling.
 
-Pure numpy/OpenCV functions, so each can be tested on its own and reused by any model wrapper.
+Plain numpy/OpenCV functions (NMS's greedy pass is one compiled loop), so each can be tested on its own and
+reused by any model wrapper.
 """
 
 from __future__ import annotations
@@ -10,6 +11,8 @@ from dataclasses import dataclass
 
 import cv2
 import numpy as np
+from numba import njit
+from rollcam.sim._jitcache import guard
 
 LETTERBOX_FILL = 114
 """Grey of the letterbox bars (the Ultralytics convention the YOLO exports were trained with)."""
@@ -66,23 +69,49 @@ def iou_matrix(a: np.ndarray, b: np.ndarray) -> np.ndarray:
 
 def nms(boxes: np.ndarray, scores: np.ndarray, classes: np.ndarray, iou_threshold: float,
         max_det: int = 300) -> np.ndarray:
-    """Indices kept by class-aware greedy non-maximum suppression, best score first."""
-    boxes = np.asarray(boxes, np.float32).reshape(-1, 4)
-    if not len(boxes):
+    """Indices kept by class-aware greedy non-maximum suppression, best score first (ties in input order).
+
+    A box is dropped when a better-scoring kept box of the same class overlaps it by IoU above
+    ``iou_threshold``; at most ``max_det`` are kept. One compiled pass costs O(kept x candidates) without
+    temporaries (a noise frame's 600 candidates take well under a millisecond).
+    """
+    b = np.asarray(boxes, np.float32).reshape(-1, 4)
+    if not len(b):
         return np.zeros(0, np.int64)
-    # Offsetting each class into its own coordinate range makes one pass class-aware (the batched-NMS trick).
-    span = float(np.max(boxes)) + 1.0
-    shifted = boxes + (np.asarray(classes, np.float32) * span)[:, None]
-    order = np.argsort(-np.asarray(scores), kind="stable")
-    keep: list[int] = []
-    while len(order) and len(keep) < max_det:
-        i = int(order[0])
-        keep.append(i)
-        if len(order) == 1:
+    order = np.argsort(-np.asarray(scores).reshape(-1), kind="stable")
+    c = np.asarray(classes).reshape(-1).astype(np.int64)
+    kept = _greedy_nms(np.ascontiguousarray(b[order], np.float64), np.ascontiguousarray(c[order]),
+                       float(iou_threshold), int(max_det))
+    return order[kept]
+
+
+@njit(cache=True, nogil=True)
+def _greedy_nms(b: np.ndarray, cls: np.ndarray, thr: float, max_det: int) -> np.ndarray:
+    """Positions kept in score-sorted boxes ``b`` of classes ``cls`` (the loop of ``nms``)."""
+    n = b.shape[0]
+    area = (b[:, 2] - b[:, 0]) * (b[:, 3] - b[:, 1])
+    gone = np.zeros(n, np.bool_)
+    out = np.empty(min(n, max(max_det, 0)), np.int64)
+    k = 0
+    for i in range(n):
+        if k >= max_det:
             break
-        rest = order[1:]
-        order = rest[iou_matrix(shifted[i:i + 1], shifted[rest])[0] <= iou_threshold]
-    return np.asarray(keep, np.int64)
+        if gone[i]:
+            continue
+        out[k] = i
+        k += 1
+        for j in range(i + 1, n):
+            if gone[j] or cls[j] != cls[i]:
+                continue
+            iw = min(b[i, 2], b[j, 2]) - max(b[i, 0], b[j, 0])
+            ih = min(b[i, 3], b[j, 3]) - max(b[i, 1], b[j, 1])
+            if not (iw > 0.0 and ih > 0.0):
+                continue
+            inter = iw * ih
+            union = area[i] + area[j] - inter
+            if union > 0.0 and inter / max(union, 1e-12) > thr:
+                gone[j] = True
+    return out[:k]
 
 
 def tile_windows(width: int, height: int, cols: int, rows: int, overlap: float) -> Iterator[tuple[int, int, int, int]]:
@@ -129,3 +158,6 @@ def suppress_contained(boxes: np.ndarray, scores: np.ndarray, classes: np.ndarra
             gone[i] = False
             alive &= ~gone
     return order[alive[order]]
+
+
+guard(__name__)
