@@ -30,6 +30,11 @@ sun_blocked_c = types.ExternalFunction(
 """(world, lut, n_bins, buildings, light, px, py, pz, skip_side): 1 when a facade shades point p from the sun."""
 
 
+encode_line_c = types.ExternalFunction(
+    "rollcam_encode_line", types.void(_ADDR, types.float64, _ADDR, types.int64, _ADDR, types.int64))
+"""(lin, gain, lut, lut_size, out, n): ``n`` float32 RGB pixels to 8-bit BGR through ``lut``."""
+
+
 def library_path() -> Path:
     """The built library; RollcamError (naming the fix) when the install did not build it."""
     path = Path(__file__).with_name(LIBRARY_NAME)

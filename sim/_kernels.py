@@ -39,9 +39,10 @@ from ._actors import (
     actor_parts,
     parts_scratch,
 )
+from ._cshade import encode_line_c
 from ._jitcache import guard
 from ._parts import PART_SHADOW
-from ._texture import SH_FACE, SH_GEO, SH_TEX, SHADE_COLS, SHADOW_MARK, _darken, _texture
+from ._texture import NO_CELL, SH_FACE, SH_GEO, SH_TEX, SHADE_COLS, SHADOW_MARK, _darken, texture_at, texture_span
 from ._world import C_MOVING, C_TRANSPOSED, background_line
 
 # slots[o, k]: >= 0 row of the shared parts table; SLOT_NONE not needed; SLOT_LOCAL needed by a single line,
@@ -248,6 +249,8 @@ def _paint_spans(lin, line, m, gt_vis, depth, idx_o, shade, span_l, span_r, owne
         mid, half = 0.5 * (xl + xr), 0.5 * (xr - xl)
         lx, lz = shade[e, 0], shade[e, 1]
         textured = shade[e, SH_TEX] > 0.0
+        ts = texture_span(shade, e, flip)
+        cell = NO_CELL
         yc = line + 0.5
         for i in range(i0, i1):
             cov = min(xr, i + 1.0) - max(xl, float(i))
@@ -261,7 +264,7 @@ def _paint_spans(lin, line, m, gt_vis, depth, idx_o, shade, span_l, span_r, owne
             sh = lx * u + lz * math.sqrt(1.0 - u * u)
             if sh < 0.0:
                 sh = 0.0
-            f0, f1, f2 = _texture(shade, e, i + 0.5, yc, flip) if textured else (1.0, 1.0, 1.0)
+            f0, f1, f2, cell = texture_at(ts, i + 0.5, yc, cell) if textured else (1.0, 1.0, 1.0, cell)
             for c in range(3):
                 v = (shade[e, 2 + c] + shade[e, 5 + c] * sh) * (f0 if c == 0 else f1 if c == 1 else f2)
                 lin[i, c] = lin[i, c] * (1.0 - cov) + v * cov
@@ -276,15 +279,10 @@ def _paint_spans(lin, line, m, gt_vis, depth, idx_o, shade, span_l, span_r, owne
 
 @njit(cache=True)
 def encode_line(lin, gain, lut, out_u8):
-    """Linear RGB line to 8-bit BGR through the output curve ``lut`` (LUT_SIZE + 1 entries)."""
-    for i in range(lin.shape[0]):
-        for c in range(3):
-            v = lin[i, c] * gain
-            if v < 0.0:
-                v = 0.0
-            elif v > 1.0:
-                v = 1.0
-            out_u8[i, 2 - c] = lut[int(v * LUT_SIZE + 0.5)]
+    """Linear RGB pixels (n x 3, float32) to 8-bit BGR through the output curve ``lut`` (LUT_SIZE + 1 entries,
+    uint8): scaled by ``gain``, clipped to [0, 1] (NaN to 0), nearest entry. The C shader library's vectorised
+    loop; every array must be C-contiguous (the renderer's lines and tables are)."""
+    encode_line_c(lin.ctypes.data, gain, lut.ctypes.data, lut.shape[0] - 1, out_u8.ctypes.data, lin.shape[0])
 
 
 # ======================================================================================================

@@ -66,24 +66,37 @@ def _lattice(ix, iy, seed):
 
 
 @njit(cache=True, inline="always")
-def _value_noise(x, y, seed):
-    """Smooth value noise in [-1, 1] at lattice coordinates (x, y): smoothstep between hashed lattice values."""
-    fx, fy = math.floor(x), math.floor(y)
-    ix, iy = int(fx), int(fy)
-    tx, ty = x - fx, y - fy
+def _cell(ix, iy, seed):
+    """The four lattice values around cell (ix, iy) of texture ``seed``: (ix, iy), (ix+1, iy), (ix, iy+1),
+    (ix+1, iy+1)."""
+    return (_lattice(ix, iy, seed), _lattice(ix + 1, iy, seed), _lattice(ix, iy + 1, seed),
+            _lattice(ix + 1, iy + 1, seed))
+
+
+@njit(cache=True, inline="always")
+def _smooth(x, y, cell):
+    """Smooth value noise in [-1, 1] at lattice coordinates (x, y) from ``cell``, the lattice values of the cell
+    holding (x, y) (``_cell``): smoothstep between them."""
+    tx, ty = x - math.floor(x), y - math.floor(y)
     tx, ty = tx * tx * (3.0 - 2.0 * tx), ty * ty * (3.0 - 2.0 * ty)
-    a = _lattice(ix, iy, seed) + tx * (_lattice(ix + 1, iy, seed) - _lattice(ix, iy, seed))
-    b = _lattice(ix, iy + 1, seed) + tx * (_lattice(ix + 1, iy + 1, seed) - _lattice(ix, iy + 1, seed))
+    a = cell[0] + tx * (cell[1] - cell[0])
+    b = cell[2] + tx * (cell[3] - cell[2])
     return 2.0 * (a + ty * (b - a)) - 1.0
 
 
 @njit(cache=True, inline="always")
-def _texture(shade, e, x, yc, flip):
-    """Albedo factors (R, G, B) of span ``e``'s part at render-space point (x, yc): 1 + contrast x value noise in
-    coordinates fixed to the part's axis (along it from its first end, across it from its axis), so the texture
-    travels with the part, and on a head its face and hair. ``flip`` (-1 for a transposed render) keeps the
-    across coordinate the image's, whichever way lines run.
-    """
+def _value_noise(x, y, seed):
+    """Smooth value noise in [-1, 1] at lattice coordinates (x, y): smoothstep between hashed lattice values."""
+    return _smooth(x, y, _cell(int(math.floor(x)), int(math.floor(y)), seed))
+
+
+@njit(cache=True, inline="always")
+def texture_span(shade, e, flip):
+    """The per-span constants of ``texture_at`` for span ``e``: the part's axis start and unit direction, its
+    length, the texture's cells per pixel, contrast and seed, and the head's radius and face record (a head
+    when ``face``). Computed once per span: per pixel they were most of the texture's cost."""
+    if not shade[e, SH_TEX] > 0.0:  # untextured: its texture columns were never written
+        return 0.0, 0.0, 0.0, 1.0, 0.0, flip, 0.0, 0.0, 0, False, 1.0, 0.0, 0.0, 0.0, 0.0, 0.0
     ax, ay, bx, by = shade[e, SH_GEO], shade[e, SH_GEO + 1], shade[e, SH_GEO + 2], shade[e, SH_GEO + 3]
     dx, dy = bx - ax, by - ay
     ln = math.sqrt(dx * dx + dy * dy)
@@ -91,18 +104,44 @@ def _texture(shade, e, x, yc, flip):
         dx, dy = dx / ln, dy / ln
     else:
         dx, dy = 0.0, 1.0
+    face = not shade[e, SH_FACE] < -1.0
+    return (ax, ay, dx, dy, ln, flip, shade[e, SH_TEX + 1], shade[e, SH_TEX], int(shade[e, SH_TEX + 2]),
+            face, shade[e, SH_GEO + 4], shade[e, SH_FACE], shade[e, SH_FACE + 1], shade[e, SH_FACE + 2],
+            shade[e, SH_FACE + 3], shade[e, SH_FACE + 4])
+
+
+NO_CELL = (0, 0, False, 0.0, 0.0, 0.0, 0.0)
+"""``texture_at``'s cell cache holding no cell (a new span's)."""
+
+
+@njit(cache=True, inline="always")
+def texture_at(ts, x, yc, cell):
+    """Albedo factors (R, G, B) at render-space point (x, yc) of the span whose ``texture_span`` is ``ts``,
+    and the cell cache for the next pixel: 1 + contrast x value noise in coordinates fixed to the part's axis
+    (along it from its first end, across it from its axis), so the texture travels with the part, and on a
+    head its face and hair. The ``flip`` in ``ts`` (-1 for a transposed render) keeps the across coordinate the
+    image's, whichever way lines run.
+
+    ``cell`` (cell x, cell y, valid, its four lattice values; ``NO_CELL`` for a span's first pixel) is the last
+    pixel's cell: neighbouring pixels mostly share one, so the hashes are redone only when the cell changes.
+    It is a tuple of scalars, not an array, so the per-pixel loop touches no reference counts.
+    """
+    ax, ay, dx, dy, ln, flip, k, contrast, seed, face, r, fc, fs, h0, h1, h2 = ts
     px, py = x - ax, yc - ay
     along_px = px * dx + py * dy
     across_px = (py * dx - px * dy) * flip
-    k = shade[e, SH_TEX + 1]
-    f = 1.0 + shade[e, SH_TEX] * _value_noise(across_px * k, along_px * k, int(shade[e, SH_TEX + 2]))
-    if shade[e, SH_FACE] < -1.0:
-        return f, f, f
-    r = shade[e, SH_GEO + 4]
-    g, hair = _face(across_px / r, (along_px - 0.5 * ln) / r, 0.5 * ln / r, shade[e, SH_FACE], shade[e, SH_FACE + 1])
+    nx, ny = across_px * k, along_px * k
+    ix, iy = int(math.floor(nx)), int(math.floor(ny))
+    if not cell[2] or cell[0] != ix or cell[1] != iy:
+        c = _cell(ix, iy, seed)
+        cell = (ix, iy, True, c[0], c[1], c[2], c[3])
+    f = 1.0 + contrast * _smooth(nx, ny, (cell[3], cell[4], cell[5], cell[6]))
+    if not face:
+        return f, f, f, cell
+    g, hair = _face(across_px / r, (along_px - 0.5 * ln) / r, 0.5 * ln / r, fc, fs)
     if hair:
-        return f * shade[e, SH_FACE + 2], f * shade[e, SH_FACE + 3], f * shade[e, SH_FACE + 4]
-    return f * g, f * g, f * g
+        return f * h0, f * h1, f * h2, cell
+    return f * g, f * g, f * g, cell
 
 
 @njit(cache=True)

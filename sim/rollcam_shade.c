@@ -300,6 +300,32 @@ void rollcam_background_line(const double *restrict world, const int64_t *restri
     }
 }
 
+/* Linear RGB pixels (n x 3 float32) to 8-bit BGR through the output curve `lut` (lut_size + 1 entries): scaled by
+ * gain, clipped to [0, 1] (NaN to 0), and looked up at the nearest of its lut_size steps. The renderer's one
+ * encoder (rollcam.sim._kernels.encode_line): gcc vectorises it (the per-pixel loop in numba was scalar and cost
+ * about a fifth of a moving-camera frame). */
+CLONES
+void rollcam_encode_line(const float *restrict lin, double gain, const uint8_t *restrict lut, int64_t lut_size,
+                         uint8_t *restrict out, int64_t n) {
+    const double scale = (double)lut_size;
+    int32_t idx[3 * 256]; /* a block's table indices: the vectorised part (gcc will not gather bytes) */
+    for (int64_t a0 = 0; a0 < n; a0 += 256) {
+        const int32_t m = (int32_t)(3 * (n - a0 < 256 ? n - a0 : 256));
+        const float *restrict src = lin + 3 * a0;
+        for (int32_t k = 0; k < m; k++) {
+            double v = (double)src[k] * gain;
+            v = v > 0.0 ? (v < 1.0 ? v : 1.0) : 0.0;
+            idx[k] = (int32_t)(v * scale + 0.5);
+        }
+        uint8_t *restrict dst = out + 3 * a0;
+        for (int32_t k = 0; k < m; k += 3) { /* RGB in, BGR out */
+            dst[k] = lut[idx[k + 2]];
+            dst[k + 1] = lut[idx[k + 1]];
+            dst[k + 2] = lut[idx[k]];
+        }
+    }
+}
+
 /* The fog and the noise for one point, for the tests. */
 double rollcam_fog_transmittance(double x) { return fog_transmittance(x, fog_table, fog_x_max); }
 

@@ -168,3 +168,18 @@ def test_part_slots_share_a_time_used_by_several_entries_and_leave_single_uses_l
     shared_o, shared_k = np.nonzero(uses > 1)  # row-major, as the table's rows
     assert np.array_equal(s_o, shared_o) and np.array_equal(s_k, shared_k)
     assert np.array_equal(slots[shared_o, shared_k], np.arange(shared_o.size))
+
+
+def test_encoder_scales_clips_and_rounds_to_the_nearest_curve_entry() -> None:
+    from rollcam.sim.render import _SRGB, encode_linear
+
+    rng = np.random.default_rng(9)
+    edges = np.array([-1.0, -0.0, 0.0, 1e-9, 0.5 / _kernels.LUT_SIZE, 0.5, 1.0, 1.0 + 1e-7, 7.0, np.inf, -np.inf,
+                      np.nan], np.float32)
+    # 1000 pixels: not a whole number of the encoder's 256-pixel blocks
+    lin = np.concatenate([np.resize(edges, (4, 3)), rng.uniform(-0.2, 1.4, (996, 3))]).astype(np.float32)
+    for gain in (1.0, 0.37, 2.5):
+        v = np.nan_to_num(lin.astype(np.float64) * gain, nan=0.0)
+        want = _SRGB[(np.clip(v, 0.0, 1.0) * _kernels.LUT_SIZE + 0.5).astype(np.int64)][:, ::-1]
+        got = encode_linear(lin.reshape(1, -1, 3), gain)[0]
+        assert np.array_equal(got, want)
