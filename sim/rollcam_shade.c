@@ -4,10 +4,12 @@
  * the static layer) shades through rollcam_background_line, and the walkers' sun test is rollcam_sun_blocked.
  *
  * Written for gcc to vectorise (8 pixels a step with AVX-512, 4 with AVX2; x86-64 builds carry both clones and
- * a plain one, picked at load by the CPU): the pixel loop has no branches (every material is evaluated and the
- * pixel's own selected), no calls, `restrict` pointers, and only the forms gcc 12's vectoriser accepts (the
- * comments at each say which). It is compiled without -ffast-math and with -ffp-contract=off, so every clone
- * performs the same IEEE operations in the same order: the image does not depend on which one runs.
+ * a plain one, picked at load by the CPU): a line's pixels are first classified by what their rays hit (sky,
+ * asphalt, sidewalk, one facade), and each run of one class is shaded by that material's loop alone. The pixel
+ * loops have no branches (conditions select values), no calls, `restrict` pointers, and only the forms gcc 12's
+ * vectoriser accepts (the comments at each say which). It is compiled without -ffast-math and with
+ * -ffp-contract=off, so every clone performs the same IEEE operations in the same order: the image does not
+ * depend on which one runs.
  *
  * Tables: rollcam/sim/_world.py's layouts (rollcam_shade_layout reports the columns read here, and the loader
  * checks them), with the building lookup and table as rollcam.sim.compile pads them: `lut` holds n_bins + 1
@@ -142,7 +144,214 @@ int64_t rollcam_sun_blocked(const double *restrict world, const int64_t *restric
     return pz + t * sun_z < bld[b * BLD_COLS + B_HEIGHT];
 }
 
-/* One render-space line of the background from pose (rot, pos): `n` pixels of linear RGB into out (n x 3). */
+/* What a line's pixels need from the scene, its camera and its pose: the constants of every pixel loop. */
+struct line_ctx {
+    int transposed;
+    int32_t n_bins, stride;
+    double line, inv_fx, inv_fy, cx0, cy0, px, py, pz;
+    double r00, r01, r02, r10, r11, r12, r20, r21, r22;
+    double xf, y_half, period, inv_period, inv_bin, road, curb, cross_y;
+    uint32_t seed;
+    double sun_x, sun_y, sun_z, sun_up, sun_xf, inv_fog, glow_emit, fog_max;
+    int sun_side;
+    double amb[3], sun_rgb[3], haze[3], hor[3], zen[3], asph[3], walk[3];
+    double light_sun[3];
+};
+
+/* Pixel classes: what its ray hits first (the road's asphalt, or the curb and sidewalk beside it). */
+enum { HIT_SKY = 0, HIT_ASPHALT = 1, HIT_SIDEWALK = 2, HIT_WALL = 3 };
+/* Pixels classified at a time: the hit pass's scratch stays in the L1 cache. */
+#define BLOCK 256
+
+/* The ray direction (unnormalised, world frame) of pixel a of the line. */
+static inline __attribute__((always_inline)) void ray_dir(const struct line_ctx *restrict k, int32_t a, double *dx,
+                                                          double *dy, double *dz) {
+    double xi = k->transposed ? k->line : (double)a, yi = k->transposed ? (double)a : k->line;
+    double cx = (xi + 0.5 - k->cx0) * k->inv_fx, cy = (yi + 0.5 - k->cy0) * k->inv_fy;
+    *dx = cx * k->r00 + cy * k->r10 + k->r20;
+    *dy = cx * k->r01 + cy * k->r11 + k->r21;
+    *dz = cx * k->r02 + cy * k->r12 + k->r22;
+}
+
+/* The sun's light on hit point h of normal dot sun `ndotl` (0 in a facade's shadow); on_sun_facade: the point
+ * is on the facade the shadow probe starts from, which cannot shade it. */
+static inline __attribute__((always_inline)) double sun_light(const struct line_ctx *restrict k,
+                                                              const int64_t *restrict lut,
+                                                              const double *restrict bld, double hx, double hy,
+                                                              double hz, double ndotl, flag on_sun_facade) {
+    double ts = (k->sun_xf - hx) / k->sun_x;
+    int32_t bin_s = street_bin(hy + ts * k->sun_y, k->y_half, k->inv_period, k->inv_bin, k->n_bins);
+    int64_t b_s = lut[k->sun_side * k->stride + bin_s];
+    double h_s = bld[b_s * BLD_COLS + B_HEIGHT];
+    flag probe = !on_sun_facade & (ts > 0.0);
+    flag shadow = probe & (hz + ts * k->sun_z < h_s);
+    double lit = ndotl > 0.0 ? ndotl : 0.0;
+    lit = shadow ? 0.0 : lit;
+    return lit * k->sun_up; /* (sun_x == 0 or sun_z <= 0 hold for the whole line: see sun_up) */
+}
+
+/* The fog's transmittance along the ray to a hit at t. */
+static inline __attribute__((always_inline)) double fog_at(const struct line_ctx *restrict k,
+                                                           const double *restrict fog, double t, double dx,
+                                                           double dy, double dz) {
+    double dist = t * sqrt(dx * dx + dy * dy + dz * dz);
+    return fog_transmittance(dist * k->inv_fog, fog, k->fog_max);
+}
+
+/* Classify pixels a0..a0+m: the class, the hit distance and the building row (on a facade; -1 elsewhere) of
+ * each. */
+static inline __attribute__((always_inline)) void hit_pass(const struct line_ctx *restrict k,
+                                                           const int64_t *restrict lut,
+                                                           const double *restrict bld, int32_t a0, int32_t m,
+                                                           int64_t *restrict cls, double *restrict t_out,
+                                                           int64_t *restrict b_out) {
+#pragma omp simd
+    for (int32_t j = 0; j < m; j++) {
+        /* Conditions combine with & and | (not && and ||) and values by selection, so the loop body has no
+         * branch for the vectoriser to give up on; every table read is at a valid (clamped) index. */
+        double dx, dy, dz;
+        ray_dir(k, a0 + j, &dx, &dy, &dz);
+        double t_ground = -k->pz / dz;
+        flag ground = (dz < 0.0) & (k->pz > 0.0) & (fabs(k->px + t_ground * dx) < k->xf);
+        double t_hit = ground ? t_ground : 1e30;
+        flag side = dx > 0.0 ? 1 : 0;
+        double t_wall = ((side == 1 ? k->xf : -k->xf) - k->px) / dx;
+        double fz_w = k->pz + t_wall * dz;
+        int32_t bin_w = street_bin(k->py + t_wall * dy, k->y_half, k->inv_period, k->inv_bin, k->n_bins);
+        int64_t b_w = lut[side * k->stride + bin_w];
+        double top = bld[b_w * BLD_COLS + B_HEIGHT];
+        flag wall = (dx != 0.0) & (t_wall > 0.0) & (t_wall < t_hit) & (fz_w >= 0.0) & (fz_w < top);
+        t_hit = wall ? t_wall : t_hit;
+        flag asphalt = fabs(clampc(k->px + t_hit * dx)) < k->road;
+        t_out[j] = t_hit;
+        b_out[j] = wall ? b_w : -1;
+        cls[j] = wall ? HIT_WALL : (ground ? (asphalt ? HIT_ASPHALT : HIT_SIDEWALK) : HIT_SKY);
+    }
+}
+
+/* Sky pixels a0..a1: the horizon-to-zenith blend and the sun's glow. */
+static inline __attribute__((always_inline)) void shade_sky(const struct line_ctx *restrict k, int32_t a0,
+                                                            int32_t a1, float *restrict out) {
+#pragma omp simd
+    for (int32_t a = a0; a < a1; a++) {
+        double dx, dy, dz, s_sky, glow;
+        ray_dir(k, a, &dx, &dy, &dz);
+        sky_weights(dx, dy, dz, k->light_sun, &s_sky, &glow);
+        for (int c = 0; c < 3; c++)
+            out[3 * a + c] = (float)(k->hor[c] * (1.0 - s_sky) + k->zen[c] * s_sky + k->sun_rgb[c] * glow);
+    }
+}
+
+/* Ground pixels a0..a1 (t: their hit distances from a0 on), all on the asphalt (two noises, markings) or all
+ * off it (curb; sidewalk: tiles, one noise), lit by the sun and the sky, through the fog. */
+static inline __attribute__((always_inline)) void shade_ground(const struct line_ctx *restrict k,
+                                                               const int64_t *restrict lut,
+                                                               const double *restrict bld,
+                                                               const double *restrict fog, int32_t a0, int32_t a1,
+                                                               const double *restrict t, const int asphalt,
+                                                               float *restrict out) {
+    static const double paint_rgb[3] = {0.62, 0.62, 0.60}, curb_rgb[3] = {0.45, 0.44, 0.42};
+    const double inv_tile = 1.0 / 0.6;
+#pragma omp simd
+    for (int32_t a = a0; a < a1; a++) {
+        double dx, dy, dz;
+        ray_dir(k, a, &dx, &dy, &dz);
+        double t_hit = t[a - a0];
+        double hx = clampc(k->px + t_hit * dx), hy = clampc(k->py + t_hit * dy), hz = clampc(k->pz + t_hit * dz);
+        double ax = fabs(hx);
+        double alb[3];
+        if (asphalt) {
+            double gm = (hx + 100.0) - floor(hx + 100.0);
+            double cm = hy - floor(hy * (1.0 / 9.0)) * 9.0;
+            flag zebra_zone = (fabs(hy - k->cross_y) < 2.0) & (ax < k->road - 0.3);
+            flag centre = ax < 0.07, edge = (k->road - 0.35 < ax) & (ax < k->road - 0.2);
+            flag paint = zebra_zone ? gm < 0.5 : (centre ? cm < 3.0 : edge);
+            double noise_a = value_noise(hx * 9.0, hy * 9.0, k->seed);
+            double noise_b = value_noise(hx * 1.3, hy * 1.3, k->seed + 7u); /* coarse asphalt grain */
+            double g_asph = 0.75 + 0.5 * (noise_a * 0.6 + noise_b * 0.4);
+            for (int c = 0; c < 3; c++)
+                alb[c] = paint ? paint_rgb[c] : k->asph[c] * g_asph;
+        } else {
+            flag kerb = ax < k->curb;
+            double tu = (ax - k->curb) * inv_tile, tv = hy * inv_tile;
+            double tiu = floor(tu), tiv = floor(tv);
+            /* one mask, not an | of two masks: the form gcc vectorises */
+            double grout_d = tu - tiu < tv - tiv ? tu - tiu : tv - tiv;
+            flag grout = grout_d < 0.04;
+            double noise_a = value_noise(hx * 4.0, hy * 4.0, k->seed + 11u);
+            double cell = hash01((int32_t)tiu, (int32_t)tiv, k->seed + 3u);
+            double g_walk = (0.85 + 0.3 * cell) * (grout ? 0.7 : 1.0) * (0.9 + 0.2 * noise_a);
+            for (int c = 0; c < 3; c++)
+                alb[c] = kerb ? curb_rgb[c] : k->walk[c] * g_walk;
+        }
+        double lit = sun_light(k, lut, bld, hx, hy, hz, k->sun_z, 0);
+        double f = fog_at(k, fog, t_hit, dx, dy, dz);
+        double g = 1.0 - f;
+        for (int c = 0; c < 3; c++)
+            out[3 * a + c] = (float)((alb[c] * (k->amb[c] + k->sun_rgb[c] * lit + 0.0)) * f + k->haze[c] * g);
+    }
+}
+
+/* Facade pixels a0..a1 of building row b_w (t: their hit distances from a0 on): floors, window columns, shop
+ * fronts, lit windows, lit by the sun and the sky, through the fog. */
+static inline __attribute__((always_inline)) void shade_wall(const struct line_ctx *restrict k,
+                                                             const int64_t *restrict lut,
+                                                             const double *restrict bld,
+                                                             const double *restrict fog, int32_t a0, int32_t a1,
+                                                             const double *restrict t, int64_t b_w,
+                                                             float *restrict out) {
+    static const double door_rgb[3] = {0.0, 0.08, 0.06};
+    /* the building's values, as locals (no gathers) */
+    const double *restrict row = bld + b_w * BLD_COLS;
+    const double y0 = row[B_Y0], floor_h = row[B_FLOOR], win_sp = row[B_WIN_SP], win_w = row[B_WIN_W];
+    const double top = row[B_HEIGHT], lit_share = row[B_LIT];
+    double rgb[3], win_rgb[3];
+    for (int c = 0; c < 3; c++)
+        rgb[c] = row[B_RGB + c], win_rgb[c] = row[B_WIN_RGB + c];
+    const uint32_t seed_b = k->seed + (uint32_t)b_w * 131u;
+    const double margin = 0.5 * (win_sp - win_w);
+#pragma omp simd
+    for (int32_t a = a0; a < a1; a++) {
+        double dx, dy, dz;
+        ray_dir(k, a, &dx, &dy, &dz);
+        double t_hit = t[a - a0];
+        flag side = dx > 0.0 ? 1 : 0;
+        double hx = clampc(k->px + t_hit * dx), hy = clampc(k->py + t_hit * dy), hz = clampc(k->pz + t_hit * dz);
+        double u = hy + k->y_half;
+        u -= floor(u * k->inv_period) * k->period;
+        u -= k->y_half + y0;
+        double floor_i = floor(hz / floor_h);
+        double zz = hz - floor_i * floor_h;
+        double col_i = floor(u / win_sp);
+        double uu = u - col_i * win_sp;
+        double noise_a = value_noise(u * 3.0, hz * 3.0, seed_b);
+        double cell = hash01((int32_t)col_i, floor_i == 0.0 ? 17 : (int32_t)floor_i, seed_b);
+        double grain = 0.9 + 0.2 * noise_a;
+        flag cornice = hz > top - 0.6;
+        flag ground_floor = floor_i == 0.0;
+        flag shop = (!cornice) & ground_floor & (0.1 < zz) & (zz < 2.7) & (0.25 < uu) & (uu < win_sp - 0.25);
+        flag door = shop & (cell < 0.35);
+        flag window = (!cornice) & (!ground_floor) & (0.9 < zz) & (zz < 2.5) & (margin < uu) & (uu < win_sp - margin);
+        flag frame = window & ((zz < 1.0) | (zz > 2.4) | (uu < margin + 0.06) | (uu > win_sp - margin - 0.06));
+        double wk = 0.7 + 0.6 * cell, k_wall = cornice ? 0.75 : 1.0;
+        double emit = (window & (cell < lit_share)) ? k->glow_emit : 0.0;
+        double lit = sun_light(k, lut, bld, hx, hy, hz, side == 1 ? -k->sun_x : k->sun_x, side == k->sun_side);
+        double f = fog_at(k, fog, t_hit, dx, dy, dz);
+        double g = 1.0 - f;
+        for (int c = 0; c < 3; c++) {
+            double w_c = rgb[c] * grain * k_wall;
+            double shop_c = door ? (c == 0 ? 0.12 + 0.2 * cell : door_rgb[c]) : win_rgb[c] * 0.8;
+            double win_c = win_rgb[c] * wk;
+            win_c = frame ? win_c * 0.5 + 0.1 : win_c;
+            double alb = window ? win_c : (shop ? shop_c : w_c);
+            out[3 * a + c] = (float)((alb * (k->amb[c] + k->sun_rgb[c] * lit + emit)) * f + k->haze[c] * g);
+        }
+    }
+}
+
+/* One render-space line of the background from pose (rot, pos): `n` pixels of linear RGB into out (n x 3).
+ * Blocks of pixels are classified by what their rays hit, and each run of one class is shaded by its material's
+ * loop alone (a street line is a few long runs of sky, facades and ground). */
 CLONES
 void rollcam_background_line(const double *restrict world, const int64_t *restrict lut, int64_t n_bins64,
                              const double *restrict bld, const double *restrict light, const double *restrict cam,
@@ -156,146 +365,53 @@ void rollcam_background_line(const double *restrict world, const int64_t *restri
                 out[3 * a + c] = (float)(kind == KIND_FLAT ? world[W_LEVEL] : world[W_ASPHALT + c]);
         return;
     }
-    const int32_t n_bins = (int32_t)n_bins64, stride = n_bins + 1;
-    const int transposed = cam[C_TRANSPOSED] != 0.0;
-    const double inv_fx = 1.0 / cam[C_FX], inv_fy = 1.0 / cam[C_FY], cx0 = cam[C_CX], cy0 = cam[C_CY];
-    const double px = pos[0], py = pos[1], pz = pos[2];
-    const double xf = world[W_FACADE], y_half = world[W_YHALF];
-    const double period = 2.0 * y_half, inv_period = 1.0 / period, inv_bin = 1.0 / world[W_BIN];
-    const uint32_t seed = (uint32_t)(int64_t)world[W_SEED];
-    const double road = world[W_ROAD], curb = world[W_ROAD] + world[W_CURB], cross_y = world[W_CROSS];
-    const double sun_x = light[L_SUN], sun_y = light[L_SUN + 1], sun_z = light[L_SUN + 2];
-    const double inv_fog = 1.0 / light[L_FOG], glow_emit = light[L_GLOW];
-    const int sun_side = sun_x > 0.0 ? 1 : 0;
+    struct line_ctx k;
+    k.n_bins = (int32_t)n_bins64, k.stride = k.n_bins + 1;
+    k.transposed = cam[C_TRANSPOSED] != 0.0;
+    k.line = (double)line;
+    k.inv_fx = 1.0 / cam[C_FX], k.inv_fy = 1.0 / cam[C_FY], k.cx0 = cam[C_CX], k.cy0 = cam[C_CY];
+    k.px = pos[0], k.py = pos[1], k.pz = pos[2];
+    k.r00 = rot[0], k.r01 = rot[1], k.r02 = rot[2], k.r10 = rot[3], k.r11 = rot[4], k.r12 = rot[5];
+    k.r20 = rot[6], k.r21 = rot[7], k.r22 = rot[8];
+    k.xf = world[W_FACADE], k.y_half = world[W_YHALF];
+    k.period = 2.0 * k.y_half, k.inv_period = 1.0 / k.period, k.inv_bin = 1.0 / world[W_BIN];
+    k.seed = (uint32_t)(int64_t)world[W_SEED];
+    k.road = world[W_ROAD], k.curb = world[W_ROAD] + world[W_CURB], k.cross_y = world[W_CROSS];
+    k.sun_x = light[L_SUN], k.sun_y = light[L_SUN + 1], k.sun_z = light[L_SUN + 2];
+    k.inv_fog = 1.0 / light[L_FOG], k.glow_emit = light[L_GLOW];
+    k.sun_side = k.sun_x > 0.0 ? 1 : 0;
     /* The sun's conditions that hold for the whole line, as a factor of the loop (a condition taken from
      * outside the loop into its masks stops gcc vectorising it): 0 below the horizon; with sun_x == 0 no
      * facade can shade (the probe's ts is then infinite). */
-    const double sun_up = sun_z <= 0.0 ? 0.0 : 1.0;
-    const double sun_xf = sun_side == 1 ? xf : -xf;
-    const double r00 = rot[0], r01 = rot[1], r02 = rot[2], r10 = rot[3], r11 = rot[4], r12 = rot[5];
-    const double r20 = rot[6], r21 = rot[7], r22 = rot[8];
-    const double inv_tile = 1.0 / 0.6;
-    /* Table values the loop reads, as locals: a table read under a condition becomes a masked load gcc cannot
+    k.sun_up = k.sun_z <= 0.0 ? 0.0 : 1.0;
+    k.sun_xf = k.sun_side == 1 ? k.xf : -k.xf;
+    /* Table values the loops read, as locals: a table read under a condition becomes a masked load gcc cannot
      * vectorise. */
-    double asph[3], walk[3], amb[3], sun_rgb[3], haze[3], hor[3], zen[3];
     for (int c = 0; c < 3; c++) {
-        asph[c] = world[W_ASPHALT + c], walk[c] = world[W_SIDEWALK + c];
-        amb[c] = light[L_AMB + c], sun_rgb[c] = light[L_SUN_RGB + c], haze[c] = light[L_HAZE + c];
-        hor[c] = light[L_HORIZON + c], zen[c] = light[L_ZENITH + c];
+        k.asph[c] = world[W_ASPHALT + c], k.walk[c] = world[W_SIDEWALK + c];
+        k.amb[c] = light[L_AMB + c], k.sun_rgb[c] = light[L_SUN_RGB + c], k.haze[c] = light[L_HAZE + c];
+        k.hor[c] = light[L_HORIZON + c], k.zen[c] = light[L_ZENITH + c], k.light_sun[c] = light[L_SUN + c];
     }
+    k.fog_max = fog_x_max;
     const double *restrict fog = fog_table; /* a pointer: gcc gathers from it, not from the global */
-    const double fog_max = fog_x_max;
-
-#pragma omp simd
-    for (int32_t a = 0; a < (int32_t)n; a++) {
-        /* Conditions combine with & and | (not && and ||) and values by selection, so the loop body has no
-         * branch for the vectoriser to give up on; every table read is at a valid (clamped) index. */
-        double xi = transposed ? (double)line : (double)a, yi = transposed ? (double)a : (double)line;
-        double cx = (xi + 0.5 - cx0) * inv_fx, cy = (yi + 0.5 - cy0) * inv_fy;
-        double dx = cx * r00 + cy * r10 + r20;
-        double dy = cx * r01 + cy * r11 + r21;
-        double dz = cx * r02 + cy * r12 + r22;
-        /* ---- what the ray hits: the ground (inside the facades), a facade, or the sky ---- */
-        double t_ground = -pz / dz;
-        flag ground = (dz < 0.0) & (pz > 0.0) & (fabs(px + t_ground * dx) < xf);
-        double t_hit = ground ? t_ground : 1e30;
-        flag side = dx > 0.0 ? 1 : 0;
-        double t_wall = ((side == 1 ? xf : -xf) - px) / dx;
-        double fz_w = pz + t_wall * dz;
-        int32_t bin_w = street_bin(py + t_wall * dy, y_half, inv_period, inv_bin, n_bins);
-        int64_t b_w = lut[side * stride + bin_w];
-        const int64_t bo = b_w * BLD_COLS; /* an index (not a pointer): the form gcc gathers with */
-        double top = bld[bo + B_HEIGHT];
-        flag wall = (dx != 0.0) & (t_wall > 0.0) & (t_wall < t_hit) & (fz_w >= 0.0) & (fz_w < top);
-        t_hit = wall ? t_wall : t_hit;
-        flag sky_px = !(wall | ground);
-        double hx = clampc(px + t_hit * dx), hy = clampc(py + t_hit * dy), hz = clampc(pz + t_hit * dz);
-
-        /* ---- ground: asphalt (two noises, markings), curb, sidewalk (tiles, one noise) ---- */
-        double ax = fabs(hx);
-        flag asphalt = ax < road, kerb = (!asphalt) & (ax < curb);
-        double gm = (hx + 100.0) - floor(hx + 100.0);
-        double cm = hy - floor(hy * (1.0 / 9.0)) * 9.0;
-        flag zebra_zone = (fabs(hy - cross_y) < 2.0) & (ax < road - 0.3);
-        flag centre = ax < 0.07, edge = (road - 0.35 < ax) & (ax < road - 0.2);
-        flag paint = zebra_zone ? gm < 0.5 : (centre ? cm < 3.0 : edge);
-        double tu = (ax - curb) * inv_tile, tv = hy * inv_tile;
-        double tiu = floor(tu), tiv = floor(tv);
-        /* one mask, not an | of two masks: the form gcc vectorises */
-        double grout_d = tu - tiu < tv - tiv ? tu - tiu : tv - tiv;
-        flag grout = grout_d < 0.04;
-
-        /* ---- facade: floors, window columns, shop fronts, lit windows ---- */
-        double u = hy + y_half;
-        u -= floor(u * inv_period) * period;
-        u -= y_half + bld[bo + B_Y0];
-        double floor_h = bld[bo + B_FLOOR], win_sp = bld[bo + B_WIN_SP], win_w = bld[bo + B_WIN_W];
-        double floor_i = floor(hz / floor_h);
-        double zz = hz - floor_i * floor_h;
-        double col_i = floor(u / win_sp);
-        double uu = u - col_i * win_sp;
-        double margin = 0.5 * (win_sp - win_w);
-        uint32_t seed_b = seed + (uint32_t)b_w * 131u;
-
-        /* ---- the noises and the cell hash, one set per pixel whatever it hit ---- */
-        double nx = wall ? u * 3.0 : (asphalt ? hx * 9.0 : hx * 4.0);
-        double ny = wall ? hz * 3.0 : (asphalt ? hy * 9.0 : hy * 4.0);
-        uint32_t nseed = wall ? seed_b : (asphalt ? seed : seed + 11u);
-        double noise_a = value_noise(nx, ny, nseed);
-        double noise_b = value_noise(hx * 1.3, hy * 1.3, seed + 7u); /* coarse asphalt grain */
-        int32_t hix = wall ? (int32_t)col_i : (int32_t)tiu;
-        int32_t hiy = wall ? (floor_i == 0.0 ? 17 : (int32_t)floor_i) : (int32_t)tiv;
-        double cell = hash01(hix, hiy, wall ? seed_b : seed + 3u);
-
-        /* facade */
-        double grain = 0.9 + 0.2 * noise_a;
-        flag cornice = hz > top - 0.6;
-        flag ground_floor = floor_i == 0.0;
-        flag shop = (!cornice) & ground_floor & (0.1 < zz) & (zz < 2.7) & (0.25 < uu) & (uu < win_sp - 0.25);
-        flag door = shop & (cell < 0.35);
-        flag window = (!cornice) & (!ground_floor) & (0.9 < zz) & (zz < 2.5) & (margin < uu) & (uu < win_sp - margin);
-        flag frame = window & ((zz < 1.0) | (zz > 2.4) | (uu < margin + 0.06) | (uu > win_sp - margin - 0.06));
-        double wk = 0.7 + 0.6 * cell, k_wall = cornice ? 0.75 : 1.0;
-        double emit = (wall & window & (cell < bld[bo + B_LIT])) ? glow_emit : 0.0;
-        /* ground */
-        double g_asph = 0.75 + 0.5 * (noise_a * 0.6 + noise_b * 0.4);
-        double g_walk = (0.85 + 0.3 * cell) * (grout ? 0.7 : 1.0) * (0.9 + 0.2 * noise_a);
-        static const double paint_rgb[3] = {0.62, 0.62, 0.60}, curb_rgb[3] = {0.45, 0.44, 0.42};
-        static const double door_rgb[3] = {0.0, 0.08, 0.06};
-        double alb[3];
-        for (int c = 0; c < 3; c++) {
-            double w_c = bld[bo + B_RGB + c] * grain * k_wall;
-            double shop_c = door ? (c == 0 ? 0.12 + 0.2 * cell : door_rgb[c]) : bld[bo + B_WIN_RGB + c] * 0.8;
-            double win_c = bld[bo + B_WIN_RGB + c] * wk;
-            win_c = frame ? win_c * 0.5 + 0.1 : win_c;
-            double fac_c = window ? win_c : (shop ? shop_c : w_c);
-            double asph_c = paint ? paint_rgb[c] : asph[c] * g_asph;
-            double walk_c = walk[c] * g_walk;
-            alb[c] = wall ? fac_c : (asphalt ? asph_c : (kerb ? curb_rgb[c] : walk_c));
-        }
-
-        /* ---- sun: facing it, and not in a facade's shadow ---- */
-        double ndotl = wall ? (side == 1 ? -sun_x : sun_x) : sun_z;
-        double ts = (sun_xf - hx) / sun_x;
-        int32_t bin_s = street_bin(hy + ts * sun_y, y_half, inv_period, inv_bin, n_bins);
-        int64_t b_s = lut[sun_side * stride + bin_s];
-        double h_s = bld[b_s * BLD_COLS + B_HEIGHT];
-        flag probe = !(wall & (side == sun_side)) & (ts > 0.0);
-        flag shadow = probe & (hz + ts * sun_z < h_s);
-        double lit = ndotl > 0.0 ? ndotl : 0.0;
-        lit = shadow ? 0.0 : lit;
-        lit = lit * sun_up; /* (sun_x == 0 or sun_z <= 0 hold for the whole line: see sun_up) */
-
-        /* ---- fog towards the haze colour; or the sky ---- */
-        double dist = t_hit * sqrt(dx * dx + dy * dy + dz * dz);
-        double f = fog_transmittance(dist * inv_fog, fog, fog_max);
-        double g = 1.0 - f;
-        double s_sky, glow;
-        sky_weights(dx, dy, dz, light, &s_sky, &glow);
-        for (int c = 0; c < 3; c++) {
-            double v = (alb[c] * (amb[c] + sun_rgb[c] * lit + emit)) * f + haze[c] * g;
-            double sky_c = hor[c] * (1.0 - s_sky) + zen[c] * s_sky + sun_rgb[c] * glow;
-            out[3 * a + c] = (float)(sky_px ? sky_c : v);
+    int64_t cls[BLOCK], b_hit[BLOCK];
+    double t_hit[BLOCK];
+    for (int32_t a0 = 0; a0 < (int32_t)n; a0 += BLOCK) {
+        int32_t m = (int32_t)n - a0 < BLOCK ? (int32_t)n - a0 : BLOCK;
+        hit_pass(&k, lut, bld, a0, m, cls, t_hit, b_hit);
+        for (int32_t j = 0; j < m;) { /* the runs of one class (and on a facade, of one building) */
+            int32_t e = j + 1;
+            while (e < m && cls[e] == cls[j] && b_hit[e] == b_hit[j])
+                e++;
+            if (cls[j] == HIT_SKY)
+                shade_sky(&k, a0 + j, a0 + e, out);
+            else if (cls[j] == HIT_WALL)
+                shade_wall(&k, lut, bld, fog, a0 + j, a0 + e, t_hit + j, b_hit[j], out);
+            else if (cls[j] == HIT_ASPHALT) /* (a constant argument: one loop without the branch for each) */
+                shade_ground(&k, lut, bld, fog, a0 + j, a0 + e, t_hit + j, 1, out);
+            else
+                shade_ground(&k, lut, bld, fog, a0 + j, a0 + e, t_hit + j, 0, out);
+            j = e;
         }
     }
 }
