@@ -38,7 +38,10 @@ def test_exact_rs_equals_brute_force_for_every_ego_preset(ego: str, props: bool,
 
 
 @pytest.mark.parametrize("ego", ["none", "drone"])
-def test_threaded_kernels_paint_what_the_serial_ones_do(ego: str) -> None:
+def test_threaded_kernels_paint_what_the_serial_ones_do(ego: str, monkeypatch: pytest.MonkeyPatch) -> None:
+    from rollcam.sim import _paint
+
+    monkeypatch.setattr(_paint, "TOUCH_WORK", 1 << 20)  # a static frame's touched lines go to the threads too
     scene = make_street_scene(5, speed="normal", width=640, height=360, n_pedestrians=20, ego=ego_preset(ego))
     times = _rs_times(Renderer(scene), 2_000_000_000)
     serial = Renderer(scene, threads=1).render_lines(times, linear=True)
