@@ -226,8 +226,10 @@ def _span_runs(span_l, span_r, m, w, ia, ib):
 
 
 @njit(cache=True)
-def _paint_spans(lin, line, m, gt_vis, depth, idx_o, shade, span_l, span_r, owner, ia, ib, n_runs, order, flip):
-    """Paint the collected spans over ``lin`` far to near (anti-aliased along the line); count visibility."""
+def _paint_spans(lin, line, m, gt_vis, depth, idx_o, shade, span_l, span_r, owner, ia, ib, n_runs, order, flip,
+                 gt_only):
+    """Paint the collected spans over ``lin`` far to near (anti-aliased along the line); count visibility.
+    ``gt_only`` counts visibility alone (which actor is nearest at each pixel centre needs no shading)."""
     w = lin.shape[0]
     # Insertion sort, far first; ties keep actor/part order so every path paints identically.
     for i in range(m):
@@ -244,7 +246,8 @@ def _paint_spans(lin, line, m, gt_vis, depth, idx_o, shade, span_l, span_r, owne
         i0 = max(int(math.floor(xl)), 0)
         i1 = min(int(math.ceil(xr)), w)
         if shade[e, 0] == SHADOW_MARK:
-            _darken(lin, line, shade, e, xl, xr, i0, i1)
+            if not gt_only:
+                _darken(lin, line, shade, e, xl, xr, i0, i1)
             continue
         mid, half = 0.5 * (xl + xr), 0.5 * (xr - xl)
         lx, lz = shade[e, 0], shade[e, 1]
@@ -252,7 +255,7 @@ def _paint_spans(lin, line, m, gt_vis, depth, idx_o, shade, span_l, span_r, owne
         ts = texture_span(shade, e, flip)
         cell = NO_CELL
         yc = line + 0.5
-        for i in range(i0, i1):
+        for i in range(i0, i0 if gt_only else i1):
             cov = min(xr, i + 1.0) - max(xl, float(i))
             if cov <= 0.0:
                 continue
@@ -456,7 +459,7 @@ def _render_chunk(ch, n_chunks, world, lut_b, bld, light, cam, rot_tab, pos_tab,
                         lin[ia[r]:ib[r]] = bg_lin[line, ia[r]:ib[r]]
             if m > 0:
                 _paint_spans(lin, line, m, gt_vis, depth, idx_o, shade, span_l, span_r, owner, ia, ib, n_runs, order,
-                             flip)
+                             flip, gt_only)
             if seed and m == 0:
                 continue  # no actor pixel on this line: it is the composite, nothing to write
             if line_hit.shape[0] > 0:

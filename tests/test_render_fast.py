@@ -186,3 +186,16 @@ def test_encoder_scales_clips_and_rounds_to_the_nearest_curve_entry() -> None:
         want = _SRGB[(np.clip(v, 0.0, 1.0) * _kernels.LUT_SIZE + 0.5).astype(np.int64)][:, ::-1]
         got = encode_linear(lin.reshape(1, -1, 3), gain)[0]
         assert np.array_equal(got, want)
+
+
+@pytest.mark.parametrize("ego", ["none", "walk"])
+def test_truth_only_renders_give_the_full_renders_truth(ego: str) -> None:
+    # (a truth-only render counts visibility without shading or darkening anything)
+    scene = make_street_scene(4, speed="fast", width=160, height=90, n_pedestrians=20, ego=ego_preset(ego),
+                              shadows=True)
+    r = Renderer(scene)
+    for times in (_rs_times(r, 3_000_000_000), np.full(90, 3_000_000_000, np.int64)):
+        full, alone = r.render_lines(times).truth, r.render_lines(times, truth_only=True).truth
+        assert full.visible.sum() > 0
+        for name in ("left", "right", "area", "visible"):
+            assert np.array_equal(getattr(full, name), getattr(alone, name), equal_nan=True), name
