@@ -40,16 +40,22 @@ class LineTruth:
 
     def boxes(self) -> list[Box | None]:
         """Image-space box of each actor: union of its per-line extents (None when it has no pixel)."""
-        out: list[Box | None] = []
         has = ~np.isnan(self.left)
-        for o in range(self.left.shape[0]):
-            lines = np.flatnonzero(has[o])
-            if lines.size == 0:
+        n_lines = has.shape[1]
+        if n_lines == 0:
+            return [None] * has.shape[0]
+        any_line = has.any(axis=1)
+        first = np.argmax(has, axis=1)
+        last = n_lines - 1 - np.argmax(has[:, ::-1], axis=1)
+        a0s = np.where(has, self.left, np.inf).min(axis=1)
+        a1s = np.where(has, self.right, -np.inf).max(axis=1)
+        out: list[Box | None] = []
+        for o in range(has.shape[0]):
+            if not any_line[o]:
                 out.append(None)
                 continue
-            a0 = float(np.min(self.left[o, lines]))
-            a1 = float(np.max(self.right[o, lines]))
-            b0, b1 = float(lines[0]), float(lines[-1] + 1)
+            a0, a1 = float(a0s[o]), float(a1s[o])
+            b0, b1 = float(first[o]), float(last[o] + 1)
             out.append((b0, a0, b1, a1) if self.transposed else (a0, b0, a1, b1))
         return out
 
