@@ -199,3 +199,15 @@ def test_truth_only_renders_give_the_full_renders_truth(ego: str) -> None:
         assert full.visible.sum() > 0
         for name in ("left", "right", "area", "visible"):
             assert np.array_equal(getattr(full, name), getattr(alone, name), equal_nan=True), name
+
+
+def test_line_truth_boxes_span_each_actors_lines_and_extents() -> None:
+    from rollcam.sim.render_result import LineTruth
+
+    gt = LineTruth.empty(3, 6, False)
+    gt.left[0, [1, 4]], gt.right[0, [1, 4]] = (2.5, 1.0), (7.0, 3.0)  # lines 1 and 4 (not those between)
+    gt.left[2, 5], gt.right[2, 5] = 0.0, 9.5
+    assert gt.boxes() == [(1.0, 1.0, 7.0, 5.0), None, (0.0, 5.0, 9.5, 6.0)]
+    gt.transposed = True
+    assert gt.boxes()[0] == (1.0, 1.0, 5.0, 7.0)
+    assert LineTruth.empty(2, 0, False).boxes() == [None, None]
