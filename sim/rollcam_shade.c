@@ -155,7 +155,6 @@ struct line_ctx {
     double sun_x, sun_y, sun_z, sun_up, sun_xf, inv_fog, glow_emit, fog_max;
     int sun_side;
     double amb[3], sun_rgb[3], haze[3], hor[3], zen[3], asph[3], walk[3];
-    double light_sun[3];
 };
 
 /* Pixel classes: what its ray hits first (the road's asphalt, or the curb and sidewalk beside it). */
@@ -230,13 +229,14 @@ static inline __attribute__((always_inline)) void hit_pass(const struct line_ctx
 }
 
 /* Sky pixels a0..a1: the horizon-to-zenith blend and the sun's glow. */
-static inline __attribute__((always_inline)) void shade_sky(const struct line_ctx *restrict k, int32_t a0,
-                                                            int32_t a1, float *restrict out) {
+static inline __attribute__((always_inline)) void shade_sky(const struct line_ctx *restrict k,
+                                                            const double *restrict light, int32_t a0, int32_t a1,
+                                                            float *restrict out) {
 #pragma omp simd
     for (int32_t a = a0; a < a1; a++) {
         double dx, dy, dz, s_sky, glow;
         ray_dir(k, a, &dx, &dy, &dz);
-        sky_weights(dx, dy, dz, k->light_sun, &s_sky, &glow);
+        sky_weights(dx, dy, dz, light, &s_sky, &glow);
         for (int c = 0; c < 3; c++)
             out[3 * a + c] = (float)(k->hor[c] * (1.0 - s_sky) + k->zen[c] * s_sky + k->sun_rgb[c] * glow);
     }
@@ -390,7 +390,7 @@ void rollcam_background_line(const double *restrict world, const int64_t *restri
     for (int c = 0; c < 3; c++) {
         k.asph[c] = world[W_ASPHALT + c], k.walk[c] = world[W_SIDEWALK + c];
         k.amb[c] = light[L_AMB + c], k.sun_rgb[c] = light[L_SUN_RGB + c], k.haze[c] = light[L_HAZE + c];
-        k.hor[c] = light[L_HORIZON + c], k.zen[c] = light[L_ZENITH + c], k.light_sun[c] = light[L_SUN + c];
+        k.hor[c] = light[L_HORIZON + c], k.zen[c] = light[L_ZENITH + c];
     }
     k.fog_max = fog_x_max;
     const double *restrict fog = fog_table; /* a pointer: gcc gathers from it, not from the global */
@@ -404,7 +404,7 @@ void rollcam_background_line(const double *restrict world, const int64_t *restri
             while (e < m && cls[e] == cls[j] && b_hit[e] == b_hit[j])
                 e++;
             if (cls[j] == HIT_SKY)
-                shade_sky(&k, a0 + j, a0 + e, out);
+                shade_sky(&k, light, a0 + j, a0 + e, out);
             else if (cls[j] == HIT_WALL)
                 shade_wall(&k, lut, bld, fog, a0 + j, a0 + e, t_hit + j, b_hit[j], out);
             else if (cls[j] == HIT_ASPHALT) /* (a constant argument: one loop without the branch for each) */
