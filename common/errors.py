@@ -90,9 +90,22 @@ def require(module: str, package: str | None = None, extra: str | None = None, f
 EXIT_OK, EXIT_FAILURE, EXIT_USAGE, EXIT_INTERRUPTED = 0, 1, 2, 130
 
 
+def is_interrupt(exc: BaseException) -> bool:
+    """Whether ``exc`` is a Ctrl-C, or an error raised from or while handling one (compiled code a SIGINT
+    interrupts reports a SystemError whose cause is the KeyboardInterrupt)."""
+    seen: set[int] = set()
+    e: BaseException | None = exc
+    while e is not None and id(e) not in seen:
+        if isinstance(e, KeyboardInterrupt):
+            return True
+        seen.add(id(e))
+        e = e.__cause__ or e.__context__
+    return False
+
+
 def exit_code(exc: BaseException) -> int:
     """The process exit status an error gives: 2 bad input (config, source), 130 Ctrl-C, 1 anything else."""
-    if isinstance(exc, KeyboardInterrupt):
+    if is_interrupt(exc):
         return EXIT_INTERRUPTED
     if isinstance(exc, (ConfigError, SourceError)):
         return EXIT_USAGE

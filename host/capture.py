@@ -30,7 +30,7 @@ from pathlib import Path
 from typing import Any, TextIO
 
 import numpy as np
-from rollcam.common.errors import ConfigError, SourceError
+from rollcam.common.errors import ConfigError, SourceError, is_interrupt
 from rollcam.common.files import OS_FS, AppendLog, FileSystem, part_target, read_jsonl, write_atomic
 from rollcam.sim.codecs import codec
 from rollcam.sim.formats import FORMATS
@@ -333,8 +333,10 @@ def capture(
     except KeyboardInterrupt:
         interrupted = True
     except BaseException as exc:
-        error = exc
-        raise
+        if not is_interrupt(exc):
+            error = exc
+            raise
+        interrupted = True  # Ctrl-C inside compiled code (see ``is_interrupt``)
     finally:
         bar.close()
         try:

@@ -16,7 +16,7 @@ import traceback
 from collections.abc import Sequence
 from typing import NoReturn
 
-from rollcam.common.errors import EXIT_FAILURE, ConfigError, RollcamError, exit_code
+from rollcam.common.errors import EXIT_FAILURE, ConfigError, RollcamError, exit_code, is_interrupt
 
 from .commands import COMMANDS, PROG
 
@@ -75,14 +75,18 @@ def _err(message: str) -> None:
     print(f"{PROG}: error: {message}", file=sys.stderr)
 
 
+def _interrupted(exc: BaseException) -> int:
+    print(f"\n{PROG}: interrupted", file=sys.stderr)
+    return exit_code(exc)
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``rollcam`` console script; returns the exit code."""
     argv = list(sys.argv[1:] if argv is None else argv)
     try:
         return _dispatch(argv)
     except KeyboardInterrupt as exc:
-        print(f"\n{PROG}: interrupted", file=sys.stderr)
-        return exit_code(exc)
+        return _interrupted(exc)
     except BrokenPipeError:
         # Output piped into something that stopped reading (``rollcam list | head``): not a failure worth a trace.
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
@@ -91,6 +95,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         _err(str(exc))
         return exit_code(exc)
     except Exception as exc:
+        if is_interrupt(exc):  # Ctrl-C inside compiled code (see ``is_interrupt``)
+            return _interrupted(exc)
         traceback.print_exc()
         _err("unexpected failure (the traceback above is a bug report's best friend)")
         return exit_code(exc)

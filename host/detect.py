@@ -33,7 +33,7 @@ from pathlib import Path
 from typing import Any, TextIO
 
 import numpy as np
-from rollcam.common.errors import SourceError
+from rollcam.common.errors import SourceError, is_interrupt
 from rollcam.common.files import AppendLog
 from rollcam.sim.frame import Frame
 
@@ -235,6 +235,10 @@ def run_detect(source: CameraSource, detector: Detector, *, frames: int | None =
         result.complete = True
     except KeyboardInterrupt:
         raise DetectInterrupted(result) from None
+    except Exception as exc:
+        if is_interrupt(exc):  # Ctrl-C inside compiled code
+            raise DetectInterrupted(result) from None
+        raise
     finally:
         result.seconds = clock() - start
         try:

@@ -389,17 +389,23 @@ def test_demo_cli(tmp_path: Path):
 
 
 class _InterruptAfter(CameraSource):
-    """Delegates to a real source and raises KeyboardInterrupt (as Ctrl-C would) on read number k + 1."""
+    """Delegates to a real source and raises KeyboardInterrupt (as Ctrl-C would) on read number k + 1; or, as
+    compiled code Ctrl-C interrupts does (numba), a SystemError raised from it."""
 
     supports_pairs = True
 
-    def __init__(self, inner: CameraSource, k: int) -> None:
-        self.inner, self.k, self.n, self.uri = inner, k, 0, inner.uri
+    def __init__(self, inner: CameraSource, k: int, compiled: bool = False) -> None:
+        self.inner, self.k, self.n, self.uri, self.compiled = inner, k, 0, inner.uri, compiled
 
     def _tick(self) -> None:
         self.n += 1
         if self.n > self.k:
-            raise KeyboardInterrupt
+            if not self.compiled:
+                raise KeyboardInterrupt
+            try:
+                raise KeyboardInterrupt
+            except KeyboardInterrupt as exc:
+                raise SystemError("returned a result with an exception set") from exc
 
     def read(self) -> Frame | None:
         self._tick()
@@ -413,12 +419,13 @@ class _InterruptAfter(CameraSource):
         return self.inner.info()
 
 
-@pytest.mark.parametrize("shutter, per_frame", [(None, 1), ("both", 2)])
-def test_interrupted_capture_keeps_complete_frames(tmp_path: Path, shutter: str | None, per_frame: int):
+@pytest.mark.parametrize("shutter, per_frame, compiled", [(None, 1, False), ("both", 2, False), ("both", 2, True)])
+def test_interrupted_capture_keeps_complete_frames(tmp_path: Path, shutter: str | None, per_frame: int,
+                                                   compiled: bool):
     k = 3
     out = tmp_path / "cap"
     with open_camera(URI) as inner, pytest.raises(CaptureInterrupted) as exc:
-        capture(_InterruptAfter(inner, k), out, 10, shutter=shutter, progress=False)
+        capture(_InterruptAfter(inner, k, compiled), out, 10, shutter=shutter, progress=False)
     assert isinstance(exc.value, KeyboardInterrupt)
     assert exc.value.result.frames == k and not exc.value.result.complete
     recs = records(out)
@@ -589,3 +596,19 @@ def test_ctrl_c_exits_130_with_complete_log(tmp_path: Path):
     assert len(list(out.glob("*.png"))) == len(recs)
     assert not leftovers(out)
     assert json.loads((out / "capture.json").read_text())["interrupted"] is True
+
+
+def test_an_error_raised_from_a_ctrl_c_counts_as_the_interruption() -> None:
+    # Compiled code a SIGINT interrupts reports a SystemError caused by the KeyboardInterrupt (numba does).
+    from rollcam.common.errors import EXIT_INTERRUPTED, exit_code, is_interrupt
+
+    def compiled_call() -> None:
+        try:
+            raise KeyboardInterrupt
+        except KeyboardInterrupt as exc:
+            raise SystemError("returned a result with an exception set") from exc
+
+    with pytest.raises(SystemError) as info:
+        compiled_call()
+    assert is_interrupt(info.value) and exit_code(info.value) == EXIT_INTERRUPTED
+    assert not is_interrupt(SystemError("a bug")) and exit_code(SystemError("a bug")) == 1

@@ -26,15 +26,21 @@ class OracleDetector:
 
     name, input, class_names = "oracle", "bgr", {PERSON: "person"}
 
-    def __init__(self, interrupt_at: int | None = None) -> None:
+    def __init__(self, interrupt_at: int | None = None, compiled: bool = False) -> None:
         self.frame = None
         self.calls = 0
         self.interrupt_at = interrupt_at
+        self.compiled = compiled  # interrupt as compiled code does: a SystemError raised from the Ctrl-C
 
     def detect(self, image: np.ndarray) -> Detections:
         self.calls += 1
         if self.calls == self.interrupt_at:
-            raise KeyboardInterrupt
+            if not self.compiled:
+                raise KeyboardInterrupt
+            try:
+                raise KeyboardInterrupt
+            except KeyboardInterrupt as exc:
+                raise SystemError("returned a result with an exception set") from exc
         boxes = [o.box_rs for o in self.frame.objects if o.box_rs is not None and o.visible >= 0.25]
         return Detections(np.asarray(boxes).reshape(-1, 4), np.linspace(0.9, 0.5, len(boxes)), [PERSON] * len(boxes))
 
@@ -75,8 +81,9 @@ def test_detect_loop_writes_log_video_summary_and_scores_truth(tmp_path, rollcam
     assert summary["complete"] and summary["truth"]["rs"]["recall"] == 1.0 and summary["detect_ms"]["p50"] >= 0
 
 
-def test_interrupt_keeps_whole_records_and_a_playable_video(tmp_path, rollcam_camera):
-    oracle = OracleDetector(interrupt_at=3)
+@pytest.mark.parametrize("compiled", [False, True])
+def test_interrupt_keeps_whole_records_and_a_playable_video(tmp_path, rollcam_camera, compiled):
+    oracle = OracleDetector(interrupt_at=3, compiled=compiled)
     src = PeekingSource(rollcam_camera("imx219", size="320x180", seed=2), oracle)
     with pytest.raises(DetectInterrupted) as info:
         run_detect(src, oracle, frames=10, out_dir=tmp_path)
