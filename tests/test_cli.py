@@ -20,6 +20,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 import pytest
+from interrupts import ctrl_c
 from rollcam.host import SourceError, open_camera
 from rollcam.host.capture import FRAMES_LOG, CaptureInterrupted, capture
 from rollcam.host.cli import main
@@ -400,12 +401,7 @@ class _InterruptAfter(CameraSource):
     def _tick(self) -> None:
         self.n += 1
         if self.n > self.k:
-            if not self.compiled:
-                raise KeyboardInterrupt
-            try:
-                raise KeyboardInterrupt
-            except KeyboardInterrupt as exc:
-                raise SystemError("returned a result with an exception set") from exc
+            ctrl_c(self.compiled)
 
     def read(self) -> Frame | None:
         self._tick()
@@ -602,13 +598,7 @@ def test_an_error_raised_from_a_ctrl_c_counts_as_the_interruption() -> None:
     # Compiled code a SIGINT interrupts reports a SystemError caused by the KeyboardInterrupt (numba does).
     from rollcam.common.errors import EXIT_INTERRUPTED, exit_code, is_interrupt
 
-    def compiled_call() -> None:
-        try:
-            raise KeyboardInterrupt
-        except KeyboardInterrupt as exc:
-            raise SystemError("returned a result with an exception set") from exc
-
     with pytest.raises(SystemError) as info:
-        compiled_call()
+        ctrl_c(compiled=True)
     assert is_interrupt(info.value) and exit_code(info.value) == EXIT_INTERRUPTED
     assert not is_interrupt(SystemError("a bug")) and exit_code(SystemError("a bug")) == 1
