@@ -82,28 +82,28 @@ def pedestrian_skeleton(act, t, seg, rad, col_idx, root, joints):
     hz = 0.925 * h + bob
     seg[n, 0], seg[n, 1], seg[n, 2] = x0, y0, hz - 0.018 * h
     seg[n, 3], seg[n, 4], seg[n, 5] = x0, y0, hz + 0.012 * h
-    rad[n], col_idx[n] = 0.058 * h, 0
+    rad[n], col_idx[n] = 0.058 * h, COL_SKIN
     n += 1
     back = -0.012 * h
     seg[n, 0], seg[n, 1], seg[n, 2] = x0 + back * fx, y0 + back * fy, hz + 0.004 * h
     bz = hz - (0.075 * h if act[P_LONG_HAIR] > 0 else 0.006 * h)
     seg[n, 3], seg[n, 4], seg[n, 5] = x0 + 1.6 * back * fx, y0 + 1.6 * back * fy, bz
-    rad[n], col_idx[n] = 0.060 * h, 1
+    rad[n], col_idx[n] = 0.060 * h, COL_HAIR
     n += 1
     seg[n, 0], seg[n, 1], seg[n, 2] = x0, y0, 0.835 * h + bob
     seg[n, 3], seg[n, 4], seg[n, 5] = x0, y0, 0.875 * h + bob
-    rad[n], col_idx[n] = 0.028 * h, 0
+    rad[n], col_idx[n] = 0.028 * h, COL_SKIN
     n += 1
     # Trunk: a round abdomen, a chest running across it (wider than deep: ~0.26 h across the shoulders,
     # ~0.13 h deep, so the waist narrows under it seen from the front) and a pelvis, also across.
     seg[n, 0], seg[n, 1], seg[n, 2] = x0, y0, hip_z + 0.07 * h
     seg[n, 3], seg[n, 4], seg[n, 5] = x0, y0, sh_z - 0.055 * h
-    rad[n], col_idx[n] = 0.08 * h * bd, 2
+    rad[n], col_idx[n] = 0.08 * h * bd, COL_SHIRT
     n += 1
     chw = 0.065 * h * bd
     seg[n, 0], seg[n, 1], seg[n, 2] = x0 - chw * lx, y0 - chw * ly, sh_z - 0.045 * h
     seg[n, 3], seg[n, 4], seg[n, 5] = x0 + chw * lx, y0 + chw * ly, sh_z - 0.045 * h
-    rad[n], col_idx[n] = 0.065 * h * bd, 2
+    rad[n], col_idx[n] = 0.065 * h * bd, COL_SHIRT
     n += 1
     skirt = act[P_SKIRT] > 0.0
     if skirt:  # from the hips to the knees, around both thighs (which take its colour); bare shins below
@@ -142,7 +142,7 @@ def pedestrian_skeleton(act, t, seg, rad, col_idx, root, joints):
         az = max(joints[2, 2], 0.025 * h)
         seg[n, 0], seg[n, 1], seg[n, 2] = joints[2, 0] - 0.02 * h * fx, joints[2, 1] - 0.02 * h * fy, az
         seg[n, 3], seg[n, 4], seg[n, 5] = joints[2, 0] + foot * fx, joints[2, 1] + foot * fy, az - 0.01 * h
-        rad[n], col_idx[n] = 0.024 * h, 4
+        rad[n], col_idx[n] = 0.024 * h, COL_SHOES
         n += 1
         arm_a = -0.32 * sw * math.sin(ph)
         elbow = 0.25 + 0.25 * sw * max(0.0, -math.sin(ph))
@@ -152,11 +152,11 @@ def pedestrian_skeleton(act, t, seg, rad, col_idx, root, joints):
         _limb(joints[3, 0], joints[3, 1], joints[3, 2], fx, fy, arm_a + elbow, 0.19 * h, joints, 4)
         seg[n, 0], seg[n, 1], seg[n, 2] = sx_, sy_, szz
         seg[n, 3], seg[n, 4], seg[n, 5] = joints[3, 0], joints[3, 1], joints[3, 2]
-        rad[n], col_idx[n] = 0.036 * h * bd, 2
+        rad[n], col_idx[n] = 0.036 * h * bd, COL_SHIRT
         n += 1
         seg[n, 0], seg[n, 1], seg[n, 2] = joints[3, 0], joints[3, 1], joints[3, 2]
         seg[n, 3], seg[n, 4], seg[n, 5] = joints[4, 0], joints[4, 1], joints[4, 2]
-        rad[n], col_idx[n] = 0.029 * h, 2 if act[P_SLEEVES] > 0 else 0
+        rad[n], col_idx[n] = 0.029 * h, COL_SHIRT if act[P_SLEEVES] > 0 else COL_SKIN
         n += 1
         # hand: on from the wrist along the forearm, a little narrower than it
         hand = 0.055 / 0.19  # of the forearm (0.19 h): the hand reaches 0.055 h past the wrist
@@ -164,7 +164,7 @@ def pedestrian_skeleton(act, t, seg, rad, col_idx, root, joints):
         seg[n, 3] = joints[4, 0] + hand * (joints[4, 0] - joints[3, 0])
         seg[n, 4] = joints[4, 1] + hand * (joints[4, 1] - joints[3, 1])
         seg[n, 5] = joints[4, 2] + hand * (joints[4, 2] - joints[3, 2])
-        rad[n], col_idx[n] = 0.024 * h, 0
+        rad[n], col_idx[n] = 0.024 * h, COL_SKIN
         n += 1
     bag = int(act[P_BAG_KIND])
     if bag == BAG_BACKPACK:  # on the back, from below the shoulders to the small of the back
