@@ -18,6 +18,8 @@ from numba import njit, prange
 from ._body import (
     A_ID,
     A_TYPE,
+    COL_BAG,
+    P_BAG,
     P_BUILD,
     P_CAST_S,
     P_CAST_X,
@@ -82,11 +84,12 @@ from ._world import (
     to_camera,
 )
 
-# Surface texture per colour index (skin, hair, shirt, pants, shoes): contrast of the albedo's variation and the
-# size of its features on the body, m. Cloth folds and weave, hair strands, skin: what makes a photographed
-# person's surface vary, which detectors trained on photographs key on (benchmarks/realism.py measures it).
-TEX_CONTRAST = (0.10, 0.45, 0.40, 0.40, 0.25)
-TEX_CELL_M = (0.05, 0.02, 0.07, 0.07, 0.04)
+# Surface texture per material (``COL_*``: skin, hair, shirt, pants, shoes, bag): contrast of the albedo's
+# variation and the size of its features on the body, m. Cloth folds and weave, hair strands, skin: what makes a
+# photographed person's surface vary, which detectors trained on photographs key on (benchmarks/realism.py
+# measures it). A bag is nylon or leather with seams and pockets: coarser than cloth, less contrast.
+TEX_CONTRAST = (0.10, 0.45, 0.40, 0.40, 0.25, 0.30)
+TEX_CELL_M = (0.05, 0.02, 0.07, 0.07, 0.04, 0.10)
 NO_FACE = -2.0
 """``Q_FACE`` of a part that is not a head."""
 
@@ -102,7 +105,7 @@ def _face_dir(parts, fx, fy, fz, vx, vy, vz):
     n = math.sqrt(c * c + s * s)
     parts[0, Q_FACE], parts[0, Q_FACE + 1] = (c / n, s / n) if n > 0.0 else (0.0, 1.0)
 BODY_LATERAL, BODY_FORWARD, BODY_TOP = 0.25, 0.40, 1.02  # walker bounds, fractions of height (see actor_bounds)
-PART_RADIUS_MAX = 0.1  # walker part radii, fraction of height x build (the largest in _body is 0.08)
+PART_RADIUS_MAX = 0.1  # walker part radii, fraction of height x build (the largest in _body: a skirt's 0.095)
 N_CHUNKS = 16  # parallel work units; scratch buffers are allocated once per unit, not per item
 
 
@@ -299,7 +302,7 @@ def actor_parts(act, world, lut, bld, light, cam, rot, pos, t, parts, scratch):
         b0 = r00 * dx + r01 * dy + r02 * dz
         b1 = r10 * dx + r11 * dy + r12 * dz
         b2 = r20 * dx + r21 * dy + r22 * dz
-        base = P_SKIN + 3 * col_idx[p]
+        base = P_BAG if col_idx[p] == COL_BAG else P_SKIN + 3 * col_idx[p]
         if capsule_part(parts, p, a0, a1, a2, b0, b1, b2, rad[p], act[base], act[base + 1], act[base + 2],
                         fx, fy, cx, cy, transposed, amb_r, amb_g, amb_b, sun_r, sun_g, sun_b, lx_part, lzv):
             ci, r_px = col_idx[p], parts[p, Q_GEO + 4]

@@ -30,7 +30,7 @@ Q_FACE, Q_HAIR = Q_TSEED + 1, Q_TSEED + 3
 """A head's face: the direction it looks, (cos, sin) of its angle from the camera (cos < -1: no face), and the
 hair's albedo over the skin's per channel (hairline, brows)."""
 PART_COLS = Q_HAIR + 3
-MAX_PARTS = 20  # a walker's 18 capsules, its contact shadow and its sun shadow
+MAX_PARTS = 21  # a walker's 18 capsules, its bag, its contact shadow and its sun shadow
 PART_CAPSULE, PART_QUAD, PART_SHADOW, PART_NONE = 0, 1, 2, -1
 NEAR_M = 0.05
 """The camera's near plane, m: parts are clipped there so parts crossing the camera plane stay finite."""

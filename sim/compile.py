@@ -11,7 +11,7 @@ import numpy as np
 from . import _body as B
 from . import _props as Pr
 from . import _world as Wd
-from .scene import Camera, Lighting, Prop, Scene
+from .scene import BAGS, Camera, Lighting, Prop, Scene
 
 BUILDING_BIN_M = 0.5
 PROP_ID_BASE = 1_000_000
@@ -171,6 +171,9 @@ def _compile_actors(scene: Scene) -> tuple[np.ndarray, tuple[int, ...], tuple[st
         a[B.P_PHASE], a[B.P_DIR] = p.gait_phase, float(p.direction)
         a[B.P_LONG_HAIR], a[B.P_SLEEVES] = float(p.long_hair), float(p.long_sleeves)
         a[B.P_STRIDE] = p.stride_length_m
+        a[B.P_BAG_KIND] = BAGS.index(p.bag)  # BAGS is in B.BAG_* order
+        a[B.P_BAG : B.P_BAG + 3] = p.bag_rgb
+        a[B.P_SKIRT] = float(p.skirt)
         a[B.P_SHADOW] = scene.contact_shadow
         if scene.contact_shadow > 0.0:
             a[B.P_CAST_X], a[B.P_CAST_Y], a[B.P_CAST_S : B.P_CAST_S + 3] = cast

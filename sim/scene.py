@@ -73,6 +73,10 @@ class Street:
         return self.road_half_width_m + self.curb_width_m + self.sidewalk_width_m
 
 
+BAGS = ("none", "backpack", "shoulder")
+"""What a walker may carry: nothing, a backpack, or a bag on a shoulder strap at the right hip."""
+
+
 @dataclass(frozen=True)
 class Pedestrian:
     """A walker going back and forth along a lane parallel to the street (turning at the lane's ends).
@@ -98,6 +102,15 @@ class Pedestrian:
     gait_phase: float = 0.0
     direction: int = 1  # +1 starts walking towards +Y, -1 towards -Y
     cls: str = "person"
+    bag: str = "none"  # one of BAGS: what the walker carries
+    bag_rgb: RGB = (0.08, 0.08, 0.09)
+    skirt: bool = False  # a skirt instead of trousers: bare legs below it
+
+    def __post_init__(self) -> None:
+        if self.bag not in BAGS:
+            from rollcam.common.errors import ConfigError
+
+            raise ConfigError(f"pedestrian {self.id}: bag {self.bag!r} is not one of {list(BAGS)}")
 
     @property
     def stride_length_m(self) -> float:

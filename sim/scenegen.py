@@ -144,6 +144,28 @@ STANDING_P, COMPANION_P, COMPANION_GAP_M = 0.12, 0.2, (0.55, 0.75)
 walker, and the lateral gap between two walking together, m."""
 
 
+OUTFIT_STREAM = 0xBA65
+"""Child stream of a street's seed for what walkers carry and wear beyond shirt and trousers (bags, skirts): drawn
+apart from the layout's own generator, so a seed's walkers stay who and where they were."""
+BACKPACK_P, SHOULDER_BAG_P, SKIRT_P = 0.22, 0.15, 0.12
+"""Share of walkers with a backpack, with a bag on a shoulder strap, and in a skirt (adults only, as the
+children here are small adults)."""
+_BAG_COLOURS = ((0.03, 0.03, 0.035), (0.05, 0.07, 0.12), (0.22, 0.12, 0.06), (0.12, 0.14, 0.10), (0.35, 0.05, 0.05),
+                (0.30, 0.30, 0.32))
+"""Bag albedos: black, navy and khaki nylon, brown leather, red, grey."""
+
+
+def _outfits(rng: np.random.Generator, peds: list[Pedestrian]) -> list[Pedestrian]:
+    """Bags and skirts, each walker drawn independently (three draws each, so one's outfit moves no other's)."""
+    out = []
+    for p in peds:
+        r_bag, r_colour, r_skirt = rng.random(3)
+        bag = "backpack" if r_bag < BACKPACK_P else "shoulder" if r_bag < BACKPACK_P + SHOULDER_BAG_P else "none"
+        colour = _BAG_COLOURS[min(int(r_colour * len(_BAG_COLOURS)), len(_BAG_COLOURS) - 1)]
+        out.append(replace(p, bag=bag, bag_rgb=colour, skirt=bool(r_skirt < SKIRT_P and p.height_m >= 1.45)))
+    return out
+
+
 def _crowd_behaviour(rng: np.random.Generator, peds: list[Pedestrian], walk_lo: float, walk_hi: float
                      ) -> list[Pedestrian]:
     """A street crowd is not all lone walkers: some stand still and some walk in pairs, side by side."""
@@ -301,6 +323,7 @@ def make_street_scene(
         peds.append(make_pedestrian(rng, i + 1, lane_x, float(rng.uniform(-6, 6)), float(rng.uniform(14, 32)),
                                     base_speed * mult))
     peds = _crowd_behaviour(np.random.default_rng([seed, CROWD_STREAM]), peds, walk_lo, walk_hi)
+    peds = _outfits(np.random.default_rng([seed, OUTFIT_STREAM]), peds)
     cams = _street_cameras(rng, street, n_cameras, width, height, focal_mm, sensor_width_mm,
                            ego if ego is not None else EgoMotion())
     lighting, lights = street_lights(time_of_day, TIMES_OF_DAY[time_of_day], **lamp_options)
