@@ -59,6 +59,8 @@ def _load() -> ctypes.CDLL:
     lib.rollcam_fog_transmittance.argtypes = [ctypes.c_double]
     lib.rollcam_value_noise.restype = ctypes.c_double
     lib.rollcam_value_noise.argtypes = [ctypes.c_double, ctypes.c_double, ctypes.c_int64]
+    lib.rollcam_pulse_cover.restype = ctypes.c_double
+    lib.rollcam_pulse_cover.argtypes = [ctypes.c_double] * 4
     return lib
 
 

@@ -36,14 +36,17 @@ KIND_STREET, KIND_CHART, KIND_FLAT = 0, 1, 2
 
 # ---- building table ---------------------------------------------------------------------------------------
 B_SIDE, B_Y0, B_Y1, B_HEIGHT, B_RGB, B_WIN_RGB, B_FLOOR, B_WIN_W, B_WIN_SP, B_LIT = 0, 1, 2, 3, 4, 7, 10, 11, 12, 13
-BLD_COLS = 14
+B_MAT = 14
+BLD_COLS = 15
+MAT_PLASTER, MAT_BRICK, MAT_STONE, MAT_GLASS = 0, 1, 2, 3
+"""A facade's material (``B_MAT``), in ``rollcam.sim.scene.FACADES`` order."""
 NO_BUILDING_HEIGHT = -1e300
 """Height of the building table's last row, the sentinel that the lookup's empty bins name (see ``compile``)."""
 
 SHADE_LAYOUT = (C_FX, C_FY, C_CX, C_CY, C_TRANSPOSED, L_SUN, L_SUN_RGB, L_AMB, L_HORIZON, L_ZENITH, L_HAZE, L_FOG,
                 L_GLOW, W_KIND, W_ROAD, W_CURB, W_FACADE, W_YHALF, W_ASPHALT, W_SIDEWALK, W_CROSS, W_SEED, W_LEVEL,
                 W_BIN, KIND_STREET, KIND_FLAT, B_Y0, B_HEIGHT, B_RGB, B_WIN_RGB, B_FLOOR, B_WIN_W, B_WIN_SP, B_LIT,
-                BLD_COLS)
+                B_MAT, BLD_COLS, MAT_PLASTER, MAT_BRICK, MAT_STONE, MAT_GLASS)
 """The columns the C shader reads, in the order ``rollcam_shade_layout`` reports them."""
 check_layout(library(), SHADE_LAYOUT)
 

@@ -11,7 +11,7 @@ import numpy as np
 from . import _body as B
 from . import _props as Pr
 from . import _world as Wd
-from .scene import BAGS, Camera, Lighting, Prop, Scene
+from .scene import BAGS, FACADES, Camera, Lighting, Prop, Scene
 
 BUILDING_BIN_M = 0.5
 PROP_ID_BASE = 1_000_000
@@ -136,6 +136,7 @@ def _compile_buildings(buildings, length_m: float) -> tuple[np.ndarray, np.ndarr
         row[Wd.B_WIN_RGB : Wd.B_WIN_RGB + 3] = b.window_color
         row[Wd.B_FLOOR], row[Wd.B_WIN_W], row[Wd.B_WIN_SP] = b.floor_height_m, b.window_width_m, b.window_spacing_m
         row[Wd.B_LIT] = b.lit_fraction
+        row[Wd.B_MAT] = FACADES.index(b.material)  # FACADES is in the shader's MAT_* order
         lo = max(int(math.floor((b.y0_m + half) / BUILDING_BIN_M)), 0)
         hi = min(int(math.ceil((b.y1_m + half) / BUILDING_BIN_M)), n_bins)
         lut[0 if b.side < 0 else 1, lo:hi] = i

@@ -26,7 +26,8 @@ enum { W_KIND = 0, W_ROAD = 1, W_CURB = 2, W_FACADE = 4, W_YHALF = 5, W_ASPHALT 
        W_CROSS = 12, W_SEED = 13, W_LEVEL = 14, W_BIN = 15 };
 enum { KIND_STREET = 0, KIND_FLAT = 2 };
 enum { B_Y0 = 1, B_HEIGHT = 3, B_RGB = 4, B_WIN_RGB = 7, B_FLOOR = 10, B_WIN_W = 11, B_WIN_SP = 12, B_LIT = 13,
-       BLD_COLS = 14 };
+       B_MAT = 14, BLD_COLS = 15 };
+enum { MAT_PLASTER = 0, MAT_BRICK = 1, MAT_STONE = 2, MAT_GLASS = 3 };
 
 /* A condition in the pixel loop: as wide as a double, so that its vector masks match the double lanes (gcc
  * does not vectorise selects mixing 32- and 64-bit masks). */
@@ -292,24 +293,57 @@ static inline __attribute__((always_inline)) void shade_ground(const struct line
     }
 }
 
-/* Facade pixels a0..a1 of building row b_w (t: their hit distances from a0 on): floors, window columns, shop
- * fronts, lit windows, lit by the sun and the sky, through the fog. */
+/* The share of [x - h, x + h] that a periodic pulse covers (period p, on over [k p, k p + w) for every
+ * integer k): the pulse box-filtered over a pixel's footprint 2h on the surface, so that mortar joints and
+ * mullions thinner than a pixel shade it by their area instead of aliasing. */
+static inline __attribute__((always_inline)) double pulse_cover(double x, double h, double p, double w) {
+    double lo = x - h, hi = x + h;
+    double klo = floor(lo / p), khi = floor(hi / p);
+    double rlo = lo - klo * p, rhi = hi - khi * p;
+    double c_lo = klo * w + (rlo < w ? rlo : w), c_hi = khi * w + (rhi < w ? rhi : w);
+    return (c_hi - c_lo) / (hi - lo);
+}
+
+/* Schlick's Fresnel reflectance of glass of normal reflectance r0 at incidence cosine `cosi`. */
+static inline __attribute__((always_inline)) double fresnel(double r0, double cosi) {
+    double m = 1.0 - cosi, m2 = m * m;
+    return r0 + (1.0 - r0) * (m2 * m2 * m);
+}
+
+/* Normal reflectance of a window pane and of a curtain wall's coated glass. */
+#define GLASS_R0 0.06
+#define COATED_R0 0.2
+
+/* Facade pixels a0..a1 of building row b_w (t: their hit distances from a0 on), all of material `mat` (a
+ * constant argument: one loop per material): the wall (plaster grain, brick courses in running bond or ashlar
+ * blocks, their joints filtered over the pixel's footprint; a curtain wall's mullions), floors, window columns,
+ * shop fronts and lit windows, lit by the sun and the sky, through the fog. Glass (panes, shop windows, the
+ * curtain wall) reflects what the mirrored ray meets: the facade across the street (its colour in the sky's
+ * light), the ground, or the sky, by Schlick's Fresnel term. */
 static inline __attribute__((always_inline)) void shade_wall(const struct line_ctx *restrict k,
                                                              const int64_t *restrict lut,
                                                              const double *restrict bld,
+                                                             const double *restrict light,
                                                              const double *restrict fog, int32_t a0, int32_t a1,
-                                                             const double *restrict t, int64_t b_w,
+                                                             const double *restrict t, int64_t b_w, const int mat,
                                                              float *restrict out) {
     static const double door_rgb[3] = {0.0, 0.08, 0.06};
+    /* brick (course and length with their joint, joint width) and ashlar (the same), metres */
+    const double course = mat == MAT_BRICK ? 0.075 : 0.36, unit = mat == MAT_BRICK ? 0.225 : 0.72;
+    const double joint = mat == MAT_BRICK ? 0.011 : 0.012, tint_amp = mat == MAT_BRICK ? 0.28 : 0.14;
+    const double mullion = 0.09;
     /* the building's values, as locals (no gathers) */
     const double *restrict row = bld + b_w * BLD_COLS;
     const double y0 = row[B_Y0], floor_h = row[B_FLOOR], win_sp = row[B_WIN_SP], win_w = row[B_WIN_W];
     const double top = row[B_HEIGHT], lit_share = row[B_LIT];
-    double rgb[3], win_rgb[3];
-    for (int c = 0; c < 3; c++)
+    double rgb[3], win_rgb[3], joint_rgb[3];
+    for (int c = 0; c < 3; c++) {
         rgb[c] = row[B_RGB + c], win_rgb[c] = row[B_WIN_RGB + c];
+        joint_rgb[c] = mat == MAT_BRICK ? 0.46 - 0.02 * c : 0.75 * row[B_RGB + c];
+    }
     const uint32_t seed_b = k->seed + (uint32_t)b_w * 131u;
     const double margin = 0.5 * (win_sp - win_w);
+    const double r0 = mat == MAT_GLASS ? COATED_R0 : GLASS_R0;
 #pragma omp simd
     for (int32_t a = a0; a < a1; a++) {
         double dx, dy, dz;
@@ -320,32 +354,98 @@ static inline __attribute__((always_inline)) void shade_wall(const struct line_c
         double u = hy + k->y_half;
         u -= floor(u * k->inv_period) * k->period;
         u -= k->y_half + y0;
+        /* half the pixel's footprint on the wall along u and z (the ray's Jacobian on the plane x = const) */
+        double inv_dx = 1.0 / dx;
+        double hu = 0.5 * fabs(t_hit) * (fabs(k->r01 - dy * k->r00 * inv_dx) * k->inv_fx
+                                         + fabs(k->r11 - dy * k->r10 * inv_dx) * k->inv_fy) + 1e-6;
+        double hv = 0.5 * fabs(t_hit) * (fabs(k->r02 - dz * k->r00 * inv_dx) * k->inv_fx
+                                         + fabs(k->r12 - dz * k->r10 * inv_dx) * k->inv_fy) + 1e-6;
         double floor_i = floor(hz / floor_h);
         double zz = hz - floor_i * floor_h;
         double col_i = floor(u / win_sp);
         double uu = u - col_i * win_sp;
         double noise_a = value_noise(u * 3.0, hz * 3.0, seed_b);
         double cell = hash01((int32_t)col_i, floor_i == 0.0 ? 17 : (int32_t)floor_i, seed_b);
-        double grain = 0.9 + 0.2 * noise_a;
+        double grain = mat == MAT_STONE ? 0.82 + 0.36 * noise_a : 0.9 + 0.2 * noise_a;
         flag cornice = hz > top - 0.6;
         flag ground_floor = floor_i == 0.0;
         flag shop = (!cornice) & ground_floor & (0.1 < zz) & (zz < 2.7) & (0.25 < uu) & (uu < win_sp - 0.25);
         flag door = shop & (cell < 0.35);
-        flag window = (!cornice) & (!ground_floor) & (0.9 < zz) & (zz < 2.5) & (margin < uu) & (uu < win_sp - margin);
-        flag frame = window & ((zz < 1.0) | (zz > 2.4) | (uu < margin + 0.06) | (uu > win_sp - margin - 0.06));
+        flag window, frame;
+        double wall_k = 1.0, joint_w = 0.0;
+        if (mat == MAT_GLASS) {
+            /* panes of one window spacing by one floor in mullions, from the first floor to the cornice */
+            window = (!cornice) & (!ground_floor);
+            double m_u = pulse_cover(uu, hu, win_sp, mullion), m_z = pulse_cover(zz, hv, floor_h, mullion);
+            joint_w = 1.0 - (1.0 - m_u) * (1.0 - m_z);
+            frame = 0;
+        } else {
+            window = (!cornice) & (!ground_floor) & (0.9 < zz) & (zz < 2.5) & (margin < uu) & (uu < win_sp - margin);
+            frame = window & ((zz < 1.0) | (zz > 2.4) | (uu < margin + 0.06) | (uu > win_sp - margin - 0.06));
+            if (mat != MAT_PLASTER) {
+                /* courses in running bond: every other course shifted by half a unit */
+                double course_i = floor(hz / course);
+                double shift = (course_i - 2.0 * floor(0.5 * course_i)) * 0.5 * unit;
+                double us = u + shift;
+                double unit_i = floor(us / unit);
+                double m_z = pulse_cover(hz, hv, course, joint), m_u = pulse_cover(us, hu, unit, joint);
+                joint_w = 1.0 - (1.0 - m_u) * (1.0 - m_z);
+                /* each unit's own tint, faded where a pixel covers many */
+                double fade = 1.0 - 2.0 * hv / course;
+                fade = fade > 0.0 ? fade : 0.0;
+                wall_k = 1.0 + tint_amp * fade * (hash01((int32_t)unit_i, (int32_t)course_i, seed_b + 5u) - 0.5);
+            }
+        }
+        flag pane = (window & !frame) | (shop & !door);
         double wk = 0.7 + 0.6 * cell, k_wall = cornice ? 0.75 : 1.0;
         double emit = (window & (cell < lit_share)) ? k->glow_emit : 0.0;
         double lit = sun_light(k, lut, bld, hx, hy, hz, side == 1 ? -k->sun_x : k->sun_x, side == k->sun_side);
         double f = fog_at(k, fog, t_hit, dx, dy, dz);
         double g = 1.0 - f;
+        /* the mirrored ray (dx -> -dx) from the hit: across the street to the other facade, the ground, or the
+         * sky */
+        double n_d = sqrt(dx * dx + dy * dy + dz * dz);
+        double refl = pane ? fresnel(r0, fabs(dx) / n_d) : 0.0;
+        double t_o = 2.0 * k->xf * fabs(inv_dx);
+        double z_o = hz + t_o * dz;
+        int32_t bin_o = street_bin(hy + t_o * dy, k->y_half, k->inv_period, k->inv_bin, k->n_bins);
+        int64_t b_o = lut[(1 - side) * k->stride + bin_o];
+        flag hit_o = (z_o >= 0.0) & (z_o < bld[b_o * BLD_COLS + B_HEIGHT]);
+        flag hit_g = (z_o < 0.0) & (dz < 0.0);
+        double s_sky, glow;
+        sky_weights(-dx, dy, dz, light, &s_sky, &glow);
+        double sun_o = 0.5 * fabs(k->sun_x) * k->sun_up;
         for (int c = 0; c < 3; c++) {
-            double w_c = rgb[c] * grain * k_wall;
+            double w_c = rgb[c] * grain * k_wall * wall_k;
+            w_c = w_c + (joint_rgb[c] - w_c) * joint_w;
             double shop_c = door ? (c == 0 ? 0.12 + 0.2 * cell : door_rgb[c]) : win_rgb[c] * 0.8;
             double win_c = win_rgb[c] * wk;
             win_c = frame ? win_c * 0.5 + 0.1 : win_c;
+            win_c = mat == MAT_GLASS ? win_c + (rgb[c] - win_c) * joint_w : win_c;
             double alb = window ? win_c : (shop ? shop_c : w_c);
-            out[3 * a + c] = (float)((alb * (k->amb[c] + k->sun_rgb[c] * lit + emit)) * f + k->haze[c] * g);
+            double env_o = bld[b_o * BLD_COLS + B_RGB + c] * (k->amb[c] + k->sun_rgb[c] * sun_o);
+            double env_s = k->hor[c] * (1.0 - s_sky) + k->zen[c] * s_sky + k->sun_rgb[c] * glow;
+            double env = hit_o ? env_o : (hit_g ? k->asph[c] * k->amb[c] : env_s);
+            double r_c = mat == MAT_GLASS ? refl * (1.0 - joint_w) : refl;
+            out[3 * a + c] = (float)(((alb * (1.0 - r_c)) * (k->amb[c] + k->sun_rgb[c] * lit + emit) + r_c * env) * f
+                                     + k->haze[c] * g);
         }
+    }
+}
+
+/* Facade pixels a0..a1 of building row b_w, by its material (each material's loop apart). */
+static inline __attribute__((always_inline)) void shade_facade(const struct line_ctx *restrict k,
+                                                               const int64_t *restrict lut,
+                                                               const double *restrict bld,
+                                                               const double *restrict light,
+                                                               const double *restrict fog, int32_t a0, int32_t a1,
+                                                               const double *restrict t, int64_t b_w,
+                                                               float *restrict out) {
+    switch ((int)bld[b_w * BLD_COLS + B_MAT]) {
+    case MAT_BRICK: shade_wall(k, lut, bld, light, fog, a0, a1, t, b_w, MAT_BRICK, out); break;
+    case MAT_STONE: shade_wall(k, lut, bld, light, fog, a0, a1, t, b_w, MAT_STONE, out); break;
+    case MAT_GLASS: shade_wall(k, lut, bld, light, fog, a0, a1, t, b_w, MAT_GLASS, out); break;
+    default: shade_wall(k, lut, bld, light, fog, a0, a1, t, b_w, MAT_PLASTER, out); break;
     }
 }
 
@@ -406,7 +506,7 @@ void rollcam_background_line(const double *restrict world, const int64_t *restri
             if (cls[j] == HIT_SKY)
                 shade_sky(&k, light, a0 + j, a0 + e, out);
             else if (cls[j] == HIT_WALL)
-                shade_wall(&k, lut, bld, fog, a0 + j, a0 + e, t_hit + j, b_hit[j], out);
+                shade_facade(&k, lut, bld, light, fog, a0 + j, a0 + e, t_hit + j, b_hit[j], out);
             else if (cls[j] == HIT_ASPHALT) /* (a constant argument: one loop without the branch for each) */
                 shade_ground(&k, lut, bld, fog, a0 + j, a0 + e, t_hit + j, 1, out);
             else
@@ -447,12 +547,15 @@ double rollcam_fog_transmittance(double x) { return fog_transmittance(x, fog_tab
 
 double rollcam_value_noise(double x, double y, int64_t seed) { return value_noise(x, y, (uint32_t)seed); }
 
+double rollcam_pulse_cover(double x, double h, double p, double w) { return pulse_cover(x, h, p, w); }
+
 /* The table columns this library reads, for the loader to check against rollcam/sim/_world.py. */
 int64_t rollcam_shade_layout(int64_t *out, int64_t n) {
     static const int64_t cols[] = {C_FX, C_FY, C_CX, C_CY, C_TRANSPOSED, L_SUN, L_SUN_RGB, L_AMB, L_HORIZON,
                                    L_ZENITH, L_HAZE, L_FOG, L_GLOW, W_KIND, W_ROAD, W_CURB, W_FACADE, W_YHALF,
                                    W_ASPHALT, W_SIDEWALK, W_CROSS, W_SEED, W_LEVEL, W_BIN, KIND_STREET, KIND_FLAT,
-                                   B_Y0, B_HEIGHT, B_RGB, B_WIN_RGB, B_FLOOR, B_WIN_W, B_WIN_SP, B_LIT, BLD_COLS};
+                                   B_Y0, B_HEIGHT, B_RGB, B_WIN_RGB, B_FLOOR, B_WIN_W, B_WIN_SP, B_LIT, B_MAT,
+                                   BLD_COLS, MAT_PLASTER, MAT_BRICK, MAT_STONE, MAT_GLASS};
     int64_t m = (int64_t)(sizeof cols / sizeof cols[0]);
     for (int64_t i = 0; i < n && i < m; i++)
         out[i] = cols[i];

@@ -37,9 +37,15 @@ class Lighting:
         return (math.sin(az) * math.cos(el), math.cos(az) * math.cos(el), math.sin(el))
 
 
+FACADES = ("plaster", "brick", "stone", "glass")
+"""What a facade is built of: rendered plaster, brick in running bond, ashlar stone blocks, or a glass curtain
+wall (a grid of panes in mullions, reflecting the sky). The first three have the windows and shop fronts; a
+curtain wall is glass from the first floor up."""
+
+
 @dataclass(frozen=True)
 class Building:
-    """One facade segment along a side of the street."""
+    """One facade segment along a side of the street: its extent, colours, window grid and material."""
 
     side: int  # -1: west facade (x = -facade_x), +1: east facade
     y0_m: float
@@ -51,6 +57,14 @@ class Building:
     window_width_m: float = 1.2
     window_spacing_m: float = 2.6
     lit_fraction: float = 0.3
+    material: str = "plaster"  # one of FACADES; on glass, `color` is the mullions' and `window_color` the panes'
+
+    def __post_init__(self) -> None:
+        if self.material not in FACADES:
+            from rollcam.common.errors import ConfigError
+
+            raise ConfigError(f"building at y {self.y0_m:g} m: material {self.material!r} is not one of "
+                              f"{list(FACADES)}")
 
 
 @dataclass(frozen=True)

@@ -166,6 +166,41 @@ def _outfits(rng: np.random.Generator, peds: list[Pedestrian]) -> list[Pedestria
     return out
 
 
+FACADE_STREAM = 0xFACADE
+"""Child stream of a street's seed for what each facade is built of: drawn apart from the layout's own generator,
+so a seed's buildings keep their extents, heights and window grids."""
+BRICK_P, STONE_P, GLASS_P, GLASS_MIN_HEIGHT_M = 0.30, 0.15, 0.12, 15.0
+"""Share of facades in brick, in ashlar stone, and in glass curtain wall (of those at least the given height)."""
+_BRICK_COLOURS = ((0.38, 0.16, 0.10), (0.30, 0.17, 0.12), (0.50, 0.40, 0.27), (0.22, 0.12, 0.09))
+"""Brick albedos: red, brown, buff and dark engineering brick."""
+_STONE_COLOURS = ((0.52, 0.47, 0.39), (0.45, 0.44, 0.42), (0.60, 0.56, 0.48))
+"""Stone albedos: sandstone, granite, limestone."""
+_PANE_COLOURS = ((0.05, 0.08, 0.10), (0.04, 0.07, 0.06), (0.09, 0.07, 0.05), (0.06, 0.06, 0.07))
+"""Curtain-wall pane albedos (what is behind the glass, tinted): blue, green, bronze, grey."""
+
+
+def _pick(colours: tuple, r: float) -> tuple[float, ...]:
+    return colours[min(int(r * len(colours)), len(colours) - 1)]
+
+
+def _facades(rng: np.random.Generator, buildings: tuple[Building, ...]) -> tuple[Building, ...]:
+    """Each facade's material and its colours (four draws per building, so one's moves no other's)."""
+    out = []
+    for b in buildings:
+        r_mat, r_colour, r_shade, r_frame = rng.random(4)
+        shade = 0.85 + 0.3 * r_shade
+        if r_mat < BRICK_P:
+            b = replace(b, material="brick", color=tuple(v * shade for v in _pick(_BRICK_COLOURS, r_colour)))
+        elif r_mat < BRICK_P + STONE_P:
+            b = replace(b, material="stone", color=tuple(v * shade for v in _pick(_STONE_COLOURS, r_colour)))
+        elif r_mat < BRICK_P + STONE_P + GLASS_P and b.height_m >= GLASS_MIN_HEIGHT_M:
+            mullion = 0.08 + 0.2 * r_frame
+            b = replace(b, material="glass", color=(mullion, mullion, mullion * 1.04),
+                        window_color=tuple(v * shade for v in _pick(_PANE_COLOURS, r_colour)))
+        out.append(b)
+    return tuple(out)
+
+
 def _crowd_behaviour(rng: np.random.Generator, peds: list[Pedestrian], walk_lo: float, walk_hi: float
                      ) -> list[Pedestrian]:
     """A street crowd is not all lone walkers: some stand still and some walk in pairs, side by side."""
@@ -307,7 +342,8 @@ def make_street_scene(
     length = 240.0
     street = Street(road_half, sidewalk, length, (), texture_seed=int(rng.integers(1 << 30)),
                     crosswalk_y_m=float(rng.uniform(-8, 18)))
-    street = Street(road_half, sidewalk, length, _buildings(rng, length), texture_seed=street.texture_seed,
+    buildings = _facades(np.random.default_rng([seed, FACADE_STREAM]), _buildings(rng, length))
+    street = Street(road_half, sidewalk, length, buildings, texture_seed=street.texture_seed,
                     crosswalk_y_m=street.crosswalk_y_m,
                     asphalt_color=tuple(float(v) for v in rng.uniform(0.07, 0.14) * np.array([1, 1, 1.08])),
                     sidewalk_color=tuple(float(v) for v in rng.uniform(0.3, 0.45) * np.array([1.0, 0.96, 0.9])))
