@@ -155,13 +155,18 @@ _BAG_COLOURS = ((0.03, 0.03, 0.035), (0.05, 0.07, 0.12), (0.22, 0.12, 0.06), (0.
 """Bag albedos: black, navy and khaki nylon, brown leather, red, grey."""
 
 
+def _pick(colours: tuple, r: float) -> tuple[float, ...]:
+    """The entry of ``colours`` that a uniform draw ``r`` in [0, 1) selects."""
+    return colours[min(int(r * len(colours)), len(colours) - 1)]
+
+
 def _outfits(rng: np.random.Generator, peds: list[Pedestrian]) -> list[Pedestrian]:
     """Bags and skirts, each walker drawn independently (three draws each, so one's outfit moves no other's)."""
     out = []
     for p in peds:
         r_bag, r_colour, r_skirt = rng.random(3)
         bag = "backpack" if r_bag < BACKPACK_P else "shoulder" if r_bag < BACKPACK_P + SHOULDER_BAG_P else "none"
-        colour = _BAG_COLOURS[min(int(r_colour * len(_BAG_COLOURS)), len(_BAG_COLOURS) - 1)]
+        colour = _pick(_BAG_COLOURS, r_colour)
         out.append(replace(p, bag=bag, bag_rgb=colour, skirt=bool(r_skirt < SKIRT_P and p.height_m >= 1.45)))
     return out
 
@@ -177,10 +182,6 @@ _STONE_COLOURS = ((0.52, 0.47, 0.39), (0.45, 0.44, 0.42), (0.60, 0.56, 0.48))
 """Stone albedos: sandstone, granite, limestone."""
 _PANE_COLOURS = ((0.05, 0.08, 0.10), (0.04, 0.07, 0.06), (0.09, 0.07, 0.05), (0.06, 0.06, 0.07))
 """Curtain-wall pane albedos (what is behind the glass, tinted): blue, green, bronze, grey."""
-
-
-def _pick(colours: tuple, r: float) -> tuple[float, ...]:
-    return colours[min(int(r * len(colours)), len(colours) - 1)]
 
 
 def _facades(rng: np.random.Generator, buildings: tuple[Building, ...]) -> tuple[Building, ...]:
