@@ -318,8 +318,8 @@ static inline __attribute__((always_inline)) double fresnel(double r0, double co
  * constant argument: one loop per material): the wall (plaster grain, brick courses in running bond or ashlar
  * blocks, their joints filtered over the pixel's footprint; a curtain wall's mullions), floors, window columns,
  * shop fronts and lit windows, lit by the sun and the sky, through the fog. Glass (panes, shop windows, the
- * curtain wall) reflects what the mirrored ray meets: the facade across the street (its colour in the sky's
- * light), the ground, or the sky, by Schlick's Fresnel term. */
+ * curtain wall) reflects what the mirrored ray meets: the facade across the street (its colour in the ambient
+ * light and half the sun's), the ground, or the sky, by Schlick's Fresnel term. */
 static inline __attribute__((always_inline)) void shade_wall(const struct line_ctx *restrict k,
                                                              const int64_t *restrict lut,
                                                              const double *restrict bld,

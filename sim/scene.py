@@ -39,8 +39,8 @@ class Lighting:
 
 FACADES = ("plaster", "brick", "stone", "glass")
 """What a facade is built of: rendered plaster, brick in running bond, ashlar stone blocks, or a glass curtain
-wall (a grid of panes in mullions, reflecting the sky). The first three have the windows and shop fronts; a
-curtain wall is glass from the first floor up."""
+wall (a grid of panes in mullions, mirroring the street and the sky). The first three have the windows and shop
+fronts; a curtain wall is glass from the first floor up."""
 
 
 @dataclass(frozen=True)
