@@ -93,7 +93,7 @@ def make_config(quick: bool = False, width: int = 1920, height: int = 1080, **ov
         base = dataclasses.replace(
             base, quick=True, scenes=("normal", "normal_ego", "pan_ego", "walk_ego", "drone_ego"),
             bands=(1, 4, 16, 64), footage_fps=(240, 960),
-            footage_scenes=("normal",), n_frames=3, n_frames_other=1, compose_repeats=3, full_reference=False,
+            footage_scenes=("normal",), n_frames=5, n_frames_other=1, compose_repeats=3, full_reference=False,
             memcpy_repeats=100, scaling_sizes=((640, 360), (1920, 1080), (3840, 2160)), scaling_frames=2,
         )
     try:
