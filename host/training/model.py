@@ -39,7 +39,7 @@ SIZES = {
     "nano": ModelSize(16, (24, 48, 96, 160), 48, (1, 2, 3, 2)),
     "small": ModelSize(24, (32, 64, 128, 224), 64, (2, 2, 4, 2)),
 }
-"""``--model`` names -> widths. The packaged ``personnet`` detector is ``pico``; ``nano`` fits 15 ms per frame too."""
+"""``--model`` names -> widths. The packaged ``personnet`` detector is ``nano``; ``personnet-raw`` is ``pico``."""
 
 
 def model_size(name: str) -> ModelSize:
