@@ -106,6 +106,39 @@ def test_resume_with_other_options_is_refused_and_init_loads_weights(tiny_datase
         train(_cfg(tiny_dataset, epochs=1, model="nano", init=str(tmp_path / "a" / "last.pt")), tmp_path / "c")
 
 
+def test_init_from_an_exported_onnx_reproduces_it_and_fine_tunes(tiny_dataset, tmp_path):
+    ort = pytest.importorskip("onnxruntime")
+    from rollcam.host.training.export import load_onnx_weights
+    from rollcam.host.training.model import Exported, PersonNet, model_size
+
+    train(_cfg(tiny_dataset, epochs=1), tmp_path / "a")
+    onnx_path = tmp_path / "a" / "model.onnx"
+    torch.manual_seed(11)
+    net = PersonNet(model_size("pico"))
+    rng = np.random.default_rng(0)
+    calib = [torch.from_numpy(rng.random((2, 3, 56, 96), dtype=np.float32)) for _ in range(2)]
+    load_onnx_weights(net, onnx_path, calib)
+    x = rng.random((1, 3, 56, 96), dtype=np.float32)
+    with torch.no_grad():
+        ours = Exported(net.eval())(torch.from_numpy(x)).numpy()
+    sess = ort.InferenceSession(str(onnx_path), providers=["CPUExecutionProvider"])
+    theirs = sess.run(None, {"images": x})[0]
+    assert np.allclose(ours, theirs, rtol=1e-4, atol=1e-4 * float(np.abs(theirs).max()))
+    # the BatchNorms carry the calibration batches' statistics, not the identity the folding leaves
+    bn = next(m for m in net.modules() if isinstance(m, torch.nn.BatchNorm2d))
+    assert not torch.allclose(bn.running_var, torch.ones_like(bn.running_var), atol=1e-3)
+
+    fine = train(_cfg(tiny_dataset, epochs=1, init=str(onnx_path)), tmp_path / "b")
+    assert fine.card["config"]["init"].endswith("model.onnx") and (tmp_path / "b" / "model.onnx").is_file()
+    with pytest.raises(ConfigError, match="does not fit"):
+        train(_cfg(tiny_dataset, epochs=1, model="nano", init=str(onnx_path)), tmp_path / "c")
+    bad = tmp_path / "bad.onnx"
+    bad.write_bytes(b"\x08\x07not a protobuf at all" * 3)
+    with pytest.raises(ConfigError, match="is not an ONNX model"):
+        train(_cfg(tiny_dataset, epochs=1, init=str(bad)), tmp_path / "d")
+    assert not (tmp_path / "d" / "model.onnx").exists()
+
+
 @pytest.mark.parametrize(("argv", "message"), [
     (["--model", "huge"], "--model 'huge' is not one of"),
     (["--subset", "fast_rs"], "--subset 'fast_rs' is not a subset"),

@@ -48,8 +48,8 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
     p.add_argument("--seed", type=value_type(int, "an integer"), default=0, help="training seed (default: 0)")
     p.add_argument("--input", choices=("rgb", "raw"), default="rgb",
                    help="rgb pictures, or the raw mosaic of a dataset built with --raw (ISP-less; default: rgb)")
-    p.add_argument("--init", default=None, metavar="CKPT", help="start from these weights (a last.pt or a state "
-                   "dict of the same model size)")
+    p.add_argument("--init", default=None, metavar="CKPT", help="start from these weights: a last.pt, a state dict "
+                   "or a model.onnx written by rollcam train (the shipped personnet's too), of the same model size")
     p.add_argument("--threads", type=_COUNT, default=None, metavar="N",
                    help="torch threads; part of what makes a run reproducible (default: min(8, cores))")
     p.add_argument("--device", choices=("auto", "cpu", "cuda"), default="auto",

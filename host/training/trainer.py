@@ -111,10 +111,25 @@ def _checkpoint(out: Path, cfg: TrainConfig) -> dict[str, Any] | None:
     return state
 
 
-def _init_weights(net: Any, path: str) -> None:
+CALIBRATION_IMAGES = 64
+"""Training images (in file order, no augmentation) that re-estimate BatchNorm statistics for an ONNX ``--init``."""
+
+
+def _init_weights(net: Any, path: str, images: FittedImages, cfg: TrainConfig, bits: int | None) -> None:
+    """Start ``net`` from ``path``: a checkpoint (``last.pt``), a bare state dict, or a ``model.onnx`` of
+    ``rollcam train`` (the shipped detectors have only that), whose BatchNorms are rebuilt from ``images``."""
     p = Path(path)
     if not p.is_file():
         raise ConfigError(f"--init {path!r} does not exist")
+    if p.suffix.lower() == ".onnx":
+        torch = import_torch()
+        from .export import load_onnx_weights
+
+        n = min(len(images), CALIBRATION_IMAGES)
+        batches = (torch.from_numpy(make_batch(images, np.arange(i, min(i + cfg.batch, n)), None, bits)["image"])
+                   for i in range(0, n, cfg.batch))
+        load_onnx_weights(net, p, batches)
+        return
     state = _load_state(p)
     weights = state.get("model", state) if isinstance(state, dict) else state
     try:
@@ -247,8 +262,12 @@ def _train(cfg: TrainConfig, out: Path, info: DatasetInfo, subsets: tuple[str, .
 
     torch.manual_seed(cfg.seed)
     net = PersonNet(model_size(cfg.model), in_channels=1 if cfg.input == "raw" else 3)
+    images = FittedImages(load_split(info, subsets, "train", scenes=cfg.scenes, cameras=cfg.cameras), *cfg.imgsz,
+                          cfg.detector_input)
+    if not len(images):
+        raise ConfigError(f"the train split of {list(subsets)} in {cfg.dataset!r} holds no images")
     if cfg.init and state is None:
-        _init_weights(net, cfg.init)
+        _init_weights(net, cfg.init, images, cfg, info.raw_bits)
     net.to(device)
     opt = _optimizer(net, cfg)
     history: list[dict[str, Any]] = []
@@ -256,10 +275,6 @@ def _train(cfg: TrainConfig, out: Path, info: DatasetInfo, subsets: tuple[str, .
         net.load_state_dict(state["model"])
         opt.load_state_dict(state["optimizer"])
         history = list(state["history"])
-    images = FittedImages(load_split(info, subsets, "train", scenes=cfg.scenes, cameras=cfg.cameras), *cfg.imgsz,
-                          cfg.detector_input)
-    if not len(images):
-        raise ConfigError(f"the train split of {list(subsets)} in {cfg.dataset!r} holds no images")
     steps = max(1, math.ceil(len(images) / cfg.batch))
     steps = min(steps, cfg.steps) if cfg.steps else steps
     run = _Run(cfg, out, info, net, opt, device, images, load_split(info, val_subsets, "val"), history, steps)
