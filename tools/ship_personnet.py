@@ -5,13 +5,16 @@
 RUN is a ``rollcam train`` folder (``model.onnx``, ``train.json``), BENCH_JSON the document ``rollcam bench
 personnet --model RUN/model.onnx --dataset DATA`` wrote for it, DEST the package folder (default
 ``host/detectors/models/personnet``). Writes DEST/model.onnx, DEST/personnet.json (figures + training card),
-DEST/README.md (the card for people) and DEST/LICENSE. ``tools/train_personnet.sh`` runs the whole chain.
+DEST/README.md (the card for people) and DEST/LICENSE. A run fine-tuned from another (``--init
+OTHER/model.onnx`` or ``OTHER/last.pt``) carries OTHER's card along as its earlier stage, while OTHER is still there.
+``tools/train_personnet.sh`` runs the whole chain.
 """
 
 from __future__ import annotations
 
 import hashlib
 import json
+import shlex
 import shutil
 import sys
 from pathlib import Path
@@ -48,9 +51,44 @@ def _row(name: str, m: dict[str, Any]) -> str:
             f"{m['mAP50_95']:.3f} |")
 
 
+def stages(train: dict[str, Any]) -> list[dict[str, Any]]:
+    """The run's training cards, first stage first: a run fine-tuned with ``--init DIR/model.onnx`` (or
+    ``DIR/last.pt``) is preceded by the card in DIR, when that run is still there."""
+    chain = [train]
+    while chain[0]["config"].get("init"):
+        before = Path(chain[0]["config"]["init"]).parent / "train.json"
+        if not before.is_file():
+            break
+        chain.insert(0, json.loads(before.read_text()))
+    return chain
+
+
+def _data_line(card: dict[str, Any]) -> str:
+    ds = card["dataset"]
+    return (f"`{ds['path']}`, {ds['pairs']} GS/RS pairs at 1920x1080 ({ds['config']['scenes']} scenes x "
+            f"{ds['config']['cameras']} cameras x {len(ds['config']['times'])} times of day, speeds "
+            f"{', '.join(ds['config']['speeds'])}, dataset seed {ds['config']['seed']}); the train split of "
+            f"{', '.join(card['subsets'])}")
+
+
+def _schedule_line(card: dict[str, Any]) -> str:
+    cfg = card["config"]
+    steps = f" of at most {cfg['steps']} steps" if cfg.get("steps") else ""
+    start = f"from `{cfg['init']}`" if cfg.get("init") else "from scratch"
+    return (f"{cfg['epochs']} epochs{steps}, batch {cfg['batch']}, AdamW lr {cfg['lr']:g} (warm-up, cosine), "
+            f"seed {cfg['seed']}, {cfg['threads']} thread(s) on {card['device']}, {start}: "
+            f"{card['timings']['train_s']:.0f} s")
+
+
+def _dataset_command(card: dict[str, Any]) -> str:
+    ds = card["dataset"]
+    return (f"rollcam dataset --out {ds['path']} --frames {ds['pairs']} --scenes {ds['config']['scenes']} "
+            "--workers 2")
+
+
 def readme(fig: dict[str, Any], train: dict[str, Any]) -> str:
     """The people's card: what the model is, how it was made, what it scores, and how to rebuild it."""
-    cfg, ds = train["config"], train["dataset"]
+    cfg, chain = train["config"], stages(train)
     lines = [
         "# personnet: rollcam's own person detector (ONNX)", "",
         "`model.onnx` is rollcam's anchor-free PersonNet (docs/training.md) trained from scratch by `rollcam train`",
@@ -62,12 +100,11 @@ def readme(fig: dict[str, Any], train: dict[str, Any]) -> str:
         f"[1, 3, {cfg['imgsz'].split('x')[1]}, {cfg['imgsz'].split('x')[0]}] RGB 0..1 (letterboxed), output "
         "[1, 5, N] cx, cy, w, h, score (heatmap peaks; NMS in the detector).",
         f"- File: {fig['file_mb']} MB, SHA-256 `{fig['sha256']}`.",
-        f"- Data: `{ds['path']}`, {ds['pairs']} GS/RS pairs at 1920x1080 ({ds['config']['scenes']} scenes x "
-        f"{ds['config']['cameras']} cameras x {len(ds['config']['times'])} times of day, speeds "
-        f"{', '.join(ds['config']['speeds'])}, dataset seed {ds['config']['seed']}); trained on the train split "
-        f"of {', '.join(train['subsets'])}.",
-        f"- Schedule: {cfg['epochs']} epochs, batch {cfg['batch']}, AdamW lr {cfg['lr']:g} (warm-up, cosine), "
-        f"seed {cfg['seed']}, {cfg['threads']} thread(s) on {train['device']}: {train['timings']['train_s']:.0f} s.",
+    ]
+    for i, card in enumerate(chain, 1):
+        head = f"Stage {i} of {len(chain)}: data" if len(chain) > 1 else "Data"
+        lines += [f"- {head} {_data_line(card)}.", f"  Schedule: {_schedule_line(card)}."]
+    lines += [
         f"- Default threshold `conf={fig['conf']}`: best F1 on the validation split.", "",
         "## Figures (one run of `rollcam bench personnet`, on this project's shared 2-core machine)", "",
         f"- Time per 640x360 frame on one CPU core (onnxruntime, 1 thread): network {fig['ms_model']} ms, "
@@ -83,17 +120,21 @@ def readme(fig: dict[str, Any], train: dict[str, Any]) -> str:
     lines += [_row("all four", fig["pooled"]), "", "Targets:", ""]
     lines += [f"- {name}: {t['value']} {t['op']} {t['limit']}: {'met' if t['pass'] else 'not met'}"
               for name, t in fig["targets"].items()]
-    lines += ["", "Validation (all four subsets) by epoch:", "", "| epoch | loss | val mAP@0.5 | val mAP@0.5:0.95 |",
-              "|---:|---:|---:|---:|"]
-    lines += [f"| {h['epoch']} | {h['loss']:.3f} | {h['val']['mAP50']:.3f} | {h['val']['mAP50_95']:.3f} |"
-              for h in train["history"] if "val" in h]
-    lines += ["", "## Rebuild", "", "```sh norun", "tools/train_personnet.sh    # dataset, training, figures, "
-              "and this folder", "```", "", "which runs:", "", "```sh norun",
-              "rollcam dataset --out rollcam_out/personnet/data --frames 640 --scenes 30 --workers 2",
-              train["command"],
-              "rollcam bench personnet --model rollcam_out/personnet/run/model.onnx "
-              "--dataset rollcam_out/personnet/data --out rollcam_out/personnet/bench",
-              "python tools/ship_personnet.py rollcam_out/personnet/run rollcam_out/personnet/bench/personnet.json",
+    for i, card in enumerate(chain, 1):
+        stage = f", stage {i}" if len(chain) > 1 else ""
+        lines += ["", f"Validation (all four subsets{stage}) by epoch:", "",
+                  "| epoch | loss | val mAP@0.5 | val mAP@0.5:0.95 |", "|---:|---:|---:|---:|"]
+        lines += [f"| {h['epoch']} | {h['loss']:.3f} | {h['val']['mAP50']:.3f} | {h['val']['mAP50_95']:.3f} |"
+                  for h in card["history"] if "val" in h]
+    lines += ["", "## Rebuild", "", "```sh norun", "tools/train_personnet.sh    # datasets, training, figures, "
+              "and this folder", "```", "", "which runs:", "", "```sh norun"]
+    for card in chain:
+        lines += [_dataset_command(card), card["command"]]
+    args = shlex.split(train["command"])
+    run = args[args.index("--out") + 1]
+    lines += [f"rollcam bench personnet --model {run}/model.onnx --dataset {train['dataset']['path']} "
+              "--out rollcam_out/personnet/bench",
+              f"python tools/ship_personnet.py {run} rollcam_out/personnet/bench/personnet.json",
               "```", "", f"Trained from rollcam commit `{train['git']['commit']}`.", ""]
     return "\n".join(lines)
 
@@ -111,7 +152,11 @@ def main(argv: list[str]) -> int:
         print(f"{bench} measured another model than {run / 'model.onnx'}", file=sys.stderr)
         return 2
     fig = {k: v for k, v in fig.items() if k != "model"}
-    write_package(run, dest, "personnet", fig, train, readme(fig, train))
+    card = readme(fig, train)
+    earlier = stages(train)[:-1]
+    if earlier:  # the cards of the runs this one was fine-tuned from, first first
+        train = {**train, "earlier_stages": earlier}
+    write_package(run, dest, "personnet", fig, train, card)
     print(f"shipped {run / 'model.onnx'} -> {dest}")
     return 0
 
