@@ -139,6 +139,69 @@ def test_init_from_an_exported_onnx_reproduces_it_and_fine_tunes(tiny_dataset, t
     assert not (tmp_path / "d" / "model.onnx").exists()
 
 
+def test_weight_average_is_exported_resumes_exactly_and_old_checkpoints_still_resume(tiny_dataset, tmp_path):
+    from rollcam.host.training.model import Exported, PersonNet, model_size
+    from rollcam.host.training.trainer import WeightAverage
+
+    # the average itself: the ramp, then the decay
+    net = torch.nn.Linear(2, 1, bias=False)
+    torch.nn.init.zeros_(net.weight)
+    avg = WeightAverage(net, 0.5)
+    with torch.no_grad():
+        net.weight.fill_(1.0)
+    avg.update(net)  # ramp: min(0.5, 2 / 11) = 2/11 of the old (0) and 9/11 of the new (1)
+    assert torch.allclose(avg.net.weight, torch.full((1, 2), 9 / 11))
+    for _ in range(40):
+        avg.update(net)
+    assert torch.allclose(avg.net.weight, torch.ones(1, 2), atol=1e-6)
+    assert not avg.net.weight.requires_grad
+
+    a = train(_cfg(tiny_dataset, ema=0.9), tmp_path / "a")
+    state = torch.load(str(tmp_path / "a" / "last.pt"), map_location="cpu", weights_only=True)
+    assert state["ema"]["updates"] == 4 and a.card["config"]["ema"] == 0.9 and "--ema 0.9" in a.card["command"]
+    raw, averaged = state["model"], state["ema"]["weights"]
+    assert any(not torch.equal(raw[k], averaged[k]) for k in raw if raw[k].dtype.is_floating_point)
+    # model.onnx is the average: onnxruntime's output is the averaged network's, not the raw weights'
+    ort = pytest.importorskip("onnxruntime")
+    x = np.random.default_rng(0).random((1, 3, 56, 96), dtype=np.float32)
+    theirs = ort.InferenceSession(str(tmp_path / "a" / "model.onnx"),
+                                  providers=["CPUExecutionProvider"]).run(None, {"images": x})[0]
+
+    def output(weights):
+        net = PersonNet(model_size("pico"))
+        net.load_state_dict(weights)
+        with torch.no_grad():
+            return Exported(net.eval())(torch.from_numpy(x)).numpy()
+
+    # the box channels (the score channel's peak pick may flip on near ties of an untrained heatmap)
+    assert np.allclose(output(averaged)[:, :4], theirs[:, :4], rtol=1e-4, atol=1e-3)
+    assert not np.allclose(output(raw)[:, :4], theirs[:, :4], rtol=1e-4, atol=1e-3)
+
+    class Stop(KeyboardInterrupt):
+        pass
+
+    def stop_after_first(epoch):
+        if epoch == 1:
+            raise Stop
+
+    with pytest.raises(Stop):
+        train(_cfg(tiny_dataset, ema=0.9), tmp_path / "b", on_epoch=stop_after_first)
+    train(_cfg(tiny_dataset, ema=0.9), tmp_path / "b")
+    resumed = torch.load(str(tmp_path / "b" / "last.pt"), map_location="cpu", weights_only=True)
+    assert resumed["ema"]["updates"] == 4
+    assert all(torch.equal(averaged[k], resumed["ema"]["weights"][k]) for k in averaged)
+
+    # a checkpoint written before --ema existed (no "ema" in its config) resumes as a run without it
+    with pytest.raises(Stop):
+        train(_cfg(tiny_dataset), tmp_path / "c", on_epoch=stop_after_first)
+    old = torch.load(str(tmp_path / "c" / "last.pt"), map_location="cpu", weights_only=True)
+    del old["config"]["ema"]
+    torch.save(old, str(tmp_path / "c" / "last.pt"))
+    with pytest.raises(ConfigError, match=r"differing: \['ema'\]"):
+        train(_cfg(tiny_dataset, ema=0.9), tmp_path / "c")
+    assert train(_cfg(tiny_dataset), tmp_path / "c").resumed_after == 1
+
+
 @pytest.mark.parametrize(("argv", "message"), [
     (["--model", "huge"], "--model 'huge' is not one of"),
     (["--subset", "fast_rs"], "--subset 'fast_rs' is not a subset"),
@@ -147,6 +210,8 @@ def test_init_from_an_exported_onnx_reproduces_it_and_fine_tunes(tiny_dataset, t
     (["--epochs", "0"], "--epochs"),
     (["--input", "raw"], "--input raw needs a dataset of raw mosaics"),
     (["--init", "/nonexistent.pt"], "does not exist"),
+    (["--ema", "1"], "--ema must be in [0, 1)"),
+    (["--ema", "-0.5"], "--ema"),
 ])
 def test_bad_arguments_exit_2_with_one_clear_line(tiny_dataset, tmp_path, capsys, argv, message):
     code = main(["train", str(tiny_dataset), *argv, "--out", str(tmp_path / "run")])

@@ -6,7 +6,7 @@ import argparse
 import json
 import os
 
-from rollcam.common.values import parse_size, positive_float, positive_int
+from rollcam.common.values import fraction, parse_size, positive_float, positive_int
 
 from . import value_type
 
@@ -58,6 +58,9 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
                    help="train on the images of the first N training scenes only (default: all)")
     p.add_argument("--cameras", type=_COUNT, default=None, metavar="N",
                    help="train on camera views 0..N-1 only (default: all)")
+    p.add_argument("--ema", type=value_type(fraction, "a number in [0, 1)"), default=0.0, metavar="DECAY",
+                   help="validate and export an exponential moving average of the weights with this decay, "
+                        "e.g. 0.999 (default: 0, off)")
     p.add_argument("--val-every", type=_COUNT, default=1, metavar="N", help="validate every N epochs (default: 1)")
     p.add_argument("--out", required=True, metavar="DIR", help="run folder (rerun to resume)")
     p.add_argument("--json", action="store_true", help="print the run card as JSON on stdout")
@@ -73,7 +76,7 @@ def config_from_args(args: argparse.Namespace):
                        model=args.model, epochs=args.epochs, imgsz=args.imgsz, batch=args.batch, lr=args.lr,
                        seed=args.seed, input=args.input, init=args.init,
                        threads=args.threads or min(8, os.cpu_count() or 1), steps=args.steps,
-                       val_every=args.val_every, scenes=args.scenes, cameras=args.cameras)
+                       val_every=args.val_every, scenes=args.scenes, cameras=args.cameras, ema=args.ema)
 
 
 def run(args: argparse.Namespace) -> int:

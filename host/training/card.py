@@ -53,6 +53,8 @@ def rebuild_command(cfg: TrainConfig, out: Path) -> str:
     args += [a for flag, v in (("--scenes", cfg.scenes), ("--cameras", cfg.cameras)) if v for a in (flag, str(v))]
     if cfg.val_every != 1:
         args += ["--val-every", str(cfg.val_every)]
+    if cfg.ema:
+        args += ["--ema", f"{cfg.ema:g}"]
     if cfg.init:
         args += ["--init", cfg.init]
     args += ["--out", str(out)]
@@ -107,7 +109,8 @@ def card_markdown(card: dict[str, Any]) -> str:
         f"{(card['dataset']['config'] or {}).get('seed')})",
         f"- trained on {', '.join(card['subsets'])}; validated on {', '.join(card['val_subsets'])}",
         f"- {c['epochs']} epochs, batch {c['batch']}, lr {c['lr']:g} (AdamW, cosine), seed {c['seed']}, "
-        f"{c['threads']} thread(s) on {card['device']}" + (f", initialised from `{c['init']}`" if c["init"] else ""),
+        f"{c['threads']} thread(s) on {card['device']}" + (f", initialised from `{c['init']}`" if c["init"] else "")
+        + (f"; exported the weights' moving average (decay {c['ema']:g})" if c.get("ema") else ""),
         f"- code: rollcam {card['rollcam_version']}, commit {git['commit'] or 'unknown'}"
         + (" (with local changes)" if git["dirty"] else "") + f", torch {card['torch']}", "",
         "## Result (validation split, scored through `onnx:`)", "",

@@ -20,6 +20,8 @@ class TrainConfig:
     ``steps`` caps the optimiser steps of each epoch (None: the whole training split), for tiny runs and tests.
     ``scenes``/``cameras`` keep the training images of the first N training scenes / camera views only (the
     study's Fig. 4: accuracy against the diversity of the training set).
+    ``ema`` > 0 keeps an exponential moving average of the weights with that decay, which validation and the
+    export use instead of the raw weights (0: off).
     """
 
     dataset: str
@@ -39,6 +41,7 @@ class TrainConfig:
     val_every: int = 1
     scenes: int | None = None
     cameras: int | None = None
+    ema: float = 0.0
 
     def __post_init__(self) -> None:
         model_size(self.model)
@@ -56,6 +59,14 @@ class TrainConfig:
             raise ConfigError(f"--input {self.input!r} is not one of {list(INPUTS)}")
         if not (0 < self.lr < 1):
             raise ConfigError(f"--lr must be in (0, 1), got {self.lr!r}")
+        if not (0 <= self.ema < 1):
+            raise ConfigError(f"--ema must be in [0, 1), got {self.ema!r}")
+
+    @staticmethod
+    def added_keys() -> dict[str, Any]:
+        """Options added after the first release, with the value that reproduces runs made before them: a
+        checkpoint whose config lacks one was trained with that value."""
+        return {"ema": 0.0}
 
     def to_json(self) -> dict[str, Any]:
         """Plain-JSON form, stored in checkpoints and the run card."""

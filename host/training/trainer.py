@@ -103,7 +103,7 @@ def _checkpoint(out: Path, cfg: TrainConfig) -> dict[str, Any] | None:
     if not path.is_file():
         return None
     state = _load_state(path)
-    have, want = state.get("config", {}), cfg.to_json()
+    have, want = TrainConfig.added_keys() | state.get("config", {}), cfg.to_json()
     if have != want:
         diff = sorted(k for k in set(have) | set(want) if have.get(k) != want.get(k))
         raise ConfigError(f"{str(out)!r} holds a run trained with other options (differing: {diff}); choose "
@@ -153,6 +153,44 @@ def _optimizer(net: Any, cfg: TrainConfig) -> Any:
                               {"params": rest, "weight_decay": 0.0}], lr=cfg.lr)
 
 
+class WeightAverage:
+    """An exponential moving average of a network's weights and BatchNorm statistics, the model that
+    validation and the export use when ``--ema`` is on. Its decay ramps in as ``min(decay, (1 + n) / (10 + n))``
+    over the first updates n, so it follows the weights closely early in a run and averages over the last
+    ~1 / (1 - decay) steps once the ramp has passed."""
+
+    def __init__(self, net: Any, decay: float) -> None:
+        import copy
+
+        self.decay = decay
+        self.updates = 0
+        self.net = copy.deepcopy(net).eval()
+        for p in self.net.parameters():
+            p.requires_grad_(False)
+
+    def update(self, net: Any) -> None:
+        """Fold ``net``'s current weights into the average (after an optimiser step)."""
+        torch = import_torch()
+        self.updates += 1
+        d = min(self.decay, (1 + self.updates) / (10 + self.updates))
+        with torch.no_grad():
+            current = net.state_dict()
+            for key, avg in self.net.state_dict().items():
+                if avg.dtype.is_floating_point:
+                    avg.mul_(d).add_(current[key].detach(), alpha=1 - d)
+                else:
+                    avg.copy_(current[key])
+
+    def state(self) -> dict[str, Any]:
+        """What a checkpoint keeps of it."""
+        return {"weights": self.net.state_dict(), "updates": self.updates}
+
+    def load(self, state: dict[str, Any]) -> None:
+        """Restore it from ``state()`` of a checkpoint."""
+        self.net.load_state_dict(state["weights"])
+        self.updates = int(state["updates"])
+
+
 def validate(model_path: Path, sets: list[Any], threads: int) -> dict[str, Any]:
     """P, R, mAP50 and mAP50_95 of an exported model over ``sets`` together (through ``onnx:``)."""
     from ..detectors import load_detector
@@ -182,6 +220,12 @@ class _Run:
     val_sets: list[Any]
     history: list[dict[str, Any]]
     steps_per_epoch: int
+    average: WeightAverage | None = None
+
+    @property
+    def final_net(self) -> Any:
+        """The network that is validated and exported: the weight average when there is one."""
+        return self.average.net if self.average is not None else self.net
 
 
 def _epoch(run: _Run, epoch: int, bar: Progress, clock: Callable[[], float]) -> dict[str, Any]:
@@ -210,6 +254,8 @@ def _epoch(run: _Run, epoch: int, bar: Progress, clock: Callable[[], float]) -> 
         loss.backward()
         torch.nn.utils.clip_grad_norm_(run.net.parameters(), 10.0)
         run.opt.step()
+        if run.average is not None:
+            run.average.update(run.net)
         sums["loss"] += float(loss.detach())
         sums["heat"] += parts["heat"]
         sums["box"] += parts["box"]
@@ -221,7 +267,7 @@ def _epoch(run: _Run, epoch: int, bar: Progress, clock: Callable[[], float]) -> 
     if (epoch + 1) % cfg.val_every == 0 or epoch + 1 == cfg.epochs:
         from .export import export_onnx
 
-        export_onnx(run.net, run.out / VAL_MODEL, *cfg.imgsz, input=cfg.detector_input, bits=run.info.raw_bits)
+        export_onnx(run.final_net, run.out / VAL_MODEL, *cfg.imgsz, input=cfg.detector_input, bits=run.info.raw_bits)
         row["val"] = validate(run.out / VAL_MODEL, run.val_sets, cfg.threads)
     row["seconds"] = round(clock() - t0, 3)
     return row
@@ -275,9 +321,13 @@ def _train(cfg: TrainConfig, out: Path, info: DatasetInfo, subsets: tuple[str, .
         net.load_state_dict(state["model"])
         opt.load_state_dict(state["optimizer"])
         history = list(state["history"])
+    average = WeightAverage(net, cfg.ema) if cfg.ema else None
+    if average is not None and state is not None:
+        average.load(state["ema"])
     steps = max(1, math.ceil(len(images) / cfg.batch))
     steps = min(steps, cfg.steps) if cfg.steps else steps
-    run = _Run(cfg, out, info, net, opt, device, images, load_split(info, val_subsets, "val"), history, steps)
+    run = _Run(cfg, out, info, net, opt, device, images, load_split(info, val_subsets, "val"), history, steps,
+               average)
     out.mkdir(parents=True, exist_ok=True)
     done = len(history)
     t_start = clock()
@@ -287,16 +337,17 @@ def _train(cfg: TrainConfig, out: Path, info: DatasetInfo, subsets: tuple[str, .
         for epoch in range(done, cfg.epochs):
             history.append(_epoch(run, epoch, bar, clock))
             _save(out / CHECKPOINT, {"config": cfg.to_json(), "epoch": epoch + 1, "model": net.state_dict(),
-                                     "optimizer": opt.state_dict(), "history": history})
+                                     "optimizer": opt.state_dict(), "history": history}
+                  | ({"ema": average.state()} if average is not None else {}))
             if on_epoch is not None:
                 on_epoch(epoch + 1)
     finally:
         bar.close()
-    net.to("cpu")
-    model_path = export_onnx(net, out / MODEL_FILE, *cfg.imgsz, input=cfg.detector_input, bits=info.raw_bits,
+    final = run.final_net.to("cpu")
+    model_path = export_onnx(final, out / MODEL_FILE, *cfg.imgsz, input=cfg.detector_input, bits=info.raw_bits,
                              info={"size": cfg.model, "imgsz": cfg.to_json()["imgsz"], "input": cfg.input})
     (out / VAL_MODEL).unlink(missing_ok=True)
     seconds = clock() - t_start
-    card = write_card(out, cfg, info, subsets, val_subsets, net, history, device=device, resumed_after=done,
+    card = write_card(out, cfg, info, subsets, val_subsets, final, history, device=device, resumed_after=done,
                       seconds=seconds, argv=argv)
     return TrainResult(out, model_path, cfg.epochs, done, seconds, history, card)
