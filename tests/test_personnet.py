@@ -72,3 +72,51 @@ def test_bench_targets_apply_only_to_what_was_measured():
     doc["targets"] = t
     text = format_report(doc)
     assert "target ms_detect: 20.0 <= 15.0: FAIL" in text and "target mAP50: 0.95 >= 0.9: PASS" in text
+
+
+def test_personnet_nms_iou_defaults_to_the_cards_and_an_option_overrides_it():
+    from rollcam.host.detectors import personnet
+
+    assert 0 < personnet.default_iou() <= 1
+    det = load_detector("personnet")
+    other = load_detector("personnet?iou=0.3")
+    try:
+        assert det.iou == pytest.approx(personnet.default_iou()) and other.iou == pytest.approx(0.3)
+    finally:
+        det.close()
+        other.close()
+
+
+def test_bench_picks_the_nms_iou_on_val_and_scores_test_as_the_detector_would(tmp_path):
+    from pathlib import Path
+
+    from rollcam.benchmarks.personnet import IOU_GRID, _suppress, scores
+    from rollcam.host.datasets import DatasetConfig, build_dataset
+    from rollcam.host.detectors import personnet
+    from rollcam.host.evaluation.loaders import load_rollcam, run_detector
+    from rollcam.host.evaluation.metrics import evaluate
+
+    ds = build_dataset(DatasetConfig(size=(640, 360), scenes=10, cameras=1, times=("noon",), speeds=("fast",),
+                                     frames=10, pedestrians=20, seed=9), tmp_path / "ds").out_dir
+    model = personnet.model_path()
+    doc = scores(model, Path(ds))
+    assert doc["iou"] in IOU_GRID and set(doc["val_by_iou"]) == {str(t) for t in IOU_GRID}
+    best = max(m["mAP50_95"] for m in doc["val_by_iou"].values())
+    assert doc["val_by_iou"][str(doc["iou"])]["mAP50_95"] == best
+    # NMS applied afterwards to detections found with NMS off = the detector run at that IoU
+    test = load_rollcam(Path(ds), "test")
+    off = load_detector(f"onnx:{model}?conf=0.01&iou=1")
+    at = load_detector(f"onnx:{model}?conf=0.01&iou={doc['iou']}")
+    try:
+        found = [d for s in test for d in run_detector(off, s)]
+        direct = [d for s in test for d in run_detector(at, s)]
+    finally:
+        off.close()
+        at.close()
+    later = _suppress(found, doc["iou"])
+    assert sum(len(d.boxes) for d in found) >= sum(len(d.boxes) for d in later) > 0
+    for a, b in zip(later, direct, strict=True):
+        assert np.array_equal(a.boxes, b.boxes) and np.array_equal(a.scores, b.scores)
+    pooled = evaluate([e.truth for s in test for e in s.images], direct)
+    assert doc["pooled"]["mAP50_95"] == pytest.approx(pooled["mAP50_95"])
+    assert doc["pooled"]["mAP50"] == pytest.approx(pooled["mAP50"])

@@ -82,8 +82,9 @@ def _schedule_line(card: dict[str, Any]) -> str:
 
 def _dataset_command(card: dict[str, Any]) -> str:
     ds = card["dataset"]
+    seed = ds["config"].get("seed", 0)
     return (f"rollcam dataset --out {ds['path']} --frames {ds['pairs']} --scenes {ds['config']['scenes']} "
-            "--workers 2")
+            + (f"--seed {seed} " if seed else "") + "--workers 2")
 
 
 def readme(fig: dict[str, Any], train: dict[str, Any]) -> str:
