@@ -75,8 +75,9 @@ def _schedule_line(card: dict[str, Any]) -> str:
     cfg = card["config"]
     steps = f" of at most {cfg['steps']} steps" if cfg.get("steps") else ""
     start = f"from `{cfg['init']}`" if cfg.get("init") else "from scratch"
+    ema = f", exporting the weights' moving average (decay {cfg['ema']:g})" if cfg.get("ema") else ""
     return (f"{cfg['epochs']} epochs{steps}, batch {cfg['batch']}, AdamW lr {cfg['lr']:g} (warm-up, cosine), "
-            f"seed {cfg['seed']}, {cfg['threads']} thread(s) on {card['device']}, {start}: "
+            f"seed {cfg['seed']}, {cfg['threads']} thread(s) on {card['device']}, {start}{ema}: "
             f"{card['timings']['train_s']:.0f} s")
 
 
@@ -106,14 +107,17 @@ def readme(fig: dict[str, Any], train: dict[str, Any]) -> str:
         head = f"Stage {i} of {len(chain)}: data" if len(chain) > 1 else "Data"
         lines += [f"- {head} {_data_line(card)}.", f"  Schedule: {_schedule_line(card)}."]
     lines += [
-        f"- Default threshold `conf={fig['conf']}`: best F1 on the validation split.", "",
+        f"- Default NMS `iou={fig.get('iou', 0.45)}`: best mAP@0.5:0.95 on the validation split (the heatmap's peak "
+        "pick already suppresses duplicates).",
+        f"- Default threshold `conf={fig['conf']}`: best F1 on the validation split at that `iou`.", "",
         "## Figures (one run of `rollcam bench personnet`, on this project's shared 2-core machine)", "",
         f"- Time per 640x360 frame on one CPU core (onnxruntime, 1 thread): network {fig['ms_model']} ms, "
         f"`detect()` with letterbox and NMS {fig['ms_detect']} ms.",
         f"- Empty street frames (no pedestrians; {fig['empty']['frames']} frames, 1920x1080): "
         f"{fig['empty']['fp_per_frame']} false positives per frame at conf {fig['empty']['conf']} "
         f"({fig['empty']['frames_with_fp']} frames with any).", "",
-        "Test split, 1920x1080 frames scored at the model's input (P and R at best F1; mAP at `conf=0.01`):", "",
+        "Test split, 1920x1080 frames scored at the model's input (P and R at best F1; mAP at `conf=0.01`; "
+        f"NMS `iou={fig.get('iou', 0.45)}`):", "",
         "| test set | images | boxes | P | R | mAP@0.5 | mAP@0.5:0.95 |", "|---|---:|---:|---:|---:|---:|---:|",
     ]
     for speed, per in fig["test"].items():
