@@ -183,8 +183,8 @@ def format_report(doc: dict[str, Any]) -> str:
     if "test" in doc:
         from rollcam.host.evaluation.report import format_table
 
-        lines.append(format_table({"detector": f"personnet (conf=0.01, iou={doc['iou']})", "split": "test", "results": doc["test"],
-                                   "sets": {"pooled": doc["pooled"]}}))
+        lines.append(format_table({"detector": f"personnet (conf=0.01, iou={doc['iou']})", "split": "test",
+                                   "results": doc["test"], "sets": {"pooled": doc["pooled"]}}))
         lines.append(f"NMS IoU of best val mAP@0.5:0.95: {doc['iou']}; best-F1 threshold on val: {doc['conf']}")
     e = doc["empty"]
     lines.append(f"empty street frames: {e['fp_per_frame']} false positives per frame at conf {e['conf']} "
