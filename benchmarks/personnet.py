@@ -154,6 +154,7 @@ def personnet_bench(model: Path | None = None, dataset: Path | None = None, empt
     doc.update(speed(path))
     if dataset is not None:
         say(f"val and test splits of {dataset}")
+        doc["dataset"] = str(dataset)
         doc.update(scores(path, Path(dataset)))
     conf = doc.get("conf") or (personnet.default_conf() if packaged else 0.25)
     iou = doc.get("iou") or (personnet.default_iou() if packaged else 0.45)

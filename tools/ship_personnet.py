@@ -116,7 +116,8 @@ def readme(fig: dict[str, Any], train: dict[str, Any]) -> str:
         f"- Empty street frames (no pedestrians; {fig['empty']['frames']} frames, 1920x1080): "
         f"{fig['empty']['fp_per_frame']} false positives per frame at conf {fig['empty']['conf']} "
         f"({fig['empty']['frames_with_fp']} frames with any).", "",
-        "Test split, 1920x1080 frames scored at the model's input (P and R at best F1; mAP at `conf=0.01`; "
+        f"Test split of `{fig.get('dataset', train['dataset']['path'])}`, 1920x1080 frames scored at the model's "
+        "input (P and R at best F1; mAP at `conf=0.01`; "
         f"NMS `iou={fig.get('iou', 0.45)}`):", "",
         "| test set | images | boxes | P | R | mAP@0.5 | mAP@0.5:0.95 |", "|---|---:|---:|---:|---:|---:|---:|",
     ]
@@ -137,7 +138,11 @@ def readme(fig: dict[str, Any], train: dict[str, Any]) -> str:
         lines += [_dataset_command(card), card["command"]]
     args = shlex.split(train["command"])
     run = args[args.index("--out") + 1]
-    lines += [f"rollcam bench personnet --model {run}/model.onnx --dataset {train['dataset']['path']} "
+    data = fig.get("dataset", train["dataset"]["path"])
+    if data not in {card["dataset"]["path"] for card in chain}:  # a dataset of its own for the figures
+        doc = json.loads((Path(data) / "dataset.json").read_text())
+        lines.append(_dataset_command({"dataset": {"path": data, "pairs": doc["pairs"], "config": doc["config"]}}))
+    lines += [f"rollcam bench personnet --model {run}/model.onnx --dataset {data} "
               "--out rollcam_out/personnet/bench",
               f"python tools/ship_personnet.py {run} rollcam_out/personnet/bench/personnet.json",
               "```", "", f"Trained from rollcam commit `{train['git']['commit']}`.", ""]
