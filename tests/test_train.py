@@ -33,6 +33,16 @@ def _cfg(ds, **kw):
     return TrainConfig(**(base | kw))
 
 
+class Stop(KeyboardInterrupt):
+    """An interruption the tests raise after an epoch's checkpoint."""
+
+
+def stop_after_first(epoch):
+    """``on_epoch`` that interrupts a run once its first epoch is saved."""
+    if epoch == 1:
+        raise Stop
+
+
 def _weights(run_dir):
     state = torch.load(str(run_dir / "last.pt"), map_location="cpu", weights_only=True)
     return {k: v.clone() for k, v in state["model"].items()}
@@ -74,13 +84,6 @@ def test_same_seed_same_weights_and_resume_matches_an_uninterrupted_run(tiny_dat
     wa, wb = _weights(tmp_path / "a"), _weights(tmp_path / "b")
     assert all(torch.equal(wa[k], wb[k]) for k in wa)
     assert a.history[-1]["loss"] == b.history[-1]["loss"]
-
-    class Stop(KeyboardInterrupt):
-        pass
-
-    def stop_after_first(epoch):
-        if epoch == 1:
-            raise Stop
 
     with pytest.raises(Stop):
         train(_cfg(tiny_dataset), tmp_path / "c", on_epoch=stop_after_first)
@@ -176,13 +179,6 @@ def test_weight_average_is_exported_resumes_exactly_and_old_checkpoints_still_re
     # the box channels (the score channel's peak pick may flip on near ties of an untrained heatmap)
     assert np.allclose(output(averaged)[:, :4], theirs[:, :4], rtol=1e-4, atol=1e-3)
     assert not np.allclose(output(raw)[:, :4], theirs[:, :4], rtol=1e-4, atol=1e-3)
-
-    class Stop(KeyboardInterrupt):
-        pass
-
-    def stop_after_first(epoch):
-        if epoch == 1:
-            raise Stop
 
     with pytest.raises(Stop):
         train(_cfg(tiny_dataset, ema=0.9), tmp_path / "b", on_epoch=stop_after_first)
