@@ -68,6 +68,11 @@ class JsonLinesStreams:
         """Register the route on an aiohttp application."""
         app.router.add_get(self.path, self.handle, allow_head=False)
 
+    def status(self) -> dict[str, int]:
+        """Readers now and served, evicted for a newcomer, closed by the sweep (stalled or idle too long)."""
+        s = self.slots
+        return {"readers": len(s), "served": s.served, "evicted": s.evicted, "closed_stalled": s.send_timeouts}
+
     def open(self, request: web.Request) -> Any:
         """The new stream's cursor (its query options read); raises an HTTP error when there is nothing to stream."""
         raise NotImplementedError

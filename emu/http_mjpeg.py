@@ -177,10 +177,9 @@ class MjpegServer(Closeable):
         app.cleanup_ctx.append(self._sweeper)
         self.http = HttpHost(app, host, port, limits=limits, name="rollcam-http")
         self.slots = StreamSlots(limits, self.http.loop.time)
-        clock = self.http.loop.time
-        self.imu = ImuStreams(camera, StreamSlots(jsonl_limits(limits), clock))  # GET /imu.jsonl
+        self.imu = ImuStreams(camera, StreamSlots(jsonl_limits(limits), self.http.loop.time))  # GET /imu.jsonl
         self.imu.add_to(app)
-        self.insensor = InSensorStreams(camera, StreamSlots(jsonl_limits(limits), clock))  # GET /insensor.jsonl
+        self.insensor = InSensorStreams(camera, StreamSlots(jsonl_limits(limits), self.http.loop.time))
         self.insensor.add_to(app)
         injector = FaultInjector(FaultPlan.of(faults))
         self.fault_stats = injector.stats
@@ -291,12 +290,8 @@ class MjpegServer(Closeable):
         doc["bad_requests"] += self.http.stats.malformed_requests
         return {**doc, "clients": s.to_json(), "http": self.http.stats.to_json(),
                 "pump": self.pump.stats.to_json(), "camera": self.camera.stats.to_json(),
-                "faults": self.fault_stats.to_json(), "jsonl": self._jsonl_status(), **self._ledger()}
-
-    def _jsonl_status(self) -> dict[str, Any]:
-        """Per JSON-lines endpoint: readers now and served, evicted for a newcomer, closed by the sweep."""
-        return {e.path: {"readers": len(e.slots), "served": e.slots.served, "evicted": e.slots.evicted,
-                         "closed_stalled": e.slots.send_timeouts} for e in (self.imu, self.insensor)}
+                "faults": self.fault_stats.to_json(), "jsonl": {e.path: e.status() for e in (self.imu, self.insensor)},
+                **self._ledger()}
 
     def _ledger(self) -> dict[str, Any]:
         """The device's energy and bandwidth ledger (a host source behind ``rollcam view`` has none)."""

@@ -234,6 +234,6 @@ def test_a_model_that_loads_but_fails_at_run_time_is_one_clear_error(tmp_path, c
 def test_a_raw_model_given_a_colour_picture_says_so(tmp_path):
     """Issue 37 O2: personnet-raw on an RGB dataset ended in onnxruntime's INVALID_ARGUMENT traceback on main."""
     det = load_detector("personnet-raw")
-    with pytest.raises(ConfigError, match=r"'personnet-raw' takes the sensor's raw mosaic .* not a 320x180 picture "
-                                          r"of 3 channels"):
+    with pytest.raises(ConfigError, match=r"raw-input model \(input=raw\) takes the sensor's one-channel mosaic, not a "
+                                          r"320x180 picture of 3 channels"):
         det.detect(np.zeros((180, 320, 3), np.uint8))

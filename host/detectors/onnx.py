@@ -102,6 +102,10 @@ def fit_image(image: np.ndarray, width: int, height: int, *, input: str = "bgr",
     """
     img = np.asarray(image)
     if input == "raw":
+        if img.ndim == 3 and img.shape[2] != 1:
+            raise ConfigError(f"a raw-input model (input=raw) takes the sensor's one-channel mosaic, not a "
+                              f"{img.shape[1]}x{img.shape[0]} picture of {img.shape[2]} channels: give it raw frames "
+                              "(an emu: source with format=, a dataset made with --raw)")
         fitted, place = (letterbox if letterbox_input else stretch)(img, width, height)
         return (fitted[..., None] if fitted.ndim == 2 else fitted), place
     if img.ndim == 2:
@@ -218,10 +222,6 @@ class OnnxDetector:
 
     # ------------------------------------------------------------------------------------------ inference
     def _prepare(self, image: np.ndarray) -> tuple[np.ndarray, Placement]:
-        if self.input == "raw" and image.ndim == 3 and image.shape[2] != 1:
-            raise ConfigError(f"detector {self.name!r} takes the sensor's raw mosaic (input=raw, one channel), not "
-                              f"a {image.shape[1]}x{image.shape[0]} picture of {image.shape[2]} channels: give it raw "
-                              "frames (an emu: source with format=, a dataset made with --raw)")
         fitted, place = fit_image(image, self.width, self.height, input=self.input, letterbox_input=self.letterbox,
                                   bgr=self.bgr, channels=self._channels)
         scale = np.float32(input_scale(fitted.dtype, self.input, self.bits))
@@ -239,10 +239,9 @@ class OnnxDetector:
         np.multiply(src, scale, out=tensor[0])
         return tensor, place
 
-    def _infer(self, names: list[str] | None, tensor: np.ndarray) -> list[np.ndarray]:
-        """The model's outputs ``names`` (None: all) for ``tensor``; a model that loads but cannot run (a bad
-        reshape, an input it does not take) is one ConfigError naming the model and the input, as a model that
-        cannot load is."""
+    def _infer(self, names: list[str], tensor: np.ndarray) -> list[np.ndarray]:
+        """The model's outputs ``names`` for ``tensor``; a model that loads but cannot run (a bad reshape, an input
+        it does not take) is one ConfigError naming the model and the input, as one that cannot load is."""
         try:
             return [np.asarray(o) for o in self._session.run(names, {self._input_name: tensor})]
         except Exception as exc:  # onnxruntime raises its own untyped errors (Fail, InvalidArgument, ...)
@@ -251,8 +250,7 @@ class OnnxDetector:
                               f"input: {why}") from None
 
     def _decode(self, outs: list[np.ndarray]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Boxes, scores and classes from the outputs in the model's layout; outputs of shapes that layout cannot
-        hold are one ConfigError naming them."""
+        """Boxes, scores and classes from the outputs in the model's layout (a ConfigError if it cannot hold them)."""
         try:
             return self._decode_yolo(outs[0]) if self.layout == "yolo" else self._decode_ssd(outs)
         except (ValueError, IndexError, TypeError) as exc:
@@ -261,11 +259,8 @@ class OnnxDetector:
 
     def _run(self, image: np.ndarray) -> Detections:
         tensor, place = self._prepare(image)
-        if self.layout == "yolo":
-            names = [self._session.get_outputs()[0].name]
-        else:
-            names = [self._ssd_outputs[r] for r in ("boxes", "scores", "classes")]
-            names += [self._ssd_outputs["num"]] if "num" in self._ssd_outputs else []
+        # SSD: boxes, scores, classes and (when the model has it) num, in the order _find_layout found them
+        names = [self._session.get_outputs()[0].name] if self.layout == "yolo" else [*self._ssd_outputs.values()]
         outs = self._infer(names, tensor)
         self.last_outputs = tuple(zip(names, outs, strict=True))
         boxes, scores, classes = self._decode(outs)
