@@ -8,6 +8,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 import pytest
+from hostile_files import npy_header_only, png_header_only
 from rollcam.common.errors import SourceError
 from rollcam.sim.label_formats import detect_format, load_labels, rle_decode
 
@@ -216,35 +217,15 @@ def test_yolo_per_frame_files_with_track_ids(tmp_path):
 
 
 # ------------------------------------------------------------------ hostile files (issue 37 F1-F5)
-def _png_header_only(path: Path, width: int, height: int) -> None:
-    """A PNG whose IHDR declares ``width`` x ``height`` (16-bit grey) with one tiny IDAT: 1 KB on disk, the
-    size of the claim only in the header (the attack's 0.9 MB file of zeros decoded to 1.9 GB on main)."""
-    import struct
-    import zlib
-
-    def chunk(kind: bytes, data: bytes) -> bytes:
-        return struct.pack(">I", len(data)) + kind + data + struct.pack(">I", zlib.crc32(kind + data))
-
-    ihdr = struct.pack(">IIBBBBB", width, height, 16, 0, 0, 0, 0)
-    path.write_bytes(b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", ihdr) + chunk(b"IDAT", zlib.compress(bytes(1024)))
-                     + chunk(b"IEND", b""))
-
-
-def _npy_header_only(path: Path, shape: tuple[int, ...]) -> None:
-    """A ``.npy`` whose header declares ``shape`` of uint16, with no data (main allocated it: MemoryError)."""
-    with path.open("wb") as f:
-        np.lib.format.write_array_header_1_0(f, {"descr": "<u2", "fortran_order": False, "shape": shape})
-
-
 @pytest.mark.parametrize("case", ["png", "npy", "npy3d"])
 def test_masks_declaring_a_huge_size_are_refused_from_the_header(tmp_path, case):
     """F2/F3: the size a PNG's IHDR or an .npy header declares is checked before anything is decoded."""
     _masks(tmp_path / "m", 2)
     (tmp_path / "m" / "m1.png").unlink()
     if case == "png":
-        _png_header_only(tmp_path / "m" / "m1.png", 30000, 30000)
+        png_header_only(tmp_path / "m" / "m1.png", 30000, 30000)
     else:
-        _npy_header_only(tmp_path / "m" / "m1.npy", (100000, 100000) if case == "npy" else (100000, 100000, 4))
+        npy_header_only(tmp_path / "m" / "m1.npy", (100000, 100000) if case == "npy" else (100000, 100000, 4))
     with pytest.raises(SourceError, match=r"m1\.(png|npy)'?: mask is 100000x100000|m1\.png'?: mask is 30000x30000"
                        ) as info:
         load_labels(tmp_path / "m", n_frames=2, size=(W, H))[1]
