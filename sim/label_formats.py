@@ -75,18 +75,18 @@ def load_labels(path: str | Path, fmt: str = "auto", *, n_frames: int, size: tup
     return track
 
 
-def check_box(x: float, y: float, w: float, h: float, size: tuple[int, int], at: str) -> list[float]:
+def check_box(x: float, y: float, w: float, h: float, size: tuple[int, int] | None, at: str) -> list[float]:
     """The box ``x, y, w, h`` (pixels) as ``[x0, y0, x1, y1]``, or one ``SourceError`` at ``at`` when a value is
-    not finite, a size is negative or the box reaches more than ``BOX_REACH`` frames beyond the footage."""
+    not finite, a size is negative or the box reaches more than ``BOX_REACH`` frames beyond the image of ``size``
+    (width, height; None when unknown: that check is skipped). Every reader of other people's boxes uses it."""
     vals = (x, y, w, h)
     if not all(math.isfinite(v) for v in vals):
         raise SourceError(f"{at}: box [x, y, w, h] must be finite numbers, got [{', '.join(f'{v:g}' for v in vals)}]")
     if w < 0 or h < 0:
         raise SourceError(f"{at}: box width and height must be >= 0, got {w:g}x{h:g}")
-    reach = BOX_REACH * max(size)
-    if max(abs(x), abs(y), abs(x + w), abs(y + h)) > reach:
+    if size is not None and max(abs(x), abs(y), abs(x + w), abs(y + h)) > BOX_REACH * max(size):
         raise SourceError(f"{at}: box [{', '.join(f'{v:g}' for v in vals)}] reaches more than {BOX_REACH} frames "
-                          f"beyond the {size[0]}x{size[1]} footage")
+                          f"beyond the {size[0]}x{size[1]} image")
     return [x, y, x + w, y + h]
 
 
