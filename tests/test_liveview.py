@@ -222,8 +222,8 @@ def test_a_stalled_page_holds_up_neither_the_device_nor_another_page(view):
     stalled = socket.socket()
     stalled.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 4096)
     stalled.connect((host, port))
-    stalled.sendall(b"GET /view/ws HTTP/1.1\r\nHost: x\r\nUpgrade: websocket\r\nConnection: Upgrade\r\n"
-                    b"Sec-WebSocket-Key: dGhlIHNhbXBsZSBub25jZQ==\r\nSec-WebSocket-Version: 13\r\n\r\n")
+    stalled.sendall(f"GET /view/ws HTTP/1.1\r\nHost: {host}:{port}\r\nUpgrade: websocket\r\nConnection: Upgrade\r\n"
+                    "Sec-WebSocket-Key: dGhlIHNhbXBsZSBub25jZQ==\r\nSec-WebSocket-Version: 13\r\n\r\n".encode())
     try:  # it never reads again: once its buffers are full, newer frames replace the unsent one (drops)
         end = time.monotonic() + 20
         while not any(c["dropped"] > 0 for c in srv.status()["clients"].values()):
