@@ -3,6 +3,7 @@
 Every file rollcam writes goes through here. ``write_atomic`` writes a temporary file beside the target,
 fsyncs it, renames it over the target and fsyncs the directory, so after a failure at any step (a full disk,
 an I/O error, ``kill -9``, power loss) the target holds either its old bytes or all its new ones.
+``output_dir`` makes a command's ``--out`` folder (a file in the way is bad usage, one line, exit 2).
 ``AppendLog`` is a JSON-lines file whose every append is one write of complete lines, cut back to the last
 whole line if the write fails; ``read_jsonl`` drops a torn last line that a killed process or a power cut left.
 
@@ -21,6 +22,8 @@ import secrets
 from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
+
+from .errors import ConfigError
 
 PART_SUFFIX = ".part"
 """Temporary files end in this; ``.NAME.<token>.part`` sits beside the file NAME it will become."""
@@ -272,24 +275,62 @@ class AppendLog:
         self.close()
 
 
+def output_dir(path: str | os.PathLike[str], what: str = "--out", *, make: bool = True) -> Path:
+    """``path`` as a folder, made with its parents when missing (``make=False``: only checked, so a command can
+    refuse a bad ``--out`` before it starts work): a command's output folder. A file standing at ``path`` or at
+    one of its parents is a ``ConfigError`` naming both (bad usage: exit 2), not a raw errno."""
+    p = Path(path)
+    blocker = next((q for q in (p, *p.parents) if q.exists() and not q.is_dir()), None)
+    if blocker is None and make:
+        try:
+            p.mkdir(parents=True, exist_ok=True)
+        except (FileExistsError, NotADirectoryError):  # a file put there meanwhile
+            blocker = next((q for q in (p, *p.parents) if q.exists() and not q.is_dir()), p)
+    if blocker is not None:
+        where = "" if blocker == p else f": {str(blocker)!r} is a file"
+        raise ConfigError(f"{what} {str(p)!r} must be a folder, not a file{where}")
+    return p
+
+
 def acquire_lock(path: str | os.PathLike[str], what: str, *, shared: bool = False) -> int | None:
-    """Take an advisory ``flock`` on ``path`` (created if needed) and return its descriptor (closing it releases
-    the lock). A lock another process holds is a ``BlockingIOError`` naming ``what`` at once, never a wait.
+    """Take an advisory ``flock`` on ``path`` (created if needed) and return its descriptor (``release_lock``
+    releases it). A lock another process holds is a ``BlockingIOError`` naming ``what`` at once, never a wait.
+    A lock taken on a file its holder removed meanwhile (``release_lock(remove=True)``) is dropped and taken again
+    on the file now at ``path``, so two processes never both hold ``path``'s lock.
     None where ``fcntl`` is missing (Windows: runs are not protected against each other there)."""
     try:
         import fcntl
     except ImportError:
         return None
-    fd = os.open(path, os.O_RDWR | os.O_CREAT | getattr(os, "O_CLOEXEC", 0), 0o666)
+    while True:
+        fd = os.open(path, os.O_RDWR | os.O_CREAT | getattr(os, "O_CLOEXEC", 0), 0o666)
+        try:
+            fcntl.flock(fd, (fcntl.LOCK_SH if shared else fcntl.LOCK_EX) | fcntl.LOCK_NB)
+            try:
+                if os.path.samestat(os.fstat(fd), os.stat(path)):
+                    return fd
+            except FileNotFoundError:
+                pass
+        except BlockingIOError:
+            os.close(fd)
+            raise BlockingIOError(errno.EWOULDBLOCK, f"{what} is in use by another process ({path})") from None
+        except BaseException:
+            os.close(fd)
+            raise
+        os.close(fd)  # the holder removed the file between our open and our lock: lock the one there now
+
+
+def release_lock(fd: int | None, path: str | os.PathLike[str], *, remove: bool = False) -> None:
+    """Release a lock ``acquire_lock`` took (None: nothing). ``remove``, for an exclusive lock only: delete the
+    lock file first, while still held, so a finished or interrupted run leaves no empty lock file behind."""
+    if fd is None:
+        return
     try:
-        fcntl.flock(fd, (fcntl.LOCK_SH if shared else fcntl.LOCK_EX) | fcntl.LOCK_NB)
-    except BlockingIOError:
+        if remove:
+            with contextlib.suppress(FileNotFoundError):
+                os.unlink(path)
+    finally:
         os.close(fd)
-        raise BlockingIOError(errno.EWOULDBLOCK, f"{what} is in use by another process ({path})") from None
-    except BaseException:
-        os.close(fd)
-        raise
-    return fd
 
 
 @contextlib.contextmanager
@@ -299,5 +340,4 @@ def file_lock(path: str | os.PathLike[str], what: str, *, shared: bool = False) 
     try:
         yield
     finally:
-        if fd is not None:
-            os.close(fd)
+        release_lock(fd, path)

@@ -31,7 +31,7 @@ def programming(camera: FirmwareCamera) -> dict[str, Any]:
 
 
 class InSensorStreams(JsonLinesStreams):
-    """The ``/insensor.jsonl`` handler of one camera, bounded to ``MAX_STREAMS`` readers."""
+    """The ``/insensor.jsonl`` handler of one camera, its readers held in fair slots (emu/http_jsonl.py)."""
 
     path: ClassVar[str] = INSENSOR_PATH
     what: ClassVar[str] = "in-sensor"

@@ -2,23 +2,38 @@
 
 ``JsonLinesStreams`` is the mechanism ``/imu.jsonl`` (emu/http_imu.py) and ``/insensor.jsonl``
 (emu/http_insensor.py) share: a first line saying what the stream is, then one JSON object per item as the device
-makes it, polled every ``poll_s``; ``?N`` items at most when the client asks (the subclass names the option), at
-most ``MAX_STREAMS`` readers per endpoint (HTTP 503 beyond), a reader that does not read within ``SEND_TIMEOUT_S``
-dropped, and a source that stops (an IMU or network turned off, a reader fallen behind the device's buffer) ending
-the stream with an ``{"error": ...}`` line. So no reader can grow the server's memory or stall it.
+makes it, polled every ``poll_s``; ``?N`` items at most when the client asks (the subclass names the option), and
+a source that stops (an IMU or network turned off, a reader fallen behind the device's buffer) ending the stream
+with an ``{"error": ...}`` line. Readers hold slots as MJPEG streams do (emu/http_slots.py, one ``StreamSlots`` per
+endpoint, its limits from ``jsonl_limits``): at most ``MAX_STREAMS`` per endpoint and ``MAX_STREAMS_PER_PEER`` from
+one address; a reader that has been sent nothing for ``stall_s`` (one that does not read, or one waiting for a
+device time far in the future) yields its slot to a newcomer, and one that has been sent nothing for
+``send_timeout_s`` is closed by the server's sweep. So no reader can grow the server's memory, stall it, or
+lock the others out.
 """
 
 from __future__ import annotations
 
 import asyncio
+import dataclasses
 import json
 from typing import Any, ClassVar
 
 from aiohttp import web
 from rollcam.common.errors import RollcamError
 
-SEND_TIMEOUT_S = 5.0
+from .http_server import Connection, HttpLimits
+from .http_slots import StreamClient, StreamSlots
+
 MAX_STREAMS = 8
+MAX_STREAMS_PER_PEER = 4
+
+
+def jsonl_limits(limits: HttpLimits) -> HttpLimits:
+    """A JSON-lines endpoint's share of the server's ``limits``: at most ``MAX_STREAMS`` readers, of them at most
+    ``MAX_STREAMS_PER_PEER`` from one address; the stall and timeout terms are the server's."""
+    return dataclasses.replace(limits, max_streams=min(limits.max_streams, MAX_STREAMS),
+                               max_streams_per_peer=min(limits.max_streams_per_peer, MAX_STREAMS_PER_PEER))
 
 
 def query_int(request: web.Request, name: str) -> int | None:
@@ -38,21 +53,25 @@ def query_int(request: web.Request, name: str) -> int | None:
 class JsonLinesStreams:
     """The handler of one camera's JSON-lines endpoint. A subclass sets ``path``, ``what`` (for the 503 text),
     ``limit_option`` and ``poll_s``, and says how a stream starts (``open``: its cursor, or an HTTP error when the
-    camera has nothing to stream), its first line (``header``) and its next items (``take``)."""
+    camera has nothing to stream), its first line (``header``) and its next items (``take``). Readers hold
+    ``slots`` (the owner sweeps them)."""
 
     path: ClassVar[str]
     what: ClassVar[str]
     limit_option: ClassVar[str]
     poll_s: ClassVar[float] = 0.02
 
-    def __init__(self, camera: Any) -> None:
-        self.camera = camera
-        self.active = 0
-        self.served = 0
+    def __init__(self, camera: Any, slots: StreamSlots) -> None:
+        self.camera, self.slots = camera, slots
 
     def add_to(self, app: web.Application) -> None:
         """Register the route on an aiohttp application."""
         app.router.add_get(self.path, self.handle, allow_head=False)
+
+    def status(self) -> dict[str, int]:
+        """Readers now and served, evicted for a newcomer, closed by the sweep (stalled or idle too long)."""
+        s = self.slots
+        return {"readers": len(s), "served": s.served, "evicted": s.evicted, "closed_stalled": s.send_timeouts}
 
     def open(self, request: web.Request) -> Any:
         """The new stream's cursor (its query options read); raises an HTTP error when there is nothing to stream."""
@@ -71,35 +90,38 @@ class JsonLinesStreams:
         """Stream items as JSON lines until the client leaves or the asked number are sent."""
         cursor = self.open(request)
         limit = query_int(request, self.limit_option)
-        if self.active >= MAX_STREAMS:
-            raise web.HTTPServiceUnavailable(text=f"{MAX_STREAMS} {self.what} streams already",
-                                             headers={"Retry-After": "1"})
-        self.active += 1
-        self.served += 1
+        conn = Connection.of(request)
+        if conn is None:  # gone before its turn
+            raise web.HTTPServiceUnavailable(text="the connection closed")
+        client = await self.slots.admit(conn, pulls=True)
+        if isinstance(client, str):
+            raise web.HTTPServiceUnavailable(text=f"{self.what} streams: {client}", headers={"Retry-After": "1"})
         try:
-            return await self._stream(request, cursor, limit)
+            conn.streaming = True
+            return await self._stream(request, client, cursor, limit)
         finally:
-            self.active -= 1
+            self.slots.leave(client)
 
-    async def _stream(self, request: web.Request, cursor: Any, limit: int | None) -> web.StreamResponse:
+    async def _stream(self, request: web.Request, client: StreamClient, cursor: Any,
+                      limit: int | None) -> web.StreamResponse:
         resp = web.StreamResponse(headers={"Content-Type": "application/x-ndjson", "Cache-Control": "no-store"})
         await resp.prepare(request)
-        sent = 0
+        now, sent = asyncio.get_running_loop().time, 0
         try:
-            await asyncio.wait_for(resp.write((json.dumps(self.header()) + "\n").encode()), SEND_TIMEOUT_S)
-            while limit is None or sent < limit:
+            await client.send(resp.write, (json.dumps(self.header()) + "\n").encode(), now)
+            while not client.gone and (limit is None or sent < limit):
                 try:
                     items = self.take(cursor, None if limit is None else limit - sent)
                 except RollcamError as exc:  # the source stopped, or the reader fell behind it
                     await resp.write((json.dumps({"error": str(exc)}) + "\n").encode())
                     break
                 if items:
-                    lines = "".join(json.dumps(x) + "\n" for x in items)
-                    await asyncio.wait_for(resp.write(lines.encode()), SEND_TIMEOUT_S)
+                    await client.send(resp.write, "".join(json.dumps(x) + "\n" for x in items).encode(), now)
                     sent += len(items)
                 else:
                     await asyncio.sleep(self.poll_s)
-            await resp.write_eof()
-        except (ConnectionError, RuntimeError, asyncio.TimeoutError):  # gone, or not reading
+            if not client.gone:
+                await resp.write_eof()
+        except (ConnectionError, RuntimeError):  # gone, or dropped by the sweep for not reading
             pass
         return resp

@@ -40,6 +40,7 @@ from rollcam.sim.frame import Frame
 from .http_faults import StreamFaults
 from .http_imu import ImuStreams
 from .http_insensor import InSensorStreams
+from .http_jsonl import jsonl_limits
 from .http_server import Connection, HttpHost, HttpLimits
 from .http_slots import StreamSlots
 from .pump import FramePump
@@ -173,13 +174,13 @@ class MjpegServer(Closeable):
             app.router.add_get(path, self._stream, allow_head=False)
         app.router.add_get("/snapshot.jpg", self._snapshot, allow_head=False)
         app.router.add_get("/status.json", self._status, allow_head=False)
-        self.imu = ImuStreams(camera)  # GET /imu.jsonl: the IMU as JSON lines
-        self.imu.add_to(app)
-        self.insensor = InSensorStreams(camera)  # GET /insensor.jsonl: the in-sensor results as JSON lines
-        self.insensor.add_to(app)
         app.cleanup_ctx.append(self._sweeper)
         self.http = HttpHost(app, host, port, limits=limits, name="rollcam-http")
         self.slots = StreamSlots(limits, self.http.loop.time)
+        self.imu = ImuStreams(camera, StreamSlots(jsonl_limits(limits), self.http.loop.time))  # GET /imu.jsonl
+        self.imu.add_to(app)
+        self.insensor = InSensorStreams(camera, StreamSlots(jsonl_limits(limits), self.http.loop.time))
+        self.insensor.add_to(app)
         injector = FaultInjector(FaultPlan.of(faults))
         self.fault_stats = injector.stats
         self._faults = StreamFaults(injector, self.slots.offer, self.http.loop, Part)
@@ -273,7 +274,8 @@ class MjpegServer(Closeable):
         async def sweep() -> None:
             while True:
                 await asyncio.sleep(SWEEP_S)
-                self.slots.sweep()
+                for slots in (self.slots, self.imu.slots, self.insensor.slots):
+                    slots.sweep()
 
         task = asyncio.get_running_loop().create_task(sweep())
         yield
@@ -288,7 +290,8 @@ class MjpegServer(Closeable):
         doc["bad_requests"] += self.http.stats.malformed_requests
         return {**doc, "clients": s.to_json(), "http": self.http.stats.to_json(),
                 "pump": self.pump.stats.to_json(), "camera": self.camera.stats.to_json(),
-                "faults": self.fault_stats.to_json(), **self._ledger()}
+                "faults": self.fault_stats.to_json(), "jsonl": {e.path: e.status() for e in (self.imu, self.insensor)},
+                **self._ledger()}
 
     def _ledger(self) -> dict[str, Any]:
         """The device's energy and bandwidth ledger (a host source behind ``rollcam view`` has none)."""

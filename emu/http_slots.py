@@ -8,9 +8,11 @@ kept from running for a frame) and the time its current write began. A write tha
 ``max_streams_per_peer`` per address; when a limit is reached it evicts the longest-stalled client inside that
 limit; when none is stalled the newcomer waits up to ``admit_wait_s`` (a silent reader stalls within about
 ``stall_s`` once its capped buffers are full) and is refused only then. ``sweep()`` closes clients stalled
-past ``send_timeout_s`` whoever is waiting. Items are shared by every client (the same bytes object is
-written to each transport), so a stalled client costs at most its transport's write buffer: the high-water
-mark plus one item.
+past ``send_timeout_s`` whoever is waiting. A stream that pulls its items (the JSON-lines endpoints) counts
+as stalled from the last item it sent: a reader that gets nothing (one asking for a device time far in the
+future) yields its slot and is closed by ``sweep()`` as a silent MJPEG reader is. Items are shared by every
+client (the same bytes object is written to each transport), so a stalled client costs at most its transport's
+write buffer: the high-water mark plus one item.
 """
 
 from __future__ import annotations
@@ -33,6 +35,7 @@ class StreamClient:
         self.older: Any = None  # the one before it, not yet sent either
         self.sent = self.dropped = 0
         self.writing_since: float | None = None
+        self.idle_since: float | None = None  # a pulling stream: when it last sent an item (None: never idle)
         self.gone = False
         self._wake = asyncio.Event()
 
@@ -63,10 +66,13 @@ class StreamClient:
         finally:
             self.writing_since = None
         self.sent += 1
+        if self.idle_since is not None:
+            self.idle_since = now()
 
     def stalled_s(self, now: float) -> float:
-        """How long the current write has waited (0 when none is pending)."""
-        return 0.0 if self.writing_since is None else now - self.writing_since
+        """How long the current write has waited, or a pulling stream has sent nothing (0 when neither)."""
+        since = [t for t in (self.writing_since, self.idle_since) if t is not None]
+        return now - min(since) if since else 0.0
 
     def backlog_bytes(self) -> int:
         """Bytes written but not yet taken by the kernel."""
@@ -92,15 +98,16 @@ class StreamSlots:
     def __iter__(self) -> Any:
         return iter(list(self.clients.values()))
 
-    async def admit(self, conn: Connection) -> StreamClient | str:
+    async def admit(self, conn: Connection, *, pulls: bool = False) -> StreamClient | str:
         """A slot for a stream on ``conn``, waiting up to ``admit_wait_s`` for one, or why there is none."""
         end = self.clock() + self.limits.admit_wait_s
-        while isinstance(got := self.join(conn), str) and self.clock() < end and not conn.eof:
+        while isinstance(got := self.join(conn, pulls=pulls), str) and self.clock() < end and not conn.eof:
             await asyncio.sleep(ADMIT_POLL_S)
         return got
 
-    def join(self, conn: Connection) -> StreamClient | str:
-        """A slot for a stream on ``conn`` now, or why there is none (for a 503)."""
+    def join(self, conn: Connection, *, pulls: bool = False) -> StreamClient | str:
+        """A slot for a stream on ``conn`` now, or why there is none (for a 503); ``pulls``: the stream finds its
+        own items (and is idle, so evictable, while it finds none), rather than being offered them."""
         lim, now = self.limits, self.clock()
         for limit, why, mine in ((lim.max_streams_per_peer, f"too many streams from {conn.peer}", True),
                                  (lim.max_streams, "too many clients", False)):
@@ -113,6 +120,8 @@ class StreamSlots:
             self.evicted += 1
             self.drop(victim)
         client = StreamClient(self.served, conn)
+        if pulls:
+            client.idle_since = now
         self.served += 1
         self.clients[client.key] = client
         return client

@@ -18,7 +18,11 @@ to every page as a new ``state``.
 
 Bound to a loopback address the view is open (as the stream is); bound beyond it, the page, the WebSocket and
 the snapshot need ``?token=`` (made at start, printed in the banner), since the controls change the device.
-A WebSocket whose ``Origin`` is another site is refused either way.
+A WebSocket whose ``Origin`` is another site is refused either way. Without the token, the view's routes answer
+only a request whose ``Host`` names this server (``localhost``, a loopback literal, the bound address or, bound
+to every address, any address literal; with the server's port): a page from ``evil.example`` whose name was
+rebound to 127.0.0.1 sends ``Host: evil.example:PORT`` and is refused (403), so it can neither change the
+controls nor read the state or a snapshot (DNS rebinding).
 """
 
 from __future__ import annotations
@@ -55,6 +59,27 @@ WEB_FILES = {"index.html": "text/html", "view.js": "text/javascript", "view.css"
 MAX_MESSAGE_BYTES = 4096  # a control message is small; aiohttp closes a WebSocket that sends more
 SNAPSHOT_WAIT_S = 5.0
 MAX_SNAPSHOTS = 2  # PNG encodes at once (each a full-size frame); more are answered 503
+
+
+def host_names_server(host_header: str, bound: tuple[str, int]) -> bool:
+    """True when a request's ``Host`` header names the server bound at ``bound`` (host, port): ``localhost``, this
+    machine's name, a loopback literal or the bound address (bound to every address: any address literal), with
+    the bound port. A name someone else's DNS answers for (a rebinding attack) is not this server."""
+    try:
+        parts = urlsplit("//" + host_header)
+        name, port = (parts.hostname or "").lower(), parts.port or 80
+    except ValueError:  # a port that is not a number, a bracket left open
+        return False
+    bound_host, bound_port = bound
+    if port != bound_port or not name:
+        return False
+    if is_loopback(name) or name in (bound_host.lower(), socket.gethostname().lower()):
+        return True
+    try:
+        ipaddress.ip_address(name)
+    except ValueError:
+        return False
+    return ipaddress.ip_address(bound_host).is_unspecified  # bound to 0.0.0.0 or ::: any of its addresses
 
 
 def is_loopback(host: str) -> bool:
@@ -137,10 +162,15 @@ class LiveView(Closeable):
         public = request.path.removeprefix("/view/") in WEB_FILES  # the script and style are no secret
         if public or not (page or request.path == "/view" or request.path.startswith("/view/")):
             return await handler(request)
-        if self.token is not None and not hmac.compare_digest(request.query.get("token", ""), self.token):
+        has_token = self.token is not None and hmac.compare_digest(request.query.get("token", ""), self.token)
+        if self.token is not None and not has_token:
             self.stats.refused_auth += 1
             raise web.HTTPUnauthorized(text="rollcam: this live view needs the token printed when the server "
                                             "started (open /?token=...)\n")
+        if not has_token and not host_names_server(request.headers.get("Host", ""), self.server.address):
+            self.stats.refused_auth += 1  # DNS rebinding: another site's name resolved to this server
+            raise web.HTTPForbidden(text=f"rollcam: Host {request.headers.get('Host', '')[:80]!r} does not name "
+                                         "this server (open it by its address or localhost)\n")
         return await (self._page(request) if page else handler(request))
 
     async def _page(self, request: web.Request) -> web.Response:

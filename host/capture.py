@@ -31,7 +31,7 @@ from typing import Any, TextIO
 
 import numpy as np
 from rollcam.common.errors import ConfigError, SourceError, is_interrupt
-from rollcam.common.files import OS_FS, AppendLog, FileSystem, part_target, read_jsonl, write_atomic
+from rollcam.common.files import OS_FS, AppendLog, FileSystem, output_dir, part_target, read_jsonl, write_atomic
 from rollcam.sim.codecs import codec
 from rollcam.sim.formats import FORMATS
 from rollcam.sim.frame import Frame
@@ -130,8 +130,7 @@ def encode_image(frame: Frame, fmt: str) -> bytes:
 
 def check_out_dir(out_dir: Path, overwrite: bool) -> None:
     """Refuse an ``out_dir`` that is a file, or holds a capture while ``overwrite`` is off; writes nothing."""
-    if out_dir.exists() and not out_dir.is_dir():
-        raise ConfigError(f"--out {str(out_dir)!r} exists and is not a directory")
+    output_dir(out_dir, make=False)
     if (out_dir / FRAMES_LOG).exists() and not overwrite:
         raise ConfigError(f"{str(out_dir)!r} already holds a capture ({FRAMES_LOG}); pass --overwrite to "
                           "replace it, or choose another --out")
@@ -140,7 +139,7 @@ def check_out_dir(out_dir: Path, overwrite: bool) -> None:
 def prepare_out_dir(out_dir: Path, overwrite: bool) -> None:
     """Create ``out_dir``; refuse one that already holds a capture unless ``overwrite`` (then clear it)."""
     check_out_dir(out_dir, overwrite)
-    out_dir.mkdir(parents=True, exist_ok=True)
+    output_dir(out_dir)
     if (out_dir / FRAMES_LOG).exists():
         for p in out_dir.iterdir():
             if p.is_file() and _is_capture_file(p.name):

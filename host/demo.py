@@ -23,7 +23,7 @@ from typing import TextIO
 
 import numpy as np
 from rollcam.common.errors import ConfigError, RollcamError
-from rollcam.common.files import write_atomic
+from rollcam.common.files import output_dir, write_atomic
 from rollcam.common.lifecycle import Stats
 from rollcam.sim.frame import Frame
 from rollcam.sim.hwconfig import load_sensor
@@ -192,10 +192,7 @@ def run_demo(
         raise ConfigError(f"seconds must be a positive number, got {seconds!r}")
     size = size or default_size(sensor)
     uri = demo_uri(sensor, size, seed, camera)
-    out = Path(out_dir)
-    if out.exists() and not out.is_dir():
-        raise ConfigError(f"--out {str(out)!r} exists and is not a directory")
-    out.mkdir(parents=True, exist_ok=True)
+    out = output_dir(out_dir)
     with open_camera(uri) as source:
         info = source.info()
         rolling = info.get("shutter") != "global"  # a GS sensor's frames are GS: no RS frame is claimed

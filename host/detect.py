@@ -34,7 +34,7 @@ from typing import Any, TextIO
 
 import numpy as np
 from rollcam.common.errors import SourceError, is_interrupt
-from rollcam.common.files import AppendLog
+from rollcam.common.files import AppendLog, output_dir
 from rollcam.sim.frame import Frame
 
 from .detectors import Detections, Detector
@@ -193,7 +193,7 @@ def run_detect(source: CameraSource, detector: Detector, *, frames: int | None =
         read = correcting_reader(read, correct)
     log = sink = None
     if out_dir is not None:
-        out_dir.mkdir(parents=True, exist_ok=True)
+        output_dir(out_dir)
         log = DetectionLog(out_dir / LOG)
         if video:
             sink = VideoSink(out_dir / VIDEO, float(source.info().get("fps") or 30.0))

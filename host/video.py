@@ -4,7 +4,8 @@ pip's OpenCV wheels carry no H.264 encoder (their FFmpeg is built without x264 o
 Part 2 (``mp4v``), which browsers and QuickTime refuse. ``VideoWriter`` pipes raw BGR frames into an ffmpeg
 executable instead: the one that the ``imageio-ffmpeg`` package ships (or ``IMAGEIO_FFMPEG_EXE``), encoding with
 libx264 (else libopenh264) to yuv420p H.264 in an MP4 whose index sits at the front (``+faststart``), so it
-plays while it downloads. ffmpeg runs as its own process, so no GPL code is loaded into rollcam's.
+plays while it downloads. ffmpeg runs as its own process, so no GPL code is loaded into rollcam's, in its own
+process group, so a terminal's Ctrl-C stops rollcam, which finishes the video, and not ffmpeg.
 
 The file is written under a temporary name beside ``path`` (``.NAME.<token>.part``) and moved into place
 durably (fsynced, renamed, directory fsynced: ``rollcam.common.files.commit``) by ``close()``; ``abort()``
@@ -88,8 +89,12 @@ class VideoWriter:
         cmd += ["-movflags", "+faststart", "-f", "mp4", str(self.part)]
         self._log: IO[bytes] = tempfile.TemporaryFile()  # noqa: SIM115 (closed by close/abort); a file, not a pipe, so a chatty ffmpeg cannot block
         try:
+            # Its own session (so its own process group): a terminal's Ctrl-C, sent to the whole foreground group,
+            # reaches rollcam only, which then closes the pipe so ffmpeg finishes the file. Were ffmpeg in the
+            # group too it would die of the same SIGINT and the video would be lost. It still ends when rollcam
+            # does, however rollcam ends: its input pipe closes.
             self._proc: subprocess.Popen[bytes] | None = subprocess.Popen(
-                cmd, stdin=subprocess.PIPE, stdout=subprocess.DEVNULL, stderr=self._log)
+                cmd, stdin=subprocess.PIPE, stdout=subprocess.DEVNULL, stderr=self._log, start_new_session=True)
         except OSError as exc:
             self._log.close()
             raise RollcamError(f"cannot run ffmpeg {exe!r}: {exc}") from None

@@ -20,6 +20,7 @@ Every problem is one ``SourceError`` naming the file (and line or annotation) an
 from __future__ import annotations
 
 import json
+import math
 import re
 from collections.abc import Sequence
 from pathlib import Path
@@ -33,6 +34,7 @@ from .footage import natural_key
 from .footage_labels import BoxLabels, LabelTrack, MaskLabels
 
 FORMATS = ("masks", "coco", "mot", "yolo")
+BOX_REACH = 100  # a box may reach this many footage widths (heights) beyond the frame; further is a broken file
 MASK_SUFFIXES = (".png", ".npy", ".tif", ".tiff")
 _TRACK_KEYS = ("track_id", "instance_id", "object_id")
 
@@ -73,6 +75,21 @@ def load_labels(path: str | Path, fmt: str = "auto", *, n_frames: int, size: tup
     return track
 
 
+def check_box(x: float, y: float, w: float, h: float, size: tuple[int, int] | None, at: str) -> list[float]:
+    """The box ``x, y, w, h`` (pixels) as ``[x0, y0, x1, y1]``, or one ``SourceError`` at ``at`` when a value is
+    not finite, a size is negative or the box reaches more than ``BOX_REACH`` frames beyond the image of ``size``
+    (width, height; None when unknown: that check is skipped). Every reader of other people's boxes uses it."""
+    vals = (x, y, w, h)
+    if not all(math.isfinite(v) for v in vals):
+        raise SourceError(f"{at}: box [x, y, w, h] must be finite numbers, got [{', '.join(f'{v:g}' for v in vals)}]")
+    if w < 0 or h < 0:
+        raise SourceError(f"{at}: box width and height must be >= 0, got {w:g}x{h:g}")
+    if size is not None and max(abs(x), abs(y), abs(x + w), abs(y + h)) > BOX_REACH * max(size):
+        raise SourceError(f"{at}: box [{', '.join(f'{v:g}' for v in vals)}] reaches more than {BOX_REACH} frames "
+                          f"beyond the {size[0]}x{size[1]} image")
+    return [x, y, x + w, y + h]
+
+
 def _per_frame_files(folder: Path, suffixes: Sequence[str], n_frames: int, frame_names: Sequence[str] | None,
                      what: str) -> list[Path]:
     """One file per footage frame: by frame file stem when the footage is a folder, else in natural order."""
@@ -92,8 +109,39 @@ def _per_frame_files(folder: Path, suffixes: Sequence[str], n_frames: int, frame
 
 
 # ------------------------------------------------------------------------------------------------ masks
+PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
+
+
+def mask_header_shape(path: Path) -> tuple[int, ...] | None:
+    """The array shape (rows, columns[, ...]) a PNG (its IHDR) or ``.npy`` file (its header) declares, read
+    without decoding the data, so a file declaring a huge image is refused before anything is allocated; None
+    for other files (their decoder checks them) and a PNG whose first chunk is not IHDR (its decoder refuses it).
+    """
+    try:
+        with path.open("rb") as f:
+            if path.suffix.lower() == ".npy":
+                version = np.lib.format.read_magic(f)
+                read = np.lib.format.read_array_header_1_0 if version == (1, 0) else \
+                    np.lib.format.read_array_header_2_0
+                shape, _fortran, _dtype = read(f)
+                return tuple(int(n) for n in shape)
+            head = f.read(33)
+    except (OSError, ValueError, TypeError, SyntaxError) as exc:
+        raise SourceError(f"{str(path)!r}: cannot read the mask's header ({exc})") from None
+    if head[:8] != PNG_SIGNATURE or head[12:16] != b"IHDR":
+        return None
+    width, height = int.from_bytes(head[16:20], "big"), int.from_bytes(head[20:24], "big")
+    return (height, width)
+
+
 def read_mask(path: Path, size: tuple[int, int]) -> np.ndarray:
-    """One instance-mask image as an int64 H x W array of ids (refusing colour, wrong size or undecodable)."""
+    """One instance-mask image as an int64 H x W array of ids (refusing colour, wrong size or undecodable).
+
+    A PNG's or ``.npy``'s declared size is checked against the footage's ``size`` from its header first."""
+    declared = mask_header_shape(path)
+    if declared is not None and declared[:2] != (size[1], size[0]):
+        what = "x".join(map(str, declared[1::-1])) if len(declared) >= 2 else f"of shape {declared!r}"
+        raise SourceError(f"{str(path)!r}: mask is {what}, the footage {size[0]}x{size[1]} (from its header)")
     if path.suffix.lower() == ".npy":
         try:
             m = np.load(path, allow_pickle=False)
@@ -141,13 +189,20 @@ def _load_masks(folder: Path, n_frames: int, size: tuple[int, int], names: Seque
 
 
 # ------------------------------------------------------------------------------------------------- COCO
-def rle_decode(rle: dict[str, Any], where: str) -> np.ndarray:
-    """A COCO RLE (``{"size": [h, w], "counts": list or compressed string}``) as an H x W bool mask."""
+def rle_decode(rle: dict[str, Any], where: str, footage: tuple[int, int] | None = None) -> np.ndarray:
+    """A COCO RLE (``{"size": [h, w], "counts": list or compressed string}``) as an H x W bool mask.
+
+    With ``footage`` (width, height) the declared size must be the footage's, checked before the counts are
+    read or anything is allocated, so the counts are bounded by the footage's pixels."""
     try:
         h, w = (int(v) for v in rle["size"])
         counts = rle["counts"]
     except (KeyError, TypeError, ValueError):
         raise SourceError(f"{where}: RLE segmentation needs 'size' [h, w] and 'counts'") from None
+    if footage is not None and (w, h) != tuple(footage):
+        raise SourceError(f"{where}: RLE mask declares {w}x{h}, the footage is {footage[0]}x{footage[1]}")
+    if h < 0 or w < 0:
+        raise SourceError(f"{where}: RLE size [{h}, {w}] is negative")
     if isinstance(counts, str):
         counts = _rle_string(counts, where)
     if not isinstance(counts, list) or not all(isinstance(c, int) and c >= 0 for c in counts):
@@ -208,13 +263,13 @@ def polygon_mask(pts: np.ndarray, h: int, w: int) -> np.ndarray:
 def _coco_mask(seg: Any, size: tuple[int, int], where: str) -> np.ndarray:
     w, h = size
     if isinstance(seg, dict):
-        m = rle_decode(seg, where)
-        if m.shape != (h, w):
-            raise SourceError(f"{where}: RLE mask is {m.shape[1]}x{m.shape[0]}, the footage {w}x{h}")
-        return m
-    if isinstance(seg, list) and seg and all(isinstance(poly, list) and len(poly) >= 6 for poly in seg):
+        return rle_decode(seg, where, size)
+    if isinstance(seg, list) and seg and all(isinstance(poly, list) and len(poly) >= 6 and len(poly) % 2 == 0
+                                             for poly in seg):
         out = np.zeros((h, w), np.bool_)
         for poly in seg:
+            if not all(isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) for v in poly):
+                raise SourceError(f"{where}: polygon coordinates must be finite numbers")
             out |= polygon_mask(np.asarray(poly, np.float64).reshape(-1, 2), h, w)
         return out
     raise SourceError(f"{where}: segmentation must be an RLE dict or a list of polygons (x, y, ... >= 3 points)")
@@ -244,15 +299,17 @@ def _load_coco(path: Path, n_frames: int, size: tuple[int, int], names: Sequence
         if not isinstance(oid, int) or isinstance(oid, bool) or oid <= 0:
             raise SourceError(f"{at}: needs a positive integer track id ({'/'.join(_TRACK_KEYS)}), got {oid!r}")
         bbox = a.get("bbox")
-        if not (isinstance(bbox, list) and len(bbox) == 4 and all(isinstance(v, (int, float)) for v in bbox)):
+        if not (isinstance(bbox, list) and len(bbox) == 4
+                and all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in bbox)):
             raise SourceError(f"{at}: bbox must be [x, y, w, h], got {bbox!r}")
+        box = check_box(*(float(v) for v in bbox), size, f"{at} bbox")
         vis = a.get("visible", 1.0)
-        if not isinstance(vis, (int, float)) or not 0.0 <= vis <= 1.0:
+        if not isinstance(vis, (int, float)) or not 0.0 <= vis <= 1.0:  # NaN fails the comparison too
             raise SourceError(f"{at}: visible must be a fraction in [0, 1], got {vis!r}")
         if a.get("category_id") in cats:
             classes[oid] = "person" if cats[a["category_id"]] == "pedestrian" else cats[a["category_id"]]
         with_seg += "segmentation" in a
-        per_frame[frame_of_image[a["image_id"]]].append((oid, bbox, float(vis), a.get("segmentation")))
+        per_frame[frame_of_image[a["image_id"]]].append((oid, box, float(vis), a.get("segmentation")))
         if any(o == oid for o, *_ in per_frame[frame_of_image[a["image_id"]]][:-1]):
             raise SourceError(f"{at}: track id {oid} appears twice in image {a['image_id']!r}")
     if with_seg not in (0, len(doc["annotations"])):
@@ -271,8 +328,7 @@ def _load_coco(path: Path, n_frames: int, size: tuple[int, int], names: Sequence
 
     def load_boxes(k: int) -> BoxLabels:
         rows = per_frame[k]
-        return BoxLabels.of([r[0] for r in rows], [[b[0], b[1], b[0] + b[2], b[1] + b[3]] for _, b, _, _ in rows],
-                            [r[2] for r in rows])
+        return BoxLabels.of([r[0] for r in rows], [r[1] for r in rows], [r[2] for r in rows])
 
     return LabelTrack(where, n_frames, size, "boxes", load_boxes, classes)
 
@@ -327,9 +383,7 @@ def _load_mot(path: Path, n_frames: int, size: tuple[int, int], names: Sequence[
             raise SourceError(f"{where!r} line {ln}: frame {parts[0]!r} is not in 1..{n_frames} (the footage's frames)")
         if oid != int(oid) or oid <= 0:
             raise SourceError(f"{where!r} line {ln}: id {parts[1]!r} must be a positive integer")
-        x, y, w, h = vals[2:6]
-        if w < 0 or h < 0:
-            raise SourceError(f"{where!r} line {ln}: box width and height must be >= 0, got {w:g}x{h:g}")
+        box = check_box(*vals[2:6], size, f"{where!r} line {ln}")
         vis = vals[8] if len(vals) > 8 else 1.0
         if not 0.0 <= vis <= 1.0:
             raise SourceError(f"{where!r} line {ln}: visibility {parts[8]!r} is not in [0, 1]")
@@ -338,7 +392,7 @@ def _load_mot(path: Path, n_frames: int, size: tuple[int, int], names: Sequence[
         k = int(frame) - 1
         if any(o == int(oid) for o, _, _ in rows[k]):
             raise SourceError(f"{where!r} line {ln}: id {int(oid)} appears twice in frame {int(frame)}")
-        rows[k].append((int(oid), [x, y, x + w, y + h], vis))
+        rows[k].append((int(oid), box, vis))
 
     def load(k: int) -> BoxLabels:
         return BoxLabels.of([r[0] for r in rows[k]], [r[1] for r in rows[k]], [r[2] for r in rows[k]])
@@ -368,13 +422,15 @@ def _load_yolo(folder: Path, n_frames: int, size: tuple[int, int], names: Sequen
                 raise SourceError(f"{at}: need 'class cx cy w h id' (or with conf before id) to follow objects "
                                   f"across frames, got {len(vals)} values")
             cls, cx, cy, bw, bh, oid = vals[0], *vals[1:5], vals[-1]
-            if oid != int(oid) or oid <= 0 or cls != int(cls) or cls < 0:
+            if not (math.isfinite(oid) and math.isfinite(cls)) or oid != int(oid) or oid <= 0 or cls != int(cls) \
+                    or cls < 0:
                 raise SourceError(f"{at}: class and id must be integers (id >= 1), got {line.strip()!r}")
             if int(oid) in ids:
                 raise SourceError(f"{at}: id {int(oid)} appears twice")
+            box = check_box((cx - bw / 2) * w_img, (cy - bh / 2) * h_img, bw * w_img, bh * h_img, size, at)
             classes[int(oid)] = "person" if cls == 0 else f"class{int(cls)}"
             ids.append(int(oid))
-            boxes.append([(cx - bw / 2) * w_img, (cy - bh / 2) * h_img, (cx + bw / 2) * w_img, (cy + bh / 2) * h_img])
+            boxes.append(box)
         return BoxLabels.of(ids, boxes)
 
     return LabelTrack(str(folder), n_frames, size, "boxes", load, classes)

@@ -9,6 +9,7 @@ import pytest
 from rollcam.common.errors import ConfigError
 from rollcam.host.cli import main
 from rollcam.host.datasets import DatasetConfig, build_dataset, make_plan
+from rollcam.host.datasets.build import DRIVER_LOCK
 from rollcam.host.datasets.plan import LabelPolicy
 from rollcam.host.sources import open_camera
 
@@ -110,6 +111,7 @@ def test_interrupted_build_resumes_to_the_same_dataset(tmp_path):
     with pytest.raises(KeyboardInterrupt):
         build_dataset(SMALL, out, on_commit=stop_after_two)
     assert len(list((out / "records").rglob("*.json"))) == 2
+    assert not (out / DRIVER_LOCK).exists()  # issue 37: main left an empty lock file behind
     assert not list(out.rglob("*.part"))
     # A sample killed half-way: a stray temporary file and a truncated image of an uncommitted sample.
     junk = out / "normal_gs" / "images" / "test" / "half.png.part"
@@ -117,7 +119,7 @@ def test_interrupted_build_resumes_to_the_same_dataset(tmp_path):
     junk.write_bytes(b"x")
     result = build_dataset(SMALL, out)
     assert (result.resumed, result.rendered) == (2, 4)
-    assert not junk.exists()
+    assert not junk.exists() and not (out / DRIVER_LOCK).exists()
     assert _tree(out) == ref
     with pytest.raises(ConfigError, match="other options"):
         build_dataset(DatasetConfig(size=(192, 108), scenes=3, frames=6, seed=8), out)

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import os
+import shutil
 import signal
 import subprocess
 import sys
@@ -113,20 +114,46 @@ def test_cli_detect_json_summary(tmp_path, capsys):
 
 
 @pytest.mark.skipif(sys.platform == "win32", reason="SIGINT to a child process")
-def test_cli_ctrl_c_exits_130_with_files_intact(tmp_path):
+@pytest.mark.parametrize("terminal", [False, True], ids=["rollcam-alone", "whole-process-group"])
+def test_cli_ctrl_c_exits_130_with_files_intact(tmp_path, terminal):
+    """Ctrl-C in a terminal signals the whole foreground process group (``terminal``: rollcam leads its own group
+    and the SIGINT goes to the group, as a terminal sends it). On main ffmpeg was in that group, died of the same
+    SIGINT and took detections.mp4 with it (issue 37); here it runs in its own and the video is finished."""
     exe = Path(sys.executable).with_name("rollcam")
     proc = subprocess.Popen([str(exe), "detect", URI, "--detector", "hog?stride=16", "--out", str(tmp_path)],
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, env={**os.environ, "PYTHONUNBUFFERED": "1"})
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, env={**os.environ, "PYTHONUNBUFFERED": "1"},
+                            start_new_session=terminal)
     log = tmp_path / LOG
     deadline = time.monotonic() + 120
-    while time.monotonic() < deadline and (not log.exists() or log.read_text().count("\n") < 2):
+    while time.monotonic() < deadline and (not log.exists() or log.read_text().count("\n") < 3
+                                           or not list(tmp_path.glob(f".{VIDEO}.*.part"))):  # ffmpeg is running
         time.sleep(0.1)
-    proc.send_signal(signal.SIGINT)
+    if terminal:
+        os.killpg(proc.pid, signal.SIGINT)
+    else:
+        proc.send_signal(signal.SIGINT)
     _, err = proc.communicate(timeout=60)
     assert proc.returncode == 130, err
     lines = log.read_text().splitlines()
-    assert len(lines) >= 2 and all(json.loads(line)["detections"] is not None for line in lines)
+    assert len(lines) >= 3 and all(json.loads(line)["detections"] is not None for line in lines)
     cap = cv2.VideoCapture(str(tmp_path / VIDEO))
     assert int(cap.get(cv2.CAP_PROP_FRAME_COUNT)) >= len(lines) - 1
     cap.release()
+    if shutil.which("ffprobe"):  # the file is whole: ffprobe decodes every frame of it
+        probe = subprocess.run(["ffprobe", "-v", "error", "-count_frames", "-select_streams", "v:0", "-show_entries",
+                                "stream=nb_read_frames", "-of", "csv=p=0", str(tmp_path / VIDEO)],
+                               capture_output=True, text=True, timeout=60, check=True)
+        assert int(probe.stdout.strip()) >= len(lines) - 1, probe
     assert "interrupted after" in err.decode()
+    assert not list(tmp_path.glob("*.part")) and not list(tmp_path.glob(".*.part"))
+
+
+@pytest.mark.parametrize("where", ["file", "below-a-file"])
+def test_out_that_is_a_file_is_one_line_exit_2(tmp_path, capsys, where):
+    """Issue 37: main ended in a raw [Errno 17] / [Errno 20] with exit 1."""
+    (tmp_path / "f").write_text("x")
+    out = tmp_path / "f" if where == "file" else tmp_path / "f" / "sub"
+    assert main(["detect", URI, "--detector", "hog?stride=16", "--frames", "1", "--out", str(out)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("rollcam: error: --out ") and str(out) in err[0], err
+    assert "must be a folder, not a file" in err[0] and "Errno" not in err[0]

@@ -6,6 +6,7 @@ import json
 
 import numpy as np
 import pytest
+from rollcam.common.errors import RollcamError
 from rollcam.host.evaluation.loaders import load_detections, load_sets
 from rollcam.host.evaluation.metrics import Dets, Truth, box_iou, coco_map, evaluate, precision_recall
 
@@ -105,3 +106,64 @@ def test_yolo_dataset_loader(tmp_path):
         {"box": [40, 15, 60, 35], "score": 0.5, "class": "person"}]}) + "\n")
     dets = load_detections(tmp_path / "d.jsonl", [s])
     assert evaluate([s.images[0].truth], dets[0])["mAP50"] == pytest.approx(1.0)
+
+
+_GOOD = {"images": [{"id": 7, "file_name": "a.png", "width": 100, "height": 80}],
+         "annotations": [{"id": 1, "image_id": 7, "category_id": 1, "bbox": [10, 10, 20, 40]}],
+         "categories": [{"id": 1, "name": "person"}]}
+
+
+@pytest.mark.parametrize(("change", "message"), [
+    ({"annotations": [{"id": 1, "image_id": 7, "category_id": 1, "bbox": [float("nan"), 1, 5, 5]}]},
+     r"gt\.json'? annotation 0 \(id 1\) bbox: box \[x, y, w, h\] must be finite numbers"),
+    ({"annotations": [{"id": 1, "image_id": 7, "category_id": 1, "bbox": [1e308, 0, 1e308, 5]}]},
+     r"annotation 0 \(id 1\) bbox: box .* reaches more than 100 frames beyond the 100x80 image"),
+    ({"annotations": [{"id": 1, "image_id": 7, "category_id": 1, "bbox": [0, 0, -5, 5]}]},
+     r"annotation 0 \(id 1\) bbox: box width and height must be >= 0"),
+    ({"annotations": [{"id": 1, "image_id": 8, "category_id": 1, "bbox": [0, 0, 5, 5]}]},
+     r"annotation 0 \(id 1\): image_id 8 names no image"),
+    ({"annotations": [{"id": 1, "image_id": 7, "category_id": 1}]}, r"annotation 0 \(id 1\): bbox must be"),
+    ({"images": [{"id": 7}]}, r"gt\.json'? image 0: needs an 'id' and a 'file_name'"),
+    ({"categories": [{"name": "person"}]}, r"gt\.json'? category 0: needs an integer 'id'"),
+    ({"annotations": {}}, r"gt\.json'?: not a COCO file"),
+])
+def test_bad_coco_eval_files_name_the_file_and_annotation(tmp_path, change, message):
+    """Issue 37 item 4: main accepted NaN and far-off boxes silently and ended in a KeyError traceback on the rest."""
+    (tmp_path / "gt.json").write_text(json.dumps({**_GOOD, **change}))
+    with pytest.raises(RollcamError, match=message):
+        load_sets(tmp_path / "gt.json", "test")
+
+
+@pytest.mark.parametrize(("line", "message"), [
+    ("nan 0.5 0.5 0.2 0.4", r"x\.txt'? line 1: class must be an integer >= 0"),
+    ("0 inf 0.5 0.2 0.4", r"x\.txt'? line 1: box \[x, y, w, h\] must be finite numbers"),
+    ("0 0.5 0.5 -0.2 0.4", r"x\.txt'? line 1: box width and height must be >= 0"),
+    ("0 0.5 0.5", r"x\.txt'? line 1: need 'class cx cy w h'"),
+    ("0 a b c d", r"x\.txt'? line 1: not numbers"),
+])
+def test_bad_yolo_eval_labels_name_the_file_and_line(tmp_path, line, message):
+    import cv2
+
+    (tmp_path / "images" / "val").mkdir(parents=True)
+    (tmp_path / "labels" / "val").mkdir(parents=True)
+    cv2.imwrite(str(tmp_path / "images" / "val" / "x.png"), np.zeros((50, 100, 3), np.uint8))
+    (tmp_path / "labels" / "val" / "x.txt").write_text(line + "\n")
+    (tmp_path / "data.yaml").write_text("val: images/val\nnames:\n  0: person\n")
+    with pytest.raises(RollcamError, match=message):
+        load_sets(tmp_path, "val")
+
+
+@pytest.mark.parametrize(("suffix", "content", "message"), [
+    (".json", [{"image_id": 7, "category_id": 1, "bbox": [float("nan"), 0, 1, 1], "score": 0.5}],
+     r"res\.json'? result 0 bbox: box \[x, y, w, h\] must be finite numbers"),
+    (".json", [{"image_id": 7, "bbox": [0, 0, 1, 1], "score": 0.5}], r"res\.json'? result 0: expected"),
+    (".jsonl", {"image": "a.png", "detections": [{"box": [0, 0, float("inf"), 1], "score": 0.5, "cls": 0}]},
+     r"res\.jsonl:1: a detection is .* of finite numbers"),
+    (".jsonl", {"image": "a.png", "detections": [{"score": 0.5}]}, r"res\.jsonl:1: a detection is"),
+])
+def test_bad_detection_files_name_the_file_and_entry(tmp_path, suffix, content, message):
+    (tmp_path / "gt.json").write_text(json.dumps(_GOOD))
+    sets = load_sets(tmp_path / "gt.json", "test")
+    (tmp_path / f"res{suffix}").write_text(json.dumps(content) + "\n")
+    with pytest.raises(RollcamError, match=message):
+        load_detections(tmp_path / f"res{suffix}", sets)

@@ -12,6 +12,7 @@ from pathlib import Path
 
 import pytest
 from fs_fakes import FailingFS, FullDiskFS
+from rollcam.common.errors import ConfigError
 from rollcam.common.files import (
     PART_SUFFIX,
     AppendLog,
@@ -20,9 +21,11 @@ from rollcam.common.files import (
     complete_length,
     file_digest,
     file_matches,
+    output_dir,
     part_path,
     part_target,
     read_jsonl,
+    release_lock,
     repair_jsonl,
     write_atomic,
 )
@@ -187,3 +190,28 @@ def test_lock_held_by_another_process_is_refused_at_once(tmp_path: Path):
         proc.stdin.close()
         proc.wait(timeout=30)
     os.close(acquire_lock(lock, "the dataset folder"))  # released when its holder exits
+
+
+@pytest.mark.skipif(os.name != "posix", reason="flock")
+def test_a_removed_lock_file_is_gone_and_the_lock_can_be_taken_again(tmp_path: Path):
+    lock = tmp_path / ".lock"
+    fd = acquire_lock(lock, "x")
+    with pytest.raises(BlockingIOError):
+        acquire_lock(lock, "x")
+    release_lock(fd, lock, remove=True)
+    assert not lock.exists()
+    fd = acquire_lock(lock, "x")  # a new file, locked
+    assert lock.exists()
+    release_lock(fd, lock)  # kept: a shared lock's file may still be held by others
+    assert lock.exists()
+    release_lock(None, lock, remove=True)  # nothing was held (no fcntl): nothing happens
+
+
+def test_output_dir_makes_folders_and_refuses_a_file_in_the_way(tmp_path: Path):
+    assert output_dir(tmp_path / "a" / "b") == tmp_path / "a" / "b" and (tmp_path / "a" / "b").is_dir()
+    assert output_dir(tmp_path / "c", make=False) == tmp_path / "c" and not (tmp_path / "c").exists()
+    (tmp_path / "f").write_text("x")
+    with pytest.raises(ConfigError, match=r"--out '.*f' must be a folder, not a file$"):
+        output_dir(tmp_path / "f")
+    with pytest.raises(ConfigError, match=r"--out '.*f/sub' must be a folder, not a file: '.*f' is a file"):
+        output_dir(tmp_path / "f" / "sub", make=False)

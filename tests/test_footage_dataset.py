@@ -8,6 +8,7 @@ from fractions import Fraction
 import cv2
 import numpy as np
 import pytest
+from hostile_files import npy_header_only, png_header_only
 from rollcam.host import open_camera
 from rollcam.host.cli import main
 from rollcam.sim.instance_masks import render_masks, write_labelled_footage
@@ -91,6 +92,27 @@ def test_dataset_from_footage_builds_the_rollcam_layout_and_evaluates(footage, t
     # Rerun: nothing to redo.
     assert main(["dataset", "--out", str(out), "--from-footage", uri, "--min-box", "1x1", "--json"]) == 0
     assert json.loads(capsys.readouterr().out)["resumed"] == N_RS
+
+
+@pytest.mark.parametrize("kind", ["png", "npy"])
+def test_a_mask_declaring_a_huge_size_is_one_line_exit_2(footage, tmp_path, capsys, kind):
+    """Issue 37 F2/F3: a PNG or .npy mask whose header declares 30000x30000 is refused from the header (main
+    decoded it in full first, or ended in a MemoryError traceback) with one line and exit 2."""
+    _r, _frames, masks, uri = footage
+    bad = tmp_path / "masks"
+    bad.mkdir()
+    for p in sorted(masks.glob("*.png"))[:-1]:
+        (bad / p.name).write_bytes(p.read_bytes())
+    last = sorted(masks.glob("*.png"))[-1]
+    if kind == "png":
+        png_header_only(bad / last.name, 30000, 30000)
+    else:
+        npy_header_only(bad / last.with_suffix(".npy").name, (30000, 30000))
+    out = tmp_path / "ds"
+    assert main(["dataset", "--out", str(out), "--from-footage", uri.replace(str(masks), str(bad))]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("rollcam: error:") and "mask is 30000x30000" in err[0], err
+    assert "from its header" in err[0] and not out.exists()
 
 
 def test_bad_labels_fail_before_any_output(footage, tmp_path, capsys):

@@ -20,9 +20,11 @@ import urllib.request
 from collections.abc import Iterator
 
 import pytest
+import rollcam.host  # noqa: F401  (registers the in-sensor network loader the insensor= option needs)
 from rollcam.emu.http_mjpeg import MjpegServer
 from rollcam.emu.http_server import HttpLimits
 from rollcam.firmware.camera import FirmwareCamera
+from rollcam.firmware.spec import CameraSpec
 
 GET = b"GET /stream.mjpg HTTP/1.1\r\nHost: x\r\n\r\n"
 
@@ -241,6 +243,29 @@ def test_send_timeout_closes_a_stalled_stream():
         assert srv.clients == {}
 
 
+@pytest.mark.parametrize(("path", "query"), [("/imu.jsonl", "from_ns=4000000000000000000"),
+                                             ("/insensor.jsonl", "from_seq=4000000000000000000")])
+def test_idle_json_lines_readers_cannot_lock_out_a_reader(path: str, query: str):
+    """Issue 37 J2: 8 readers asking for a device time far in the future held every JSON-lines slot on main (503
+    for everyone else); here they count as stalled, one address holds at most its share, a newcomer evicts the
+    idlest, and the sweep closes them at the deadline."""
+    limits = HttpLimits(stall_s=0.3, admit_wait_s=3.0, send_timeout_s=2.0)
+    cam = FirmwareCamera(CameraSpec.from_options("imx219", {"size": "320x180", "scene": "flat", "imu": "on",
+                                                            "insensor": "personnet-raw"}))
+    request = f"GET {path}?{query} HTTP/1.1\r\nHost: x\r\n\r\n".encode()
+    with MjpegServer(cam, limits=limits) as srv, sockets() as held:
+        for _ in range(8):
+            held.append(attacker(srv.address, "127.0.0.2", request=request))
+            assert held[-1].recv(12) == b"HTTP/1.1 200"
+        base = f"http://127.0.0.1:{srv.address[1]}"
+        with urllib.request.urlopen(f"{base}{path}?{'samples' if 'imu' in path else 'results'}=1", timeout=20) as r:
+            lines = r.read().decode().splitlines()  # main: HTTP 503 "8 ... streams already"
+        assert len(lines) == 2 and "error" not in lines[-1], lines
+        st = status(srv)["jsonl"][path]
+        assert st["served"] == 9 and st["readers"] <= 4 + 1  # at most 4 from one address: its own idlest evicted
+        assert wait_for(lambda: status(srv)["jsonl"][path]["closed_stalled"] >= 1)  # the idle deadline
+
+
 def _has_ipv6_loopback() -> bool:
     try:
         with socket.socket(socket.AF_INET6) as s:
@@ -272,6 +297,7 @@ import os, resource, sys, time
 from rollcam.emu.http_mjpeg import MjpegServer
 from rollcam.emu.http_server import HttpLimits
 from rollcam.firmware.camera import FirmwareCamera
+from rollcam.firmware.spec import CameraSpec
 cam = FirmwareCamera("imx219", scene={"scene": "flat"}, size=(640, 480), fps=10)
 with MjpegServer(cam, limits=HttpLimits(request_timeout_s=60, max_connections=1000)) as srv:
     n = len(os.listdir("/proc/self/fd"))

@@ -8,6 +8,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 import pytest
+from hostile_files import npy_header_only, png_header_only
 from rollcam.common.errors import SourceError
 from rollcam.sim.label_formats import detect_format, load_labels, rle_decode
 
@@ -213,3 +214,94 @@ def test_yolo_per_frame_files_with_track_ids(tmp_path):
     (d / "f1.txt").unlink()
     with pytest.raises(SourceError, match=r"holds 1 label files, the footage 2 frames"):
         load_labels(d, n_frames=2, size=(W, H))
+
+
+# ------------------------------------------------------------------ hostile files (issue 37 F1-F5)
+@pytest.mark.parametrize("case", ["png", "npy", "npy3d"])
+def test_masks_declaring_a_huge_size_are_refused_from_the_header(tmp_path, case):
+    """F2/F3: the size a PNG's IHDR or an .npy header declares is checked before anything is decoded."""
+    _masks(tmp_path / "m", 2)
+    (tmp_path / "m" / "m1.png").unlink()
+    if case == "png":
+        png_header_only(tmp_path / "m" / "m1.png", 30000, 30000)
+    else:
+        npy_header_only(tmp_path / "m" / "m1.npy", (100000, 100000) if case == "npy" else (100000, 100000, 4))
+    with pytest.raises(SourceError, match=r"m1\.(png|npy)'?: mask is 100000x100000|m1\.png'?: mask is 30000x30000"
+                       ) as info:
+        load_labels(tmp_path / "m", n_frames=2, size=(W, H))[1]
+    assert "from its header" in str(info.value) and "\n" not in str(info.value)
+
+
+def test_a_coco_rle_declaring_a_huge_mask_is_refused_before_allocation(tmp_path):
+    """F1: the RLE's declared size is the footage's, checked before its counts are decoded (main allocated the
+    declared 60000x60000 mask, 3.6 GB, before comparing it with the footage)."""
+    import tracemalloc
+
+    rle = {"size": [60000, 60000], "counts": [0, 60000 * 60000]}
+    p = _coco(tmp_path, [{"id": 5, "image_id": 10, "bbox": [0, 0, 1, 1], "track_id": 1, "segmentation": rle},
+                         {"id": 6, "image_id": 11, "bbox": [0, 0, 1, 1], "track_id": 1, "segmentation": [[0, 0, 1, 0,
+                                                                                                           1, 1]]}])
+    tracemalloc.start()
+    try:
+        with pytest.raises(SourceError, match=r"labels\.json'? frame 0 track 1: RLE mask declares 60000x60000, "
+                                              r"the footage is 32x24"):
+            load_labels(p, n_frames=2, size=(W, H))[0]
+        peak = tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+    assert peak < 50 * 2**20, peak
+    with pytest.raises(SourceError, match=r"RLE mask declares 32x25"):
+        rle_decode({"size": [25, 32], "counts": [800]}, "x", (W, H))
+
+
+@pytest.mark.parametrize(("bbox", "message"), [
+    ([float("nan"), 1, 5, 5], r"annotation 0 \(id 1\) bbox: box \[x, y, w, h\] must be finite numbers, got \[nan"),
+    ([0, 0, float("inf"), 5], r"annotation 0 \(id 1\) bbox: box \[x, y, w, h\] must be finite numbers"),
+    ([1e308, 0, 1e308, 1], r"annotation 0 \(id 1\) bbox: box \[1e\+308, 0, 1e\+308, 1\] reaches more than 100"),
+    ([0, 0, -1, 5], r"annotation 0 \(id 1\) bbox: box width and height must be >= 0, got -1x5"),
+    ([0, 0, True, 5], r"bbox must be \[x, y, w, h\]"),
+])
+def test_coco_boxes_must_be_finite_sized_and_near_the_footage(tmp_path, bbox, message):
+    """F5: main accepted these silently (MOT already refused NaN)."""
+    p = _coco(tmp_path, [{"id": 1, "image_id": 10, "bbox": bbox, "track_id": 1}])
+    with pytest.raises(SourceError, match=message):
+        load_labels(p, n_frames=2, size=(W, H))[0]
+
+
+def test_coco_polygons_must_be_finite(tmp_path):
+    p = _coco(tmp_path, [{"id": 1, "image_id": 10, "bbox": [0, 0, 1, 1], "track_id": 1,
+                          "segmentation": [[0, 0, float("nan"), 0, 1, 1]]},
+                         {"id": 2, "image_id": 11, "bbox": [0, 0, 1, 1], "track_id": 1,
+                          "segmentation": [[0, 0, 1, 0, 1, 1]]}])
+    with pytest.raises(SourceError, match=r"frame 0 track 1: polygon coordinates must be finite numbers"):
+        load_labels(p, n_frames=2, size=(W, H))[0]
+
+
+@pytest.mark.parametrize(("line", "message"), [
+    ("nan 0.5 0.5 0.25 0.5 3", r"f0\.txt'? line 1: class and id must be integers"),
+    ("0 0.5 0.5 0.25 0.5 nan", r"f0\.txt'? line 1: class and id must be integers"),
+    ("inf 0.5 0.5 0.25 0.5 3", r"f0\.txt'? line 1: class and id must be integers"),
+    ("0 0.5 0.5 0.25 0.5 inf", r"f0\.txt'? line 1: class and id must be integers"),
+    ("0 nan 0.5 0.25 0.5 3", r"f0\.txt'? line 1: box \[x, y, w, h\] must be finite numbers"),
+    ("0 0.5 0.5 -0.25 0.5 3", r"f0\.txt'? line 1: box width and height must be >= 0"),
+    ("0 1e300 0.5 0.25 0.5 3", r"f0\.txt'? line 1: box .* reaches more than 100 frames"),
+])
+def test_yolo_non_finite_ids_classes_and_boxes_name_the_line(tmp_path, line, message):
+    """F4: nan/inf ids and classes ended in a traceback on main (int(nan))."""
+    d = tmp_path / "y"
+    d.mkdir()
+    (d / "f0.txt").write_text(line + "\n")
+    (d / "f1.txt").write_text("")
+    with pytest.raises(SourceError, match=message):
+        load_labels(d, n_frames=2, size=(W, H))[0]
+
+
+@pytest.mark.parametrize(("text", "message"), [
+    ("1,4,1e308,0,1e308,1\n", r"gt\.txt'? line 1: box .* reaches more than 100 frames"),
+    ("1,4,0,0,-2,1\n", r"gt\.txt'? line 1: box width and height must be >= 0, got -2x1"),
+])
+def test_mot_boxes_are_checked_as_coco_and_yolo_boxes_are(tmp_path, text, message):
+    p = tmp_path / "gt.txt"
+    p.write_text(text)
+    with pytest.raises(SourceError, match=message):
+        load_labels(p, n_frames=3, size=(W, H))

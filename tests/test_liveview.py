@@ -21,7 +21,7 @@ import numpy as np
 import pytest
 from rollcam.common.errors import ConfigError
 from rollcam.emu.http_mjpeg import MjpegServer
-from rollcam.emu.http_view import LiveView, is_loopback
+from rollcam.emu.http_view import LiveView, host_names_server, is_loopback
 from rollcam.emu.view_controls import EGO_PRESETS, CameraControls, NoControls
 from rollcam.firmware.camera import FirmwareCamera
 from rollcam.sim.scenegen import ego_preset
@@ -97,6 +97,50 @@ def test_the_token_is_required_off_loopback_for_page_websocket_and_snapshot():
 
         asyncio.run(run())
         assert lv.stats.refused_auth >= 6
+
+
+def test_a_rebound_name_cannot_reach_the_view_on_loopback(view):
+    """DNS rebinding (issue 37 V2): evil.example resolved to 127.0.0.1 sends Origin and Host evil.example:PORT.
+    On main the WebSocket changed the gain and state/snapshot answered; here each is refused (403) unless the
+    Host names this server."""
+    srv, lv = view
+    port = srv.address[1]
+    evil = {"Host": f"evil.example:{port}", "Origin": f"http://evil.example:{port}", "Accept": "text/html"}
+    gain = srv.camera.spec.option_values()["gain"]
+
+    async def run() -> None:
+        async with aiohttp.ClientSession() as s:
+            for path in ("/", "/view", "/view/state.json", "/view/snapshot.json"):
+                async with s.get(local(srv) + path, headers=evil) as r:
+                    assert r.status == 403, path
+                    assert "evil.example" in await r.text()
+            with pytest.raises(aiohttp.WSServerHandshakeError) as refused:
+                await s.ws_connect(local(srv) + "/view/ws", headers=evil)
+            assert refused.value.status == 403
+            async with s.get(local(srv) + "/view/view.js", headers=evil) as r:  # the script is public anyway
+                assert r.status == 200
+            for host in (f"localhost:{port}", f"127.0.0.1:{port}"):  # this server by its names: served
+                async with s.get(local(srv) + "/view/state.json", headers={"Host": host}) as r:
+                    assert r.status == 200, host
+            async with s.ws_connect(local(srv) + "/view/ws", headers={"Host": f"localhost:{port}"},
+                                    origin=f"http://localhost:{port}") as ws:
+                assert len(await frames(ws, 1)) == 1
+
+    asyncio.run(run())
+    assert srv.camera.spec.option_values()["gain"] == gain
+    assert lv.stats.refused_auth >= 5
+
+
+@pytest.mark.parametrize(("host", "bound", "ok"), [
+    ("127.0.0.1:8080", ("127.0.0.1", 8080), True), ("localhost:8080", ("127.0.0.1", 8080), True),
+    ("[::1]:8080", ("::1", 8080), True), ("127.0.0.1:8081", ("127.0.0.1", 8080), False),
+    ("127.0.0.1", ("127.0.0.1", 8080), False), ("evil.example:8080", ("127.0.0.1", 8080), False),
+    ("evil.example:8080", ("0.0.0.0", 8080), False), ("192.168.1.5:8080", ("0.0.0.0", 8080), True),
+    ("192.168.1.5:8080", ("10.0.0.1", 8080), False), ("10.0.0.1:8080", ("10.0.0.1", 8080), True),
+    ("127.0.0.1:x", ("127.0.0.1", 8080), False), ("", ("127.0.0.1", 8080), False),
+])
+def test_host_names_this_server(host: str, bound: tuple[str, int], ok: bool):
+    assert host_names_server(host, bound) is ok
 
 
 def test_programs_asking_slash_still_get_the_mjpeg_stream(view):
@@ -178,8 +222,8 @@ def test_a_stalled_page_holds_up_neither_the_device_nor_another_page(view):
     stalled = socket.socket()
     stalled.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 4096)
     stalled.connect((host, port))
-    stalled.sendall(b"GET /view/ws HTTP/1.1\r\nHost: x\r\nUpgrade: websocket\r\nConnection: Upgrade\r\n"
-                    b"Sec-WebSocket-Key: dGhlIHNhbXBsZSBub25jZQ==\r\nSec-WebSocket-Version: 13\r\n\r\n")
+    stalled.sendall(f"GET /view/ws HTTP/1.1\r\nHost: {host}:{port}\r\nUpgrade: websocket\r\nConnection: Upgrade\r\n"
+                    "Sec-WebSocket-Key: dGhlIHNhbXBsZSBub25jZQ==\r\nSec-WebSocket-Version: 13\r\n\r\n".encode())
     try:  # it never reads again: once its buffers are full, newer frames replace the unsent one (drops)
         end = time.monotonic() + 20
         while not any(c["dropped"] > 0 for c in srv.status()["clients"].values()):

@@ -202,3 +202,38 @@ def test_missing_runtimes_name_the_install(monkeypatch, yolo_model):
     with pytest.raises(MissingDependencyError, match=r"needs onnxruntime, an install dependency of rollcam missing "
                                                      r"from this broken install \(pip install onnxruntime\)$"):
         load_detector("ssdlite")
+
+
+def _failing_model(path) -> str:
+    """A model that loads (its input size is dynamic) but fails at run time: it reshapes its input to 6 x 1000."""
+    shape = helper.make_tensor("s", TensorProto.INT64, [3], [1, 6, 1000])
+    graph = helper.make_graph(
+        [helper.make_node("Constant", [], ["shape"], value=shape), helper.make_node("Reshape", ["images", "shape"],
+                                                                                     ["output0"])],
+        "fails", [helper.make_tensor_value_info("images", TensorProto.FLOAT, [1, 3, "h", "w"])],
+        [helper.make_tensor_value_info("output0", TensorProto.FLOAT, [1, 6, 1000])])
+    model = helper.make_model(graph, opset_imports=[helper.make_opsetid("", 13)])
+    model.ir_version = 8
+    onnx.save(model, str(path))
+    return str(path)
+
+
+def test_a_model_that_loads_but_fails_at_run_time_is_one_clear_error(tmp_path, capsys):
+    """Issue 37 O2: onnxruntime's own error came out as a traceback on main."""
+    from rollcam.host.cli import main
+
+    det = load_detector(f"onnx:{_failing_model(tmp_path / 'bad.onnx')}?size=64x64")
+    with pytest.raises(ConfigError, match=r"bad\.onnx'? failed on a \[1, 3, 64, 64\] float32 input: .*Reshape"):
+        det.detect(np.zeros((64, 64, 3), np.uint8))
+    code = main(["detect", "emu:imx219?scene=flat&size=64x64", "--frames", "1", "--out", str(tmp_path / "out"),
+                 "--detector", f"onnx:{tmp_path / 'bad.onnx'}?size=64x64"])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 2 and len(err) == 1 and err[0].startswith("rollcam: error: ") and "bad.onnx" in err[0], err
+
+
+def test_a_raw_model_given_a_colour_picture_says_so(tmp_path):
+    """Issue 37 O2: personnet-raw on an RGB dataset ended in onnxruntime's INVALID_ARGUMENT traceback on main."""
+    det = load_detector("personnet-raw")
+    with pytest.raises(ConfigError, match=r"raw-input model \(input=raw\) takes the sensor's one-channel mosaic, not a "
+                                          r"320x180 picture of 3 channels"):
+        det.detect(np.zeros((180, 320, 3), np.uint8))

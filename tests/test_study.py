@@ -60,6 +60,20 @@ def test_aggregate_tables_and_plain_answers():
     assert any("10x (fast)" in t and "NOT within 2 %" in t and "beyond" in t for t in text)
 
 
+@pytest.mark.parametrize("command", ["study", "dataset"])
+@pytest.mark.parametrize("where", ["file", "below-a-file"])
+def test_out_that_is_a_file_is_one_line_exit_2(tmp_path, capsys, command, where):
+    """Issue 37: ``study --out FILE`` (and ``dataset``) ended in a raw [Errno 17] / [Errno 20] with exit 1 on main."""
+    (tmp_path / "f").write_text("x")
+    out = tmp_path / "f" if where == "file" else tmp_path / "f" / "sub"
+    args = ["study", "--quick"] if command == "study" else ["dataset", "--frames", "6", "--scenes", "3"]
+    assert main([*args, "--out", str(out)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err[-1].startswith("rollcam: error: --out ") and str(out) in err[-1] and "Errno" not in err[-1], err
+    assert sum(line.startswith("rollcam: error:") for line in err) == 1
+    assert (tmp_path / "f").read_text() == "x"
+
+
 @pytest.mark.slow
 def test_quick_study_end_to_end(tmp_path, capsys):
     pytest.importorskip("torch")

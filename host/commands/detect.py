@@ -5,10 +5,10 @@ from __future__ import annotations
 import argparse
 import json
 import sys
-from pathlib import Path
 from typing import Any
 
 from rollcam.common.errors import EXIT_INTERRUPTED, ConfigError
+from rollcam.common.files import output_dir
 from rollcam.common.values import fraction, non_negative_float, positive_fraction, positive_int
 
 from . import PROG, value_type
@@ -59,7 +59,7 @@ def run(args: argparse.Namespace) -> int:
     from ..truthmatch import RunningPR
     from .compile_notice import notify_if_cold, renders
 
-    out_dir = Path(args.out) if args.out else None
+    out_dir = output_dir(args.out, make=False) if args.out else None  # a file there: exit 2 before any work
     if out_dir is not None and (out_dir / LOG).exists() and not args.overwrite:
         raise ConfigError(f"{str(out_dir)!r} already holds a detection run ({LOG}); pass --overwrite or choose "
                           "another --out")

@@ -7,6 +7,7 @@ import json
 from pathlib import Path
 
 from rollcam.common.errors import ConfigError
+from rollcam.common.files import output_dir
 
 DESCRIPTION = """\
 Evaluate a detector on the GS and RS images of a rollcam dataset (or on an Ultralytics data.yaml or a COCO
@@ -75,7 +76,7 @@ def run(args: argparse.Namespace) -> int:
         raise ConfigError("nothing was evaluated")
     ds = Path(args.dataset)
     out = Path(args.out) if args.out else (ds / "eval" if ds.is_dir() else Path("rollcam_out/eval"))
-    out.mkdir(parents=True, exist_ok=True)
+    output_dir(out)
     stem = result_stem(args.detector, args.detections, args.split, args.subset, args.correct)
     doc["files"] = {"json": str(out / f"{stem}.json"), "chart": str(out / f"{stem}.png")}
     write_atomic(out / f"{stem}.json", (json.dumps(doc, indent=1) + "\n").encode())

@@ -5,15 +5,15 @@ written after its files; a rerun with the same config skips samples whose record
 still match the sizes and checksums it holds, and redoes the rest (overwriting whatever an interrupted sample
 left). ``config.json`` pins the config: rerunning into the same folder with a different config is refused
 unless ``overwrite``. One build at a time writes into a folder (``.rollcam-dataset.lock``, an advisory
-``flock`` held for the whole build); pool workers die with their driver and hold ``.rollcam-workers.lock``, so
-a rerun after a ``kill -9`` waits for any that are still going instead of racing them.
+``flock`` held for the whole build, the file removed when the build ends however it ends); pool workers die
+with their driver and hold ``.rollcam-workers.lock``, so a rerun after a ``kill -9`` waits for any that are
+still going instead of racing them.
 """
 
 from __future__ import annotations
 
 import functools
 import json
-import os
 import shutil
 import time
 from collections.abc import Callable
@@ -22,7 +22,7 @@ from pathlib import Path
 from typing import Any, TextIO
 
 from rollcam.common.errors import ConfigError, RollcamError
-from rollcam.common.files import acquire_lock, write_atomic
+from rollcam.common.files import acquire_lock, output_dir, release_lock, write_atomic
 
 from ..progress import Progress
 from ..sources import open_camera
@@ -148,13 +148,13 @@ def build_dataset(
     shared storage mounted at the same path on every worker); otherwise they return the bytes and this
     process writes them. ``on_commit`` is called after each sample is committed (a seam for tests).
     """
-    out = Path(out_dir).resolve()
+    out = output_dir(Path(out_dir).resolve(), make=False)  # a file there: one line, exit 2, before any work
     tasks = cfg.plan()
     first = tasks[0].samples[0]
     with open_camera(cfg.sample_uri(first)):  # bad sensor, size or source options fail here, before any work
         pass
     _check_out(out, cfg, overwrite)  # a folder that would be refused gets no lock file either
-    out.mkdir(parents=True, exist_ok=True)
+    output_dir(out)
     try:
         lock = acquire_lock(out / DRIVER_LOCK, f"dataset folder {str(out)!r}")
     except BlockingIOError:
@@ -164,9 +164,8 @@ def build_dataset(
         return _build(cfg, out, tasks, workers=workers, executor=executor, threads_per_worker=threads_per_worker,
                       worker_writes=worker_writes, overwrite=overwrite, progress=progress, stream=stream,
                       on_commit=on_commit, clock=clock)
-    finally:
-        if lock is not None:
-            os.close(lock)
+    finally:  # finished or interrupted, the folder keeps no empty lock file
+        release_lock(lock, out / DRIVER_LOCK, remove=True)
 
 
 def _build(cfg: DatasetConfig, out: Path, tasks: list[Any], *, workers: int, executor: str | None,

@@ -102,6 +102,10 @@ def fit_image(image: np.ndarray, width: int, height: int, *, input: str = "bgr",
     """
     img = np.asarray(image)
     if input == "raw":
+        if img.ndim == 3 and img.shape[2] != 1:
+            raise ConfigError(f"a raw-input model (input=raw) takes the sensor's one-channel mosaic, not a "
+                              f"{img.shape[1]}x{img.shape[0]} picture of {img.shape[2]} channels: give it raw frames "
+                              "(an emu: source with format=, a dataset made with --raw)")
         fitted, place = (letterbox if letterbox_input else stretch)(img, width, height)
         return (fitted[..., None] if fitted.ndim == 2 else fitted), place
     if img.ndim == 2:
@@ -235,19 +239,31 @@ class OnnxDetector:
         np.multiply(src, scale, out=tensor[0])
         return tensor, place
 
+    def _infer(self, names: list[str], tensor: np.ndarray) -> list[np.ndarray]:
+        """The model's outputs ``names`` for ``tensor``; a model that loads but cannot run (a bad reshape, an input
+        it does not take) is one ConfigError naming the model and the input, as one that cannot load is."""
+        try:
+            return [np.asarray(o) for o in self._session.run(names, {self._input_name: tensor})]
+        except Exception as exc:  # onnxruntime raises its own untyped errors (Fail, InvalidArgument, ...)
+            why = " ".join(str(exc).split())[:300]
+            raise ConfigError(f"ONNX model {str(self.path)!r} failed on a {list(tensor.shape)} {tensor.dtype} "
+                              f"input: {why}") from None
+
+    def _decode(self, outs: list[np.ndarray]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Boxes, scores and classes from the outputs in the model's layout (a ConfigError if it cannot hold them)."""
+        try:
+            return self._decode_yolo(outs[0]) if self.layout == "yolo" else self._decode_ssd(outs)
+        except (ValueError, IndexError, TypeError) as exc:
+            raise ConfigError(f"ONNX model {str(self.path)!r}: outputs {[o.shape for o in outs]} do not fit the "
+                              f"{self.layout} layout ({exc})") from None
+
     def _run(self, image: np.ndarray) -> Detections:
         tensor, place = self._prepare(image)
-        if self.layout == "yolo":
-            (out,) = self._session.run(None, {self._input_name: tensor})
-            self.last_outputs = ((self._session.get_outputs()[0].name, np.asarray(out)),)
-            boxes, scores, classes = self._decode_yolo(np.asarray(out))
-        else:
-            names = [self._ssd_outputs[r] for r in ("boxes", "scores", "classes")]
-            num_name = self._ssd_outputs.get("num")
-            outs = self._session.run([*names, *([num_name] if num_name else [])], {self._input_name: tensor})
-            self.last_outputs = tuple(zip([*names, *([num_name] if num_name else [])],
-                                          (np.asarray(o) for o in outs), strict=True))
-            boxes, scores, classes = self._decode_ssd(outs)
+        # SSD: boxes, scores, classes and (when the model has it) num, in the order _find_layout found them
+        names = [self._session.get_outputs()[0].name] if self.layout == "yolo" else [*self._ssd_outputs.values()]
+        outs = self._infer(names, tensor)
+        self.last_outputs = tuple(zip(names, outs, strict=True))
+        boxes, scores, classes = self._decode(outs)
         classes = classes - self.class_offset
         keep = scores >= self.conf
         if self.keep_classes is not None:

@@ -11,6 +11,7 @@ is a list of ``{"image_id", "category_id", "bbox": [x, y, w, h], "score"}`` agai
 from __future__ import annotations
 
 import json
+import math
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -19,6 +20,7 @@ from typing import Any
 import numpy as np
 import yaml
 from rollcam.common.errors import ConfigError
+from rollcam.sim.label_formats import check_box
 
 from .metrics import Dets, Truth
 
@@ -54,21 +56,59 @@ class EvalSet:
         self.by_key = {e.key: e for e in self.images}
 
 
-def _coco_set(name: str, doc: dict[str, Any], image_root: Path, key_prefix: str, **kw: Any) -> EvalSet:
+def _number(v: Any) -> bool:
+    return isinstance(v, (int, float)) and not isinstance(v, bool)
+
+
+def _coco_set(name: str, doc: Any, image_root: Path, key_prefix: str, where: str, **kw: Any) -> EvalSet:
+    """The set a COCO document (from the file ``where``) describes; anything malformed, non-finite boxes and
+    negative sizes included, is one ConfigError naming the file and the image, category or annotation."""
+    if not isinstance(doc, dict) or not all(isinstance(doc.get(k, []), list)
+                                            for k in ("images", "annotations", "categories")):
+        raise ConfigError(f"{where!r}: not a COCO file (needs 'images', 'annotations' and 'categories' lists)")
+    for i, c in enumerate(doc.get("categories", [])):
+        if not isinstance(c, dict) or not isinstance(c.get("id"), int) or not isinstance(c.get("name"), str):
+            raise ConfigError(f"{where!r} category {i}: needs an integer 'id' and a 'name', got {str(c)[:80]!r}")
+    sizes: dict[Any, tuple[int, int] | None] = {}
+    for i, img in enumerate(doc.get("images", [])):
+        if not isinstance(img, dict) or "id" not in img or not isinstance(img.get("file_name"), str):
+            raise ConfigError(f"{where!r} image {i}: needs an 'id' and a 'file_name', got {str(img)[:80]!r}")
+        w, h = img.get("width", 0), img.get("height", 0)
+        if not (isinstance(w, int) and isinstance(h, int) and w >= 0 and h >= 0):
+            raise ConfigError(f"{where!r} image {i}: width and height must be integers >= 0, got {w!r}x{h!r}")
+        sizes[img["id"]] = (w, h) if w and h else None
     cats = sorted(doc.get("categories", []), key=lambda c: c["id"])
     cat_index = {c["id"]: i for i, c in enumerate(cats)}
-    per_image: dict[int, list[dict[str, Any]]] = {}
-    for a in doc.get("annotations", []):
-        per_image.setdefault(a["image_id"], []).append(a)
+    per_image: dict[Any, list[tuple[list[float], int, bool]]] = {}
+    for i, a in enumerate(doc.get("annotations", [])):
+        at = f"{where!r} annotation {i}" + (f" (id {a.get('id')!r})" if isinstance(a, dict) and "id" in a else "")
+        if not isinstance(a, dict) or a.get("image_id") not in sizes:
+            raise ConfigError(f"{at}: image_id {a.get('image_id') if isinstance(a, dict) else a!r} names no image")
+        bbox = a.get("bbox")
+        if not (isinstance(bbox, list) and len(bbox) == 4 and all(_number(v) for v in bbox)):
+            raise ConfigError(f"{at}: bbox must be [x, y, w, h], got {bbox!r}")
+        box = check_box(*(float(v) for v in bbox), sizes[a["image_id"]], f"{at} bbox")
+        if a.get("category_id") in cat_index:
+            crowd = bool(a.get("iscrowd", 0) or a.get("ignore", 0))
+            per_image.setdefault(a["image_id"], []).append((box, cat_index[a["category_id"]], crowd))
     entries = []
     for img in doc.get("images", []):
-        anns = [a for a in per_image.get(img["id"], []) if a["category_id"] in cat_index]
-        boxes = [[a["bbox"][0], a["bbox"][1], a["bbox"][0] + a["bbox"][2], a["bbox"][1] + a["bbox"][3]] for a in anns]
-        truth = Truth.of(boxes, [cat_index[a["category_id"]] for a in anns],
-                         [bool(a.get("iscrowd", 0) or a.get("ignore", 0)) for a in anns],
+        anns = per_image.get(img["id"], [])
+        truth = Truth.of([b for b, _, _ in anns], [c for _, c, _ in anns], [g for _, _, g in anns],
                          img.get("width", 0), img.get("height", 0))
         entries.append(ImageEntry(key_prefix + img["file_name"], image_root / img["file_name"], img["id"], truth))
     return EvalSet(name, entries, [c["name"] for c in cats], **kw)
+
+
+def _read_json(path: Path) -> Any:
+    """A JSON file, or one ConfigError naming it and where its text breaks."""
+    try:
+        return json.loads(path.read_text())
+    except UnicodeDecodeError as exc:
+        raise ConfigError(f"{str(path)!r}: not JSON text ({exc.reason})") from None
+    except json.JSONDecodeError as exc:
+        raise ConfigError(f"{str(path)!r}: malformed JSON ({exc.msg} at line {exc.lineno} column {exc.colno})"
+                          ) from None
 
 
 def load_rollcam(root: Path, split: str) -> list[EvalSet]:
@@ -80,8 +120,8 @@ def load_rollcam(root: Path, split: str) -> list[EvalSet]:
         if split not in sub["coco"] or not coco.is_file():
             raise ConfigError(f"dataset {str(root)!r} has no {split!r} split for {name!r} "
                               f"(known: {sorted(sub['coco'])})")
-        doc = json.loads(coco.read_text())
-        sets.append(_coco_set(name, doc, root / name, f"{name}/", speed=sub["speed"], shutter=sub["shutter"]))
+        sets.append(_coco_set(name, _read_json(coco), root / name, f"{name}/", str(coco), speed=sub["speed"],
+                              shutter=sub["shutter"]))
     return sets
 
 
@@ -105,13 +145,42 @@ def load_yolo(yaml_path: Path, split: str) -> EvalSet:
         rel = p.relative_to(img_dir)
         # Ultralytics' rule: the label of .../images/x.png is .../labels/x.txt (last "images" in the path).
         label = Path("/labels/".join(str(p.with_suffix(".txt")).rsplit("/images/", 1)))
-        with Image.open(p) as im:
-            w, h = im.size
-        rows = np.loadtxt(label, ndmin=2) if label.is_file() and label.stat().st_size else np.zeros((0, 5))
-        c, cx, cy, bw, bh = (rows[:, k] for k in range(5))
-        boxes = np.c_[(cx - bw / 2) * w, (cy - bh / 2) * h, (cx + bw / 2) * w, (cy + bh / 2) * h]
-        entries.append(ImageEntry(str(Path(data[split]) / rel), p, i, Truth.of(boxes, c.astype(int), None, w, h)))
+        try:
+            with Image.open(p) as im:  # the header only
+                w, h = im.size
+        except (OSError, SyntaxError, ValueError, Image.DecompressionBombError) as exc:
+            raise ConfigError(f"{str(p)!r}: cannot read the image's header ({exc})") from None
+        classes, boxes = _yolo_rows(label, (w, h)) if label.is_file() else ([], [])
+        entries.append(ImageEntry(str(Path(data[split]) / rel), p, i, Truth.of(boxes, classes, None, w, h)))
     return EvalSet(yaml_path.parent.name or "dataset", entries, class_names)
+
+
+def _yolo_rows(label: Path, size: tuple[int, int]) -> tuple[list[int], list[list[float]]]:
+    """Classes and pixel boxes of an Ultralytics label file (``class cx cy w h`` per line, normalised); a line
+    that is not that (non-finite values, negative sizes, a class that is not an integer >= 0 included) is one
+    ConfigError naming the file and the line."""
+    try:
+        text = label.read_text()
+    except (OSError, UnicodeDecodeError) as exc:
+        raise ConfigError(f"{str(label)!r}: cannot read YOLO labels ({exc})") from None
+    classes, boxes = [], []
+    w, h = size
+    for ln, line in enumerate(text.splitlines(), start=1):
+        if not line.strip():
+            continue
+        at = f"{str(label)!r} line {ln}"
+        try:
+            vals = [float(v) for v in line.split()]
+        except ValueError:
+            raise ConfigError(f"{at}: not numbers: {line.strip()[:80]!r}") from None
+        if len(vals) < 5:
+            raise ConfigError(f"{at}: need 'class cx cy w h', got {len(vals)} values")
+        c, cx, cy, bw, bh = vals[:5]
+        if not math.isfinite(c) or c != int(c) or c < 0:
+            raise ConfigError(f"{at}: class must be an integer >= 0, got {line.split()[0]!r}")
+        classes.append(int(c))
+        boxes.append(check_box((cx - bw / 2) * w, (cy - bh / 2) * h, bw * w, bh * h, size, at))
+    return classes, boxes
 
 
 def load_sets(dataset: str | Path, split: str, images: str | Path | None = None) -> list[EvalSet]:
@@ -124,12 +193,12 @@ def load_sets(dataset: str | Path, split: str, images: str | Path | None = None)
     if path.is_file() and path.suffix in (".yaml", ".yml"):
         return [load_yolo(path, split)]
     if path.is_file() and path.suffix == ".json":
-        doc = json.loads(path.read_text())
+        doc = _read_json(path)
         if not isinstance(doc, dict) or "images" not in doc:
             raise ConfigError(f"{str(path)!r} is not a COCO dataset file (no 'images')")
         # COCO's own layout keeps annotations/ beside the image folders, and file names relative to their parent.
         default_root = path.parent.parent if path.parent.name == "annotations" else path.parent
-        return [_coco_set(path.stem, doc, Path(images) if images else default_root, "")]
+        return [_coco_set(path.stem, doc, Path(images) if images else default_root, "", str(path))]
     raise ConfigError(f"dataset {str(dataset)!r} is not a rollcam dataset folder, a YOLO data.yaml (or folder with "
                       "one), or a COCO JSON file")
 
@@ -164,17 +233,22 @@ def _find(s: EvalSet, image: str, basenames: dict[str, ImageEntry | None]) -> Im
     return basenames.get(Path(image).name)
 
 
-def _dets_from_items(items: list[dict[str, Any]], names: dict[str, int]) -> Dets:
+def _dets_from_items(items: Any, names: dict[str, int], at: str) -> Dets:
+    """One image's detections of a ``detections.jsonl`` line (``at`` names it); a malformed or non-finite one is
+    a ConfigError naming the line."""
+    if not isinstance(items, list):
+        raise ConfigError(f"{at}: 'detections' must be a list, got {str(items)[:80]!r}")
     boxes, scores, classes = [], [], []
     for d in items:
-        if "class" in d:
-            c = names.get(str(d["class"]).lower())
-        else:
-            c = int(d.get("cls", 0))
-            c = c if 0 <= c < len(names) else None
+        box, score, cls = (d.get("box"), d.get("score"), d.get("cls", 0)) if isinstance(d, dict) else (None,) * 3
+        if not (isinstance(box, list) and len(box) == 4 and all(_number(v) and math.isfinite(v) for v in box)
+                and _number(score) and math.isfinite(score) and isinstance(cls, int)):
+            raise ConfigError(f"{at}: a detection is {{'box': [x0, y0, x1, y1], 'score': S, 'cls': C}} of finite "
+                              f"numbers, got {str(d)[:80]!r}")
+        c = names.get(str(d["class"]).lower()) if "class" in d else (cls if 0 <= cls < len(names) else None)
         if c is not None:
-            boxes.append(d["box"])
-            scores.append(d["score"])
+            boxes.append(box)
+            scores.append(score)
             classes.append(c)
     return Dets.of(boxes, scores, classes)
 
@@ -182,7 +256,6 @@ def _dets_from_items(items: list[dict[str, Any]], names: dict[str, int]) -> Dets
 def load_detections(path: str | Path, sets: list[EvalSet]) -> list[list[Dets]]:
     """Detections from a file, one list per set aligned with its images (images absent from the file: none)."""
     p = Path(path)
-    text = p.read_text()
     per_set: list[dict[int, Dets]] = [{} for _ in sets]
     if p.suffix == ".json":
         if len(sets) != 1:
@@ -192,7 +265,14 @@ def load_detections(path: str | Path, sets: list[EvalSet]) -> list[list[Dets]]:
         cat_of = {i + 1: i for i in range(len(s.class_names))}
         ids = {e.image_id: k for k, e in enumerate(s.images)}
         grouped: dict[int, list[dict[str, Any]]] = {}
-        for r in json.loads(text):
+        results = _read_json(p)
+        for i, r in enumerate(results if isinstance(results, list) else [results]):
+            bbox, score = (r.get("bbox"), r.get("score")) if isinstance(r, dict) else (None, None)
+            if not (isinstance(bbox, list) and len(bbox) == 4 and all(_number(v) for v in bbox) and _number(score)
+                    and math.isfinite(score) and "image_id" in r and "category_id" in r):
+                raise ConfigError(f"{str(p)!r} result {i}: expected {{'image_id', 'category_id', 'bbox': [x, y, w, h], "
+                                  f"'score'}} of finite numbers, got {str(r)[:80]!r}")
+            check_box(*(float(v) for v in bbox), None, f"{str(p)!r} result {i} bbox")
             if r["image_id"] in ids and r["category_id"] in cat_of:
                 grouped.setdefault(ids[r["image_id"]], []).append(r)
         for k, rs in grouped.items():
@@ -200,6 +280,10 @@ def load_detections(path: str | Path, sets: list[EvalSet]) -> list[list[Dets]]:
             per_set[0][k] = Dets.of(np.c_[xywh[:, :2], xywh[:, :2] + xywh[:, 2:]], [r["score"] for r in rs],
                                     [cat_of[r["category_id"]] for r in rs])
     else:
+        try:
+            text = p.read_text()
+        except UnicodeDecodeError as exc:
+            raise ConfigError(f"{str(p)!r}: not JSON lines ({exc.reason})") from None
         index = []
         for si, s in enumerate(sets):
             names = {n.lower(): i for i, n in enumerate(s.class_names)}
@@ -225,6 +309,6 @@ def load_detections(path: str | Path, sets: list[EvalSet]) -> list[list[Dets]]:
                     raise ConfigError(f"{p!s}:{n}: image {image!r} matches images of several sets "
                                       f"({[sets[h[0]].name for h in hits]}); give its path from the dataset root")
             for si, names, pos, e in hits:
-                per_set[si][pos[id(e)]] = _dets_from_items(items, names)
+                per_set[si][pos[id(e)]] = _dets_from_items(items, names, f"{p!s}:{n}")
     empty = Dets.of(np.zeros((0, 4)), [], [])
     return [[per_set[si].get(k, empty) for k in range(len(s.images))] for si, s in enumerate(sets)]

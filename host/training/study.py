@@ -25,7 +25,7 @@ from pathlib import Path
 from typing import Any
 
 from rollcam.common.errors import ConfigError
-from rollcam.common.files import write_atomic
+from rollcam.common.files import output_dir, write_atomic
 
 SHUTTERS = ("gs", "rs")
 
@@ -192,7 +192,7 @@ def run_study(s: StudySettings, out: str | Path, *, workers: int = 1, executor: 
     from ..progress import Progress
     from .study_report import write_report
 
-    root = Path(out).resolve()
+    root = output_dir(Path(out).resolve())  # a file there: one line, exit 2
     t0 = time.monotonic()
     for name, cfg in dataset_configs(s).items():
         build_dataset(cfg, root / "data" / name, workers=workers, progress=progress)
