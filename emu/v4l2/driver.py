@@ -26,6 +26,7 @@ from rollcam.firmware.controls import CONTROLS
 from rollcam.firmware.imaging import mjpeg_quality
 from rollcam.firmware.pixfmt import device_format
 from rollcam.sim.codecs import transcode
+from rollcam.sim.formats import YUV_PACKINGS
 from rollcam.sim.frame import Frame
 
 from . import ctrls, raw
@@ -142,12 +143,13 @@ class EmuDriver:
         _, slot, payload = self._filling
         fmt = self.fmt
         readout = self.camera.spec.settings.readout
-        if fmt.bytesperline and not readout.by_column:
+        layout = device_format(fmt.pixelformat).layout
+        if layout is not None and not readout.by_column:
             first, end = plan.schedule.band_lines(band, n_bands)
             if readout.reversed:
                 first, end = fmt.height - end, fmt.height - first
-            lo, hi = first * fmt.bytesperline, end * fmt.bytesperline
-            slot.memory[lo:hi] = payload[lo:hi]
+            for lo, hi in layout.line_spans(first, end, fmt.width, fmt.height):
+                slot.memory[lo:hi] = payload[lo:hi]
         elif band == n_bands - 1:
             slot.memory[: payload.size] = payload
 
@@ -208,11 +210,20 @@ class EmuDriver:
 
 
 def _pix_format(width: int, height: int, fourcc: str) -> raw.PixFormat:
+    """G_FMT's answer. The colorimetry says what the codec table (``rollcam.sim.codecs``) writes, so a client that
+    converts by it (GStreamer does) gets the emulator's picture: YUV is BT.601 limited range, and GREY, a
+    colour stream's luma or a mono sensor's samples, is full range (V4L2's default for a Y'CbCr format is
+    limited)."""
     pf = device_format(fourcc)
     space = raw.Colorspace.JPEG if pf.compressed else raw.Colorspace.RAW if pf.raw else \
         raw.Colorspace.SRGB
+    enc, quant = raw.YcbcrEnc.DEFAULT, raw.Quantization.DEFAULT
+    if fourcc == "GREY":
+        quant = raw.Quantization.FULL_RANGE
+    elif pf.layout is not None and pf.layout.packing in YUV_PACKINGS:
+        enc, quant = raw.YcbcrEnc.BT601, raw.Quantization.LIM_RANGE
     return raw.PixFormat(width, height, fourcc, raw.Field.NONE, pf.bytesperline(width), pf.sizeimage(width, height),
-                         space)
+                         space, enc, quant)
 
 
 # ------------------------------------------------------------------------------------------------ handlers
