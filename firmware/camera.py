@@ -11,12 +11,13 @@ from __future__ import annotations
 
 import dataclasses
 from collections.abc import Mapping
+from fractions import Fraction
 from typing import Any
 
 from rollcam.common.errors import ConfigError, DeviceError
 from rollcam.sim.frame import Frame
 from rollcam.sim.hwconfig import SensorConfig
-from rollcam.sim.synthetic import SyntheticCamera
+from rollcam.sim.synthetic import SyntheticCamera, resolve_settings
 
 from . import controls as ctl
 from .imaging import Imager, warm, warm_ahead
@@ -46,6 +47,11 @@ class FirmwareCamera(DeviceStream):
         super().__init__(clock)
         self.spec = spec
         self.sensor = spec.sensor
+        made = (spec.settings.width, spec.settings.height)
+        self.scaled_size = None if made in self.mode_sizes() else made
+        """The size the camera was made with when it is no sensor mode (``size=640x480`` on an imx477): the
+        default mode's readout scaled to it, as an ISP's scaler gives a size the sensor has no mode for. The
+        camera offers it beside the modes for as long as it lives, so a client can set it again."""
         self.traits = traits_for(self.sensor.name)
         self.registers = RegisterFile(self.sensor, self._mode_select)
         self.imager = Imager()
@@ -120,9 +126,20 @@ class FirmwareCamera(DeviceStream):
         """Output width and height."""
         return self.spec.settings.width, self.spec.settings.height
 
-    def sizes(self) -> list[tuple[int, int]]:
+    def mode_sizes(self) -> list[tuple[int, int]]:
         """Output sizes of the sensor's modes."""
         return [(m.width, m.height) for m in self.sensor.modes]
+
+    def sizes(self) -> list[tuple[int, int]]:
+        """Output sizes the camera offers: its sensor's modes, then its ``scaled_size`` if it has one."""
+        return self.mode_sizes() + ([self.scaled_size] if self.scaled_size is not None else [])
+
+    def default_interval(self, width: int, height: int) -> Fraction:
+        """The frame period of an offered size at its default frame length, in seconds as V4L2's fraction
+        (the mode's own rate; a scaled size reads out in its mode's time)."""
+        spec = self.spec
+        t = resolve_settings(self.sensor, size=(width, height), shutter=spec.shutter, readout=spec.readout).timing
+        return Fraction(t.frame_period_pck, t.pixel_rate_hz)
 
     @property
     def formats(self) -> list[str]:

@@ -243,7 +243,8 @@ def _enum_fmt(d: EmuDriver, arg: raw.FmtDesc) -> raw.FmtDesc:
 
 
 def _try_fmt(d: EmuDriver, arg: raw.PixFormat) -> raw.PixFormat:
-    """TRY_FMT: the nearest mode size (as v4l2_find_nearest_size) and a supported format (else the first); a raw
+    """TRY_FMT: the nearest offered size (as v4l2_find_nearest_size: the modes, and a scaled size the camera was
+    made with) and a supported format (else the first); a raw
     Bayer fourcc comes back in the order the current flips give, as Linux sensor drivers answer."""
     sizes = d.camera.sizes()
     w, h = min(sizes, key=lambda s: abs(s[0] - arg.width) + abs(s[1] - arg.height))
@@ -270,17 +271,12 @@ def _enum_framesizes(d: EmuDriver, arg: raw.FrmSize) -> raw.FrmSize:
     return raw.FrmSize(arg.index, arg.pixel_format, raw.FrmSizeType.DISCRETE, *sizes[arg.index])
 
 
-def _interval(d: EmuDriver, width: int, height: int) -> Fraction:
-    t = d.camera.sensor.timing(f"{width}x{height}")
-    return Fraction(t.frame_period_pck, t.pixel_rate_hz)
-
-
 def _enum_frameintervals(d: EmuDriver, arg: raw.FrmIval) -> raw.FrmIval:
     if (arg.index != 0 or (arg.width, arg.height) not in d.camera.sizes()
             or arg.pixel_format not in d.camera.formats):
         raise V4L2Error(errno.EINVAL, f"no frame interval {arg.index} for {arg.pixel_format!r} "
                                       f"{arg.width}x{arg.height}")
-    ival = _interval(d, arg.width, arg.height)
+    ival = d.camera.default_interval(arg.width, arg.height)
     return raw.FrmIval(0, arg.pixel_format, arg.width, arg.height, raw.FrmSizeType.DISCRETE, ival.numerator,
                        ival.denominator)
 
