@@ -8,7 +8,9 @@ exposed from ``start_ns`` of the same spec is byte-identical whichever door it l
 they sent (the in-process ``Frame``, UVC's frame index and PTS, the HTTP part's ``X-Sequence`` and
 ``X-Timestamp-Ns``) stream a moving street with sensor noise, so a frame of another sequence number or time fails.
 A program under ``rollcam run`` does not tell which buffer it kept, so its device shows a still street without
-temporal noise (``STILL``): every frame of it is the same picture, which a test checks first.
+temporal noise (``STILL``): every frame of it is the same picture, which a test checks first. The picamera2
+stand-in's arrays are read as a script reads them (its metadata names the frame), in each layout picamera2 gives.
+Linux's own USB/IP client needs the vhci-hcd kernel module to attach, so USB/IP is read by rollcam's client here.
 
 **Tolerances**, per channel of the 8-bit BGR picture:
 
@@ -48,7 +50,7 @@ from rollcam.emu.uvc import FirmwareProducer, UVCFunction
 from rollcam.firmware.camera import FirmwareCamera, FramePlan
 from rollcam.firmware.imaging import encode
 from rollcam.firmware.spec import CameraSpec
-from rollcam.host import open_camera
+from rollcam.host import open_camera, standin_env
 from rollcam.host.preload import build_camera, program_environment, serving
 from rollcam.sim.codecs import JPEG_QUALITY, Levels, codec, preview_frame
 from rollcam.sim.frame import Frame
@@ -348,3 +350,61 @@ def test_uvc_through_usbip_with_rollcams_client(fourcc):
                 got[decode] = list(src)
         cam.stream_off()
     _uvc_check(got[1], got[0], cam.spec, fourcc, "UVC/USB-IP")
+
+
+# ------------------------------------------------------------------------------- the picamera2 stand-in (read)
+PICAMERA2 = ["RGB888", "BGR888", "XRGB8888", "XBGR8888", "YUV420", "YVU420"]
+PICAMERA2_SCRIPT = """
+    import json, sys
+    import numpy as np
+    from picamera2 import Picamera2
+
+    out = {}
+    with Picamera2() as picam2:
+        for fmt in sys.argv[2:]:
+            picam2.configure(picam2.create_preview_configuration(main={"format": fmt, "size": (640, 480)}))
+            picam2.start()
+            request = picam2.capture_request()
+            np.save(f"{sys.argv[1]}/{fmt}.npy", request.make_array("main"))
+            md = request.get_metadata()
+            request.release()
+            picam2.stop()
+            out[fmt] = [md["RollcamSequence"], md["RollcamDeviceTimestamp"]]
+    print(json.dumps(out))
+"""
+
+
+def _as_picamera2(fmt: str, bgr: np.ndarray) -> np.ndarray:
+    """The reference picture laid out as picamera2 gives ``fmt``'s array: RGB888 is B, G, R in memory (OpenCV's
+    BGR), BGR888 R, G, B; the X formats add a fourth byte of 255; YUV420 is I420 and YVU420 has V before U."""
+    if fmt in ("RGB888", "XRGB8888"):
+        out = bgr
+    elif fmt in ("BGR888", "XBGR8888"):
+        out = bgr[..., ::-1]
+    else:
+        i420 = codec("YU12").encode(bgr)
+        if fmt == "YVU420":
+            y, quarter = 640 * 480, 640 * 480 // 4
+            flat = i420.reshape(-1)
+            i420 = np.concatenate([flat[:y], flat[y + quarter:], flat[y:y + quarter]]).reshape(i420.shape)
+        return i420
+    if fmt.startswith("X"):
+        out = np.concatenate([out, np.full((*out.shape[:2], 1), 255, np.uint8)], axis=2)
+    return np.ascontiguousarray(out)
+
+
+@pytest.mark.parametrize("formats", [pytest.param(["RGB888", "YUV420"], id="fast"),
+                                     pytest.param(PICAMERA2, id="all", marks=pytest.mark.slow)])
+def test_picamera2_stand_in_arrays(tmp_path, formats):
+    """The stand-in's main stream at the sensor mode's size (no scaling) is the firmware camera's processed
+    picture: the preview ISP of the same raw frame, so exact in every layout."""
+    source = f"emu:imx219?size=640x480&{MOVING}"
+    p = subprocess.run([sys.executable, "-c", textwrap.dedent(PICAMERA2_SCRIPT), str(tmp_path), *formats],
+                       env=standin_env([source]), capture_output=True, text=True, timeout=600)
+    assert p.returncode == 0, p.stderr[-3000:]
+    frames = json.loads(p.stdout.strip().splitlines()[-1])
+    ref = Reference(build_camera(source + "&format=YUYV")[0].spec)
+    for fmt, (seq, start) in frames.items():
+        got = np.load(tmp_path / f"{fmt}.npy")
+        want = _as_picamera2(fmt, ref.frame(seq, start).data)
+        assert_same_bytes(got, want.reshape(-1), f"picamera2 {fmt} frame {seq}")
