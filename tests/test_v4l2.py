@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
-from rollcam.common.errors import DeviceError
+from rollcam.common.errors import ConfigError, DeviceError
 from rollcam.emu.v4l2 import Device, V4L2Error, raw
 from rollcam.emu.v4l2 import functions as fn
 from rollcam.sim import formats as sim_formats
@@ -175,6 +175,13 @@ def test_a_size_no_mode_has_is_offered_and_kept(sensor):
         assert (320, 240) in [(s.width, s.height) for s in fn.enum_frame_sizes(d.driver, "YUYV")]  # still offered
         assert (d.set_format(320, 240, "NV12").width, fn.get_format(d.driver).height) == (320, 240)
         assert next(d.stream(frames=1)).image().shape == (240, 320, 3)
+
+
+def test_an_odd_size_no_mode_has_is_refused_naming_the_modes():
+    """An odd scaled size cannot carry YUV chroma or a Bayer tile: the device streamed nothing (its pump failed
+    to encode the first frame) where a real driver aligns to 2 pixels; it is refused when the camera is made."""
+    with pytest.raises(ConfigError, match=r"641x480 is no mode of imx477 \(4056x3040, .*odd side"):
+        Device.open("imx477", size=(641, 480))
 
 
 def test_sequence_gaps_on_dropped_buffers_and_error_flag():
