@@ -143,7 +143,7 @@ def case(fourcc: str, fast: set[str]) -> pytest.param:
 
 
 # ------------------------------------------------------------------------------------------- in-process emu:
-@pytest.mark.parametrize("fourcc", [case(f, {"NV12", "YU12", "MJPG", "RG10"}) for f in PROCESSED + IMX219_RAW])
+@pytest.mark.parametrize("fourcc", [case(f, {"NV12", "YU12", "MJPG", "RG10"}) for f in [*PROCESSED, *IMX219_RAW]])
 def test_in_process_emu_frames_are_the_reference(fourcc):
     with open_camera(f"emu:imx219?size=640x480&{MOVING}&format={fourcc}&frames=3&start_ns=123456789") as src:
         frames = list(src)
@@ -227,6 +227,17 @@ def test_ffmpeg_gets_a_size_no_mode_has_at_its_rate(device, tmp_path):
     assert (stream["width"], stream["height"]) == (640, 480)
     num, den = map(int, stream["r_frame_rate"].split("/"))
     assert abs(num / den - 30.01) < 0.05, stream["r_frame_rate"]
+
+
+@pytest.mark.parametrize("fourcc", [case(f, {"pRAA"}) for f in [*IMX219_RAW, "NV12"]])
+def test_v4l2_ctl_under_rollcam_run(device, tmp_path, fourcc):
+    """v4l2-ctl writes the buffers as they are: the raw formats no converting client reads (CSI-2 packed, 10-bit)
+    and a 4:2:0 one, exact."""
+    need("v4l2-ctl")
+    out = tmp_path / "frame"
+    run_program(device, ["v4l2-ctl", "-d", "/dev/video0", f"--set-fmt-video=width=640,height=480,pixelformat={fourcc}",
+                         "--stream-mmap", "--stream-count=1", f"--stream-to={out}"])
+    assert_same_bytes(out.read_bytes(), still_reference(device, fourcc).wire(0, 0), f"v4l2-ctl {fourcc}")
 
 
 @pytest.mark.parametrize("fourcc", [case(f, {"NV12", "GREY"}) for f in GSTREAMER])
