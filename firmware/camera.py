@@ -47,11 +47,6 @@ class FirmwareCamera(DeviceStream):
         super().__init__(clock)
         self.spec = spec
         self.sensor = spec.sensor
-        made = (spec.settings.width, spec.settings.height)
-        self.scaled_size = None if made in self.mode_sizes() else made
-        """The size the camera was made with when it is no sensor mode (``size=640x480`` on an imx477): the
-        default mode's readout scaled to it, as an ISP's scaler gives a size the sensor has no mode for. The
-        camera offers it beside the modes for as long as it lives, so a client can set it again."""
         self.traits = traits_for(self.sensor.name)
         self.registers = RegisterFile(self.sensor, self._mode_select)
         self.imager = Imager()
@@ -126,20 +121,9 @@ class FirmwareCamera(DeviceStream):
         """Output width and height."""
         return self.spec.settings.width, self.spec.settings.height
 
-    def mode_sizes(self) -> list[tuple[int, int]]:
+    def sizes(self) -> list[tuple[int, int]]:
         """Output sizes of the sensor's modes."""
         return [(m.width, m.height) for m in self.sensor.modes]
-
-    def sizes(self) -> list[tuple[int, int]]:
-        """Output sizes the camera offers: its sensor's modes, then its ``scaled_size`` if it has one."""
-        return self.mode_sizes() + ([self.scaled_size] if self.scaled_size is not None else [])
-
-    def default_interval(self, width: int, height: int) -> Fraction:
-        """The frame period of an offered size at its default frame length, in seconds as V4L2's fraction
-        (the mode's own rate; a scaled size reads out in its mode's time)."""
-        spec = self.spec
-        t = resolve_settings(self.sensor, size=(width, height), shutter=spec.shutter, readout=spec.readout).timing
-        return Fraction(t.frame_period_pck, t.pixel_rate_hz)
 
     @property
     def formats(self) -> list[str]:
@@ -249,3 +233,10 @@ class FirmwareCamera(DeviceStream):
         for paired GS/RS data), flips applied, with the in-sensor results if any (``insensor``); and that spec."""
         spec = self._spec_for_frame()
         return spec, self.insensor.make(spec, self.imager, plan.seq, plan.start_ns, shutter, self.stats)
+
+
+def default_interval(spec: CameraSpec, width: int, height: int) -> Fraction:
+    """The frame period of ``spec``'s sensor at an output size and its default frame length, in seconds as V4L2's
+    fraction (a mode's own rate; a size no mode has reads out in its mode's time)."""
+    t = resolve_settings(spec.sensor, size=(width, height), shutter=spec.shutter, readout=spec.readout).timing
+    return Fraction(t.frame_period_pck, t.pixel_rate_hz)

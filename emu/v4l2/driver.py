@@ -21,7 +21,7 @@ from rollcam.common.errors import ConfigError, DeviceError
 from rollcam.common.faults import REQUESTS, FaultInjector, FaultPlan
 from rollcam.common.lifecycle import Stats
 from rollcam.emu.pump import FramePump
-from rollcam.firmware.camera import FirmwareCamera, FramePlan
+from rollcam.firmware.camera import FirmwareCamera, FramePlan, default_interval
 from rollcam.firmware.controls import CONTROLS
 from rollcam.firmware.imaging import mjpeg_quality
 from rollcam.firmware.pixfmt import device_format
@@ -76,6 +76,11 @@ class EmuDriver:
         self.stats = DriverStats()
         self._filling: tuple[int, Slot, np.ndarray] | None = None
         self.meta: Any = None  # the metadata node's driver (``meta.MetaDriver``), filled as each buffer completes
+        modes = camera.sizes()
+        self.sizes = modes if camera.size in modes else [*modes, camera.size]
+        """Frame sizes the device offers: the sensor's modes and, when its camera was made with a size that is no
+        mode (``size=640x480`` on an imx477), that size too (the default mode's readout scaled to it, as a bridge's
+        scaler gives a size the sensor has no mode for), for as long as it lives, so a client can set it again."""
 
     @property
     def fmt(self) -> raw.PixFormat:
@@ -246,7 +251,7 @@ def _try_fmt(d: EmuDriver, arg: raw.PixFormat) -> raw.PixFormat:
     """TRY_FMT: the nearest offered size (as v4l2_find_nearest_size: the modes, and a scaled size the camera was
     made with) and a supported format (else the first); a raw
     Bayer fourcc comes back in the order the current flips give, as Linux sensor drivers answer."""
-    sizes = d.camera.sizes()
+    sizes = d.sizes
     w, h = min(sizes, key=lambda s: abs(s[0] - arg.width) + abs(s[1] - arg.height))
     try:
         fourcc = d.camera.resolve_format(arg.pixelformat)
@@ -265,18 +270,18 @@ def _s_fmt(d: EmuDriver, arg: raw.PixFormat) -> raw.PixFormat:
 
 
 def _enum_framesizes(d: EmuDriver, arg: raw.FrmSize) -> raw.FrmSize:
-    sizes = d.camera.sizes()
+    sizes = d.sizes
     if arg.pixel_format not in d.camera.formats or not 0 <= arg.index < len(sizes):
         raise V4L2Error(errno.EINVAL, f"no frame size {arg.index} for format {arg.pixel_format!r}")
     return raw.FrmSize(arg.index, arg.pixel_format, raw.FrmSizeType.DISCRETE, *sizes[arg.index])
 
 
 def _enum_frameintervals(d: EmuDriver, arg: raw.FrmIval) -> raw.FrmIval:
-    if (arg.index != 0 or (arg.width, arg.height) not in d.camera.sizes()
+    if (arg.index != 0 or (arg.width, arg.height) not in d.sizes
             or arg.pixel_format not in d.camera.formats):
         raise V4L2Error(errno.EINVAL, f"no frame interval {arg.index} for {arg.pixel_format!r} "
                                       f"{arg.width}x{arg.height}")
-    ival = d.camera.default_interval(arg.width, arg.height)
+    ival = default_interval(d.camera.spec, arg.width, arg.height)
     return raw.FrmIval(0, arg.pixel_format, arg.width, arg.height, raw.FrmSizeType.DISCRETE, ival.numerator,
                        ival.denominator)
 
