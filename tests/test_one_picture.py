@@ -314,6 +314,34 @@ def test_mjpeg_over_http(fourcc):
         assert_close(got, picture, Tolerance(**JPEG), f"HTTP part {seq} decoded")
 
 
+@pytest.mark.parametrize("client", [pytest.param("opencv", id="opencv"),
+                                    pytest.param("ffmpeg", id="ffmpeg", marks=pytest.mark.slow)])
+def test_mjpeg_over_http_read_by_a_video_client(tmp_path, client):
+    """OpenCV's VideoCapture (its ffmpeg backend) and ffmpeg itself on the multipart stream of the still camera
+    (they do not say which part they kept): ffmpeg's copy is the reference's JPEG, and both decodes are within the
+    JPEG tolerance of the picture."""
+    cam, _ = build_camera(STILL)
+    with MjpegServer(cam) as srv:
+        if client == "opencv":
+            cap = cv2.VideoCapture(srv.url)
+            ok, got = cap.read()
+            cap.release()
+            assert ok
+        else:
+            need("ffmpeg")
+            jpeg, bgr = tmp_path / "frame.jpg", tmp_path / "bgr"
+            p = subprocess.run(["ffmpeg", "-hide_banner", "-loglevel", "error", "-y", "-i", srv.url,
+                                "-map", "0", "-frames:v", "1", "-c:v", "copy", "-f", "mjpeg", str(jpeg),
+                                "-map", "0", "-frames:v", "1", "-f", "rawvideo", "-pix_fmt", "bgr24", str(bgr)],
+                               capture_output=True, text=True, timeout=120)
+            assert p.returncode == 0, p.stderr[-2000:]
+            got = np.fromfile(bgr, np.uint8).reshape(480, 640, 3)
+        ref = Reference(cam.spec)
+    if client == "ffmpeg":
+        assert_same_bytes(jpeg.read_bytes(), ref.wire(0, 0, "MJPG"), "ffmpeg's copy of an HTTP part")
+    assert_close(got, ref.rendered(0, 0), Tolerance(**JPEG), f"{client} on the HTTP MJPEG stream")
+
+
 # ------------------------------------------------------------------------------------- UVC: pyusb and USB/IP
 UVC_FORMATS = {"YUYV": "yuyv", "NV12": "nv12", "MJPG": "mjpeg"}
 
