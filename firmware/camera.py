@@ -11,12 +11,13 @@ from __future__ import annotations
 
 import dataclasses
 from collections.abc import Mapping
+from fractions import Fraction
 from typing import Any
 
 from rollcam.common.errors import ConfigError, DeviceError
 from rollcam.sim.frame import Frame
 from rollcam.sim.hwconfig import SensorConfig
-from rollcam.sim.synthetic import SyntheticCamera
+from rollcam.sim.synthetic import SyntheticCamera, resolve_settings
 
 from . import controls as ctl
 from .imaging import Imager, warm, warm_ahead
@@ -232,3 +233,10 @@ class FirmwareCamera(DeviceStream):
         for paired GS/RS data), flips applied, with the in-sensor results if any (``insensor``); and that spec."""
         spec = self._spec_for_frame()
         return spec, self.insensor.make(spec, self.imager, plan.seq, plan.start_ns, shutter, self.stats)
+
+
+def default_interval(spec: CameraSpec, width: int, height: int) -> Fraction:
+    """The frame period of ``spec``'s sensor at an output size and its default frame length, in seconds as V4L2's
+    fraction (a mode's own rate; a size no mode has reads out in its mode's time)."""
+    t = resolve_settings(spec.sensor, size=(width, height), shutter=spec.shutter, readout=spec.readout).timing
+    return Fraction(t.frame_period_pck, t.pixel_rate_hz)

@@ -256,8 +256,8 @@ OPTIONS: dict[str, Option] = {o.name: o for o in (
            ("chart",), "vx_px_s"),
     Option("level", bounded(non_negative_float, 0.0, MAX_LEVEL), 0.5,
            "flat, flicker: (mean) radiance level (0..1 is the sensor's range)", ("flat", "flicker")),
-    Option("size", _size, None, "output WxH (default: the sensor's default mode; another size is a "
-                                     "rescaled readout)"),
+    Option("size", _size, None, "output WxH (default: the sensor's default mode; another, even size is "
+                                     "a rescaled readout)"),
     Option("fps", positive_float, None, "frame rate: sets the frame length (default: the mode's); above the "
                                         "sensor's maximum for the size is an error"),
     Option("shutter", _choice(*SHUTTERS), None, "rolling | global (default: the sensor's)"),

@@ -253,6 +253,11 @@ def _check_limits(spec: CameraSpec) -> None:
     """The typed fields against the option table's limits (before anything is sized from them)."""
     if spec.size is not None:
         check_size(spec.size)
+        modes = [(m.width, m.height) for m in spec.sensor.modes]
+        if spec.size not in modes and (spec.size[0] % 2 or spec.size[1] % 2):
+            (w, h), names = spec.size, ", ".join(f"{a}x{b}" for a, b in modes)
+            raise ConfigError(f"size {w}x{h} is no mode of {spec.sensor.name} ({names}) and has an odd side: a "
+                              "scaled size must be even, as a Bayer tile and 4:2:0 chroma are 2 pixels")
     g = spec.sensor.gain
     max_gain = g.analog_max * g.digital_max
     slack = 1 + 1e-3  # doors that speak hundredths (UVC) round the maximum to the nearest one

@@ -39,6 +39,10 @@ _BAYER_FOURCCS = {  # order -> fourcc of 8, 10, 10 packed, 12, 12 packed, 16 bit
 _BAYER_LAYOUTS = (("raw", 8), ("raw", 10), ("csi2", 10), ("raw", 12), ("csi2", 12), ("raw", 16))
 
 
+YUV_PACKINGS = ("yuyv", "uyvy", "nv12", "yu12")
+"""The Y'CbCr layouts: BT.601 limited range, as ``rollcam.sim.codecs`` converts them."""
+
+
 @dataclass(frozen=True)
 class PixelFormat:
     """One fourcc: sample bits, memory layout (``packing``) and colour filter (Bayer order, 'mono' or None).
@@ -70,6 +74,24 @@ class PixelFormat:
         if self.packing in ("nv12", "yu12"):
             return width * height * 3 // 2
         return self.bytesperline(width) * height
+
+    def line_spans(self, first: int, end: int, width: int, height: int) -> list[tuple[int, int]]:
+        """Byte ranges ``[lo, hi)`` of a frame that hold image lines ``first..end-1``, in every plane: a band of
+        a 4:2:0 frame (NV12, YU12) is its luma lines and the chroma lines they share (chroma line ``k`` serves
+        lines ``2k`` and ``2k + 1``), so a device that fills a buffer band by band fills the chroma too."""
+        luma = self.bytesperline(width)
+        spans = [(first * luma, end * luma)]
+        if self.packing in ("nv12", "yu12"):
+            c0, c1 = first // 2, (end + 1) // 2  # the chroma lines the band touches
+            y_size = luma * height
+            if self.packing == "nv12":  # one plane of interleaved CbCr, a line as wide as luma's
+                spans.append((y_size + c0 * luma, y_size + c1 * luma))
+            else:  # Cb then Cr planes, half as wide and half as high
+                half = luma // 2
+                cb_size = half * (height // 2)
+                spans += [(y_size + c0 * half, y_size + c1 * half),
+                          (y_size + cb_size + c0 * half, y_size + cb_size + c1 * half)]
+        return spans
 
     def shape(self, width: int, height: int) -> tuple[int, ...]:
         """Array shape of a frame's ``data`` in this format."""

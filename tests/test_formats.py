@@ -38,6 +38,24 @@ def test_bytesperline_sizeimage_shape(fourcc, w, h, bpl, size, shape):
     assert (f.bytesperline(w), f.sizeimage(w, h), f.shape(w, h)) == (bpl, size, shape)
 
 
+@pytest.mark.parametrize("fourcc", ["NV12", "YU12", "YUYV", "RG10", "pRAA", "XR24"])
+def test_line_spans_of_bands_cover_every_plane(fourcc):
+    """Bands of lines (odd boundaries included) cover the whole frame, chroma planes too, and a band's spans hold
+    exactly the bytes its lines need: luma lines, and the chroma lines they share."""
+    f = F.pixel_format(fourcc)
+    w, h = 8, 6
+    frame = np.zeros(f.sizeimage(w, h), np.uint8)
+    for first, end in ((0, 3), (3, 5), (5, 6)):
+        for lo, hi in f.line_spans(first, end, w, h):
+            assert 0 <= lo < hi <= frame.size
+            frame[lo:hi] += 1
+    assert frame.min() >= 1  # every byte is in some band
+    if fourcc == "NV12":  # luma rows 3 and 4 and the chroma row (line 1 of 3) that rows 2..3 share, then 4..5's
+        assert F.pixel_format("NV12").line_spans(3, 5, w, h) == [(24, 40), (48 + 8, 48 + 24)]
+    if fourcc == "YU12":
+        assert F.pixel_format("YU12").line_spans(0, 2, w, h) == [(0, 16), (48, 52), (60, 64)]
+
+
 def test_pixel_format_errors_and_short_names():
     assert F.pixel_format("Y10").fourcc == "Y10 "
     with pytest.raises(ConfigError, match="'XXXX'"):

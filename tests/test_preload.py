@@ -96,6 +96,17 @@ def test_v4l2_compliance_streaming_has_no_failures(server):
     assert p.returncode == 0
 
 
+def test_v4l2_compliance_on_a_size_no_mode_has():
+    """``size=640x480`` on an imx477 (no such mode) is offered and kept: TRY_FMT(G_FMT) and S_FMT(G_FMT) give G_FMT
+    back (they gave the nearest mode, 1332x990, before)."""
+    need("v4l2-compliance")
+    with serving([("/dev/video0", "emu:imx477?size=640x480&scene=flat")]) as s:
+        p = run(s, "v4l2-compliance", "-d", "/dev/video0", timeout=300, check=False)
+    summary = [line for line in p.stdout.splitlines() if line.startswith("Total for")]
+    fails = "\n".join(line for line in p.stdout.splitlines() if "fail:" in line)
+    assert summary and ", Failed: 0," in summary[-1], fails + "\n" + p.stdout[-3000:]
+
+
 @pytest.mark.slow
 def test_v4l2_compliance_every_format_has_no_failures(server):
     need("v4l2-compliance")

@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
-from rollcam.common.errors import DeviceError
+from rollcam.common.errors import ConfigError, DeviceError
 from rollcam.emu.v4l2 import Device, V4L2Error, raw
 from rollcam.emu.v4l2 import functions as fn
 from rollcam.sim import formats as sim_formats
@@ -138,6 +138,50 @@ def test_formats_decode_to_the_same_picture(fourcc):
         if fourcc == "GREY":
             want = cv2.cvtColor(cv2.cvtColor(want, cv2.COLOR_BGR2GRAY), cv2.COLOR_GRAY2BGR)  # previews are BGR
         assert np.abs(got.astype(int) - want).mean() < 6
+
+
+@pytest.mark.parametrize("fourcc", ["NV12", "YU12", "YUYV"])
+def test_a_realtime_buffer_filled_band_by_band_holds_every_plane(fourcc):
+    """The real-time pump fills a buffer band by band; a 4:2:0 frame's chroma planes lie after all its luma
+    lines, so a fill by luma lines alone left them zero (a green picture)."""
+    with dev() as want_dev, dev(realtime=True) as d:
+        for x in (want_dev, d):
+            x.set_format(640, 480, fourcc)
+            x.controls["test_pattern"].value = 3  # colour bars: the same picture in every frame
+        want = next(want_dev.stream(frames=1))
+        got = next(d.stream(frames=1))
+        assert got.data.size == want.data.size == 640 * 480 * (2 if fourcc == "YUYV" else 3 / 2)
+        assert np.array_equal(got.data, want.data)
+
+
+@pytest.mark.parametrize("sensor", ["imx477", "imx219"])
+def test_a_size_no_mode_has_is_offered_and_kept(sensor):
+    """``size=640x480`` on an imx477 (no such mode): ENUM_FRAMESIZES lists it after the modes, TRY_FMT(G_FMT) and
+    S_FMT give it back, ENUM_FRAMEINTERVALS gives the default mode's rate, and S_FMT to a mode and back works."""
+    with Device.open(sensor, scene={"scene": "flat"}, size=(320, 240), realtime=False) as d:
+        modes = [(m.width, m.height) for m in d.driver.camera.sensor.modes]
+        assert (320, 240) not in modes
+        sizes = [(s.width, s.height) for s in fn.enum_frame_sizes(d.driver, "YUYV")]
+        assert sizes == [*modes, (320, 240)]
+        g = fn.get_format(d.driver)
+        assert (g.width, g.height) == (320, 240)
+        assert fn.try_format(d.driver, 320, 240, g.pixelformat) == g
+        (ival,) = fn.enum_frame_intervals(d.driver, "YUYV", 320, 240)
+        t = d.driver.camera.sensor.timing(d.driver.camera.sensor.mode())
+        assert Fraction(ival.numerator, ival.denominator) == Fraction(t.frame_period_pck, t.pixel_rate_hz)
+        assert fn.get_frame_interval(d.driver) == (ival.numerator, ival.denominator)
+        f = d.set_format(*modes[-1], "YUYV")
+        assert (f.width, f.height) == modes[-1]
+        assert (320, 240) in [(s.width, s.height) for s in fn.enum_frame_sizes(d.driver, "YUYV")]  # still offered
+        assert (d.set_format(320, 240, "NV12").width, fn.get_format(d.driver).height) == (320, 240)
+        assert next(d.stream(frames=1)).image().shape == (240, 320, 3)
+
+
+def test_an_odd_size_no_mode_has_is_refused_naming_the_modes():
+    """An odd scaled size cannot carry YUV chroma or a Bayer tile: the device streamed nothing (its pump failed
+    to encode the first frame) where a real driver aligns to 2 pixels; it is refused when the camera is made."""
+    with pytest.raises(ConfigError, match=r"641x480 is no mode of imx477 \(4056x3040, .*odd side"):
+        Device.open("imx477", size=(641, 480))
 
 
 def test_sequence_gaps_on_dropped_buffers_and_error_flag():

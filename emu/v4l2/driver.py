@@ -21,11 +21,12 @@ from rollcam.common.errors import ConfigError, DeviceError
 from rollcam.common.faults import REQUESTS, FaultInjector, FaultPlan
 from rollcam.common.lifecycle import Stats
 from rollcam.emu.pump import FramePump
-from rollcam.firmware.camera import FirmwareCamera, FramePlan
+from rollcam.firmware.camera import FirmwareCamera, FramePlan, default_interval
 from rollcam.firmware.controls import CONTROLS
 from rollcam.firmware.imaging import mjpeg_quality
 from rollcam.firmware.pixfmt import device_format
 from rollcam.sim.codecs import transcode
+from rollcam.sim.formats import YUV_PACKINGS
 from rollcam.sim.frame import Frame
 
 from . import ctrls, raw
@@ -75,6 +76,11 @@ class EmuDriver:
         self.stats = DriverStats()
         self._filling: tuple[int, Slot, np.ndarray] | None = None
         self.meta: Any = None  # the metadata node's driver (``meta.MetaDriver``), filled as each buffer completes
+        modes = camera.sizes()
+        self.sizes = modes if camera.size in modes else [*modes, camera.size]
+        """Frame sizes the device offers: the sensor's modes and, when its camera was made with a size that is no
+        mode (``size=640x480`` on an imx477), that size too (the default mode's readout scaled to it, as a bridge's
+        scaler gives a size the sensor has no mode for), for as long as it lives, so a client can set it again."""
 
     @property
     def fmt(self) -> raw.PixFormat:
@@ -142,12 +148,13 @@ class EmuDriver:
         _, slot, payload = self._filling
         fmt = self.fmt
         readout = self.camera.spec.settings.readout
-        if fmt.bytesperline and not readout.by_column:
+        layout = device_format(fmt.pixelformat).layout
+        if layout is not None and not readout.by_column:
             first, end = plan.schedule.band_lines(band, n_bands)
             if readout.reversed:
                 first, end = fmt.height - end, fmt.height - first
-            lo, hi = first * fmt.bytesperline, end * fmt.bytesperline
-            slot.memory[lo:hi] = payload[lo:hi]
+            for lo, hi in layout.line_spans(first, end, fmt.width, fmt.height):
+                slot.memory[lo:hi] = payload[lo:hi]
         elif band == n_bands - 1:
             slot.memory[: payload.size] = payload
 
@@ -208,11 +215,20 @@ class EmuDriver:
 
 
 def _pix_format(width: int, height: int, fourcc: str) -> raw.PixFormat:
+    """G_FMT's answer. The colorimetry says what the codec table (``rollcam.sim.codecs``) writes, so a client that
+    converts by it (GStreamer does) gets the emulator's picture: YUV is BT.601 limited range, and GREY, a
+    colour stream's luma or a mono sensor's samples, is full range (V4L2's default for a Y'CbCr format is
+    limited)."""
     pf = device_format(fourcc)
     space = raw.Colorspace.JPEG if pf.compressed else raw.Colorspace.RAW if pf.raw else \
         raw.Colorspace.SRGB
+    enc, quant = raw.YcbcrEnc.DEFAULT, raw.Quantization.DEFAULT
+    if fourcc == "GREY":
+        quant = raw.Quantization.FULL_RANGE
+    elif pf.layout is not None and pf.layout.packing in YUV_PACKINGS:
+        enc, quant = raw.YcbcrEnc.BT601, raw.Quantization.LIM_RANGE
     return raw.PixFormat(width, height, fourcc, raw.Field.NONE, pf.bytesperline(width), pf.sizeimage(width, height),
-                         space)
+                         space, enc, quant)
 
 
 # ------------------------------------------------------------------------------------------------ handlers
@@ -232,9 +248,10 @@ def _enum_fmt(d: EmuDriver, arg: raw.FmtDesc) -> raw.FmtDesc:
 
 
 def _try_fmt(d: EmuDriver, arg: raw.PixFormat) -> raw.PixFormat:
-    """TRY_FMT: the nearest mode size (as v4l2_find_nearest_size) and a supported format (else the first); a raw
+    """TRY_FMT: the nearest offered size (as v4l2_find_nearest_size: the modes, and a scaled size the camera was
+    made with) and a supported format (else the first); a raw
     Bayer fourcc comes back in the order the current flips give, as Linux sensor drivers answer."""
-    sizes = d.camera.sizes()
+    sizes = d.sizes
     w, h = min(sizes, key=lambda s: abs(s[0] - arg.width) + abs(s[1] - arg.height))
     try:
         fourcc = d.camera.resolve_format(arg.pixelformat)
@@ -253,23 +270,18 @@ def _s_fmt(d: EmuDriver, arg: raw.PixFormat) -> raw.PixFormat:
 
 
 def _enum_framesizes(d: EmuDriver, arg: raw.FrmSize) -> raw.FrmSize:
-    sizes = d.camera.sizes()
+    sizes = d.sizes
     if arg.pixel_format not in d.camera.formats or not 0 <= arg.index < len(sizes):
         raise V4L2Error(errno.EINVAL, f"no frame size {arg.index} for format {arg.pixel_format!r}")
     return raw.FrmSize(arg.index, arg.pixel_format, raw.FrmSizeType.DISCRETE, *sizes[arg.index])
 
 
-def _interval(d: EmuDriver, width: int, height: int) -> Fraction:
-    t = d.camera.sensor.timing(f"{width}x{height}")
-    return Fraction(t.frame_period_pck, t.pixel_rate_hz)
-
-
 def _enum_frameintervals(d: EmuDriver, arg: raw.FrmIval) -> raw.FrmIval:
-    if (arg.index != 0 or (arg.width, arg.height) not in d.camera.sizes()
+    if (arg.index != 0 or (arg.width, arg.height) not in d.sizes
             or arg.pixel_format not in d.camera.formats):
         raise V4L2Error(errno.EINVAL, f"no frame interval {arg.index} for {arg.pixel_format!r} "
                                       f"{arg.width}x{arg.height}")
-    ival = _interval(d, arg.width, arg.height)
+    ival = default_interval(d.camera.spec, arg.width, arg.height)
     return raw.FrmIval(0, arg.pixel_format, arg.width, arg.height, raw.FrmSizeType.DISCRETE, ival.numerator,
                        ival.denominator)
 

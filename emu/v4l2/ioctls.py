@@ -112,6 +112,7 @@ def _put_pix(a: abi.Format, p: raw.PixFormat) -> None:
     C.memset(C.addressof(a.fmt), 0, C.sizeof(a.fmt))
     pix.width, pix.height, pix.pixelformat = p.width, p.height, raw.fourcc_code(p.pixelformat)
     pix.field, pix.bytesperline, pix.sizeimage, pix.colorspace = p.field, p.bytesperline, p.sizeimage, p.colorspace
+    pix.ycbcr_enc, pix.quantization = p.ycbcr_enc, p.quantization
     pix.priv = PRIV_MAGIC
 
 

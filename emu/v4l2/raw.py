@@ -77,6 +77,21 @@ class Colorspace(enum.IntEnum):
     RAW = 11
 
 
+class YcbcrEnc(enum.IntEnum):
+    """``enum v4l2_ycbcr_encoding`` (the one used here)."""
+
+    DEFAULT = 0
+    BT601 = 1
+
+
+class Quantization(enum.IntEnum):
+    """``enum v4l2_quantization``."""
+
+    DEFAULT = 0
+    FULL_RANGE = 1
+    LIM_RANGE = 2
+
+
 class CtrlType(enum.IntEnum):
     """``enum v4l2_ctrl_type``."""
 
@@ -203,6 +218,8 @@ class PixFormat:
     bytesperline: int = 0
     sizeimage: int = 0
     colorspace: int = Colorspace.SRGB
+    ycbcr_enc: int = YcbcrEnc.DEFAULT
+    quantization: int = Quantization.DEFAULT
 
 
 @dataclass
