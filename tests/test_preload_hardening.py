@@ -96,7 +96,8 @@ def test_a_library_from_another_build_gets_a_clear_line_not_garbage(server, tmp_
                       "-ldl", "-lpthread")
     env = program_environment(server)
     env["LD_PRELOAD"] = str(other)
-    code = "import errno, os\ntry:\n os.open('/dev/video0', os.O_RDWR)\nexcept OSError as e:\n print(errno.errorcode[e.errno])"
+    code = ("import errno, os\ntry:\n os.open('/dev/video0', os.O_RDWR)\n"
+            "except OSError as e:\n print(errno.errorcode[e.errno])")
     with caplog.at_level("WARNING", logger="rollcam.emu.v4l2.server"):
         p = run_under(server, sys.executable, "-c", code, env=env)
     assert p.stdout.strip() == "ENODEV"
