@@ -164,6 +164,32 @@ def test_threads_racing_close_dup_open_and_ioctl_on_one_fd_are_safe(server, tmp_
     wait_until(lambda: open_fds() <= before, what="the server's descriptors back to before")
 
 
+def test_when_the_server_dies_a_blocked_dqbuf_and_later_calls_fail_with_enodev(tmp_path):
+    """R5: the server going away mid-DQBUF wakes the waiting thread with ENODEV, and every later call on
+    the file fails with ENODEV (not an undefined errno, not a hang)."""
+    code = textwrap.dedent(PRELUDE) + textwrap.dedent("""
+        import sys
+        fd = os.open("/dev/video0", os.O_RDWR)
+        fcntl.ioctl(fd, R["REQBUFS"], abi.RequestBuffers(count=2, type=1, memory=1))
+        fcntl.ioctl(fd, R["QBUF"], abi.Buffer(index=0, type=1, memory=1))
+        fcntl.ioctl(fd, R["STREAMON"], ctypes.c_int(1))
+        fcntl.ioctl(fd, R["DQBUF"], abi.Buffer(type=1, memory=1))
+        print("waiting", flush=True)
+        b = abi.Buffer(type=1, memory=1)
+        out = [raw_ioctl(fd, R["DQBUF"], ctypes.addressof(b))]  # nothing queued: blocks until the server goes
+        out.append(raw_ioctl(fd, R["QUERYCAP"], ctypes.addressof(abi.Capability())))
+        os.close(fd)
+        print(json.dumps(out))
+    """)
+    with serving([("/dev/video0", SOURCE)]) as s:
+        p = subprocess.Popen([sys.executable, "-c", code], env=program_environment(s), stdout=subprocess.PIPE,
+                             stderr=subprocess.PIPE, text=True)
+        assert p.stdout.readline().strip() == "waiting", p.stderr.read()
+    out, err = p.communicate(timeout=60)
+    assert p.returncode == 0, err[-2000:]
+    assert json.loads(out.strip().splitlines()[-1]) == ["ENODEV", "ENODEV"]
+
+
 # ------------------------------------------------------------------------------- R2: bad pointers
 def test_garbage_pointers_get_efault_as_on_linux_not_sigsegv(server):
     """R2: a bad argument pointer is EFAULT (ioctl in and out, the extended-control array, read()'s buffer,
