@@ -35,7 +35,9 @@ class BuildPlain(build_ext):
 
 setup(
     ext_modules=[Extension(LIBRARY, sources=["emu/preload/rollcam_preload.c"],
-                           extra_compile_args=["-O2", "-U_FORTIFY_SOURCE", "-Wno-nonnull-compare"],
+                           # -Wno-nonnull-compare: the interposed calls check the pointers libc declares nonnull
+                           extra_compile_args=["-O2", "-U_FORTIFY_SOURCE", "-Wall", "-Wextra", "-Werror",
+                                               "-Wno-nonnull-compare"],
                            extra_link_args=["-ldl", "-lpthread"]),
                  # -O3 and -fopenmp-simd (the pragma only, no OpenMP runtime) vectorise the pixel loop; no
                  # -ffast-math and no FMA contraction, so every CPU clone computes the same image (see the source).

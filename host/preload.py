@@ -2,7 +2,8 @@
 
 Each device is a ``FirmwareCamera`` (from an ``emu:`` URI or a sensor name) behind an ``EmuDriver`` and a
 ``DeviceNode``, and, when its camera runs an in-sensor network, a metadata node (``MetaDriver``) at the next
-free ``/dev/videoN``; one ``PreloadServer`` serves them on a Unix socket in a private temporary folder. The
+free ``/dev/videoN``; one ``PreloadServer`` serves them on a Unix socket in a private temporary folder
+(``rollcam-run-PID-*``: a folder a killed run left behind is removed by the next run). The
 program runs with the preload library (``rollcam.emu.preload``) in ``LD_PRELOAD``, the socket and device
 paths in its environment, and ``rollcam/host/shims`` first on its ``PYTHONPATH`` (stand-in modules such as
 ``picamera2``). Its exit status is returned (128 + N when signal N ended it); the socket and folder go.
@@ -14,6 +15,8 @@ import contextlib
 import os
 import shutil
 import signal
+import socket
+import stat
 import subprocess
 import tempfile
 from collections.abc import Iterator, Sequence
@@ -31,6 +34,9 @@ from rollcam.host.standins import standin_env
 
 DEFAULT_DEVICE = "/dev/video0"
 DEFAULT_SOURCE = "emu:imx219?size=640x480"
+FOLDER_PREFIX = "rollcam-run-"
+"""A run's private folder is ``FOLDER_PREFIX`` + its pid + ``-`` + a random part (so a later run can tell an
+abandoned one: ``reclaim_stale_folders``)."""
 
 
 def parse_device(text: str, index: int) -> tuple[str, str]:
@@ -68,13 +74,52 @@ def minor_of(path: str, index: int) -> int:
     return int(path[-digits:]) if digits else index
 
 
+def _abandoned(folder: Path, pid: int) -> bool:
+    """Whether a run's folder outlived its process: no process ``pid`` here and nothing listening on its
+    socket (both, so that a run in another PID namespace sharing /tmp keeps its folder)."""
+    try:
+        os.kill(pid, 0)
+        return False
+    except ProcessLookupError:
+        pass
+    except PermissionError:
+        return False
+    with socket.socket(socket.AF_UNIX, socket.SOCK_STREAM) as s:
+        try:
+            s.connect(str(folder / "v4l2.sock"))
+            return False
+        except OSError:
+            return True
+
+
+def reclaim_stale_folders(root: Path | None = None) -> list[Path]:
+    """Remove the folders of runs that ended without cleaning up (``kill -9`` of ``rollcam run``): this
+    user's ``rollcam-run-PID-*`` folders in ``root`` (default: the temporary folder) whose process is gone.
+    Returns what was removed."""
+    root = Path(tempfile.gettempdir()) if root is None else root
+    removed = []
+    for folder in root.glob(f"{FOLDER_PREFIX}*-*"):
+        pid = folder.name[len(FOLDER_PREFIX):].partition("-")[0]
+        try:
+            st = folder.lstat()
+        except OSError:
+            continue
+        if not pid.isdigit() or not stat.S_ISDIR(st.st_mode) or st.st_uid != os.getuid():
+            continue
+        if _abandoned(folder, int(pid)):
+            shutil.rmtree(folder, ignore_errors=True)
+            removed.append(folder)
+    return removed
+
+
 @contextlib.contextmanager
 def serving(devices: Sequence[tuple[str, str]], *, realtime: bool = True) -> Iterator[PreloadServer]:
     """Serve ``(path, source)`` devices on a socket in a new private folder; everything goes on exit."""
     paths = [p for p, _ in devices]
     if len(set(paths)) != len(paths):
         raise ConfigError(f"device paths {paths!r} repeat")
-    folder = tempfile.mkdtemp(prefix="rollcam-run-")
+    reclaim_stale_folders()
+    folder = tempfile.mkdtemp(prefix=f"{FOLDER_PREFIX}{os.getpid()}-")
     nodes: dict[str, DeviceNode] = {}
     try:
         for i, (path, source) in enumerate(devices):

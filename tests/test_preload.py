@@ -14,6 +14,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 from programs import need
+from programs import python_under as python
+from programs import run_under as run
 from rollcam.common.errors import RollcamError
 from rollcam.emu import preload as preload_package
 from rollcam.emu.preload import LIBRARY_NAME
@@ -29,20 +31,6 @@ FRAME = 640 * 480 * 2
 def server():
     with serving([("/dev/video0", SOURCE), ("/dev/video3", "emu:ov9281?size=640x400")]) as s:
         yield s
-
-
-def run(server, *argv: str, timeout: float = 120, check: bool = True) -> subprocess.CompletedProcess:
-    p = subprocess.run(list(argv), env=program_environment(server), capture_output=True, text=True,
-                       timeout=timeout)
-    if check:
-        assert p.returncode == 0, (p.returncode, p.stdout[-2000:], p.stderr[-2000:])
-    return p
-
-
-def python(server, code: str, timeout: float = 120) -> dict:
-    """Run ``code`` in a child Python under the preload library; its last stdout line is JSON."""
-    p = run(server, sys.executable, "-c", textwrap.dedent(code), timeout=timeout)
-    return json.loads(p.stdout.strip().splitlines()[-1])
 
 
 def test_v4l2_ctl_all_list_formats_and_devices(server):

@@ -3,6 +3,7 @@
 ``rollcam_preload.c`` is built into ``librollcam_preload.so`` beside this file by the normal install (a
 setuptools build step, on a machine with a C compiler). It forwards the program's libc
 calls on the device paths to ``rollcam.emu.v4l2.server``; ``environment`` is what a program needs to use it.
+The two speak the wire format of ``rollcam_wire.h`` (``wire`` reads it for the server).
 """
 
 from __future__ import annotations

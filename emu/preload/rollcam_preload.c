@@ -22,7 +22,9 @@
 #include <linux/videodev2.h>
 #include <poll.h>
 #include <pthread.h>
+#include <signal.h>
 #include <stdarg.h>
+#include <stddef.h>
 #include <stdint.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -40,29 +42,15 @@
 #include <time.h>
 #include <unistd.h>
 
+#include "rollcam_wire.h"
+
+
 #define EXPORT __attribute__((visibility("default")))
 #define MAX_FD 65536
 #define MAX_DEVICES 16
 #define MAX_EXT_CTRLS 1024
 #define VIDEO_MAJOR 81
 
-enum { OP_OPEN = 1, OP_IOCTL = 2, OP_MMAP = 3, OP_READ = 4, OP_POLL = 5, OP_CLOSE = 6 };
-
-struct req { uint32_t op, len; uint64_t a, b, c; };
-struct rsp { int64_t result; int32_t err; uint32_t len; };
-
-struct handle {
-    int ctl;             /* connection to the server: one V4L2 file handle */
-    int evfd;            /* readable while events are pending */
-    int readyfd;         /* the program's fd (first one opened) */
-    int minor;
-    int refs;            /* program fds referring to this handle (dup) */
-    pid_t pid;           /* the process that opened it: a forked child closing its copy releases nothing */
-    pthread_mutex_t lock;
-};
-
-static struct handle *table[MAX_FD];
-static pthread_mutex_t table_lock = PTHREAD_MUTEX_INITIALIZER;
 static char sock_path[108];
 static char devices[MAX_DEVICES][64];
 static int n_devices;
@@ -141,6 +129,11 @@ static void trace(const char *fmt, ...) {
         real_write(2, buf, (size_t)n < sizeof buf ? (size_t)n : sizeof buf - 1);
 }
 
+static void fork_prepare(void);
+static void fork_parent(void);
+static void fork_child(void);
+static sigset_t all_signals;
+
 __attribute__((constructor)) static void init(void) {
     /* Every real entry point up front, so that no path calls one not yet looked up. */
     resolve_open();
@@ -215,6 +208,8 @@ __attribute__((constructor)) static void init(void) {
             break;
         d = end + 1;
     }
+    sigfillset(&all_signals);
+    pthread_atfork(fork_prepare, fork_parent, fork_child);
 }
 
 /* ---------------------------------------------------------------------------------------------- paths */
@@ -253,51 +248,183 @@ static int minor_of(int index) {
     return *p ? atoi(p) : index;
 }
 
-struct rsp;
-struct req;
-static int xfer(int ctl, const struct req *q, const void *payload, void *out, uint32_t cap, struct rsp *r,
-                int *fds, int *nfds);
 
-static struct handle *lookup(int fd) {
-    if (fd < 0 || fd >= MAX_FD)
+/* ------------------------------------------------------------------------------------ program memory */
+/*
+ * The ioctl argument, the read() buffer and the poll/select sets are the program's memory: a bad pointer
+ * there gets EFAULT, as the kernel's copy_from_user/copy_to_user give it, never a SIGSEGV in this library.
+ * The copies are process_vm_readv/process_vm_writev on this process (one system call each, no signal handler
+ * to install over the program's, safe in any thread, no shared state). Where a seccomp policy refuses those
+ * calls (ENOSYS, EPERM), a pipe does the same job: write() reads the program's memory and read() writes it,
+ * each failing with EFAULT on a bad address.
+ */
+static int vm_calls_refused;
+
+static int pipe_copy(void *dst, const void *src, size_t n) {
+    int p[2];
+    if (pipe2(p, O_CLOEXEC) < 0)
+        return -1;
+    resolve_read();
+    resolve_write();
+    resolve_close();
+    int rc = 0;
+    for (size_t done = 0; done < n && rc == 0;) {
+        size_t k = n - done < 4096 ? n - done : 4096; /* under the pipe's capacity: write never blocks */
+        if (real_write(p[1], (const char *)src + done, k) != (ssize_t)k ||
+            real_read(p[0], (char *)dst + done, k) != (ssize_t)k)
+            rc = -1;
+        done += k;
+    }
+    real_close(p[0]);
+    real_close(p[1]);
+    if (rc < 0)
+        errno = EFAULT;
+    return rc;
+}
+
+/* Copy n bytes between the program's memory (user) and the library's; -1 with EFAULT when user is bad. */
+static int user_copy(void *dst, const void *src, size_t n, int to_user) {
+    if (!n)
+        return 0;
+    if (!__atomic_load_n(&vm_calls_refused, __ATOMIC_RELAXED)) {
+        struct iovec local = {to_user ? (void *)src : dst, n}, remote = {to_user ? dst : (void *)src, n};
+        ssize_t r = to_user ? process_vm_writev(getpid(), &local, 1, &remote, 1, 0)
+                            : process_vm_readv(getpid(), &local, 1, &remote, 1, 0);
+        if (r == (ssize_t)n)
+            return 0;
+        if (r >= 0 || errno == EFAULT) {
+            errno = EFAULT;
+            return -1;
+        }
+        if (errno != ENOSYS && errno != EPERM)
+            return -1;
+        __atomic_store_n(&vm_calls_refused, 1, __ATOMIC_RELAXED);
+    }
+    return pipe_copy(dst, src, n);
+}
+
+#define copy_in(lib, user, n) user_copy((lib), (user), (n), 0)
+#define copy_out(user, lib, n) user_copy((user), (lib), (n), 1)
+
+/* ------------------------------------------------------------------------------------------ handles */
+/*
+ * A handle is one open file of a device as this process sees it: its connection to the server and the fds
+ * the server handed over. Its lifetime is the kernel's struct file's: the table holds a reference for each
+ * program fd (dup adds one), each call holds one for its length (get/put, as the kernel's fdget/fdput), and
+ * whoever drops the last one sends OP_CLOSE. So a thread blocked in DQBUF keeps the handle alive through
+ * another thread's close(), and two closes cannot free it twice. table_lock guards the table, the counts
+ * and the list of live handles; h->lock makes each request and its answer on h->ctl one exchange.
+ *
+ * fork: the child shares each open file with its parent, as on Linux (its STREAMOFF stops the parent's
+ * stream). Before the fork the parent opens a connection for the child to each of its files (OP_ATTACH);
+ * the child uses that one and drops its copy of the parent's, so the two never interleave on one socket
+ * and the file is released when the last process closes it. The locks are reset in the child.
+ */
+struct handle {
+    int ctl;              /* this process's connection to the server */
+    int waitfd;           /* the library's own dup of the ready pipe: waited on, whatever the program closes */
+    int evfd;             /* readable while events are pending */
+    int minor;
+    int64_t file;         /* the server's id of the open file (OP_ATTACH) */
+    int refs;             /* table slots + calls in flight (table_lock) */
+    int slots;            /* table slots (table_lock) */
+    int dead;             /* the connection broke: every call fails with ENODEV (lock) */
+    int child_ctl;        /* fork: the child's connection, made before the fork (table_lock, held across it) */
+    pthread_mutex_t lock;
+    struct handle *next;  /* live handles (table_lock) */
+};
+
+static struct handle *table[MAX_FD];
+static struct handle *live;
+static pthread_mutex_t table_lock = PTHREAD_MUTEX_INITIALIZER;
+
+/* Whether fd is emulated now (no reference taken: for the fast path of every libc call). */
+static int emulated(int fd) {
+    return fd >= 0 && fd < MAX_FD && __atomic_load_n(&table[fd], __ATOMIC_ACQUIRE) != NULL;
+}
+
+/* fd's handle with a reference held for the caller's call (put() it), or NULL. */
+static struct handle *get(int fd) {
+    if (!emulated(fd))
         return NULL;
-    return __atomic_load_n(&table[fd], __ATOMIC_ACQUIRE);
-}
-
-static void attach(int fd, struct handle *h) {
     pthread_mutex_lock(&table_lock);
-    h->refs++;
-    __atomic_store_n(&table[fd], h, __ATOMIC_RELEASE);
+    struct handle *h = table[fd];
+    if (h)
+        h->refs++;
     pthread_mutex_unlock(&table_lock);
+    return h;
 }
 
-/* Forget fd; the handle's connection closes (the server releases the file handle) with its last fd. */
-static void detach(int fd) {
-    struct handle *h = lookup(fd);
+static int call(struct handle *h, const struct rollcam_req *q, const void *payload, void *out, uint32_t cap,
+                struct rollcam_rsp *r, int *fds, int *nfds);
+
+/* The last reference is gone: the file is closed (released before the program's close() returns). */
+static void release(struct handle *h) {
+    struct rollcam_req q = {OP_CLOSE, 0, 0, 0, 0};
+    struct rollcam_rsp r;
+    call(h, &q, NULL, NULL, 0, &r, NULL, NULL);
+    resolve_close();
+    real_close(h->ctl);
+    real_close(h->waitfd);
+    real_close(h->evfd);
+    pthread_mutex_destroy(&h->lock);
+    free(h);
+}
+
+static void unlink_live(struct handle *h) {
+    for (struct handle **p = &live; *p; p = &(*p)->next)
+        if (*p == h) {
+            __atomic_store_n(p, h->next, __ATOMIC_RELEASE);
+            return;
+        }
+}
+
+/* Whether any device is open in this process (the fast path of poll/select: no copy of their sets). */
+static int any_live(void) {
+    return __atomic_load_n(&live, __ATOMIC_ACQUIRE) != NULL;
+}
+
+/* Drop a reference from get() or from a table slot (NULL: nothing); errno is kept. */
+static void put(struct handle *h) {
     if (!h)
         return;
+    int err = errno;
     pthread_mutex_lock(&table_lock);
-    __atomic_store_n(&table[fd], NULL, __ATOMIC_RELEASE);
     int last = --h->refs == 0;
+    if (last)
+        unlink_live(h);
     pthread_mutex_unlock(&table_lock);
-    if (last) {
-        /* Closing is synchronous, as on a kernel device: the file is released before close() returns. */
-        struct req q = {OP_CLOSE, 0, 0, 0, 0};
-        struct rsp r;
-        if (getpid() == h->pid)
-            xfer(h->ctl, &q, NULL, NULL, 0, &r, NULL, NULL);
-        resolve_close();
-        real_close(h->ctl);
-        real_close(h->evfd);
-        pthread_mutex_destroy(&h->lock);
-        free(h);
+    if (last)
+        release(h);
+    errno = err;
+}
+
+/* fd now refers to h (NULL: to no emulated file); returns the handle the slot held, whose reference the
+ * caller drops with put() (outside table_lock: it may be the last). */
+static struct handle *set_slot(int fd, struct handle *h) {
+    if (fd < 0 || fd >= MAX_FD)
+        return NULL;
+    pthread_mutex_lock(&table_lock);
+    struct handle *old = table[fd];
+    if (h) {
+        if (!h->refs) { /* a new handle */
+            h->next = live;
+            __atomic_store_n(&live, h, __ATOMIC_RELEASE);
+        }
+        h->refs++;
+        h->slots++;
     }
+    if (old)
+        old->slots--;
+    __atomic_store_n(&table[fd], h, __ATOMIC_RELEASE);
+    pthread_mutex_unlock(&table_lock);
+    return old;
 }
 
 /* ------------------------------------------------------------------------------------------ transport */
-static int send_all(int fd, const struct req *q, const void *payload) {
-    struct iovec iov[2] = {{(void *)q, sizeof *q}, {(void *)payload, q->len}};
-    size_t total = sizeof *q + q->len, sent = 0;
+static int send_all(int fd, const void *head, size_t head_len, const void *payload, size_t len) {
+    struct iovec iov[2] = {{(void *)head, head_len}, {(void *)payload, len}};
+    size_t total = head_len + len, sent = 0;
     while (sent < total) {
         struct msghdr m = {0};
         size_t skip = sent;
@@ -313,7 +440,7 @@ static int send_all(int fd, const struct req *q, const void *payload) {
             skip = 0;
         }
         m.msg_iov = v;
-        m.msg_iovlen = n;
+        m.msg_iovlen = (size_t)n;
         ssize_t r = sendmsg(fd, &m, MSG_NOSIGNAL);
         if (r < 0 && errno == EINTR)
             continue;
@@ -337,15 +464,17 @@ static int recv_all(int fd, void *buf, size_t len) {
     return 0;
 }
 
-/* One request and its answer. The answer's payload goes to out (up to cap bytes; the rest is dropped);
- * fds passed with it land in fds (up to 2). Returns 0, or -1 with errno ENODEV when the server is gone. */
-static int xfer(int ctl, const struct req *q, const void *payload, void *out, uint32_t cap, struct rsp *r,
-                int *fds, int *nfds) {
-    if (send_all(ctl, q, payload) < 0) {
-        errno = ENODEV;
+/* One request and its answer on ctl. The answer's payload goes to out (up to cap bytes; the rest is read
+ * and dropped); fds passed with it land in fds (up to ROLLCAM_WIRE_MAX_FDS, *nfds of them; others are
+ * closed). Returns 0, or -1 when the connection broke (no fds are left open then). */
+static int xfer(int ctl, const struct rollcam_req *q, const void *payload, void *out, uint32_t cap,
+                struct rollcam_rsp *r, int *fds, int *nfds) {
+    int got = 0;
+    if (nfds)
+        *nfds = 0;
+    if (send_all(ctl, q, sizeof *q, payload, q->len) < 0)
         return -1;
-    }
-    union { char buf[CMSG_SPACE(2 * sizeof(int))]; struct cmsghdr align; } cm;
+    union { char buf[CMSG_SPACE(ROLLCAM_WIRE_MAX_FDS * sizeof(int))]; struct cmsghdr align; } cm;
     struct iovec iov = {r, sizeof *r};
     struct msghdr m = {0};
     m.msg_iov = &iov;
@@ -356,59 +485,103 @@ static int xfer(int ctl, const struct req *q, const void *payload, void *out, ui
     do
         n = recvmsg(ctl, &m, MSG_CMSG_CLOEXEC | MSG_WAITALL);
     while (n < 0 && errno == EINTR);
-    if (n <= 0 || (n < (ssize_t)sizeof *r && recv_all(ctl, (char *)r + n, sizeof *r - (size_t)n) < 0)) {
-        errno = ENODEV;
-        return -1;
-    }
-    int got = 0;
-    for (struct cmsghdr *c = CMSG_FIRSTHDR(&m); c; c = CMSG_NXTHDR(&m, c)) {
-        if (c->cmsg_level == SOL_SOCKET && c->cmsg_type == SCM_RIGHTS) {
+    if (n > 0) {
+        for (struct cmsghdr *c = CMSG_FIRSTHDR(&m); c; c = CMSG_NXTHDR(&m, c)) {
+            if (c->cmsg_level != SOL_SOCKET || c->cmsg_type != SCM_RIGHTS)
+                continue;
             int k = (int)((c->cmsg_len - CMSG_LEN(0)) / sizeof(int));
-            int *p = (int *)CMSG_DATA(c);
             for (int i = 0; i < k; i++) {
-                if (fds && got < 2)
-                    fds[got++] = p[i];
-                else {
-                    resolve_close();
-                    real_close(p[i]);
-                }
+                int fd;
+                memcpy(&fd, CMSG_DATA(c) + i * sizeof(int), sizeof fd);
+                if (fds && got < ROLLCAM_WIRE_MAX_FDS)
+                    fds[got++] = fd;
+                else
+                    real_close(fd);
             }
         }
     }
-    if (nfds)
-        *nfds = got;
-    uint32_t keep = r->len < cap ? r->len : cap;
-    if (keep && recv_all(ctl, out, keep) < 0) {
-        errno = ENODEV;
-        return -1;
-    }
-    for (uint32_t left = r->len - keep; left > 0;) {
+    int ok = n > 0 && (n == (ssize_t)sizeof *r || recv_all(ctl, (char *)r + n, sizeof *r - (size_t)n) == 0);
+    uint32_t keep = ok ? (r->len < cap ? r->len : cap) : 0;
+    ok = ok && (!keep || recv_all(ctl, out, keep) == 0);
+    for (uint32_t left = ok ? r->len - keep : 0; ok && left > 0;) {
         char sink[4096];
-        uint32_t k = left < sizeof sink ? left : sizeof sink;
-        if (recv_all(ctl, sink, k) < 0) {
-            errno = ENODEV;
-            return -1;
-        }
+        uint32_t k = left < sizeof sink ? left : (uint32_t)sizeof sink;
+        ok = recv_all(ctl, sink, k) == 0;
         left -= k;
     }
+    if (!ok) {
+        for (int i = 0; i < got; i++)
+            real_close(fds[i]);
+        return -1;
+    }
+    if (nfds)
+        *nfds = got;
     return 0;
 }
 
-static int call(struct handle *h, const struct req *q, const void *payload, void *out, uint32_t cap,
-                struct rsp *r, int *fds, int *nfds) {
+/* A request on h's connection, one at a time, with the program's signals held off for its few microseconds
+ * (the server answers at once): a handler that calls into the library, or longjmps out of it, never finds the
+ * connection mid-exchange. A broken connection fails this and every later call with ENODEV. */
+static int call(struct handle *h, const struct rollcam_req *q, const void *payload, void *out, uint32_t cap,
+                struct rollcam_rsp *r, int *fds, int *nfds) {
+    sigset_t old;
+    pthread_sigmask(SIG_BLOCK, &all_signals, &old);
     pthread_mutex_lock(&h->lock);
-    int rc = xfer(h->ctl, q, payload, out, cap, r, fds, nfds);
+    int rc = h->dead ? -1 : xfer(h->ctl, q, payload, out, cap, r, fds, nfds);
+    if (rc < 0)
+        h->dead = 1;
     pthread_mutex_unlock(&h->lock);
+    pthread_sigmask(SIG_SETMASK, &old, NULL);
     if (rc < 0) {
-        r->result = -1;
-        r->err = ENODEV;
+        *r = (struct rollcam_rsp){-1, ENODEV, 0};
+        if (nfds)
+            *nfds = 0;
     }
     return rc;
 }
 
-static int is_blocking(int fd) {
+static void say(const char *fmt, ...) {
+    char buf[512];
+    va_list ap;
+    va_start(ap, fmt);
+    int n = vsnprintf(buf, sizeof buf, fmt, ap);
+    va_end(ap);
+    resolve_write();
+    if (n > 0)
+        real_write(2, buf, (size_t)n < sizeof buf ? (size_t)n : sizeof buf - 1);
+}
+
+/* A new connection to the server, past the hello; -1 with ENODEV when there is none or it speaks another
+ * wire format (said on stderr: that is a broken install, not a missing device). */
+static int dial(void) {
+    int s = socket(AF_UNIX, SOCK_STREAM | SOCK_CLOEXEC, 0);
+    if (s < 0)
+        return -1;
+    struct sockaddr_un addr = {.sun_family = AF_UNIX};
+    memcpy(addr.sun_path, sock_path, sizeof addr.sun_path);
+    struct rollcam_hello mine = {ROLLCAM_WIRE_MAGIC, ROLLCAM_WIRE_VERSION}, theirs = {0, 0};
+    resolve_close();
+    if (connect(s, (struct sockaddr *)&addr, sizeof addr) < 0 || send_all(s, &mine, sizeof mine, NULL, 0) < 0 ||
+        recv_all(s, &theirs, sizeof theirs) < 0) {
+        real_close(s);
+        trace("rollcam-preload: cannot reach the device server at %s\n", sock_path);
+        errno = ENODEV;
+        return -1;
+    }
+    if (theirs.magic != mine.magic || theirs.version != mine.version) {
+        say("rollcam-preload: the device server at %s speaks wire format %u (magic %#x), this library %u: "
+            "reinstall rollcam so that both come from one build\n", sock_path, theirs.version, theirs.magic,
+            mine.version);
+        real_close(s);
+        errno = ENODEV;
+        return -1;
+    }
+    return s;
+}
+
+static int is_blocking(struct handle *h) {
     resolve_fcntl();
-    int fl = real_fcntl(fd, F_GETFL);
+    int fl = real_fcntl(h->waitfd, F_GETFL); /* the program's fd shares this open file's O_NONBLOCK */
     return fl >= 0 && !(fl & O_NONBLOCK);
 }
 
@@ -421,51 +594,41 @@ static int wait_readable(int fd) {
 
 /* -------------------------------------------------------------------------------------------- open */
 static int emu_open(int index, const char *path, int flags) {
-    int s = socket(AF_UNIX, SOCK_STREAM | SOCK_CLOEXEC, 0);
+    int s = dial();
     if (s < 0)
         return -1;
-    struct sockaddr_un addr = {.sun_family = AF_UNIX};
-    strcpy(addr.sun_path, sock_path);
-    if (connect(s, (struct sockaddr *)&addr, sizeof addr) < 0) {
-        resolve_close();
-        real_close(s);
-        trace("rollcam-preload: cannot reach the device server at %s\n", sock_path);
-        errno = ENODEV;
-        return -1;
+    struct rollcam_req q = {OP_OPEN, (uint32_t)strlen(path), (uint64_t)(unsigned)flags, 0, 0};
+    struct rollcam_rsp r;
+    int fds[ROLLCAM_WIRE_MAX_FDS] = {-1, -1}, nfds = 0, err = ENODEV;
+    struct handle *h = NULL;
+    resolve_close();
+    resolve_fcntl();
+    if (xfer(s, &q, path, NULL, 0, &r, fds, &nfds) == 0) {
+        err = r.err ? r.err : nfds != 2 ? ENODEV : fds[0] >= MAX_FD ? EMFILE : 0;
+        if (!err && !(h = calloc(1, sizeof *h)))
+            err = ENOMEM;
+        if (!err && (h->waitfd = real_fcntl(fds[0], F_DUPFD_CLOEXEC, 0)) < 0)
+            err = errno;
     }
-    struct req q = {OP_OPEN, (uint32_t)strlen(path), (uint64_t)(unsigned)flags, 0, 0};
-    struct rsp r;
-    int fds[2] = {-1, -1}, nfds = 0;
-    if (xfer(s, &q, path, NULL, 0, &r, fds, &nfds) < 0 || r.err || nfds != 2) {
-        int err = r.err ? r.err : ENODEV;
-        resolve_close();
+    if (err) {
         real_close(s);
         for (int i = 0; i < nfds; i++)
             real_close(fds[i]);
+        free(h);
         errno = err;
         return -1;
     }
-    if (fds[0] >= MAX_FD) {
-        resolve_close();
-        real_close(s);
-        real_close(fds[0]);
-        real_close(fds[1]);
-        errno = EMFILE;
-        return -1;
-    }
-    resolve_fcntl();
     if (!(flags & O_CLOEXEC))
         real_fcntl(fds[0], F_SETFD, 0);
     if (flags & O_NONBLOCK)
         real_fcntl(fds[0], F_SETFL, O_NONBLOCK);
-    struct handle *h = calloc(1, sizeof *h);
     h->ctl = s;
-    h->readyfd = fds[0];
     h->evfd = fds[1];
     h->minor = minor_of(index);
-    h->pid = getpid();
+    h->file = r.result;
+    h->child_ctl = -1;
     pthread_mutex_init(&h->lock, NULL);
-    attach(fds[0], h);
+    put(set_slot(fds[0], h));
     trace("rollcam-preload: open(%s) = %d\n", path, fds[0]);
     return fds[0];
 }
@@ -537,83 +700,88 @@ EXPORT int __openat64_2(int dirfd, const char *path, int flags) {
     OPEN_BODY(real___openat64_2(dirfd, path, flags))
 }
 
+/* The slot goes before the fd number is freed (so a racing open() that gets the number finds it empty); the
+ * slot's reference goes after, and with it the file when that was the last. */
 EXPORT int close(int fd) {
     resolve_close();
-    struct handle *h = lookup(fd);
-    if (!h)
+    if (!emulated(fd))
         return real_close(fd);
-    pthread_mutex_lock(&table_lock);
-    int ok = __atomic_load_n(&table[fd], __ATOMIC_ACQUIRE) == h;
-    pthread_mutex_unlock(&table_lock);
-    if (ok)
-        detach(fd);
+    struct handle *h = set_slot(fd, NULL);
+    int rc = real_close(fd);
+    put(h);
     trace("rollcam-preload: close(%d)\n", fd);
-    return real_close(fd);
+    return rc;
 }
 
 /* ------------------------------------------------------------------------------------------- ioctl */
-static int emu_ioctl(int fd, struct handle *h, unsigned long request, void *arg) {
-    /* Requests the VFS answers for every file before any driver sees them. */
+static int is_ext_ctrls(unsigned int request) {
+    return request == VIDIOC_G_EXT_CTRLS || request == VIDIOC_S_EXT_CTRLS || request == VIDIOC_TRY_EXT_CTRLS;
+}
+
+/* An ioctl as video_usercopy makes it: the argument copied in (_IOC_WRITE) or zeroed, the request sent, the
+ * answer copied out (_IOC_READ), EFAULT for memory the program cannot lend; a blocking DQBUF/DQEVENT waits on
+ * the readiness pipes between tries. request is 32 bits, as the kernel compares it. */
+static int emu_ioctl(int fd, struct handle *h, unsigned int request, void *arg) {
     if (request == FIONBIO || request == FIOCLEX || request == FIONCLEX || request == FIOASYNC) {
         resolve_ioctl();
-        return real_ioctl(fd, request, arg);
+        return real_ioctl(fd, request, arg); /* the VFS answers these for every file */
     }
-    uint32_t size = _IOC_SIZE(request), dir = _IOC_DIR(request);
-    if (dir == _IOC_NONE)
-        size = 0;
-    if (size && !arg) {
-        errno = EFAULT;
-        return -1;
-    }
-    int ext = request == VIDIOC_G_EXT_CTRLS || request == VIDIOC_S_EXT_CTRLS || request == VIDIOC_TRY_EXT_CTRLS;
-    uint32_t nctrl = 0, total = size;
-    char small[512], *buf = small;
+    uint32_t dir = _IOC_DIR(request), size = dir == _IOC_NONE ? 0 : _IOC_SIZE(request), nctrl = 0;
+    const uint32_t csize = (uint32_t)sizeof(struct v4l2_ext_control);
+    struct v4l2_ext_controls head = {0};
+    int ext = is_ext_ctrls(request) && size == sizeof head;
     if (ext) {
-        struct v4l2_ext_controls *c = arg;
-        nctrl = c->count <= MAX_EXT_CTRLS && c->controls ? c->count : 0;
-        total += nctrl * (uint32_t)sizeof(struct v4l2_ext_control);
+        if (copy_in(&head, arg, size) < 0)
+            return -1;
+        nctrl = head.count <= MAX_EXT_CTRLS && head.controls ? head.count : 0;
     }
-    if (total > sizeof small && !(buf = malloc(total))) {
+    uint32_t total = size + nctrl * csize;
+    char small[2 * 512], *in = small;
+    if (2 * (size_t)total > sizeof small && !(in = malloc(2 * (size_t)total))) {
         errno = ENOMEM;
         return -1;
     }
-    if (size)
-        memcpy(buf, arg, size);
-    if (nctrl)
-        memcpy(buf + size, ((struct v4l2_ext_controls *)arg)->controls, nctrl * sizeof(struct v4l2_ext_control));
-    struct req q = {OP_IOCTL, total, request, 0, 0};
-    struct rsp r;
-    int fds[2], nfds = 0;
+    char *out = in + total; /* the answer lands apart from the request: a retried DQBUF resends the same */
+    int rc = -1, err = EFAULT;
+    if (size && (dir & _IOC_WRITE ? copy_in(in, arg, size) : (memset(in, 0, size), 0)) < 0)
+        goto done;
+    if (nctrl && copy_in(in + size, head.controls, nctrl * csize) < 0)
+        goto done;
+    struct rollcam_req q = {OP_IOCTL, total, request, 0, 0};
+    struct rollcam_rsp r;
+    int fds[ROLLCAM_WIRE_MAX_FDS], nfds = 0;
     for (;;) {
-        call(h, &q, buf, buf, total, &r, fds, &nfds);
+        call(h, &q, in, out, total, &r, fds, &nfds);
         int wait_ev = request == VIDIOC_DQEVENT && r.err == ENOENT;
-        if (!((request == VIDIOC_DQBUF && r.err == EAGAIN) || wait_ev) || !is_blocking(fd))
+        if (!((request == VIDIOC_DQBUF && r.err == EAGAIN) || wait_ev) || !is_blocking(h))
             break;
-        if (wait_readable(wait_ev ? h->evfd : fd) < 0) {
+        if (wait_readable(wait_ev ? h->evfd : h->waitfd) < 0) {
             r.err = errno;
             break;
         }
     }
+    int keep = -1; /* the fd EXPBUF gives the program */
+    if (request == VIDIOC_EXPBUF && !r.err && nfds && r.len >= sizeof(struct v4l2_exportbuffer)) {
+        keep = fds[0];
+        memcpy(out + offsetof(struct v4l2_exportbuffer, fd), &keep, sizeof keep);
+    }
+    err = r.err;
     if (r.len) {
         uint32_t back = r.len < size ? r.len : size;
-        if (dir & _IOC_READ || ext)
-            memcpy(arg, buf, back);
-        if (nctrl && r.len >= total)
-            memcpy(((struct v4l2_ext_controls *)arg)->controls, buf + size,
-                   nctrl * sizeof(struct v4l2_ext_control));
+        if (((dir & _IOC_READ) || ext) && copy_out(arg, out, back) < 0)
+            err = EFAULT;
+        else if (nctrl && r.len >= total && copy_out(head.controls, out + size, nctrl * csize) < 0)
+            err = EFAULT;
     }
-    if (buf != small)
-        free(buf);
-    if (nfds && request == VIDIOC_EXPBUF && !r.err)
-        ((struct v4l2_exportbuffer *)arg)->fd = fds[0];
-    else
-        for (int i = 0; i < nfds; i++)
+    for (int i = 0; i < nfds; i++)
+        if (fds[i] != keep || err)
             real_close(fds[i]);
-    if (r.err) {
-        errno = r.err;
-        return -1;
-    }
-    return (int)r.result;
+    rc = err ? -1 : (int)r.result;
+done:
+    if (in != small)
+        free(in);
+    errno = err;
+    return rc;
 }
 
 EXPORT int ioctl(int fd, unsigned long request, ...) {
@@ -621,18 +789,22 @@ EXPORT int ioctl(int fd, unsigned long request, ...) {
     va_start(ap, request);
     void *arg = va_arg(ap, void *);
     va_end(ap);
-    struct handle *h = lookup(fd);
-    if (h)
-        return emu_ioctl(fd, h, request, arg);
-    resolve_ioctl();
-    return real_ioctl(fd, request, arg);
+    struct handle *h = get(fd);
+    if (!h) {
+        resolve_ioctl();
+        return real_ioctl(fd, request, arg);
+    }
+    int rc = emu_ioctl(fd, h, (unsigned int)request, arg);
+    put(h);
+    return rc;
 }
 
 /* -------------------------------------------------------------------------------------------- mmap */
 static void *emu_mmap(struct handle *h, void *addr, size_t len, int prot, int flags, off_t off) {
-    struct req q = {OP_MMAP, 0, (uint64_t)off, len, (uint64_t)(unsigned)prot | ((uint64_t)(unsigned)flags << 32)};
-    struct rsp r;
-    int fds[2], nfds = 0;
+    struct rollcam_req q = {OP_MMAP, 0, (uint64_t)off, len,
+                            (uint64_t)(unsigned)prot | ((uint64_t)(unsigned)flags << 32)};
+    struct rollcam_rsp r;
+    int fds[ROLLCAM_WIRE_MAX_FDS], nfds = 0;
     call(h, &q, NULL, NULL, 0, &r, fds, &nfds);
     if (r.err || nfds != 1) {
         for (int i = 0; i < nfds; i++)
@@ -649,57 +821,81 @@ static void *emu_mmap(struct handle *h, void *addr, size_t len, int prot, int fl
 }
 
 EXPORT void *mmap(void *addr, size_t len, int prot, int flags, int fd, off_t off) {
-    struct handle *h = lookup(fd);
-    if (h)
-        return emu_mmap(h, addr, len, prot, flags, off);
-    resolve_mmap();
-    return real_mmap(addr, len, prot, flags, fd, off);
+    struct handle *h = get(fd);
+    if (!h) {
+        resolve_mmap();
+        return real_mmap(addr, len, prot, flags, fd, off);
+    }
+    void *p = emu_mmap(h, addr, len, prot, flags, off);
+    put(h);
+    return p;
 }
 
 EXPORT void *mmap64(void *addr, size_t len, int prot, int flags, int fd, off64_t off) {
-    struct handle *h = lookup(fd);
-    if (h)
-        return emu_mmap(h, addr, len, prot, flags, (off_t)off);
-    resolve_mmap64();
-    return real_mmap64(addr, len, prot, flags, fd, off);
+    struct handle *h = get(fd);
+    if (!h) {
+        resolve_mmap64();
+        return real_mmap64(addr, len, prot, flags, fd, off);
+    }
+    void *p = emu_mmap(h, addr, len, prot, flags, (off_t)off);
+    put(h);
+    return p;
 }
 
 /* ---------------------------------------------------------------------------------------- read/write */
-static ssize_t emu_read(int fd, struct handle *h, void *buf, size_t count) {
-    struct req q = {OP_READ, 0, count, 0, 0};
-    struct rsp r;
-    for (;;) {
-        call(h, &q, NULL, buf, count > UINT32_MAX ? UINT32_MAX : (uint32_t)count, &r, NULL, NULL);
-        if (r.err != EAGAIN || !is_blocking(fd))
-            break;
-        if (wait_readable(fd) < 0)
-            return -1;
-    }
-    if (r.err) {
-        errno = r.err;
+#define MAX_READ (64u << 20) /* one read() returns at most this much (more than any frame) */
+
+static ssize_t emu_read(struct handle *h, void *buf, size_t count) {
+    uint32_t cap = count < MAX_READ ? (uint32_t)count : MAX_READ;
+    char *tmp = malloc(cap ? cap : 1);
+    if (!tmp) {
+        errno = ENOMEM;
         return -1;
     }
-    return (ssize_t)r.result;
+    struct rollcam_req q = {OP_READ, 0, cap, 0, 0};
+    struct rollcam_rsp r;
+    for (;;) {
+        call(h, &q, NULL, tmp, cap, &r, NULL, NULL);
+        if (r.err != EAGAIN || !is_blocking(h))
+            break;
+        if (wait_readable(h->waitfd) < 0) {
+            r.err = errno;
+            break;
+        }
+    }
+    ssize_t n = r.err ? -1 : (ssize_t)(r.len < cap ? r.len : cap);
+    if (n > 0 && copy_out(buf, tmp, (size_t)n) < 0)
+        r.err = EFAULT, n = -1;
+    free(tmp);
+    if (r.err)
+        errno = r.err;
+    return n;
 }
 
 EXPORT ssize_t read(int fd, void *buf, size_t count) {
-    struct handle *h = lookup(fd);
-    if (h)
-        return emu_read(fd, h, buf, count);
-    resolve_read();
-    return real_read(fd, buf, count);
+    struct handle *h = get(fd);
+    if (!h) {
+        resolve_read();
+        return real_read(fd, buf, count);
+    }
+    ssize_t n = emu_read(h, buf, count);
+    put(h);
+    return n;
 }
 
 EXPORT ssize_t __read_chk(int fd, void *buf, size_t count, size_t buflen) {
-    struct handle *h = lookup(fd);
-    if (h)
-        return emu_read(fd, h, buf, count < buflen ? count : buflen);
-    resolve___read_chk();
-    return real___read_chk(fd, buf, count, buflen);
+    struct handle *h = get(fd);
+    if (!h) {
+        resolve___read_chk();
+        return real___read_chk(fd, buf, count, buflen);
+    }
+    ssize_t n = emu_read(h, buf, count < buflen ? count : buflen);
+    put(h);
+    return n;
 }
 
 EXPORT ssize_t write(int fd, const void *buf, size_t count) {
-    if (lookup(fd)) {
+    if (emulated(fd)) {
         errno = EINVAL; /* a capture device has no write() */
         return -1;
     }
@@ -709,8 +905,8 @@ EXPORT ssize_t write(int fd, const void *buf, size_t count) {
 
 /* -------------------------------------------------------------------------------------------- poll */
 static short query_mask(struct handle *h, short events) {
-    struct req q = {OP_POLL, 0, (uint64_t)(unsigned short)events, 1, 0};
-    struct rsp r;
+    struct rollcam_req q = {OP_POLL, 0, (uint64_t)(unsigned short)events, 1, 0};
+    struct rollcam_rsp r;
     if (call(h, &q, NULL, NULL, 0, &r, NULL, NULL) < 0)
         return POLLERR | POLLHUP;
     return r.err ? POLLERR : (short)r.result;
@@ -722,11 +918,12 @@ static long long now_ns(void) {
     return (long long)t.tv_sec * 1000000000LL + t.tv_nsec;
 }
 
-/* poll() with V4L2 masks for emulated fds: ask the server; if nothing is ready, wait on the eventfds (and
- * the other fds) until the deadline, then ask again. timeout_ns < 0: forever. */
-static int emu_poll(struct pollfd *fds, nfds_t n, long long timeout_ns, const sigset_t *sigmask) {
+/* poll() with V4L2 masks for emulated fds (hs[i]: fds[i]'s handle or NULL): ask the server; if nothing is
+ * ready, wait on the readiness pipes (and the other fds) until the deadline, then ask again. timeout_ns < 0:
+ * forever. fds is the library's copy. */
+static int emu_poll(struct pollfd *fds, struct handle **hs, nfds_t n, long long timeout_ns, const sigset_t *mask) {
     resolve_ppoll();
-    struct pollfd small[32], *tmp = n * 2 <= 32 ? small : malloc(n * 2 * sizeof *tmp);
+    struct pollfd *tmp = malloc(2 * n * sizeof *tmp);
     if (!tmp) {
         errno = ENOMEM;
         return -1;
@@ -737,14 +934,14 @@ static int emu_poll(struct pollfd *fds, nfds_t n, long long timeout_ns, const si
         int ready = 0;
         nfds_t k = 0;
         for (nfds_t i = 0; i < n; i++) {
-            struct handle *h = lookup(fds[i].fd);
+            struct handle *h = hs[i];
             if (!h) {
                 tmp[k++] = (struct pollfd){fds[i].fd, fds[i].events, 0};
                 continue;
             }
             fds[i].revents = (short)(query_mask(h, fds[i].events) & (fds[i].events | POLLERR | POLLHUP));
             ready += fds[i].revents != 0;
-            tmp[k++] = (struct pollfd){fds[i].events & (POLLIN | POLLRDNORM) ? fds[i].fd : -1, POLLIN, 0};
+            tmp[k++] = (struct pollfd){fds[i].events & (POLLIN | POLLRDNORM) ? h->waitfd : -1, POLLIN, 0};
             tmp[k++] = (struct pollfd){fds[i].events & POLLPRI ? h->evfd : -1, POLLIN, 0};
         }
         struct timespec ts, *tsp = NULL;
@@ -756,7 +953,7 @@ static int emu_poll(struct pollfd *fds, nfds_t n, long long timeout_ns, const si
             ts.tv_nsec = left % 1000000000LL;
             tsp = &ts;
         }
-        int r = real_ppoll(tmp, k, tsp, sigmask);
+        int r = real_ppoll(tmp, k, tsp, mask);
         if (r < 0) {
             result = -1;
             break;
@@ -764,7 +961,7 @@ static int emu_poll(struct pollfd *fds, nfds_t n, long long timeout_ns, const si
         int others = 0;
         k = 0;
         for (nfds_t i = 0; i < n; i++) {
-            if (lookup(fds[i].fd)) {
+            if (hs[i]) {
                 k += 2;
                 continue;
             }
@@ -776,24 +973,50 @@ static int emu_poll(struct pollfd *fds, nfds_t n, long long timeout_ns, const si
             break;
         }
     }
-    if (tmp != small)
-        free(tmp);
+    free(tmp);
     return result;
 }
 
-static int any_emulated(const struct pollfd *fds, nfds_t n) {
-    for (nfds_t i = 0; i < n; i++)
-        if (lookup(fds[i].fd))
-            return 1;
-    return 0;
+#define MAX_POLL_FDS 65536
+
+/* poll on a copy of the program's array, with a reference to each emulated fd's handle for the wait;
+ * 1: fds holds none (or is the program's bad memory), and the real call should answer instead. */
+static int poll_copy(struct pollfd *fds, nfds_t n, long long timeout_ns, const sigset_t *mask, int *result) {
+    if (!any_live() || n == 0 || n > MAX_POLL_FDS)
+        return 1;
+    struct pollfd *copy = malloc(n * sizeof *copy);
+    struct handle **hs = calloc(n, sizeof *hs);
+    int any = 0, err = 0;
+    if (!copy || !hs)
+        err = ENOMEM;
+    else if (copy_in(copy, fds, n * sizeof *copy) < 0)
+        err = -1; /* the real call gives the EFAULT */
+    for (nfds_t i = 0; !err && i < n; i++)
+        any |= (hs[i] = get(copy[i].fd)) != NULL;
+    if (any) {
+        *result = emu_poll(copy, hs, n, timeout_ns, mask);
+        int e = errno;
+        if (*result >= 0 && copy_out(fds, copy, n * sizeof *copy) < 0)
+            *result = -1, e = EFAULT;
+        for (nfds_t i = 0; i < n; i++)
+            put(hs[i]);
+        errno = e;
+    } else if (err > 0) {
+        *result = -1;
+        errno = err;
+    }
+    free(copy);
+    free(hs);
+    return !any && err <= 0;
 }
 
 EXPORT int poll(struct pollfd *fds, nfds_t n, int timeout) {
-    if (!any_emulated(fds, n)) {
+    int r;
+    if (poll_copy(fds, n, timeout < 0 ? -1 : (long long)timeout * 1000000LL, NULL, &r)) {
         resolve_poll();
         return real_poll(fds, n, timeout);
     }
-    return emu_poll(fds, n, timeout < 0 ? -1 : (long long)timeout * 1000000LL, NULL);
+    return r;
 }
 
 EXPORT int __poll_chk(struct pollfd *fds, nfds_t n, int timeout, size_t len) {
@@ -802,39 +1025,52 @@ EXPORT int __poll_chk(struct pollfd *fds, nfds_t n, int timeout, size_t len) {
 }
 
 EXPORT int ppoll(struct pollfd *fds, nfds_t n, const struct timespec *t, const sigset_t *sigmask) {
-    if (!any_emulated(fds, n)) {
+    int r;
+    struct timespec tc;
+    int bad_t = t && copy_in(&tc, t, sizeof tc) < 0; /* the real call gives the EFAULT */
+    if (bad_t || poll_copy(fds, n, t ? (long long)tc.tv_sec * 1000000000LL + tc.tv_nsec : -1, sigmask, &r)) {
         resolve_ppoll();
         return real_ppoll(fds, n, t, sigmask);
     }
-    return emu_poll(fds, n, t ? (long long)t->tv_sec * 1000000000LL + t->tv_nsec : -1, sigmask);
+    return r;
 }
 
-/* select/pselect through emu_poll when an emulated fd is in a set (the kernel's POLLIN/OUT/EX sets). */
-static int emu_select(int nfds, fd_set *rd, fd_set *wr, fd_set *ex, long long timeout_ns, const sigset_t *mask) {
-    struct pollfd *p = calloc((size_t)(nfds > 0 ? nfds : 1), sizeof *p);
-    if (!p) {
+/* select/pselect through emu_poll when an emulated fd is in a set (the kernel's POLLIN/OUT/EX sets); the
+ * sets are the library's copies. 1: none is emulated, the real call should answer. */
+static int emu_select(int nfds, fd_set *rd, fd_set *wr, fd_set *ex, long long timeout_ns, const sigset_t *mask,
+                      int *result) {
+    struct pollfd *p = calloc((size_t)nfds, sizeof *p);
+    struct handle **hs = calloc((size_t)nfds, sizeof *hs);
+    if (!p || !hs) {
+        free(p);
+        free(hs);
         errno = ENOMEM;
-        return -1;
+        *result = -1;
+        return 0;
     }
     nfds_t n = 0;
+    int any = 0;
     for (int fd = 0; fd < nfds; fd++) {
         short ev = (short)((rd && FD_ISSET(fd, rd) ? POLLIN : 0) | (wr && FD_ISSET(fd, wr) ? POLLOUT : 0) |
                            (ex && FD_ISSET(fd, ex) ? POLLPRI : 0));
-        if (ev)
+        if (ev) {
+            any |= (hs[n] = get(fd)) != NULL;
             p[n++] = (struct pollfd){fd, ev, 0};
+        }
     }
-    int r = emu_poll(p, n, timeout_ns, mask);
-    if (r >= 0) {
+    int r = any ? emu_poll(p, hs, n, timeout_ns, mask) : 0;
+    int err = errno;
+    if (any && r >= 0) {
         r = 0;
         if (rd) FD_ZERO(rd);
         if (wr) FD_ZERO(wr);
         if (ex) FD_ZERO(ex);
-        for (nfds_t i = 0; i < n; i++) {
+        for (nfds_t i = 0; i < n && r >= 0; i++) {
             short re = p[i].revents;
             if (re & POLLNVAL) {
-                free(p);
-                errno = EBADF;
-                return -1;
+                r = -1;
+                err = EBADF;
+                break;
             }
             int hit = 0;
             if (rd && (p[i].events & POLLIN) && (re & (POLLIN | POLLRDNORM | POLLHUP | POLLERR)))
@@ -846,75 +1082,112 @@ static int emu_select(int nfds, fd_set *rd, fd_set *wr, fd_set *ex, long long ti
             r += hit;
         }
     }
+    for (nfds_t i = 0; i < n; i++)
+        put(hs[i]);
     free(p);
-    return r;
+    free(hs);
+    errno = err;
+    *result = r;
+    return !any;
 }
 
-static int select_has_emulated(int nfds, fd_set *rd, fd_set *wr, fd_set *ex) {
-    for (int fd = 0; fd < nfds && fd < FD_SETSIZE; fd++)
-        if (lookup(fd) && ((rd && FD_ISSET(fd, rd)) || (wr && FD_ISSET(fd, wr)) || (ex && FD_ISSET(fd, ex))))
-            return 1;
+/* select's sets copied in (only the words nfds covers, as the kernel reads them), run, copied out. */
+static int select_copy(int nfds, fd_set *rd, fd_set *wr, fd_set *ex, long long timeout_ns, const sigset_t *mask,
+                       int *result) {
+    if (!any_live() || nfds <= 0 || nfds > FD_SETSIZE)
+        return 1;
+    size_t bytes = ((size_t)nfds + 8 * sizeof(long) - 1) / (8 * sizeof(long)) * sizeof(long);
+    fd_set c[3];
+    fd_set *user[3] = {rd, wr, ex}, *mine[3] = {NULL, NULL, NULL};
+    for (int i = 0; i < 3; i++) {
+        if (!user[i])
+            continue;
+        FD_ZERO(&c[i]);
+        if (copy_in(&c[i], user[i], bytes) < 0)
+            return 1; /* the real call gives the EFAULT */
+        mine[i] = &c[i];
+    }
+    if (emu_select(nfds, mine[0], mine[1], mine[2], timeout_ns, mask, result))
+        return 1;
+    int err = errno;
+    for (int i = 0; i < 3 && *result >= 0; i++)
+        if (user[i] && copy_out(user[i], mine[i], bytes) < 0)
+            *result = -1, err = EFAULT;
+    errno = err;
     return 0;
 }
 
 EXPORT int select(int nfds, fd_set *rd, fd_set *wr, fd_set *ex, struct timeval *tv) {
-    if (!select_has_emulated(nfds, rd, wr, ex)) {
+    struct timeval t;
+    int r;
+    long long start = now_ns(), ns = -1;
+    if (tv && copy_in(&t, tv, sizeof t) == 0)
+        ns = (long long)t.tv_sec * 1000000000LL + (long long)t.tv_usec * 1000LL;
+    if ((tv && ns < 0) || select_copy(nfds, rd, wr, ex, ns, NULL, &r)) {
         resolve_select();
         return real_select(nfds, rd, wr, ex, tv);
     }
-    long long t = tv ? (long long)tv->tv_sec * 1000000000LL + (long long)tv->tv_usec * 1000LL : -1;
-    long long start = now_ns();
-    int r = emu_select(nfds, rd, wr, ex, t, NULL);
     if (tv) { /* Linux leaves the time not slept in the timeout */
-        long long left = t - (now_ns() - start);
+        long long left = ns - (now_ns() - start);
         if (left < 0)
             left = 0;
-        tv->tv_sec = left / 1000000000LL;
-        tv->tv_usec = (left % 1000000000LL) / 1000;
+        t.tv_sec = left / 1000000000LL;
+        t.tv_usec = (left % 1000000000LL) / 1000;
+        int err = errno;
+        copy_out(tv, &t, sizeof t);
+        errno = err;
     }
     return r;
 }
 
 EXPORT int pselect(int nfds, fd_set *rd, fd_set *wr, fd_set *ex, const struct timespec *t, const sigset_t *mask) {
-    if (!select_has_emulated(nfds, rd, wr, ex)) {
+    struct timespec tc;
+    int r;
+    long long ns = -1;
+    if (t && copy_in(&tc, t, sizeof tc) == 0)
+        ns = (long long)tc.tv_sec * 1000000000LL + tc.tv_nsec;
+    if ((t && ns < 0) || select_copy(nfds, rd, wr, ex, ns, mask, &r)) {
         resolve_pselect();
         return real_pselect(nfds, rd, wr, ex, t, mask);
     }
-    return emu_select(nfds, rd, wr, ex, t ? (long long)t->tv_sec * 1000000000LL + t->tv_nsec : -1, mask);
+    return r;
 }
 
 /* --------------------------------------------------------------------------------------------- dup */
-static int dup_result(int oldfd, int newfd) {
-    struct handle *h = lookup(oldfd);
-    if (newfd >= 0 && newfd != oldfd) {
-        if (lookup(newfd))
-            detach(newfd); /* dup2 onto an emulated fd closed it */
-        if (h && newfd < MAX_FD)
-            attach(newfd, h);
-    }
+/* newfd (a result of dup/dup2/dup3/F_DUPFD of oldfd, whose handle h is held by the caller) now refers to
+ * h's file, or to no emulated one: a dup2 onto an emulated fd closed that one. */
+static int duped(struct handle *h, int oldfd, int newfd) {
+    if (newfd >= 0 && newfd != oldfd && (h || emulated(newfd)))
+        put(set_slot(newfd, h));
+    put(h);
     return newfd;
 }
 
 EXPORT int dup(int fd) {
+    struct handle *h = get(fd);
     resolve_dup();
-    return dup_result(fd, real_dup(fd));
+    return duped(h, fd, real_dup(fd));
 }
 
 EXPORT int dup2(int fd, int fd2) {
+    struct handle *h = get(fd);
     resolve_dup2();
-    return dup_result(fd, real_dup2(fd, fd2));
+    int r = real_dup2(fd, fd2);
+    return duped(h, fd, r);
 }
 
 EXPORT int dup3(int fd, int fd2, int flags) {
+    struct handle *h = get(fd);
     resolve_dup3();
-    return dup_result(fd, real_dup3(fd, fd2, flags));
+    int r = real_dup3(fd, fd2, flags);
+    return duped(h, fd, r);
 }
 
 static int fcntl_common(int (*real)(int, int, ...), int fd, int cmd, void *arg) {
-    int r = real(fd, cmd, arg);
-    if ((cmd == F_DUPFD || cmd == F_DUPFD_CLOEXEC) && r >= 0 && lookup(fd))
-        dup_result(fd, r);
-    return r;
+    if (cmd != F_DUPFD && cmd != F_DUPFD_CLOEXEC)
+        return real(fd, cmd, arg);
+    struct handle *h = get(fd);
+    return duped(h, fd, real(fd, cmd, arg));
 }
 
 EXPORT int fcntl(int fd, int cmd, ...) {
@@ -933,6 +1206,82 @@ EXPORT int fcntl64(int fd, int cmd, ...) {
     va_end(ap);
     resolve_fcntl64();
     return fcntl_common(real_fcntl64 ? real_fcntl64 : (resolve_fcntl(), real_fcntl), fd, cmd, arg);
+}
+
+/* -------------------------------------------------------------------------------------------- fork */
+static pthread_mutex_t dirs_lock = PTHREAD_MUTEX_INITIALIZER;
+
+/* A connection for a forked child to h's file, made in the parent before the fork; -1 when none. */
+static int attach_for_child(struct handle *h) {
+    int s = dial();
+    if (s < 0)
+        return -1;
+    struct rollcam_req q = {OP_ATTACH, 0, (uint64_t)h->file, 0, 0};
+    struct rollcam_rsp r;
+    if (xfer(s, &q, NULL, NULL, 0, &r, NULL, NULL) < 0 || r.err) {
+        real_close(s);
+        return -1;
+    }
+    return s;
+}
+
+static void fork_prepare(void) {
+    pthread_mutex_lock(&dirs_lock);
+    pthread_mutex_lock(&table_lock);
+    for (struct handle *h = live; h; h = h->next)
+        h->child_ctl = h->slots ? attach_for_child(h) : -1;
+}
+
+static void fork_parent(void) {
+    resolve_close();
+    for (struct handle *h = live; h; h = h->next) {
+        if (h->child_ctl >= 0)
+            real_close(h->child_ctl);
+        h->child_ctl = -1;
+    }
+    pthread_mutex_unlock(&table_lock);
+    pthread_mutex_unlock(&dirs_lock);
+}
+
+/* Only this thread lives on in the child: the other threads' calls hold no references and their locks are
+ * reset; each handle takes the connection made for it and drops the parent's. */
+static void fork_child(void) {
+    resolve_close();
+    for (struct handle **p = &live; *p;) {
+        struct handle *h = *p;
+        real_close(h->ctl);
+        h->ctl = h->child_ctl;
+        h->child_ctl = -1;
+        h->dead = h->ctl < 0;
+        h->refs = h->slots;
+        pthread_mutex_init(&h->lock, NULL);
+        if (h->slots) {
+            p = &h->next;
+            continue;
+        }
+        __atomic_store_n(p, h->next, __ATOMIC_RELAXED); /* closed in the parent while a call held it */
+        if (h->ctl >= 0)
+            real_close(h->ctl);
+        real_close(h->waitfd);
+        real_close(h->evfd);
+        free(h);
+    }
+    pthread_mutex_init(&table_lock, NULL);
+    pthread_mutex_init(&dirs_lock, NULL);
+}
+
+/* ------------------------------------------------------------------------------------------- layout */
+/* The wire format this library was built with, for the test that holds it to rollcam.emu.preload.wire's
+ * reading of rollcam_wire.h: magic, version, the three structs' sizes, the ops; returns how many. */
+EXPORT int64_t rollcam_preload_wire(int64_t *out, int64_t n) {
+    const int64_t v[] = {ROLLCAM_WIRE_MAGIC, ROLLCAM_WIRE_VERSION, ROLLCAM_WIRE_MAX_PAYLOAD, ROLLCAM_WIRE_MAX_FDS,
+                         sizeof(struct rollcam_hello), sizeof(struct rollcam_req), sizeof(struct rollcam_rsp),
+                         offsetof(struct rollcam_req, a), offsetof(struct rollcam_rsp, err),
+                         OP_OPEN, OP_IOCTL, OP_MMAP, OP_READ, OP_POLL, OP_CLOSE, OP_ATTACH};
+    int64_t k = (int64_t)(sizeof v / sizeof v[0]);
+    for (int64_t i = 0; i < k && i < n; i++)
+        out[i] = v[i];
+    return k;
 }
 
 /* -------------------------------------------------------------------------------------------- stat */
@@ -960,8 +1309,8 @@ static int path_minor(const char *path) {
     return realcall;
 
 #define STAT_FD(fd, st, realcall) \
-    struct handle *h = lookup(fd); \
-    if (h) { fill_stat((struct stat *)(st), h->minor); return 0; } \
+    struct handle *h = get(fd); \
+    if (h) { fill_stat((struct stat *)(st), h->minor); put(h); return 0; } \
     return realcall;
 
 EXPORT int stat(const char *p, struct stat *st) { resolve_stat(); STAT_PATH(p, st, real_stat(p, st)) }
@@ -1034,8 +1383,9 @@ EXPORT int statx(int dirfd, const char *p, int flags, unsigned int mask, struct 
     resolve_statx();
     int m = -1;
     if (p && !*p && (flags & AT_EMPTY_PATH)) {
-        struct handle *h = lookup(dirfd);
+        struct handle *h = get(dirfd);
         m = h ? h->minor : -1;
+        put(h);
     } else {
         m = path_minor(p);
     }
@@ -1092,8 +1442,7 @@ EXPORT int euidaccess(const char *p, int mode) {
 /* ---------------------------------------------------------------------------------------- directories */
 /* A listing of /dev ends with the emulated nodes it lacks (v4l2-ctl --list-devices, device scanners). */
 struct dir_state { DIR *dir; int next; int seen[MAX_DEVICES]; struct dirent ent; struct dirent64 ent64; };
-static struct dir_state dirs[8];
-static pthread_mutex_t dirs_lock = PTHREAD_MUTEX_INITIALIZER;
+static struct dir_state dirs[8]; /* dirs_lock */
 
 EXPORT DIR *opendir(const char *name) {
     resolve_opendir();
@@ -1214,7 +1563,7 @@ EXPORT long syscall(long number, ...) {
     va_end(ap);
     switch (number) {
     case SYS_ioctl:
-        if (lookup((int)a[0]))
+        if (emulated((int)a[0]))
             return ioctl((int)a[0], (unsigned long)a[1], (void *)a[2]);
         break;
     case SYS_openat:
@@ -1222,15 +1571,15 @@ EXPORT long syscall(long number, ...) {
             return emu_open(device_index((const char *)a[1]), (const char *)a[1], (int)a[2]);
         break;
     case SYS_close:
-        if (lookup((int)a[0]))
+        if (emulated((int)a[0]))
             return close((int)a[0]);
         break;
     case SYS_read:
-        if (lookup((int)a[0]))
+        if (emulated((int)a[0]))
             return read((int)a[0], (void *)a[1], (size_t)a[2]);
         break;
     case SYS_mmap:
-        if (lookup((int)a[4]))
+        if (emulated((int)a[4]))
             return (long)mmap((void *)a[0], (size_t)a[1], (int)a[2], (int)a[3], (int)a[4], (off_t)a[5]);
         break;
     default:

@@ -10,6 +10,7 @@ or read would return, ``event`` while an event is pending. ``rollcam.emu.v4l2.io
 from __future__ import annotations
 
 import errno
+import fcntl
 import mmap
 import os
 import select
@@ -152,10 +153,13 @@ class DeviceNode:
 
     # ------------------------------------------------------------------------------------ memory
     def _alloc(self, index: int, size: int) -> np.ndarray:
-        """Buffer memory for the queue: a memfd the program maps (the one copy of each frame is the fill)."""
+        """Buffer memory for the queue: a memfd the program maps (the one copy of each frame is the fill),
+        sealed at its size as a dma-buf is fixed: a program's ftruncate of an EXPBUF'd buffer fails (EPERM)
+        instead of making this process's fill fault (SIGBUS) and every device die with it."""
         length = -(-size // PAGE) * PAGE
-        fd = os.memfd_create(f"rollcam-v4l2-{self.minor}-{index}", os.MFD_CLOEXEC)
+        fd = os.memfd_create(f"rollcam-v4l2-{self.minor}-{index}", os.MFD_CLOEXEC | os.MFD_ALLOW_SEALING)
         os.ftruncate(fd, length)
+        fcntl.fcntl(fd, fcntl.F_ADD_SEALS, fcntl.F_SEAL_SHRINK | fcntl.F_SEAL_GROW | fcntl.F_SEAL_SEAL)
         old = self.shm.pop(index, None)
         if old is not None:
             os.close(old)

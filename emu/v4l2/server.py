@@ -1,11 +1,12 @@
 """The device server the preload library talks to: a Unix socket, one connection per open file.
 
-Wire format (native byte order; the library is ``rollcam.emu.preload``'s C file): a request is a 32-byte
-header ``op, len, a, b, c`` and ``len`` bytes; an answer is ``result (i64), errno (i32), len`` and ``len``
-bytes, with file descriptors (readiness pipes, memfds) as SCM_RIGHTS. Every request is answered at once
-(what blocks, the library waits for on the readiness pipes), so a program's threads never hold up the
-device. A connection's end (close, exit or crash of the program) releases its file; a failure in one
-request is that request's errno and the server goes on.
+The wire format is ``rollcam.emu.preload.wire`` (read from ``rollcam_wire.h``, the C library's header):
+each connection starts with a hello each way, and a library from another build is refused with a log line
+naming both versions. Every request is answered at once (what blocks, the library waits for on the readiness
+pipes), so a program's threads never hold up the device. An open file can have several connections (a forked
+child gets its own, ``OP_ATTACH``); it is released when the last one closes or ends (exit or crash of the
+program). A failure in one request is that request's errno and the server goes on; a connection that breaks
+the protocol is refused or dropped, releasing what it held.
 """
 
 from __future__ import annotations
@@ -15,23 +16,31 @@ import contextlib
 import errno
 import logging
 import os
+import secrets
 import socket
-import struct
 import threading
 from collections.abc import Mapping
+from dataclasses import dataclass
 
 from rollcam.common.lifecycle import Closeable
+from rollcam.emu.preload.wire import HELLO, MAGIC, MAX_PAYLOAD, REQ, RSP, VERSION, Op
 
 from . import ioctls
 from .node import DeviceNode, OpenFile
 from .queue import V4L2Error
 
-OP_OPEN, OP_IOCTL, OP_MMAP, OP_READ, OP_POLL, OP_CLOSE = 1, 2, 3, 4, 5, 6
-_REQ = struct.Struct("=IIQQQ")
-_RSP = struct.Struct("=qiI")
-MAX_PAYLOAD = 1 << 16
-MAX_CONNECTIONS = 512  # open files per server; v4l2-compliance opens 100 at once
+MAX_CONNECTIONS = 512  # connections per server; v4l2-compliance opens 100 at once
 log = logging.getLogger(__name__)
+
+
+@dataclass(eq=False)
+class SharedFile:
+    """One open file of a node and how many connections share it (a process and its forked children)."""
+
+    id: int
+    node: DeviceNode
+    file: OpenFile
+    links: int = 1
 
 
 class PreloadServer(Closeable):
@@ -45,6 +54,7 @@ class PreloadServer(Closeable):
         os.chmod(socket_path, 0o600)
         self.sock.listen(MAX_CONNECTIONS)
         self._conns: set[socket.socket] = set()
+        self._files: dict[int, SharedFile] = {}
         self._lock = threading.Lock()
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._accept, name="rollcam-preload-accept", daemon=True)
@@ -67,6 +77,11 @@ class PreloadServer(Closeable):
         with contextlib.suppress(FileNotFoundError):
             os.unlink(self.socket_path)
 
+    def open_files(self) -> int:
+        """How many open files the connections hold now (for tests and logs)."""
+        with self._lock:
+            return len(self._files)
+
     def _accept(self) -> None:
         while not self._stop.is_set():
             try:
@@ -81,65 +96,111 @@ class PreloadServer(Closeable):
             threading.Thread(target=self._serve, args=(conn,), name="rollcam-preload-conn", daemon=True).start()
 
     def _serve(self, conn: socket.socket) -> None:
-        node: DeviceNode | None = None
-        f: OpenFile | None = None
+        shared: SharedFile | None = None
         try:
+            if not _hello(conn):
+                return
             while True:
-                head = _recv(conn, _REQ.size)
+                head = _recv(conn, REQ.size)
                 if head is None:
                     return
-                op, length, a, b, c = _REQ.unpack(head)
+                op, length, a, b, c = REQ.unpack(head)
                 if length > MAX_PAYLOAD:
-                    return  # not our library: drop the connection
+                    log.warning("rollcam preload: a request of %d bytes (most: %d): connection dropped",
+                                length, MAX_PAYLOAD)
+                    return
                 payload = _recv(conn, length) if length else b""
                 if payload is None:
                     return
-                if op == OP_OPEN:
-                    node, f = self._open(conn, payload, a, f)
+                if op in (Op.OPEN, Op.ATTACH):
+                    if shared is not None:  # one file per connection: the first stays as it is
+                        log.warning("rollcam preload: a second OPEN/ATTACH on one connection: refused")
+                        _send(conn, -1, errno.EPROTO, b"", [])
+                        continue
+                    shared = self._open(payload, a) if op == Op.OPEN else self._attach(a)
+                    if shared is None:
+                        _send(conn, -1, errno.ENODEV, b"", [])
+                    elif op == Op.OPEN:
+                        _send(conn, shared.id, 0, b"", [shared.file.ready.read_fd, shared.file.event.read_fd])
+                    else:
+                        _send(conn, 0, 0, b"", [])
                     continue
-                if op == OP_CLOSE:  # released before the program's close() returns
-                    if node is not None and f is not None:
-                        node.release(f)
-                    node = f = None
+                if op == Op.CLOSE:  # released before the program's close() returns, when this was the last
+                    self._leave(shared)
+                    shared = None
                     _send(conn, 0, 0, b"", [])
                     return
-                result, err, data, fds = _dispatch(node, f, op, a, b, c, payload)
+                result, err, data, fds = _dispatch(shared, op, a, b, c, payload)
                 _send(conn, result, err, data, fds)
         except OSError:
             return
         finally:
             with self._lock:
                 self._conns.discard(conn)
-            if node is not None and f is not None:
-                node.release(f)
+            self._leave(shared)
             conn.close()
 
-    def _open(self, conn: socket.socket, payload: bytes, flags: int, f: OpenFile | None
-              ) -> tuple[DeviceNode | None, OpenFile | None]:
+    def _open(self, payload: bytes, flags: int) -> SharedFile | None:
+        """A new open file of the node at the path ``payload`` names (None: no such node)."""
         node = self.nodes.get(payload.decode(errors="replace"))
-        if node is None or f is not None:
-            _send(conn, -1, errno.ENODEV, b"", [])
-            return None, f
-        f = node.open(flags)
-        _send(conn, 0, 0, b"", [f.ready.read_fd, f.event.read_fd])
-        return node, f
+        if node is None:
+            return None
+        shared = SharedFile(secrets.randbits(62), node, node.open(flags))
+        with self._lock:
+            self._files[shared.id] = shared
+        return shared
+
+    def _attach(self, file_id: int) -> SharedFile | None:
+        """One more connection to the open file ``file_id`` (None: it is released or never was)."""
+        with self._lock:
+            shared = self._files.get(file_id)
+            if shared is not None:
+                shared.links += 1
+            return shared
+
+    def _leave(self, shared: SharedFile | None) -> None:
+        """A connection leaves its file; the last one out releases it."""
+        if shared is None:
+            return
+        with self._lock:
+            shared.links -= 1
+            last = shared.links == 0
+            if last:
+                del self._files[shared.id]
+        if last:
+            shared.node.release(shared.file)
 
 
-def _dispatch(node: DeviceNode | None, f: OpenFile | None, op: int, a: int, b: int, c: int, payload: bytes
+def _hello(conn: socket.socket) -> bool:
+    """The connection's first exchange: True when the library speaks this server's wire format."""
+    head = _recv(conn, HELLO.size)
+    if head is None:
+        return False
+    magic, version = HELLO.unpack(head)
+    conn.sendall(HELLO.pack(MAGIC, VERSION))
+    if (magic, version) != (MAGIC, VERSION):
+        log.warning("rollcam preload: a program's library speaks wire format %d (magic %#x), this server %d: "
+                    "reinstall rollcam so that both come from one build", version, magic, VERSION)
+        return False
+    return True
+
+
+def _dispatch(shared: SharedFile | None, op: int, a: int, b: int, c: int, payload: bytes
               ) -> tuple[int, int, bytes, list[int]]:
     """One request -> (result, errno, bytes back, fds)."""
-    if node is None or f is None:
+    if shared is None:
         return -1, errno.EBADF, b"", []
+    node, f = shared.node, shared.file
     try:
-        if op == OP_IOCTL:
+        if op == Op.IOCTL:
             ans = ioctls.handle(node, f, a & 0xFFFFFFFF, payload)
             return ans.result, 0, ans.data or b"", ans.fds
-        if op == OP_MMAP:
+        if op == Op.MMAP:
             return 0, 0, b"", [node.mmap(f, a, b, c & 0xFFFFFFFF, c >> 32)]
-        if op == OP_READ:
+        if op == Op.READ:
             data = node.read(f, a)
             return len(data), 0, data, []
-        if op == OP_POLL:
+        if op == Op.POLL:
             return node.poll(f, a, bool(b)), 0, b"", []
         return -1, errno.EINVAL, b"", []
     except V4L2Error as exc:
@@ -160,7 +221,7 @@ def _recv(conn: socket.socket, n: int) -> bytes | None:
 
 
 def _send(conn: socket.socket, result: int, err: int, data: bytes, fds: list[int]) -> None:
-    head = _RSP.pack(result, err, len(data))
+    head = RSP.pack(result, err, len(data))
     if fds:
         conn.sendmsg([head], [(socket.SOL_SOCKET, socket.SCM_RIGHTS, array.array("i", fds))])
         if data:
