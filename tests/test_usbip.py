@@ -166,6 +166,31 @@ def test_unlink_cancels_a_queued_urb():
         assert srv.stats.unlinked == 1
 
 
+def test_unlink_of_a_running_urb_answers_with_the_ret_unlink_alone():
+    """Linux's stub driver: a URB already running ends early and is answered by its RET_UNLINK; no RET_SUBMIT
+    follows (vhci-hcd gave the URB back at the unlink and drops a device that answers it again)."""
+    clock = ManualClock()
+
+    def sleep(seconds: float) -> None:  # device time passes at once, real time a little
+        clock.sleep(seconds)
+        time.sleep(0.005)
+
+    fn = UVCFunction(FakeProducer(clock=clock, intervals_ns=(10**11,)), transfer="bulk", realtime=True,
+                     sleep=sleep, render_ahead=False)
+    with USBIPServer([fn], port=0) as srv, ImportedDevice(*srv.address, "1-1") as dev:
+        size = _commit(dev).dwMaxPayloadTransferSize
+        running = dev.submit(1, P.DIR_IN, size)  # its worker waits for a frame due in 100 s of device time
+        _wait_for(lambda: fn.streaming)  # a bulk stream starts at its first read: the URB is running
+        unlink = dev.unlink(running)
+        rep = dev.reply()
+        assert isinstance(rep, P.RetUnlink) and rep.seqnum == unlink and rep.status == -errno.ECONNRESET
+        clock.t_ns += 10**12
+        after = dev.submit(1, P.DIR_IN, size)
+        rep = dev.reply()
+        assert isinstance(rep, P.RetSubmit) and rep.seqnum == after and rep.status == 0  # nothing for `running`
+        assert srv.stats.unlinked == 1
+
+
 def test_a_flooding_client_does_not_block_the_others(server):
     with socket.create_connection(server.address) as s:
         s.sendall(P.req_import("1-2"))
