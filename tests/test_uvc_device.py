@@ -22,7 +22,7 @@ PROBE, COMMIT = C.VS_PROBE_CONTROL << 8, C.VS_COMMIT_CONTROL << 8
 def _open(transfer="iso", **kw):
     producer = FakeProducer(**kw)
     fn = UVCFunction(producer, transfer=transfer, sleep=producer.clock.sleep)
-    dev = usb.core.find(idVendor=0x1D6B, idProduct=0x0102, backend=EmulatedBackend([fn]))
+    dev = usb.core.find(idVendor=0x1209, idProduct=0x0001, backend=EmulatedBackend([fn]))
     assert dev is not None
     dev.set_configuration()
     return producer, fn, dev
@@ -41,7 +41,7 @@ def _realtime_iso_stream():
     clock = ManualClock()
     producer = FakeProducer(clock=clock)
     fn = UVCFunction(producer, realtime=True, sleep=clock.sleep, render_ahead=False)
-    dev = usb.core.find(idVendor=0x1D6B, backend=EmulatedBackend([fn]))
+    dev = usb.core.find(idVendor=0x1209, backend=EmulatedBackend([fn]))
     dev.set_configuration()
     probe = _commit(dev)
     dev.set_interface_altsetting(VS, 4)
@@ -54,7 +54,7 @@ def _error_code(dev) -> int:
 
 def test_pyusb_enumerates_and_reads_strings_and_descriptors():
     _, fn, dev = _open()
-    assert (dev.idVendor, dev.idProduct, dev.bDeviceClass) == (0x1D6B, 0x0102, 0xEF)
+    assert (dev.idVendor, dev.idProduct, dev.bDeviceClass) == (0x1209, 0x0001, 0xEF)
     assert dev.manufacturer == "rollcam" and dev.serial_number == "0001"
     cfg = dev.get_active_configuration()
     alts = [(i.bInterfaceNumber, i.bAlternateSetting, [e.wMaxPacketSize for e in i]) for i in cfg]
@@ -240,7 +240,7 @@ def test_bulk_read_times_out_when_no_frame_is_due():
     producer = FakeProducer(clock=clock)
     fn = UVCFunction(producer, transfer="bulk", realtime=True, sleep=lambda s: None,
                      render_ahead=False)
-    dev = usb.core.find(idVendor=0x1D6B, backend=EmulatedBackend([fn]))
+    dev = usb.core.find(idVendor=0x1209, backend=EmulatedBackend([fn]))
     dev.set_configuration()
     _commit(dev)
     with pytest.raises(usb.core.USBTimeoutError):
@@ -265,7 +265,7 @@ def test_render_ahead_offers_the_newest_completed_frame_and_counts_the_rest():
     t0 = time.monotonic_ns()
     producer = FakeProducer(intervals_ns=(10_000_000,), clock=lambda: time.monotonic_ns() - t0)
     fn = UVCFunction(producer, transfer="bulk", realtime=True)
-    dev = usb.core.find(idVendor=0x1D6B, backend=EmulatedBackend([fn]))
+    dev = usb.core.find(idVendor=0x1209, backend=EmulatedBackend([fn]))
     dev.set_configuration()
     probe = _commit(dev, interval=100_000)
     parser = PayloadParser(probe.dwClockFrequency, 64 * 48 * 2)
