@@ -35,7 +35,7 @@ from . import protocol as P
 
 log = logging.getLogger("rollcam.usbip")
 
-POLL_MS = 200  # how often a blocked bulk read looks whether the connection is closing
+POLL_MS = 20  # how often a blocked bulk read looks whether the connection closes or its URB was unlinked
 
 
 def failed(urb: P.Submit, status: int) -> P.RetSubmit:
