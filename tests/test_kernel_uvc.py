@@ -252,3 +252,12 @@ def test_v4l2_compliance_on_uvcvideo_fails_only_where_every_uvc_camera_does(kern
                    if KNOWN_COMPLIANCE_FAILURES.get(name, "\0") not in why}
     assert not unexplained, out[-6000:]
     assert int(total.group(1)) >= 50 and int(total.group(3)) == len(failures)
+
+
+def test_the_kernel_names_the_camera_in_full_with_ids_that_are_no_other_products(kernel_guest):
+    with attached_camera(kernel_guest, "iso") as att:
+        _, out = kernel_guest.sh(f"cat /sys/class/video4linux/{att.node.removeprefix('/dev/')}/name; "
+                                 "v4l2-ctl --list-devices; usbip port")
+    assert out.splitlines()[0] == "rollcam emulated UVC camera"  # uvcvideo's 32-byte name, not cut
+    assert "rollcam emulated UVC camera (usb-vhci_hcd" in out
+    assert "Generic : pid.codes Test PID (1209:0001)" in out  # usb.ids' name for the ID: a test device
