@@ -17,7 +17,7 @@ define one_opencv
 	fi
 endef
 
-.PHONY: demo test lint bench venv venv-dev clean
+.PHONY: demo test test-kernel lint bench venv venv-dev clean
 
 $(BIN)/python:
 	$(PY) -m venv $(VENV)
@@ -43,6 +43,12 @@ demo: venv
 test: venv-dev
 	$(BIN)/ruff check .
 	$(BIN)/python -m pytest -q
+
+# The kernel suite: Debian's stock kernel in QEMU drives the camera through vhci-hcd and uvcvideo (tests/guest.py;
+# needs qemu-system-x86, busybox-static, socat, usbip, v4l-utils; the first run downloads the kernel package).
+test-kernel: venv-dev
+	$(BIN)/python tests/guest.py prepare
+	$(BIN)/python -m pytest -q -m kernel
 
 lint: venv-dev
 	$(BIN)/ruff check .

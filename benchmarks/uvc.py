@@ -113,7 +113,7 @@ def path_throughput(frames: int, rng: np.random.Generator) -> dict[str, Any]:
     size = WIDTH * HEIGHT * 2
     for transfer in ("iso", "bulk"):
         fn = UVCFunction(_StillProducer(rng), fourccs=("YUYV",), transfer=transfer)
-        dev = usb.core.find(idVendor=0x1D6B, backend=EmulatedBackend([fn]))
+        dev = usb.core.find(idVendor=0x1209, backend=EmulatedBackend([fn]))
         probe = _negotiate(dev.ctrl_transfer, dev.set_interface_altsetting, transfer)
         read = 3072 if transfer == "iso" else probe.dwMaxPayloadTransferSize
         parser = PayloadParser(probe.dwClockFrequency, size)

@@ -181,3 +181,14 @@ def parse_host_port(text: str, default_host: str = "127.0.0.1") -> tuple[str, in
     if not 0 <= number <= 65535:
         raise ConfigError(f"port {number} is not in 0..65535 (in {text!r})")
     return host or default_host, number
+
+
+def usb_id(text: str) -> tuple[int, int]:
+    """Option parser: ``'1209:0001'`` -> (0x1209, 0x0001), a USB vendor and product ID in hex."""
+    try:
+        vid, pid = (int(v, 16) for v in text.split(":"))
+    except ValueError:
+        raise ConfigError(f"{text!r} is not VID:PID in hex (e.g. 1209:0001)") from None
+    if not (0 <= vid <= 0xFFFF and 0 <= pid <= 0xFFFF):
+        raise ConfigError(f"VID:PID {text!r} is out of range (each 0000..ffff)")
+    return vid, pid

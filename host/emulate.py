@@ -107,8 +107,9 @@ def start_usbip(args: argparse.Namespace, camera: Any, pump: Any) -> Running | N
 
     host, port = args.usbip
     _warn_if_wide("USB/IP", host)
+    ids = {} if args.usb_id is None else dict(zip(("vendor_id", "product_id"), args.usb_id, strict=True))
     function = UVCFunction(FirmwareProducer(camera), transfer=args.usb_transfer, realtime=True,
-                           identity=DeviceIdentity(serial=camera.serial_number), faults=args.faults)
+                           identity=DeviceIdentity(serial=camera.serial_number, **ids), faults=args.faults)
     try:
         server = USBIPServer([function], host, port)
     except OSError as exc:

@@ -223,6 +223,8 @@ def test_every_command_is_a_module_registered_the_same_way():
     (["emulate", "imx219", "--fps", "fast"], "emulate: argument --fps: 'fast' is invalid: expected a number > 0"),
     (["emulate", "imx219", "--speed", "3x"], "argument --speed: '3x' is invalid: expected static | normal | fast"),
     (["emulate", "imx219", "--usbip", "host"], "emulate: argument --usbip: expected HOST:PORT, got 'host'"),
+    (["emulate", "imx219", "--usb-id", "logitech"], "argument --usb-id: 'logitech' is not VID:PID in hex"),
+    (["emulate", "imx219", "--usb-id", "10000:1"], "argument --usb-id: VID:PID '10000:1' is out of range"),
 ])
 def test_usage_errors_are_one_error_line_and_exit_2(capsys, argv, words):
     assert main(argv) == 2
@@ -293,7 +295,7 @@ def test_http_fragment_options_are_parsed_like_any_query(tmp_path: Path):
 def test_a_missing_optional_package_is_one_line_and_exit_1(monkeypatch, capsys, tmp_path: Path):
     monkeypatch.setitem(sys.modules, "usb", None)  # as if pyusb were not installed
     monkeypatch.setitem(sys.modules, "usb.core", None)
-    assert main(["capture", "uvc:1d6b:0102?backend=emu", "--frames", "1", "--out", str(tmp_path / "x")]) == 1
+    assert main(["capture", "uvc:1209:0001?backend=emu", "--frames", "1", "--out", str(tmp_path / "x")]) == 1
     err = capsys.readouterr().err
     broken = "an install dependency of rollcam missing from this broken install (pip install pyusb)"
     assert err == f"rollcam: error: the uvc: source needs pyusb, {broken}\n"

@@ -38,9 +38,9 @@ def test_usb_section_filters_video_class():
         def __iter__(self):
             return iter(self.configs)
 
-    devs = [Dev(**vars(device(0x1D6B, 0x0102, [0x0E, 0x0E]))), Dev(**vars(device(0x046D, 0xC52B, [0x03])))]
+    devs = [Dev(**vars(device(0x1209, 0x0001, [0x0E, 0x0E]))), Dev(**vars(device(0x046D, 0xC52B, [0x03])))]
     rows, note = usb_video_devices(lambda find_all: devs)
-    assert [r["uri"] for r in rows] == ["uvc:1d6b:0102"] and not note
+    assert [r["uri"] for r in rows] == ["uvc:1209:0001"] and not note
 
     class NoBackendError(Exception):
         pass

@@ -42,11 +42,11 @@ def test_firmware_producer_programs_the_firmware_and_serves_its_frames():
 
 def test_rollcam_emulate_usbip_streams_to_the_uvc_source():
     cmd = [sys.executable, "-m", "rollcam.host.cli", "emulate", "imx219", "--size", "640x480", "--scene", "flat",
-           "--usbip", "127.0.0.1:0", "--usb-transfer", "bulk", "--json", "--duration", "120"]
+           "--usbip", "127.0.0.1:0", "--usb-transfer", "bulk", "--usb-id", "046d:0825", "--json", "--duration", "120"]
     proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     try:
         info = json.loads(proc.stdout.readline())["usbip"]
-        uri = (f"uvc:1d6b:0102?backend=usbip&usbip=127.0.0.1:{info['port']}&busid={info['busids'][0]}"
+        uri = (f"uvc:046d:0825?backend=usbip&usbip=127.0.0.1:{info['port']}&busid={info['busids'][0]}"
                "&size=640x480&sensor=imx219&frames=3")
         with open_camera(uri) as src:
             frames = list(src)

@@ -29,7 +29,7 @@ def _pyusb(faults: str, transfer: str = "iso"):
     producer = FakeProducer()
     fn = UVCFunction(producer, transfer=transfer, sleep=producer.clock.sleep, faults=faults)
     backend = EmulatedBackend([fn])
-    dev = usb.core.find(idVendor=0x1D6B, idProduct=0x0102, backend=backend)
+    dev = usb.core.find(idVendor=0x1209, idProduct=0x0001, backend=backend)
     dev.set_configuration()
     return producer, fn, backend, dev
 
@@ -133,7 +133,7 @@ def test_pyusb_disconnect_is_enodev_and_the_camera_re_enumerates():
             frames += parser.feed(bytes(dev.read(0x81, 3072)))
     assert info.value.errno == errno.ENODEV and len(frames) == 2
     assert _usb_errno(dev.ctrl_transfer, 0xA1, C.GET_CUR, PROBE, VS, 48) == errno.ENODEV  # the old handle is dead
-    again = usb.core.find(idVendor=0x1D6B, idProduct=0x0102, backend=backend)
+    again = usb.core.find(idVendor=0x1209, idProduct=0x0001, backend=backend)
     assert again.address != dev.address and fn.fault_stats.disconnects == 1
     again.set_configuration()
     _commit(again)
@@ -147,7 +147,7 @@ def test_pyusb_disconnect_is_enodev_and_the_camera_re_enumerates():
 
 def test_usb_backend_fixture_takes_faults(rollcam_usb_backend):
     backend = rollcam_usb_backend("imx219", scene="flat", faults="error=100%")
-    dev = usb.core.find(idVendor=0x1D6B, idProduct=0x0102, backend=backend)
+    dev = usb.core.find(idVendor=0x1209, idProduct=0x0001, backend=backend)
     dev.set_configuration()
     probe = _commit(dev)
     dev.set_interface_altsetting(VS, 4)

@@ -364,7 +364,7 @@ def _uvc_check(frames: list[Frame], wire: list[Frame], spec: CameraSpec, fourcc:
 
 @pytest.mark.parametrize("fourcc", [case(f, {"NV12"}) for f in UVC_FORMATS])
 def test_uvc_through_pyusb(fourcc):
-    uri = (f"uvc:1d6b:0102?backend=emu&sensor=imx219&size=640x480&scene=street&seed=3&realtime=off&frames=2"
+    uri = (f"uvc:1209:0001?backend=emu&sensor=imx219&size=640x480&scene=street&seed=3&realtime=off&frames=2"
            f"&format={UVC_FORMATS[fourcc]}")
     with open_camera(uri) as src:
         frames = list(src)
@@ -384,7 +384,7 @@ def test_uvc_through_usbip_with_rollcams_client(fourcc):
         cam = FirmwareCamera("imx219", size=SIZE, scene={"scene": "street", "speed": "fast", "seed": 3})
         with USBIPServer([UVCFunction(FirmwareProducer(cam), transfer="bulk")], port=0) as srv:
             host, port = srv.address
-            with open_camera(f"uvc:1d6b:0102?backend=usbip&usbip={host}:{port}&busid=1-1&frames=2&size=640x480"
+            with open_camera(f"uvc:1209:0001?backend=usbip&usbip={host}:{port}&busid=1-1&frames=2&size=640x480"
                              f"&format={UVC_FORMATS[fourcc]}&decode={decode}") as src:
                 got[decode] = list(src)
         cam.stream_off()

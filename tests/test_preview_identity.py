@@ -95,7 +95,7 @@ def test_uvc_over_usbip(frame0, wire, decode):
     function = UVCFunction(FirmwareProducer(camera()), transfer="bulk")
     with USBIPServer([function], port=0) as srv:
         host, port = srv.address[:2]
-        uri = (f"uvc:1d6b:0102?backend=usbip&usbip={host}:{port}&busid=1-1&size={W}x{H}&format={wire}"
+        uri = (f"uvc:1209:0001?backend=usbip&usbip={host}:{port}&busid=1-1&size={W}x{H}&format={wire}"
                f"&decode={decode}&frames=1")
         with open_camera(uri) as src:
             f = src.read()

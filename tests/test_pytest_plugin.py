@@ -49,8 +49,8 @@ def test_users_tests_run_on_the_fixtures(pytester):
         def test_pyusb_finds_and_negotiates(rollcam_usb_backend):
             import usb.core
             backend = rollcam_usb_backend("imx219", cameras=2, scene="flat")
-            devs = list(usb.core.find(find_all=True, idVendor=0x1D6B, backend=backend))
-            assert sorted(d.idProduct for d in devs) == [0x0102, 0x0103]
+            devs = list(usb.core.find(find_all=True, idVendor=0x1209, backend=backend))
+            assert sorted(d.idProduct for d in devs) == [0x0001, 0x0002]
             dev = devs[0]
             dev.set_configuration()
             probe = dev.ctrl_transfer(0xA1, 0x87, 0x0100, 1, 34)  # GET_DEF of VS_PROBE_CONTROL

@@ -65,7 +65,7 @@ def test_several_clients_list_the_devices_at_once(server):
     devs = results[0]
     assert [d.busid for d in devs] == ["1-1", "1-2"]
     d = devs[0]
-    assert (d.idVendor, d.idProduct, d.speed, d.bDeviceClass) == (0x1D6B, 0x0102, 3, 0xEF)
+    assert (d.idVendor, d.idProduct, d.speed, d.bDeviceClass) == (0x1209, 0x0001, 3, 0xEF)
     assert d.interfaces == ((C.CC_VIDEO, C.SC_VIDEOCONTROL, 1), (C.CC_VIDEO, C.SC_VIDEOSTREAMING, 1))
     assert all(r == devs for r in results)
 
@@ -166,6 +166,31 @@ def test_unlink_cancels_a_queued_urb():
         assert srv.stats.unlinked == 1
 
 
+def test_unlink_of_a_running_urb_answers_with_the_ret_unlink_alone():
+    """Linux's stub driver: a URB already running ends early and is answered by its RET_UNLINK; no RET_SUBMIT
+    follows (vhci-hcd gave the URB back at the unlink and drops a device that answers it again)."""
+    clock = ManualClock()
+
+    def sleep(seconds: float) -> None:  # device time passes at once, real time a little
+        clock.sleep(seconds)
+        time.sleep(0.005)
+
+    fn = UVCFunction(FakeProducer(clock=clock, intervals_ns=(10**11,)), transfer="bulk", realtime=True,
+                     sleep=sleep, render_ahead=False)
+    with USBIPServer([fn], port=0) as srv, ImportedDevice(*srv.address, "1-1") as dev:
+        size = _commit(dev).dwMaxPayloadTransferSize
+        running = dev.submit(1, P.DIR_IN, size)  # its worker waits for a frame due in 100 s of device time
+        _wait_for(lambda: fn.streaming)  # a bulk stream starts at its first read: the URB is running
+        unlink = dev.unlink(running)
+        rep = dev.reply()
+        assert isinstance(rep, P.RetUnlink) and rep.seqnum == unlink and rep.status == -errno.ECONNRESET
+        clock.t_ns += 10**12
+        after = dev.submit(1, P.DIR_IN, size)
+        rep = dev.reply()
+        assert isinstance(rep, P.RetSubmit) and rep.seqnum == after and rep.status == 0  # nothing for `running`
+        assert srv.stats.unlinked == 1
+
+
 def test_a_flooding_client_does_not_block_the_others(server):
     with socket.create_connection(server.address) as s:
         s.sendall(P.req_import("1-2"))
@@ -186,9 +211,9 @@ def test_an_independent_usbip_client_lists_imports_and_streams(server):
     host, port = server.address
     with socket.create_connection((host, port)) as s:
         listed = UP.client_devlist(s)
-    assert [(d["busid"], d["idVendor"], d["bNumInterfaces"]) for d in listed] == [("1-1", 0x1D6B, 2),
-                                                                                 ("1-2", 0x1D6B, 2)]
-    handle = usbip.attach(host, "1-1", port=port, vid=0x1D6B, pid=0x0102)
+    assert [(d["busid"], d["idVendor"], d["bNumInterfaces"]) for d in listed] == [("1-1", 0x1209, 2),
+                                                                                 ("1-2", 0x1209, 2)]
+    handle = usbip.attach(host, "1-1", port=port, vid=0x1209, pid=0x0001)
     try:
         assert handle.device_descriptor.bDeviceClass == 0xEF
         handle.control(0x21, C.SET_CUR, PROBE, 1, Probe(bFormatIndex=1, bFrameIndex=1).pack())
@@ -240,7 +265,7 @@ def test_linux_usbip_lists_the_emulated_camera_from_the_emulate_hint():
         list_cmd = re.search(r"\((usbip [^;]*list[^;]*);", hint).group(1)
         out = subprocess.run(shlex.split(list_cmd), capture_output=True, text=True, timeout=30)
         assert out.returncode == 0, out.stderr
-        assert re.search(r"1-1: .*\(1d6b:0102\)", out.stdout), out.stdout
+        assert re.search(r"1-1: .*\(1209:0001\)", out.stdout), out.stdout
     finally:
         proc.send_signal(signal.SIGINT)
         try:
@@ -255,5 +280,5 @@ def test_linux_usbip_list_shows_every_busid(server):
     out = subprocess.run([USBIP_TOOL, "--tcp-port", str(port), "list", "-r", host], capture_output=True, text=True,
                          timeout=30)
     assert out.returncode == 0, out.stderr
-    assert "1-1:" in out.stdout and "1-2:" in out.stdout and "1d6b:0102" in out.stdout
+    assert "1-1:" in out.stdout and "1-2:" in out.stdout and "1209:0001" in out.stdout
     assert server.stats.devlists == 1

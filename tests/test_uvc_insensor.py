@@ -77,7 +77,7 @@ def _check_against_device(frames, producer):
 
 
 def test_uvc_source_reads_the_results_through_pyusb():
-    uri = "uvc:1d6b:0102?backend=emu&sensor=imx219&size=640x480&insensor=personnet-raw&frames=4"
+    uri = "uvc:1209:0001?backend=emu&sensor=imx219&size=640x480&insensor=personnet-raw&frames=4"
     with open_camera(uri) as src:
         frames = list(src)
         producer = src.function.producer
@@ -95,6 +95,6 @@ def test_uvc_results_over_usbip():
     fn = UVCFunction(FirmwareProducer(FirmwareCamera(spec)), transfer="bulk")
     with USBIPServer([fn], port=0) as srv:
         host, port = srv.address
-        with open_camera(f"uvc:1d6b:0102?backend=usbip&usbip={host}:{port}&busid=1-1&frames=3&size=640x480") as src:
+        with open_camera(f"uvc:1209:0001?backend=usbip&usbip={host}:{port}&busid=1-1&frames=3&size=640x480") as src:
             frames = list(src)
     _check_against_device(frames, fn.producer)

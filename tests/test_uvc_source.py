@@ -12,7 +12,7 @@ from rollcam.emu.uvc.convert import decode, encode
 from rollcam.host import DeviceError, DeviceNotFoundError, SourceError, open_camera
 from uvc_fakes import FakeProducer
 
-EMU = "uvc:1d6b:0102?backend=emu&sensor=imx219&size=160x120&scene=chart&frames=3"
+EMU = "uvc:1209:0001?backend=emu&sensor=imx219&size=160x120&scene=chart&frames=3"
 
 
 def test_emulated_uvc_frames_carry_exact_device_timing():
@@ -52,7 +52,7 @@ def test_uvc_source_over_usbip():
     fn = UVCFunction(FakeProducer(), transfer="iso")
     with USBIPServer([fn], port=0) as srv:
         host, port = srv.address
-        with open_camera(f"uvc:1d6b:0102?backend=usbip&usbip={host}:{port}&busid=1-1&frames=2&size=32x24") as src:
+        with open_camera(f"uvc:1209:0001?backend=usbip&usbip={host}:{port}&busid=1-1&frames=2&size=32x24") as src:
             frames = list(src)
             assert src.info()["width"] == 32
         assert [f.timestamp_ns for f in frames] == [fn.producer.timestamp_ns(i) for i in range(2)]
@@ -60,17 +60,17 @@ def test_uvc_source_over_usbip():
         deadline = time.monotonic() + 5
         while srv.exports["1-1"].owner is not None and time.monotonic() < deadline:
             time.sleep(0.01)  # the server notices the closed connection on its own thread
-        with pytest.raises(DeviceNotFoundError, match="is 1d6b:0102"):
-            open_camera(f"uvc:1d6b:9999?backend=usbip&usbip={host}:{port}")
+        with pytest.raises(DeviceNotFoundError, match="is 1209:0001"):
+            open_camera(f"uvc:1209:9999?backend=usbip&usbip={host}:{port}")
 
 
 @pytest.mark.parametrize(("uri", "match"), [
     ("uvc:xyz", "VID:PID"),
-    ("uvc:1d6b:0102?backend=emu&colour=red", "unknown option"),
-    ("uvc:1d6b:0102?backend=bogus", "backend"),
-    ("uvc:1d6b:0102?scene=chart", "need backend=emu"),
-    ("uvc:1d6b:0102?backend=emu&sensor=imx219&size=160x120&scene=chart&format=h264", "offers"),
-    ("uvc:1d6b:0102?backend=emu&sensor=nosuch", "nosuch"),
+    ("uvc:1209:0001?backend=emu&colour=red", "unknown option"),
+    ("uvc:1209:0001?backend=bogus", "backend"),
+    ("uvc:1209:0001?scene=chart", "need backend=emu"),
+    ("uvc:1209:0001?backend=emu&sensor=imx219&size=160x120&scene=chart&format=h264", "offers"),
+    ("uvc:1209:0001?backend=emu&sensor=nosuch", "nosuch"),
 ])
 def test_bad_uvc_uris_are_clear_errors(uri, match):
     with pytest.raises(SourceError, match=match):
@@ -79,12 +79,12 @@ def test_bad_uvc_uris_are_clear_errors(uri, match):
 
 def test_absent_usbip_server_is_a_missing_device():
     with pytest.raises(DeviceNotFoundError, match="USB/IP import failed"):
-        open_camera("uvc:1d6b:0102?backend=usbip&usbip=127.0.0.1:1")
+        open_camera("uvc:1209:0001?backend=usbip&usbip=127.0.0.1:1")
 
 
 def test_real_libusb_without_a_camera_is_a_clear_error():
     with pytest.raises(DeviceError, match=r"libusb|no USB device"):
-        open_camera("uvc:1d6b:0102?frames=1")
+        open_camera("uvc:1209:0001?frames=1")
 
 
 @pytest.mark.hardware
@@ -116,5 +116,5 @@ def test_a_bad_option_found_while_negotiating_releases_the_camera(monkeypatch):
     original = UVCFunction.close
     monkeypatch.setattr(UVCFunction, "close", lambda self: (closed.append(self), original(self)))
     with pytest.raises(SourceError, match="h264"):
-        open_camera("uvc:1d6b:0102?backend=emu&format=h264&scene=flat")
+        open_camera("uvc:1209:0001?backend=emu&format=h264&scene=flat")
     assert len(closed) == 1

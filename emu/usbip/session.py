@@ -7,7 +7,11 @@ bounded: at most ``max_queued_urbs`` URBs and ``max_urb_bytes`` transfer bytes q
 is always admitted, so the bound is the budget plus one ``MAX_TRANSFER``); beyond that the reader stops
 reading and TCP pushes back on the client. Failures follow the Linux stub driver: a failed isochronous URB
 still carries one packet descriptor per packet (each with the error and ``actual_length`` 0), as
-vhci-hcd reads ``number_of_packets`` descriptors after every isochronous RET_SUBMIT. A device that is
+vhci-hcd reads ``number_of_packets`` descriptors after every isochronous RET_SUBMIT. A CMD_UNLINK of a URB still
+queued cancels it at once (RET_UNLINK -ECONNRESET); of a URB a worker is running, it ends that URB early and
+its worker answers with the RET_UNLINK in place of the RET_SUBMIT, as the stub driver's completion handler does:
+vhci-hcd has given the URB back already, and a RET_SUBMIT for it would make it drop the device. A URB already
+answered gets RET_UNLINK 0, always after its RET_SUBMIT (both are sent under one lock). A device that is
 unplugged (an injected disconnect) ends the connection without answering, as the stub driver's unplug does:
 vhci-hcd then gives the outstanding URBs back with -ENODEV and the port goes away.
 """
@@ -31,7 +35,7 @@ from . import protocol as P
 
 log = logging.getLogger("rollcam.usbip")
 
-POLL_MS = 200  # how often a blocked bulk read looks whether the connection is closing
+POLL_MS = 20  # how often a blocked bulk read looks whether the connection closes or its URB was unlinked
 
 
 def failed(urb: P.Submit, status: int) -> P.RetSubmit:
@@ -66,7 +70,7 @@ class UrbSession:
         self.urbs_received = 0
         self.reserved_bytes = 0  # transfer bytes of URBs queued or running
         self.peak_reserved_bytes = 0
-        self._running = 0
+        self._running: dict[int, int | None] = {}  # seqnum of a URB a worker runs -> seqnum of its CMD_UNLINK
         self._last_activity = time.monotonic()
 
     # ------------------------------------------------------------------------------------------ state
@@ -80,6 +84,11 @@ class UrbSession:
     def send(self, data: bytes) -> None:
         with self.send_lock:
             self._send(data)
+
+    def unlinked(self, seqnum: int) -> bool:
+        """Whether the running URB ``seqnum`` has been unlinked by the importer (its worker should give up)."""
+        with self.cond:
+            return self._running.get(seqnum) is not None
 
     # ------------------------------------------------------------------------------------------ reader
     def run(self) -> None:
@@ -118,14 +127,20 @@ class UrbSession:
             self.cond.notify_all()
 
     def _unlink(self, cmd: P.Unlink) -> None:
-        with self.cond:
-            hit = next((u for q in self.queues for u in q if u.seqnum == cmd.unlink_seqnum), None)
-            if hit is not None:
-                self.queues[hit.ep != 0].remove(hit)
-                self.reserved_bytes -= hit.transfer_buffer_length
-                self.stats.unlinked += 1
-                self.cond.notify_all()
-        self.send(P.RetUnlink(cmd.seqnum, -errno.ECONNRESET if hit else 0).pack())
+        # send_lock before cond, as in _answer: a worker's RET_SUBMIT and this RET_UNLINK never cross.
+        with self.send_lock:
+            with self.cond:
+                target = cmd.unlink_seqnum
+                hit = next((u for q in self.queues for u in q if u.seqnum == target), None)
+                if hit is not None:
+                    self.queues[hit.ep != 0].remove(hit)
+                    self.reserved_bytes -= hit.transfer_buffer_length
+                    self.stats.unlinked += 1
+                    self.cond.notify_all()
+                elif target in self._running:
+                    self._running[target] = cmd.seqnum  # its worker answers, with this RET_UNLINK
+                    return
+            self._send(P.RetUnlink(cmd.seqnum, -errno.ECONNRESET if hit else 0).pack())
 
     # ------------------------------------------------------------------------------------------ workers
     def _work(self, queue: deque[P.Submit]) -> None:
@@ -136,10 +151,10 @@ class UrbSession:
                 if self.done:
                     return
                 urb = queue.popleft()
-                self._running += 1
+                self._running[urb.seqnum] = None
                 self.cond.notify_all()
             try:
-                self.send(self.execute(urb).pack())
+                self._answer(urb, self.execute(urb))
             except Disconnected:
                 self.abort()  # the device is gone: the connection ends, unanswered (the stub's unplug)
                 return
@@ -148,11 +163,23 @@ class UrbSession:
                 return
             finally:
                 with self.cond:
-                    self._running -= 1
+                    self._running.pop(urb.seqnum, None)
                     self.reserved_bytes -= urb.transfer_buffer_length
                     self._last_activity = time.monotonic()
                     self.cond.notify_all()
             self.stats.urbs += 1
+
+    def _answer(self, urb: P.Submit, reply: P.RetSubmit) -> None:
+        """Send ``reply``, or the RET_UNLINK that replaces it when the importer unlinked ``urb`` meanwhile."""
+        with self.send_lock:
+            with self.cond:
+                unlink = self._running.pop(urb.seqnum, None)
+                if unlink is not None:
+                    self.stats.unlinked += 1
+            if unlink is None:
+                self._send(reply.pack())
+            else:
+                self._send(P.RetUnlink(unlink, -errno.ECONNRESET).pack())
 
     def execute(self, urb: P.Submit) -> P.RetSubmit:
         """Run one URB against the device; USB errors become negative errno statuses."""
@@ -187,6 +214,8 @@ class UrbSession:
         while True:
             if self.done:
                 raise DeviceError("connection closing")
+            if self.unlinked(urb.seqnum):
+                raise DeviceError(f"URB {urb.seqnum} unlinked")  # answered by its RET_UNLINK
             try:
                 return self.function.read(0x80 | urb.ep, urb.transfer_buffer_length, POLL_MS)
             except TransferTimeout:

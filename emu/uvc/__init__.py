@@ -6,7 +6,7 @@ Typical use::
 
     camera = FirmwareCamera("imx219", scene="street", size=(640, 480))   # rollcam.firmware.camera
     function = UVCFunction(FirmwareProducer(camera))  # iso by default; transfer="bulk" for a bulk camera
-    dev = usb.core.find(idVendor=0x1D6B, idProduct=0x0102, backend=EmulatedBackend([function]))
+    dev = usb.core.find(idVendor=0x1209, idProduct=0x0001, backend=EmulatedBackend([function]))
 """
 
 from __future__ import annotations

@@ -62,8 +62,12 @@ class StreamFormat:
 class DeviceIdentity:
     """What the device descriptor and string table say about the camera."""
 
-    vendor_id: int = 0x1D6B  # Linux Foundation, as gadget-mode emulated devices use
-    product_id: int = 0x0102
+    # pid.codes' VID 0x1209 with one of its test PIDs (0x0000-0x0FFF are kept for tests and common tasks), which
+    # usb.ids lists as "Generic : pid.codes Test PID": no other product's name. `rollcam emulate --usb-id` and
+    # ``DeviceIdentity(vendor_id=..., product_id=...)`` give a camera other IDs (a real camera's, to test a
+    # driver's quirk for it).
+    vendor_id: int = 0x1209
+    product_id: int = 0x0001
     bcd_device: int = 0x0100
     manufacturer: str = "rollcam"
     product: str = "rollcam emulated UVC camera"
@@ -155,9 +159,11 @@ def build_descriptors(formats: Sequence[StreamFormat], identity: DeviceIdentity 
     vs_len = 13 + n_fmt + len(fmt)
     vs_header = struct.pack(f"<BBBBHBBBBBBB{n_fmt}B", 13 + n_fmt, C.CS_INTERFACE, C.VS_INPUT_HEADER, n_fmt, vs_len,
                             STREAM_EP, 0, C.TERMINAL_OUTPUT, 0, 0, 0, 1, *([0] * n_fmt))
+    # No iFunction and no iInterface string: uvcvideo appends one to the product's name in a 32-byte field
+    # ("rollcam emulated UVC camera: ro"); without them the kernel names the camera by its product string.
     iad = struct.pack("<BBBBBBBB", 8, C.DT_INTERFACE_ASSOCIATION, 0, 2, C.CC_VIDEO,
-                      C.SC_VIDEO_INTERFACE_COLLECTION, 0, 2)
-    body = iad + _interface(0, 0, 0, C.SC_VIDEOCONTROL, 2) + vc
+                      C.SC_VIDEO_INTERFACE_COLLECTION, 0, 0)
+    body = iad + _interface(0, 0, 0, C.SC_VIDEOCONTROL, 0) + vc
     if transfer == "bulk":
         body += _interface(1, 0, 1, C.SC_VIDEOSTREAMING) + vs_header + fmt + _endpoint(STREAM_EP, C.EP_XFER_BULK,
                                                                                        512, 0)

@@ -257,8 +257,10 @@ class UVCFunction(Closeable):
         self.reset()
 
     def read(self, endpoint: int, max_len: int, timeout_ms: int | None = None) -> bytes:
-        """One payload from the streaming endpoint (see ``transfers.StreamTransfers.read``): b'' when an
-        isochronous stream has nothing due; a bulk read waits up to ``timeout_ms`` (None or 0: forever)."""
+        """One isochronous packet or bulk transfer from the streaming endpoint (``transfers.StreamTransfers.read``):
+        b'' when an isochronous stream has nothing due; a bulk read waits up to ``timeout_ms`` (None or 0:
+        forever) and returns at most ``max_len`` bytes of the payload stream, a longer payload going on in the
+        next reads."""
         with self.plug.watch(self._halt_stream):
             return self._transfers.read(endpoint, max_len, timeout_ms)
 

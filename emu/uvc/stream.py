@@ -7,6 +7,11 @@ mid-frame counts in ``frames_aborted``. Without render-ahead (``render_ahead=Fal
 when the host asks, and frames the host fell behind on are skipped without being rendered. A fault plan
 (``faults``) drops frames (never sent), sends frames with ERR set, unplugs the device after N frames
 (``Disconnected``) and damages payloads (``faults.PayloadFaults``), decided by frame and payload index.
+
+A bulk payload larger than the host's transfer continues in the next transfers (``next_bulk``), as on the
+wire: a payload is a run of 512-byte packets ended by a short one, or by a zero-length packet when it ends on
+a transfer's last byte short of the negotiated maximum, which is how uvcvideo finds a payload's end. An
+isochronous packet is one whole payload, so a payload larger than the packet is an overflow there.
 """
 
 from __future__ import annotations
@@ -94,6 +99,9 @@ class StreamEndpoint:
         self._packer: PayloadPacker | None = None
         self._batch: PayloadBatch | None = None
         self._pos = 0
+        self._rest = memoryview(b"")  # what a bulk transfer left of the payload being sent
+        self._whole = 0  # that payload's length
+        self._zlp = False  # a bulk payload ended on a transfer's last byte: a zero-length packet ends it
 
     @property
     def active(self) -> bool:
@@ -112,7 +120,7 @@ class StreamEndpoint:
     def stop(self) -> None:
         """End the stream (a frame cut short counts as aborted); a halted endpoint is usable again."""
         self.payload_faults.clear_halt()
-        if self._batch is not None and self._pos < len(self._batch):
+        if self._batch is not None and (self._pos < len(self._batch) or self._rest):
             self.stats.frames_aborted += 1  # the host went away mid-frame
         if self._ahead is not None:
             self._ahead.stop()
@@ -120,26 +128,48 @@ class StreamEndpoint:
         self._packer = None
         self._batch = None
         self._pos = 0
+        self._rest = memoryview(b"")
+        self._zlp = False
 
     def mark_errors(self, n_frames: int) -> None:
         """The next ``n_frames`` frames go out with ERR set."""
         self._error_frames += int(n_frames)
 
-    def next_payload(self, max_len: int) -> bytes | int:
-        """The next payload, or the ns until the next frame is due (real-time mode)."""
+    def next_payload(self, max_len: int | None) -> bytes | int:
+        """The next payload (``TransferOverflow`` when it is longer than ``max_len``; None: no limit), or the ns
+        until the next frame is due (real-time mode)."""
         self.payload_faults.check_halt()
         if self._batch is None or self._pos >= len(self._batch):
             wait_ns = self._next_batch()
             if wait_ns:
                 return wait_ns
         payload = self._batch[self._pos]
-        if len(payload) > max_len:
+        if max_len is not None and len(payload) > max_len:
             raise TransferOverflow(f"payload of {len(payload)} bytes does not fit a {max_len}-byte read")
         self._pos += 1
         out = self.payload_faults.apply(payload, self._next_index - 1)  # raises for a payload that fails
         self.stats.payloads_sent += 1
         self.stats.bytes_sent += len(out)
         return out
+
+    def next_bulk(self, max_len: int) -> bytes | int:
+        """The next bulk transfer of at most ``max_len`` bytes, or the ns until the next frame is due (real-time
+        mode): the rest of the payload being sent, else the next payload, its first ``max_len`` bytes when it
+        is longer (the remainder goes out in the following transfers). A payload shorter than the negotiated
+        maximum that ends exactly on the transfer's last byte is followed by a zero-length packet."""
+        self.payload_faults.check_halt()
+        if self._zlp:
+            self._zlp = False
+            return b""
+        if not self._rest:
+            got = self.next_payload(None)
+            if isinstance(got, int):
+                return got
+            self._rest = memoryview(got)
+            self._whole = len(got)
+        out, self._rest = self._rest[:max_len], self._rest[max_len:]
+        self._zlp = not self._rest and len(out) == max_len and self._whole < self._packer.payload_size
+        return out.tobytes()
 
     def _next_payloads_faulty(self, n: int, max_len: int) -> tuple[bytes, list[int], list[int], int]:
         """``next_payloads`` one payload at a time through the payload faults: a babbled packet is empty

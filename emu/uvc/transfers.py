@@ -60,8 +60,9 @@ class StreamTransfers:
         self.controls.streaming = False
 
     def read(self, endpoint: int, max_len: int, timeout_ms: int | None = None) -> bytes:
-        """One payload; b'' (a zero-length packet) when an isochronous stream has nothing due. A bulk read waits
-        for the next frame up to ``timeout_ms`` (None or 0: forever), on the device clock."""
+        """One isochronous packet (a whole payload; b'' when nothing is due), or one bulk transfer (the payload
+        stream's next ``max_len`` bytes at most, see ``StreamEndpoint.next_bulk``). A bulk read waits for the
+        next frame up to ``timeout_ms`` (None or 0: forever), on the device clock."""
         deadline = Deadline(timeout_ms / 1000 if timeout_ms else None, self._clock_s)
         while True:
             got = self._try_read(endpoint, max_len)
@@ -116,4 +117,6 @@ class StreamTransfers:
         """The next payload, or the ns until the next frame is due."""
         with self._lock:
             self._check_stream(endpoint)
+            if self.transfer == "bulk":
+                return self.endpoint.next_bulk(max_len)
             return self.endpoint.next_payload(max_len)

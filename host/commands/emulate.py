@@ -23,6 +23,7 @@ from rollcam.common.values import (
     parse_host_port,
     parse_size,
     positive_float,
+    usb_id,
 )
 
 from . import value_type
@@ -60,6 +61,9 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
                    help="serve the camera as a UVC device over USB/IP (the usbip protocol port is 3240)")
     g.add_argument("--usb-transfer", choices=("iso", "bulk"), default="iso",
                    help="UVC streaming endpoint type for --usbip (default: %(default)s)")
+    g.add_argument("--usb-id", type=value_type(usb_id, "VID:PID in hex"), default=None, metavar="VID:PID",
+                   help="USB vendor and product ID of the --usbip camera, in hex (default: 1209:0001, a "
+                        "pid.codes test ID; give a real camera's to test a driver quirk for it)")
     p.add_argument("--faults", type=value_type(FaultPlan.parse, "a fault plan like drop=2%,error=1%,seed=7"),
                    default=FaultPlan(), metavar="PLAN",
                    help="inject faults on every transport, reproducibly by seed, e.g. 'drop=2%%,stall=1%%,"

@@ -27,7 +27,7 @@ from typing import Any
 import numpy as np
 from rollcam.common.errors import ConfigError, DeviceError, DeviceNotFoundError, ProtocolError, SourceError, require
 from rollcam.common.lifecycle import Deadline
-from rollcam.common.values import parse_bool
+from rollcam.common.values import parse_bool, usb_id
 from rollcam.emu.usbip import ImportedDevice, UrbError
 from rollcam.emu.uvc import DeviceIdentity, FirmwareProducer, UVCFunction
 from rollcam.emu.uvc import constants as C
@@ -66,13 +66,9 @@ def _usb():
 
 def _parse_ids(uri: SourceURI) -> tuple[int, int]:
     try:
-        vid, pid = (int(v, 16) for v in uri.target.split(":"))
-    except ValueError:
-        raise SourceError(f"source {uri.uri!r}: target {uri.target!r} is not VID:PID in hex (e.g. uvc:1d6b:0102)")\
-            from None
-    if not (0 <= vid <= 0xFFFF and 0 <= pid <= 0xFFFF):
-        raise SourceError(f"source {uri.uri!r}: VID:PID {uri.target!r} out of range")
-    return vid, pid
+        return usb_id(uri.target)
+    except ConfigError as exc:
+        raise SourceError(f"source {uri.uri!r}: target {exc}") from None
 
 
 class _PyUSBLink:

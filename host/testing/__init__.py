@@ -134,9 +134,9 @@ def rollcam_usb_backend() -> Iterator[Callable[..., Any]]:
     """Factory of pyusb backends with emulated UVC cameras on them.
 
     ``backend = rollcam_usb_backend("imx219", scene="street", seed=1)`` returns a ``usb.backend.IBackend``;
-    ``usb.core.find(idVendor=0x1D6B, idProduct=0x0102, backend=backend)`` then finds the camera and ordinary
+    ``usb.core.find(idVendor=0x1209, idProduct=0x0001, backend=backend)`` then finds the camera and ordinary
     pyusb code negotiates (probe/commit) and streams from it. Each camera is a ``FirmwareCamera``; pass
-    ``cameras=N`` for several on one bus (product ids 0x0102, 0x0103, ...). Streams stop after the test.
+    ``cameras=N`` for several on one bus (product ids 0x0001, 0x0002, ...). Streams stop after the test.
     """
     from rollcam.emu.uvc import DeviceIdentity, FirmwareProducer, UVCFunction
     from rollcam.emu.uvc.pyusb_backend import EmulatedBackend
@@ -151,7 +151,8 @@ def rollcam_usb_backend() -> Iterator[Callable[..., Any]]:
             cam = FirmwareCamera(sensor, scene={"scene": "street", **scene}, serial_number=f"{k + 1:04d}",
                                  **({"size": size} if size is not None else {}))
             made.append(UVCFunction(FirmwareProducer(cam), transfer=transfer, realtime=realtime, faults=faults,
-                                    identity=DeviceIdentity(product_id=0x0102 + k, serial=cam.serial_number)))
+                                    identity=DeviceIdentity(product_id=DeviceIdentity.product_id + k,
+                                                            serial=cam.serial_number)))
         functions.extend(made)
         return EmulatedBackend(made)
 
