@@ -410,6 +410,12 @@ class Guest:
                 f"for i in $(seq 100); do grep -q ':{port:04X} ' /proc/net/tcp && exit 0; sleep 0.1; done; exit 1")
         yield port
 
+    def kill(self) -> None:
+        """Kill QEMU: the guest vanishes mid-whatever, closing nothing (its bridged connections stay open, unread,
+        as a peer that lost power leaves them)."""
+        self.proc.kill()
+        self.proc.wait()
+
     def close(self) -> None:
         """Power the guest off (QEMU is killed if it does not quit) and stop the bridges."""
         if self._closed:

@@ -11,15 +11,19 @@ import contextlib
 import hashlib
 import re
 import threading
+import time
 from collections.abc import Iterator
 from dataclasses import dataclass
 
+import guest as guest_module
 import pytest
-from rollcam.emu.usbip.server import USBIPServer
+from rollcam.common.lifecycle import Deadline
+from rollcam.emu.usbip.server import ServerLimits, USBIPServer
 from rollcam.emu.uvc import DeviceIdentity, FirmwareProducer, UVCFunction
 from rollcam.emu.uvc.convert import encode
 from rollcam.firmware.camera import FirmwareCamera
 from rollcam.firmware.spec import CameraSpec
+from rollcam.host.sources import open_camera
 
 pytestmark = pytest.mark.kernel
 
@@ -261,3 +265,44 @@ def test_the_kernel_names_the_camera_in_full_with_ids_that_are_no_other_products
     assert out.splitlines()[0] == "rollcam emulated UVC camera"  # uvcvideo's 32-byte name, not cut
     assert "rollcam emulated UVC camera (usb-vhci_hcd" in out
     assert "Generic : pid.codes Test PID (1209:0001)" in out  # usb.ids' name for the ID: a test device
+
+
+def wait_until(condition, seconds: float) -> bool:
+    """Whether ``condition()`` came true within ``seconds`` (looked at every 0.1 s)."""
+    deadline = Deadline(seconds)
+    while not condition():
+        if deadline.expired:
+            return False
+        time.sleep(0.1)
+    return True
+
+
+def test_others_are_served_while_one_is_attached_and_a_vanished_guest_frees_its_camera(tmp_path):
+    """A guest holds camera 1-1 and streams; a host importer streams 1-2 meanwhile. Then the guest's QEMU is
+    killed: its connection stays open and unread, and the server frees 1-1 within its send limit."""
+    why = guest_module.missing()
+    if why:
+        pytest.skip(f"the kernel tests need: {why}")
+    functions = [UVCFunction(FirmwareProducer(FirmwareCamera("imx219", scene={"scene": "chart", "seed": k})),
+                             realtime=True) for k in range(2)]
+    limits = ServerLimits(send_timeout_s=3.0, idle_timeout_s=3.0)
+    with USBIPServer(functions, "127.0.0.1", 0, limits=limits) as server:
+        host, port = server.address
+        uri = f"uvc:1209:0001?backend=usbip&usbip={host}:{port}&size=640x480&frames=3&busid="
+        g = guest_module.Guest(tmp_path)
+        try:
+            with g.usbip_port(server.address) as gport:
+                g.sh(f"usbip --tcp-port {gport} attach -r 127.0.0.1 -b 1-1")
+                node = g.video_node("rollcam")
+                g.sh(f"setsid v4l2-ctl -d {node} --stream-mmap=4 --stream-count=100000 --stream-to=/dev/null "
+                     "</dev/null >/dev/null 2>&1 &")
+                assert wait_until(lambda: functions[0].streaming, 60)
+                with open_camera(uri + "1-2") as other:  # a second importer, served meanwhile
+                    assert len(list(other)) == 3
+                assert server.exports["1-1"].owner is not None  # the guest still holds its camera
+                g.kill()
+        finally:
+            g.close()
+        assert wait_until(lambda: server.exports["1-1"].owner is None, 60)
+        with open_camera(uri + "1-1") as again:
+            assert len(list(again)) == 3
