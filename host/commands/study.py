@@ -44,7 +44,8 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
 
 def run(args: argparse.Namespace) -> int:
     """Run the study and print its answers and where the report is."""
-    from ..training.study import SETTINGS, run_study
+    from ..training.study import run_study
+    from ..training.study_settings import SETTINGS
     from .compile_notice import notify_if_cold
 
     notify_if_cold()
