@@ -61,6 +61,13 @@ def test_help_lists_subcommands():
         assert cmd in res.stdout
 
 
+def test_version_is_the_package_version():
+    from importlib.metadata import version
+
+    res = run("--version")
+    assert res.returncode == 0 and res.stdout.strip() == f"rollcam {version('rollcam')}", res.stdout + res.stderr
+
+
 def test_no_command_is_usage_error():
     res = run()
     assert res.returncode == 2
