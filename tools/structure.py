@@ -114,8 +114,8 @@ def _edges(module: Module, modules: dict[str, Module]) -> Iterator[tuple[str, in
 def cycles(modules: dict[str, Module]) -> list[list[str]]:
     """Each set of modules that import each other (a strongly connected component of two or more), sorted.
 
-    A package importing its own submodule (an `__init__` that re-exports) does not close a cycle with that submodule
-    importing a sibling: only edges between the modules themselves count, as the interpreter follows them.
+    Only import statements make edges: importing `a.b` also runs `a/__init__.py` first, but that implicit edge does
+    not count (else every `__init__` that re-exports a submodule would close a cycle with each of its siblings).
     """
     graph = {name: sorted({target for target, _ in m.imports if target != name}) for name, m in modules.items()}
     index: dict[str, int] = {}
