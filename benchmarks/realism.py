@@ -26,8 +26,8 @@ from pathlib import Path
 import numpy as np
 from rollcam.common.errors import ConfigError
 from rollcam.host.detectors import load_detector
-from rollcam.sim.isp import PictureSteps
 from rollcam.sim.optics import LensOptics
+from rollcam.sim.picture import PictureSteps
 from rollcam.sim.render import Renderer, encode_linear
 from rollcam.sim.scenegen import DAYLIGHT, TIMES_OF_DAY, make_street_scene
 

@@ -17,7 +17,7 @@ Measurements on a seeded street of the study's pedestrians (20 walkers, static c
   evaluations (line renders), wall time, and the error of the adaptive and of the mid-exposure point-sampled
   frame against the dense one, in 8-bit sRGB DN over every pixel and channel.
 - ``optics``: each lens effect (``rollcam.sim.optics``: vignetting, Gaussian PSF, defocus disc) on the linear
-  radiance of one IMX219 1920x1080 street frame, and each ISP picture step (``rollcam.sim.isp.PictureSteps``:
+  radiance of one IMX219 1920x1080 street frame, and each ISP picture step (``rollcam.sim.picture.PictureSteps``:
   sharpening, a JPEG round trip) on its 8-bit picture; then whole clean BGR3 frames with every effect off (the
   path with no lens work), with a phone-like lens (vignette 0.3, 1 px PSF: the linear render and its encoding
   added) and with the lens and both ISP steps, and whole raw pRAA frames (blur bound 0.5 px) without and with
@@ -34,8 +34,9 @@ import numpy as np
 from rollcam.sim.codecs import codec
 from rollcam.sim.exposure import DEFAULT_BOUND_PX, dense_plan, integrate, plan_samples
 from rollcam.sim.hwconfig import load_sensor
-from rollcam.sim.isp import PictureSteps, preview
+from rollcam.sim.isp import preview
 from rollcam.sim.optics import LensOptics
+from rollcam.sim.picture import PictureSteps
 from rollcam.sim.render import srgb_lut
 from rollcam.sim.scenegen import make_street_scene
 from rollcam.sim.synthetic import SyntheticCamera

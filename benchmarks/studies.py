@@ -136,8 +136,8 @@ def _realism(args: argparse.Namespace, progress: Any) -> tuple[Doc, str]:
     bad = [t for t in times if t not in TIMES_OF_DAY]
     if bad:
         raise ConfigError(f"--times: {bad[0]!r} is not one of {list(TIMES_OF_DAY)}, 'daylight' or 'all'")
-    from rollcam.sim.isp import PictureSteps
     from rollcam.sim.optics import LensOptics
+    from rollcam.sim.picture import PictureSteps
 
     doc = realism(detectors=args.detector or DETECTORS, n_scenes=args.scenes, seed=args.seed, times=times,
                   lens=_steps(LensOptics, "--lens", args.lens), picture=_steps(PictureSteps, "--picture", args.picture),

@@ -122,7 +122,7 @@ class Connection(asyncio.Protocol):
         self.transport = transport  # type: ignore[assignment]
         peer = transport.get_extra_info("peername")
         self.peer = str(peer[0]) if peer else ""
-        if not self.host._admit(self):
+        if not self.host.admit(self):
             self.refuse("503 Service Unavailable")
             return
         self.admitted = self._inner_open = True
@@ -157,7 +157,7 @@ class Connection(asyncio.Protocol):
 
     def connection_lost(self, exc: Exception | None) -> None:
         self._disarm()
-        self.host._forget(self)
+        self.host.forget(self)
         if self._inner_open:
             self._inner_open = False
             self.inner.connection_lost(exc)
@@ -316,21 +316,22 @@ class HttpHost(Closeable):
             await runner.cleanup()
             await listener.wait_closed()
 
-    def _admit(self, conn: Connection) -> bool:
+    def admit(self, conn: Connection) -> bool:
         """Room for ``conn``: under the limit, or by evicting the oldest connection still waiting for a request."""
         if len(self.connections) >= self.limits.max_connections:
             idle = next((c for c in self.connections if not c.in_request), None)
             if idle is None:
                 return False
             self.stats.evicted_waiting += 1
-            self._forget(idle)
+            self.forget(idle)
             idle.abort()
         self.connections[conn] = None
         self.stats.connections_total += 1
         self.stats.connections_open = len(self.connections)
         return True
 
-    def _forget(self, conn: Connection) -> None:
+    def forget(self, conn: Connection) -> None:
+        """``conn`` is closed: it no longer holds a place (twice is harmless)."""
         self.connections.pop(conn, None)
         self.stats.connections_open = len(self.connections)
 

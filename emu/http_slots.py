@@ -47,6 +47,11 @@ class StreamClient:
         self.item = item
         self._wake.set()
 
+    def evict(self) -> None:
+        """Mark the stream gone and wake its sender, whose ``next`` then returns None."""
+        self.gone = True
+        self._wake.set()
+
     async def next(self) -> Any:
         """The next item to send, oldest first; None once the client was evicted."""
         while self.item is None and not self.gone:
@@ -134,8 +139,7 @@ class StreamSlots:
     def drop(self, client: StreamClient) -> None:
         """Free the slot and close the connection now, unsent data and all."""
         self.leave(client)
-        client.gone = True
-        client._wake.set()
+        client.evict()
         client.conn.abort()
 
     def offer(self, item: Any) -> None:

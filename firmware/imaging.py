@@ -32,7 +32,7 @@ from rollcam.common.values import JPEG_QUALITY
 from rollcam.sim import formats as sf
 from rollcam.sim.codecs import codec
 from rollcam.sim.frame import Frame
-from rollcam.sim.isp import PictureSteps
+from rollcam.sim.picture import PictureSteps
 from rollcam.sim.synthetic import SyntheticCamera
 
 from .imu import FrameImu, with_imu

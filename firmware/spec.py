@@ -27,9 +27,9 @@ from rollcam.common.errors import ConfigError, RollcamError
 from rollcam.sim import formats as sf
 from rollcam.sim.hwconfig import SensorConfig, load_sensor
 from rollcam.sim.imu import ImuParams
-from rollcam.sim.isp import PictureSteps
 from rollcam.sim.noise import parse_stages
 from rollcam.sim.optics import LensOptics
+from rollcam.sim.picture import PictureSteps
 from rollcam.sim.scene import Scene
 from rollcam.sim.scenegen import ego_preset, make_scene
 from rollcam.sim.sensor import flipped_cfa

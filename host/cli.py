@@ -1,4 +1,4 @@
-"""The ``rollcam`` command line: one subcommand per module of ``rollcam.host.commands``.
+"""The ``rollcam`` command line: one subcommand per command module of ``rollcam.host.commands.COMMANDS``.
 
 Exit codes (``rollcam.common.errors.exit_code``): 0 success; 2 bad usage or input (argparse errors,
 ``ConfigError``, ``SourceError``); 1 any other failure (``DeviceError`` such as a camera that is not there,
@@ -55,7 +55,7 @@ def build_parser() -> tuple[Parser, dict[str, argparse.ArgumentParser]]:
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True, parser_class=Parser)
     commands = {}
     for name, module_name in COMMANDS.items():
-        module = importlib.import_module(f"{__package__}.commands.{module_name}")
+        module = importlib.import_module(module_name)
         p = module.add_parser(sub)
         p.set_defaults(run=module.run)
         commands[name] = p

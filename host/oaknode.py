@@ -72,7 +72,7 @@ def _make_class(dai: Any) -> type:
                 raise
             for msg in got if isinstance(got, list) else [got]:
                 if msg is not None:
-                    self._node._taken(msg)
+                    self._node.message_taken(msg)
             return got
 
         def get(self, *args: Any, **kwargs: Any) -> Any:
@@ -97,7 +97,7 @@ def _make_class(dai: Any) -> type:
             return getattr(self.output, name)
 
         def createOutputQueue(self, *args: Any, **kwargs: Any) -> OutputQueue:
-            self._node._queues += 1
+            self._node.queue_opened()
             return OutputQueue(self.output.createOutputQueue(*args, **kwargs), self._node)
 
     class EmulatedCamera(dai.node.ThreadedHostNode):
@@ -128,7 +128,11 @@ def _make_class(dai: Any) -> type:
             if self.error is not None:
                 raise SourceError(f"EmulatedCamera({self.uri!r}) failed: {self.error!r}") from self.error
 
-        def _taken(self, msg: Any) -> None:
+        def queue_opened(self) -> None:
+            """A consumer opened a queue on ``out``: the last frame now waits until one takes it."""
+            self._queues += 1
+
+        def message_taken(self, msg: Any) -> None:
             """A consumer took ``msg``: once it is the last frame, the pipeline stops (before it is returned)."""
             if self._last_seq is not None and msg.getSequenceNum() == self._last_seq and \
                     not self._last_taken.is_set():

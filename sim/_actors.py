@@ -80,7 +80,7 @@ from ._world import (
     L_SUN_RGB,
     W_KIND,
     W_YHALF,
-    _sun_blocked,
+    sun_blocked,
     to_camera,
 )
 
@@ -281,7 +281,7 @@ def actor_parts(act, world, lut, bld, light, cam, rot, pos, t, parts, scratch):
             seg[p, 1] += shift
             seg[p, 4] += shift
     # Sun on the walker: blocked by the street canyon at chest height.
-    lit = 0.0 if _sun_blocked(world, lut, bld, root[0], root[1], 0.7 * act[P_H], light, -1) else 1.0
+    lit = 0.0 if sun_blocked(world, lut, bld, root[0], root[1], 0.7 * act[P_H], light, -1) else 1.0
     # Pose, intrinsics and lights as scalars (see ``capsule_part``). Every expression keeps ``to_camera``'s and
     # ``_project``'s operation order, so the parts are bit-identical.
     r00, r01, r02 = rot[0, 0], rot[0, 1], rot[0, 2]
@@ -323,7 +323,7 @@ def actor_parts(act, world, lut, bld, light, cam, rot, pos, t, parts, scratch):
         if lit > 0.0 and reach > 0.0:
             ux, uy = cx / reach, cy / reach
             gx, gy = root[0] + 0.5 * cx, root[1] + 0.5 * cy
-            if not _sun_blocked(world, lut, bld, gx, gy, 0.05, light, -1):  # not in a facade's shadow
+            if not sun_blocked(world, lut, bld, gx, gy, 0.05, light, -1):  # not in a facade's shadow
                 along, side = 0.5 * reach + CAST_FOOT * act[P_H], CAST_SIDE * width
                 ground_shadow(parts, n + 1, gx, gy, -uy * side, ux * side, ux * along, uy * along,
                                act[P_CAST_S], act[P_CAST_S + 1], act[P_CAST_S + 2], CAST_EDGE, cam, rot, pos)

@@ -75,13 +75,23 @@ def _drop_if_older(path: Path, mtime: float) -> None:
         pass  # not cached yet, or a read-only install (where nothing is edited, so nothing is stale)
 
 
+def cache_index(kernel: Dispatcher) -> Path | None:
+    """The index file numba keeps for cached ``kernel`` (it may not exist yet); None without a cache.
+
+    The one reader of numba's internals (as of 0.6x) for it: a kernel without a cache has a NullCache and no
+    ``_cache_file``, and a numba that moved the path reads as no cache rather than a crash.
+    """
+    try:
+        return Path(kernel._cache._cache_file._index_path)
+    except AttributeError:
+        return None
+
+
 def _cache_files(module: ModuleType) -> Iterator[Path]:
     """The index and data files of every cached kernel of ``module``, wherever numba keeps them."""
     for kernel in kernels(module):
-        try:
-            # numba's internals (as of 0.6x): a kernel without a cache has a NullCache and no _cache_file.
-            index = Path(kernel._cache._cache_file._index_path)
-        except AttributeError:
+        index = cache_index(kernel)
+        if index is None:
             continue
         yield index
         stem = glob.escape(index.name.removesuffix(".nbi"))

@@ -34,7 +34,7 @@ from ._parts import (
     capsule_part,
     sun_in_view,
 )
-from ._world import C_CX, C_CY, C_FX, C_FY, C_TRANSPOSED, L_AMB, L_SUN, L_SUN_RGB, _sun_blocked
+from ._world import C_CX, C_CY, C_FX, C_FY, C_TRANSPOSED, L_AMB, L_SUN, L_SUN_RGB, sun_blocked
 
 # ---- prop rows of the actor table (after A_TYPE, A_STATIC, A_SPEED, A_ID) ----------------------------------
 G_KIND, G_X, G_Y, G_L, G_W, G_H, G_DIR, G_RGB, G_RGB2, G_S0, G_S1, G_A, G_B, G_C = (
@@ -240,7 +240,7 @@ def prop_parts(act, shift, world, lut, bld, light, cam, rot, pos, parts, poly):
     x, y, h, d = act[G_X], act[G_Y] + shift, act[G_H], act[G_DIR]
     lx, lz = sun_in_view(rot, light, cam[C_TRANSPOSED] != 0.0)
     z_sun = act[G_A] if kind == PK_CAR else (act[G_B] + act[G_C] if kind == PK_TREE else 0.5 * h)
-    lit = 0.0 if _sun_blocked(world, lut, bld, x, y, z_sun, light, -1) else 1.0
+    lit = 0.0 if sun_blocked(world, lut, bld, x, y, z_sun, light, -1) else 1.0
     main = (act[G_RGB], act[G_RGB + 1], act[G_RGB + 2])
     second = (act[G_RGB2], act[G_RGB2 + 1], act[G_RGB2 + 2])
     if kind == PK_CAR:

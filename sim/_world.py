@@ -108,7 +108,7 @@ def to_camera(rot, pos, x, y, z, out):
 
 
 @njit(cache=True, inline="always")
-def _sun_blocked(world, lut, bld, px, py, pz, light, skip_side):
+def sun_blocked(world, lut, bld, px, py, pz, light, skip_side):
     """True when a facade stands between point ``p`` and the sun (street canyon shadows); ``skip_side``: the
     facade (0 west, 1 east) the point is on, or -1."""
     return sun_blocked_c(world.ctypes.data, lut.ctypes.data, lut.shape[1] - 1, bld.ctypes.data, light.ctypes.data,

@@ -23,19 +23,18 @@ from typing import Any, ClassVar
 from rollcam.common.errors import ConfigError
 
 from .configschema import (
-    _Checked,
-    _dotted,
-    _f,
-    _Invalid,
-    _ListOf,
-    _nonempty,
-    _nonneg,
-    _one_of,
-    _parse_section,
-    _pos,
-    _Rule,
+    Checked,
+    InvalidKey,
+    ListOf,
+    Rule,
+    dotted,
+    nonempty,
+    nonnegative,
+    one_of,
+    parse_section,
+    positive,
+    spec,
 )
-from .configschema import _schema as _schema  # re-exported: tests read a class's schema rows from here
 from .formats import FORMATS
 from .imu import ImuParams
 from .timing import LineTiming, Readout
@@ -56,34 +55,34 @@ GREY counts as processed: a mono sensor's 8-bit output and a colour ISP's luma a
 
 
 @dataclass(frozen=True)
-class Crop(_Checked):
+class Crop(Checked):
     """Sensor area a mode reads, in full-resolution active-pixel coordinates."""
 
-    left: int = _f(int, "an integer >= 0 (pixels)", _nonneg)
-    top: int = _f(int, "an integer >= 0 (pixels)", _nonneg)
-    width: int = _f(int, "a positive integer (pixels)", _pos)
-    height: int = _f(int, "a positive integer (pixels)", _pos)
+    left: int = spec(int, "an integer >= 0 (pixels)", nonnegative)
+    top: int = spec(int, "an integer >= 0 (pixels)", nonnegative)
+    width: int = spec(int, "a positive integer (pixels)", positive)
+    height: int = spec(int, "a positive integer (pixels)", positive)
 
 
 @dataclass(frozen=True, kw_only=True)
-class SensorMode(_Checked):
+class SensorMode(Checked):
     """One readout mode: output size, line and frame length, optional binning, crop and own pixel rate."""
 
-    name: str = _f(str, "a non-empty string", _nonempty)
-    width: int = _f(int, "a positive integer (output pixels per line)", _pos)
-    height: int = _f(int, "a positive integer (output lines)", _pos)
-    line_length_pck: int = _f(int, "a positive integer (pixel clocks per line)", _pos)
-    frame_length_lines: int = _f(int, "a positive integer (lines per frame)", _pos)
-    binning: tuple[int, ...] = _f(_ListOf(int), "[horizontal, vertical], factors >= 1",
-                                  lambda v: len(v) == 2 and min(v) >= 1, (1, 1))
-    crop: Crop | None = _f(Crop, "a mapping {left, top, width, height}", None, None)  # noqa: RUF009
-    pixel_rate_hz: int | None = _f(int, "a positive integer (Hz), overriding the sensor's", _pos, None)
-    _rules: ClassVar[tuple[_Rule, ...]] = (
-        _Rule("line_length_pck", lambda s, _, i: s.line_length_pck >= s.width,
+    name: str = spec(str, "a non-empty string", nonempty)
+    width: int = spec(int, "a positive integer (output pixels per line)", positive)
+    height: int = spec(int, "a positive integer (output lines)", positive)
+    line_length_pck: int = spec(int, "a positive integer (pixel clocks per line)", positive)
+    frame_length_lines: int = spec(int, "a positive integer (lines per frame)", positive)
+    binning: tuple[int, ...] = spec(ListOf(int), "[horizontal, vertical], factors >= 1",
+                                    lambda v: len(v) == 2 and min(v) >= 1, (1, 1))
+    crop: Crop | None = spec(Crop, "a mapping {left, top, width, height}", None, None)  # noqa: RUF009
+    pixel_rate_hz: int | None = spec(int, "a positive integer (Hz), overriding the sensor's", positive, None)
+    _rules: ClassVar[tuple[Rule, ...]] = (
+        Rule("line_length_pck", lambda s, _, i: s.line_length_pck >= s.width,
               lambda s, _, i: f">= width ({s.width}): a line cannot be shorter than its active pixels"),
-        _Rule("frame_length_lines", lambda s, _, i: s.frame_length_lines >= s.height,
+        Rule("frame_length_lines", lambda s, _, i: s.frame_length_lines >= s.height,
               lambda s, _, i: f">= height ({s.height}): a frame cannot hold fewer lines than it outputs"),
-        _Rule("crop", lambda s, _, i: s.crop is None or (s.crop.width, s.crop.height) == s.read_size,
+        Rule("crop", lambda s, _, i: s.crop is None or (s.crop.width, s.crop.height) == s.read_size,
               lambda s, _, i: "width x height = output size x binning = {}x{}".format(*s.read_size)),
     )
 
@@ -94,13 +93,13 @@ class SensorMode(_Checked):
 
 
 @dataclass(frozen=True, kw_only=True)
-class Link(_Checked):
+class Link(Checked):
     """The sensor's data link to its host: MIPI CSI-2 (``lanes`` x ``lane_mbps``) or USB (``lane_mbps`` is the
     bus's signalling rate, ``lanes`` 1), for the bandwidth ledger (``rollcam.firmware.ledger``)."""
 
-    bus: str = _f(str, "'csi2' or 'usb'", _one_of("csi2", "usb"))
-    lanes: int = _f(int, "an integer in 1..8 (data lanes)", lambda v: 1 <= v <= 8)
-    lane_mbps: float = _f(float, "a positive number (Mbit/s per lane)", _pos)
+    bus: str = spec(str, "'csi2' or 'usb'", one_of("csi2", "usb"))
+    lanes: int = spec(int, "an integer in 1..8 (data lanes)", lambda v: 1 <= v <= 8)
+    lane_mbps: float = spec(float, "a positive number (Mbit/s per lane)", positive)
 
     @property
     def capacity_bps(self) -> int:
@@ -109,75 +108,75 @@ class Link(_Checked):
 
 
 @dataclass(frozen=True, kw_only=True)
-class Optics(_Checked):
+class Optics(Checked):
     """Lens focal length, the sensor's active-area size (the filmback) and its pixel pitch."""
 
-    focal_mm: float = _f(float, "a positive number (mm)", _pos)
-    sensor_width_mm: float = _f(float, "a positive number (mm, active area)", _pos)
-    sensor_height_mm: float = _f(float, "a positive number (mm, active area)", _pos)
-    pixel_size_um: float = _f(float, "a positive number (um, square pixels)", _pos)
+    focal_mm: float = spec(float, "a positive number (mm)", positive)
+    sensor_width_mm: float = spec(float, "a positive number (mm, active area)", positive)
+    sensor_height_mm: float = spec(float, "a positive number (mm, active area)", positive)
+    pixel_size_um: float = spec(float, "a positive number (um, square pixels)", positive)
 
 
 @dataclass(frozen=True, kw_only=True)
-class NoiseParams(_Checked):
+class NoiseParams(Checked):
     """EMVA 1288 figures at unity analog gain; ``ideal`` asks the sensor model to add no noise at all."""
 
-    quantum_efficiency: float = _f(float, "a number in (0, 1]", lambda v: 0 < v <= 1)
-    full_well_e: float = _f(float, "a positive number (electrons)", _pos)
-    dark_noise_e: float = _f(float, "a number >= 0 (electrons rms)", _nonneg)
-    dark_current_e_per_s: float = _f(float, "a number >= 0 (electrons per second)", _nonneg)
-    system_gain_dn_per_e: float = _f(float, "a positive number (DN per electron)", _pos)
-    dsnu_e: float = _f(float, "a number >= 0 (electrons rms)", _nonneg)
-    prnu_fraction: float = _f(float, "a number in [0, 1)", lambda v: 0 <= v < 1)
-    black_level_dn: float = _f(float, "a number >= 0 (DN)", _nonneg)
-    ideal: bool = _f(bool, "true or false", None, False)
-    flux_photons_per_s: float | None = _f(float, "a positive number (photons per pixel per second at linear "
-                                          "radiance 1.0), or null for full well at 10 ms", _pos, None)
+    quantum_efficiency: float = spec(float, "a number in (0, 1]", lambda v: 0 < v <= 1)
+    full_well_e: float = spec(float, "a positive number (electrons)", positive)
+    dark_noise_e: float = spec(float, "a number >= 0 (electrons rms)", nonnegative)
+    dark_current_e_per_s: float = spec(float, "a number >= 0 (electrons per second)", nonnegative)
+    system_gain_dn_per_e: float = spec(float, "a positive number (DN per electron)", positive)
+    dsnu_e: float = spec(float, "a number >= 0 (electrons rms)", nonnegative)
+    prnu_fraction: float = spec(float, "a number in [0, 1)", lambda v: 0 <= v < 1)
+    black_level_dn: float = spec(float, "a number >= 0 (DN)", nonnegative)
+    ideal: bool = spec(bool, "true or false", None, False)
+    flux_photons_per_s: float | None = spec(float, "a positive number (photons per pixel per second at linear "
+                                            "radiance 1.0), or null for full well at 10 ms", positive, None)
 
 
 @dataclass(frozen=True, kw_only=True)
-class ExposureLimits(_Checked):
+class ExposureLimits(Checked):
     """Exposure range in lines: at least ``min_lines``, at most frame_length_lines - ``max_margin_lines``."""
 
-    min_lines: int = _f(int, "an integer >= 1 (lines)", lambda v: v >= 1)
-    max_margin_lines: int = _f(int, "an integer >= 0 (lines)", _nonneg)
+    min_lines: int = spec(int, "an integer >= 1 (lines)", lambda v: v >= 1)
+    max_margin_lines: int = spec(int, "an integer >= 0 (lines)", nonnegative)
 
 
 _GAIN = "a positive number (linear gain, 1.0 = unity)"
 
 
 @dataclass(frozen=True, kw_only=True)
-class GainLimits(_Checked):
+class GainLimits(Checked):
     """Analog and digital gain ranges as linear multipliers (1.0 = unity)."""
 
-    analog_min: float = _f(float, _GAIN, _pos)
-    analog_max: float = _f(float, _GAIN, _pos)
-    digital_min: float = _f(float, _GAIN, _pos)
-    digital_max: float = _f(float, _GAIN, _pos)
-    _rules: ClassVar[tuple[_Rule, ...]] = (
-        _Rule("analog_min", lambda s, _, i: s.analog_min <= s.analog_max,
+    analog_min: float = spec(float, _GAIN, positive)
+    analog_max: float = spec(float, _GAIN, positive)
+    digital_min: float = spec(float, _GAIN, positive)
+    digital_max: float = spec(float, _GAIN, positive)
+    _rules: ClassVar[tuple[Rule, ...]] = (
+        Rule("analog_min", lambda s, _, i: s.analog_min <= s.analog_max,
               lambda s, _, i: f"<= analog_max ({s.analog_max!r})"),
-        _Rule("digital_min", lambda s, _, i: s.digital_min <= s.digital_max,
+        Rule("digital_min", lambda s, _, i: s.digital_min <= s.digital_max,
               lambda s, _, i: f"<= digital_max ({s.digital_max!r})"),
     )
 
 
 @dataclass(frozen=True, kw_only=True)
-class Register(_Checked):
+class Register(Checked):
     """One sensor register: address, width, name, access, meaning; ``reset`` None = not published.
 
     ``role`` tags the registers the firmware drives (frame length, exposure, ...) whatever their name.
     """
 
-    address: int = _f(int, "an integer in 0..0xFFFF", lambda v: 0 <= v <= 0xFFFF)
-    width_bits: int = _f(int, "one of 8, 16, 24, 32", _one_of(8, 16, 24, 32))
-    name: str = _f(str, "an UPPER_CASE identifier", lambda v: re.fullmatch(r"[A-Z][A-Z0-9_]*", v))
-    access: str = _f(str, "'ro' or 'rw'", _one_of("ro", "rw"))
-    meaning: str = _f(str, "a non-empty string", _nonempty)
-    reset: int | None = _f(int, "an integer >= 0, or null when not published", _nonneg, None)
-    role: str | None = _f(str, f"one of {list(REGISTER_ROLES)}, or null", _one_of(*REGISTER_ROLES), None)
-    _rules: ClassVar[tuple[_Rule, ...]] = (
-        _Rule("reset", lambda s, _, i: s.reset is None or s.reset < 1 << s.width_bits,
+    address: int = spec(int, "an integer in 0..0xFFFF", lambda v: 0 <= v <= 0xFFFF)
+    width_bits: int = spec(int, "one of 8, 16, 24, 32", one_of(8, 16, 24, 32))
+    name: str = spec(str, "an UPPER_CASE identifier", lambda v: re.fullmatch(r"[A-Z][A-Z0-9_]*", v))
+    access: str = spec(str, "'ro' or 'rw'", one_of("ro", "rw"))
+    meaning: str = spec(str, "a non-empty string", nonempty)
+    reset: int | None = spec(int, "an integer >= 0, or null when not published", nonnegative, None)
+    role: str | None = spec(str, f"one of {list(REGISTER_ROLES)}, or null", one_of(*REGISTER_ROLES), None)
+    _rules: ClassVar[tuple[Rule, ...]] = (
+        Rule("reset", lambda s, _, i: s.reset is None or s.reset < 1 << s.width_bits,
               lambda s, _, i: f"a value that fits {s.width_bits} bits (< {1 << s.width_bits:#x})"),
     )
 
@@ -210,67 +209,67 @@ _READOUTS = [r.value for r in Readout]
 
 
 @dataclass(frozen=True, kw_only=True, repr=False)
-class SensorConfig(_Checked):
+class SensorConfig(Checked):
     """Everything rollcam knows about one sensor: geometry, timing, formats, noise, limits, registers."""
 
-    name: str = _f(str, "a lower-case identifier", lambda v: re.fullmatch(r"[a-z0-9_\-]+", v))
-    description: str = _f(str, "a non-empty string", _nonempty)
-    shutter: str = _f(str, "'rolling' or 'global'", _one_of("rolling", "global"))
-    active_width: int = _f(int, "a positive integer (pixels)", _pos)
-    active_height: int = _f(int, "a positive integer (pixels)", _pos)
-    pixel_rate_hz: int = _f(int, "a positive integer (Hz, e.g. 182_400_000)", _pos)
-    readout: Readout = _f(str, f"one of {_READOUTS}", _one_of(*_READOUTS))  # noqa: RUF009
-    optics: Optics = _f(Optics, "a mapping {focal_mm, sensor_width_mm, ...}")  # noqa: RUF009
-    modes: tuple[SensorMode, ...] = _f(_ListOf(SensorMode), "a non-empty list of modes", _nonempty)
-    default_mode: str = _f(str, "the name of one of the modes", _nonempty)
-    formats: tuple[str, ...] = _f(_ListOf(str), "a non-empty list of V4L2 fourccs", _nonempty)
-    bit_depth: int = _f(int, "an integer in 8..16 (ADC bits)", lambda v: 8 <= v <= 16)
-    bayer_order: str = _f(str, f"one of {list(BAYER_ORDERS)}", _one_of(*BAYER_ORDERS))
-    noise: NoiseParams = _f(NoiseParams, "a mapping of EMVA 1288 figures")  # noqa: RUF009
-    exposure: ExposureLimits = _f(ExposureLimits, "a mapping {min_lines, max_margin_lines}")  # noqa: RUF009
-    gain: GainLimits = _f(GainLimits, "a mapping {analog_min, analog_max, ...}")  # noqa: RUF009
-    registers: tuple[Register, ...] = _f(_ListOf(Register), "a list of registers (may be empty)")
-    sources: tuple[str, ...] = _f(_ListOf(str), "a list of strings", None, ())
-    imu: ImuParams | None = _f(ImuParams, "a mapping of IMU figures (Kalibr terms), or absent", None, None)  # noqa: RUF009
-    link: Link | None = _f(Link, "a mapping {bus, lanes, lane_mbps}, or absent", None, None)  # noqa: RUF009
-    _rules: ClassVar[tuple[_Rule, ...]] = (
-        *(_Rule(f"optics.sensor_{ax}_mm",
-                lambda s, _, i, ax=ax: math.isclose(_dotted(s, f"optics.sensor_{ax}_mm"), _size_mm(s, ax),
+    name: str = spec(str, "a lower-case identifier", lambda v: re.fullmatch(r"[a-z0-9_\-]+", v))
+    description: str = spec(str, "a non-empty string", nonempty)
+    shutter: str = spec(str, "'rolling' or 'global'", one_of("rolling", "global"))
+    active_width: int = spec(int, "a positive integer (pixels)", positive)
+    active_height: int = spec(int, "a positive integer (pixels)", positive)
+    pixel_rate_hz: int = spec(int, "a positive integer (Hz, e.g. 182_400_000)", positive)
+    readout: Readout = spec(str, f"one of {_READOUTS}", one_of(*_READOUTS))  # noqa: RUF009
+    optics: Optics = spec(Optics, "a mapping {focal_mm, sensor_width_mm, ...}")  # noqa: RUF009
+    modes: tuple[SensorMode, ...] = spec(ListOf(SensorMode), "a non-empty list of modes", nonempty)
+    default_mode: str = spec(str, "the name of one of the modes", nonempty)
+    formats: tuple[str, ...] = spec(ListOf(str), "a non-empty list of V4L2 fourccs", nonempty)
+    bit_depth: int = spec(int, "an integer in 8..16 (ADC bits)", lambda v: 8 <= v <= 16)
+    bayer_order: str = spec(str, f"one of {list(BAYER_ORDERS)}", one_of(*BAYER_ORDERS))
+    noise: NoiseParams = spec(NoiseParams, "a mapping of EMVA 1288 figures")  # noqa: RUF009
+    exposure: ExposureLimits = spec(ExposureLimits, "a mapping {min_lines, max_margin_lines}")  # noqa: RUF009
+    gain: GainLimits = spec(GainLimits, "a mapping {analog_min, analog_max, ...}")  # noqa: RUF009
+    registers: tuple[Register, ...] = spec(ListOf(Register), "a list of registers (may be empty)")
+    sources: tuple[str, ...] = spec(ListOf(str), "a list of strings", None, ())
+    imu: ImuParams | None = spec(ImuParams, "a mapping of IMU figures (Kalibr terms), or absent", None, None)  # noqa: RUF009
+    link: Link | None = spec(Link, "a mapping {bus, lanes, lane_mbps}, or absent", None, None)  # noqa: RUF009
+    _rules: ClassVar[tuple[Rule, ...]] = (
+        *(Rule(f"optics.sensor_{ax}_mm",
+                lambda s, _, i, ax=ax: math.isclose(dotted(s, f"optics.sensor_{ax}_mm"), _size_mm(s, ax),
                                                     rel_tol=0.02),
                 lambda s, _, i, ax=ax: f"active_{ax} x pixel_size_um = {_size_mm(s, ax):.4g} mm (within 2%)")
           for ax in ("width", "height")),
-        _Rule("noise.black_level_dn", lambda s, _, i: s.noise.black_level_dn < (1 << s.bit_depth) - 1,
+        Rule("noise.black_level_dn", lambda s, _, i: s.noise.black_level_dn < (1 << s.bit_depth) - 1,
               lambda s, _, i: f"< {(1 << s.bit_depth) - 1}, the {s.bit_depth}-bit maximum"),
-        _Rule("modes[].name", lambda s, m, i: m.name not in [x.name for x in s.modes[:i]],
+        Rule("modes[].name", lambda s, m, i: m.name not in [x.name for x in s.modes[:i]],
               lambda s, m, i: "a name no earlier mode has"),
-        _Rule("modes[].crop", lambda s, m, i: _fits(s, m),
+        Rule("modes[].crop", lambda s, m, i: _fits(s, m),
               lambda s, m, i: f"an area inside the {s.active_width}x{s.active_height} active array "
                               "(without crop: width x height times binning, centred)",
               lambda s, m, i: m.crop or m.read_size),
-        _Rule("modes[].frame_length_lines",
+        Rule("modes[].frame_length_lines",
               lambda s, m, i: m.frame_length_lines >= s.exposure.min_lines + s.exposure.max_margin_lines,
               lambda s, m, i: f">= exposure.min_lines + max_margin_lines "
                               f"({s.exposure.min_lines} + {s.exposure.max_margin_lines}): room to expose"),
-        *(_Rule(f"modes[].{key}", lambda s, m, i, key=key, role=role: getattr(m, key) <= _reg_max(s, role),
+        *(Rule(f"modes[].{key}", lambda s, m, i, key=key, role=role: getattr(m, key) <= _reg_max(s, role),
                 lambda s, m, i, role=role: f"<= {_reg_max(s, role)}, the most its "
                                            f"{_reg_bits(s, role)}-bit {role} register holds")
           for key, role in (("frame_length_lines", "frame_length"), ("line_length_pck", "line_length"))),
-        _Rule("default_mode", lambda s, _, i: s.default_mode in [m.name for m in s.modes],
+        Rule("default_mode", lambda s, _, i: s.default_mode in [m.name for m in s.modes],
               lambda s, _, i: f"one of {[m.name for m in s.modes]}"),
-        _Rule("formats[]", lambda s, f, i: f in FOURCCS,
+        Rule("formats[]", lambda s, f, i: f in FOURCCS,
               lambda s, f, i: f"a known V4L2 fourcc {sorted(FOURCCS)}"),
-        _Rule("formats[]", lambda s, f, i: f not in s.formats[:i], lambda s, f, i: "each format listed once"),
-        _Rule("formats[]", lambda s, f, i: FOURCCS[f][0] in (None, s.bayer_order),
+        Rule("formats[]", lambda s, f, i: f not in s.formats[:i], lambda s, f, i: "each format listed once"),
+        Rule("formats[]", lambda s, f, i: FOURCCS[f][0] in (None, s.bayer_order),
               lambda s, f, i: f"a processed format or one of bayer_order {s.bayer_order!r}, not "
                               f"{FOURCCS[f][0]}"),
-        _Rule("formats[]", lambda s, f, i: FOURCCS[f][1] <= s.bit_depth,
+        Rule("formats[]", lambda s, f, i: FOURCCS[f][1] <= s.bit_depth,
               lambda s, f, i: f"at most bit_depth ({s.bit_depth}) bits, not {FOURCCS[f][1]}"),
-        _Rule("registers[].name", lambda s, r, i: r.name not in [x.name for x in s.registers[:i]],
+        Rule("registers[].name", lambda s, r, i: r.name not in [x.name for x in s.registers[:i]],
               lambda s, r, i: "a name no earlier register has"),
-        _Rule("registers[].address", lambda s, r, i: _clash(s, i) is None,
+        Rule("registers[].address", lambda s, r, i: _clash(s, i) is None,
               lambda s, r, i: f"an address range clear of {_clash(s, i)}",
               lambda s, r, i: f"{r.address:#06x}..{r.end:#06x}"),
-        _Rule("registers[].role",
+        Rule("registers[].role",
               lambda s, r, i: r.role is None or r.role not in [x.role for x in s.registers[:i]],
               lambda s, r, i: "a role no earlier register has"),
     )
@@ -356,8 +355,8 @@ def _reg_max(sensor: Any, role: str) -> int:
 def _parse_text(text: str, label: str) -> SensorConfig:
     raw = read_yaml(text, label)
     try:
-        return _parse_section(SensorConfig, raw, "")
-    except _Invalid as e:
+        return parse_section(SensorConfig, raw, "")
+    except InvalidKey as e:
         raise ConfigError(f"{label}: {e}") from None
 
 

@@ -27,7 +27,7 @@ from typing import Any, ClassVar
 import numpy as np
 from rollcam.common.errors import ConfigError
 
-from .configschema import _Checked, _f, _ListOf, _nonneg, _pos, _Rule
+from .configschema import Checked, ListOf, Rule, nonnegative, positive, spec
 from .pose import Kinematics, Trajectory, rotation_vector_to_matrix
 
 NS_PER_S = 1_000_000_000
@@ -43,32 +43,32 @@ def _vec(n: int, what: str) -> Any:
 
 
 @dataclass(frozen=True, kw_only=True)
-class ImuParams(_Checked):
+class ImuParams(Checked):
     """An IMU's figures in Kalibr's terms and its place beside the camera (hw_config section ``imu``).
 
     Defaults: the EuRoC MAV's ADIS16448 as Kalibr's IMU model page lists it, 400 Hz, mounted at the camera's
     optical centre with the camera's axes.
     """
 
-    rate_hz: int = _f(int, f"an integer in {MIN_RATE_HZ}..{MAX_RATE_HZ} (Hz)",
-                      lambda v: MIN_RATE_HZ <= v <= MAX_RATE_HZ, 400)
-    gyroscope_noise_density: float = _f(float, "a number >= 0 (rad/s/sqrt(Hz))", _nonneg, 1.6968e-04)
-    gyroscope_random_walk: float = _f(float, "a number >= 0 (rad/s^2/sqrt(Hz))", _nonneg, 1.9393e-05)
-    accelerometer_noise_density: float = _f(float, "a number >= 0 (m/s^2/sqrt(Hz))", _nonneg, 2.0e-03)
-    accelerometer_random_walk: float = _f(float, "a number >= 0 (m/s^3/sqrt(Hz))", _nonneg, 3.0e-03)
-    gyroscope_scale_misalignment: tuple[float, ...] = _f(
-        _ListOf(float), "9 numbers, a 3x3 matrix by rows (identity: none)", _vec(9, "M"), _IDENTITY)
-    accelerometer_scale_misalignment: tuple[float, ...] = _f(
-        _ListOf(float), "9 numbers, a 3x3 matrix by rows (identity: none)", _vec(9, "M"), _IDENTITY)
-    rotation_cam_imu_deg: tuple[float, ...] = _f(
-        _ListOf(float), "3 numbers, the rotation vector of R_cam_imu (deg)", _vec(3, "r"), (0.0, 0.0, 0.0))
-    translation_cam_imu_m: tuple[float, ...] = _f(
-        _ListOf(float), "3 numbers, the IMU's origin in camera coordinates (m)", _vec(3, "t"), (0.0, 0.0, 0.0))
-    time_offset_ns: int = _f(int, f"an integer in -{MAX_OFFSET_NS}..{MAX_OFFSET_NS} (ns, t_imu = t_cam + offset)",
-                             lambda v: abs(v) <= MAX_OFFSET_NS, 0)
-    gravity_mps2: float = _f(float, "a positive number (m/s^2)", _pos, 9.80665)
-    _rules: ClassVar[tuple[_Rule, ...]] = (
-        _Rule("rotation_cam_imu_deg", lambda s, _, i: math.hypot(*s.rotation_cam_imu_deg) <= 360.0,
+    rate_hz: int = spec(int, f"an integer in {MIN_RATE_HZ}..{MAX_RATE_HZ} (Hz)",
+                        lambda v: MIN_RATE_HZ <= v <= MAX_RATE_HZ, 400)
+    gyroscope_noise_density: float = spec(float, "a number >= 0 (rad/s/sqrt(Hz))", nonnegative, 1.6968e-04)
+    gyroscope_random_walk: float = spec(float, "a number >= 0 (rad/s^2/sqrt(Hz))", nonnegative, 1.9393e-05)
+    accelerometer_noise_density: float = spec(float, "a number >= 0 (m/s^2/sqrt(Hz))", nonnegative, 2.0e-03)
+    accelerometer_random_walk: float = spec(float, "a number >= 0 (m/s^3/sqrt(Hz))", nonnegative, 3.0e-03)
+    gyroscope_scale_misalignment: tuple[float, ...] = spec(
+        ListOf(float), "9 numbers, a 3x3 matrix by rows (identity: none)", _vec(9, "M"), _IDENTITY)
+    accelerometer_scale_misalignment: tuple[float, ...] = spec(
+        ListOf(float), "9 numbers, a 3x3 matrix by rows (identity: none)", _vec(9, "M"), _IDENTITY)
+    rotation_cam_imu_deg: tuple[float, ...] = spec(
+        ListOf(float), "3 numbers, the rotation vector of R_cam_imu (deg)", _vec(3, "r"), (0.0, 0.0, 0.0))
+    translation_cam_imu_m: tuple[float, ...] = spec(
+        ListOf(float), "3 numbers, the IMU's origin in camera coordinates (m)", _vec(3, "t"), (0.0, 0.0, 0.0))
+    time_offset_ns: int = spec(int, f"an integer in -{MAX_OFFSET_NS}..{MAX_OFFSET_NS} (ns, t_imu = t_cam + offset)",
+                               lambda v: abs(v) <= MAX_OFFSET_NS, 0)
+    gravity_mps2: float = spec(float, "a positive number (m/s^2)", positive, 9.80665)
+    _rules: ClassVar[tuple[Rule, ...]] = (
+        Rule("rotation_cam_imu_deg", lambda s, _, i: math.hypot(*s.rotation_cam_imu_deg) <= 360.0,
               lambda s, _, i: "a rotation of at most 360 deg"),
     )
 

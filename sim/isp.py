@@ -115,44 +115,6 @@ SHARPEN_SIGMA_PX = 1.0
 """Radius (Gaussian sigma, px) of the unsharp mask's blur: the detail band a camera ISP boosts."""
 
 
-@dataclass(frozen=True)
-class PictureSteps:
-    """The ISP's last steps on its 8-bit picture, after demosaic and gamma: unsharp-mask sharpening of the luma
-    by ``sharpen`` (0: off), then the camera encoder's JPEG compression at ``jpeg_quality`` (0: off; 1..100
-    as libjpeg's quality scale), left in the picture as a decoder would see it. All off: no work."""
-
-    sharpen: float = 0.0
-    jpeg_quality: int = 0
-
-    def __post_init__(self) -> None:
-        if isinstance(self.sharpen, bool) or not isinstance(self.sharpen, (int, float)) \
-                or not 0 <= self.sharpen <= MAX_SHARPEN:
-            raise ConfigError(f"sharpen must be a number in 0..{MAX_SHARPEN:g}, got {self.sharpen!r}")
-        if isinstance(self.jpeg_quality, bool) or not isinstance(self.jpeg_quality, (int, np.integer)) \
-                or not 0 <= self.jpeg_quality <= 100:
-            raise ConfigError(f"jpeg_quality must be a whole number in 0..100 (0: off), got {self.jpeg_quality!r}")
-
-    @property
-    def on(self) -> bool:
-        """True when a step changes the picture."""
-        return bool(self.sharpen or self.jpeg_quality)
-
-    def info(self) -> dict[str, float]:
-        """What a frame's metadata records about these steps (the ones that are on)."""
-        return {k: v for k, v in (("sharpen", self.sharpen), ("jpeg_quality", self.jpeg_quality)) if v}
-
-    def apply(self, bgr: np.ndarray) -> np.ndarray:
-        """The 8-bit BGR picture after these steps (``bgr`` itself when all are off)."""
-        if self.sharpen:
-            bgr = sharpen(bgr, self.sharpen)
-        if self.jpeg_quality:
-            from .codecs import codec  # the one JPEG codec (it imports this module)
-
-            jpeg = codec("MJPG")
-            bgr = jpeg.decode(jpeg.encode(bgr, quality=int(self.jpeg_quality)))
-        return bgr
-
-
 def sharpen(bgr: np.ndarray, amount: float, sigma_px: float = SHARPEN_SIGMA_PX) -> np.ndarray:
     """Unsharp mask on the luma: every channel plus ``amount`` x (Y - Gaussian(Y, ``sigma_px``)), BT.601 Y,
     rounded and clipped to 8 bits. Luma only, as camera ISPs do, so edges gain contrast without colour

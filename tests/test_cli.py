@@ -61,6 +61,13 @@ def test_help_lists_subcommands():
         assert cmd in res.stdout
 
 
+def test_version_is_the_package_version():
+    from importlib.metadata import version
+
+    res = run("--version")
+    assert res.returncode == 0 and res.stdout.strip() == f"rollcam {version('rollcam')}", res.stdout + res.stderr
+
+
 def test_no_command_is_usage_error():
     res = run()
     assert res.returncode == 2
@@ -190,7 +197,7 @@ def test_every_command_is_a_module_registered_the_same_way():
 
     assert set(COMMANDS) >= {"demo", "list", "capture", "detect", "emulate", "view", "dataset", "eval", "bench"}
     for module_name in COMMANDS.values():
-        module = importlib.import_module(f"rollcam.host.commands.{module_name}")
+        module = importlib.import_module(module_name)
         assert callable(module.add_parser) and callable(module.run), module_name
     # Building every parser imports none of the heavy or optional packages: --help is fast whatever is missing.
     code = ("import sys; from rollcam.host.cli import build_parser; build_parser(); "

@@ -259,7 +259,7 @@ def test_missing_files_and_names(tmp_path: Path) -> None:
 
 
 def test_schema_rows_match_dataclass_fields() -> None:
-    from rollcam.sim.hwconfig import _schema
+    from rollcam.sim.configschema import schema
 
     for cls in (SensorConfig, SensorMode, Optics, NoiseParams, ExposureLimits, GainLimits, Register):
-        assert set(_schema(cls)) == {f.name for f in dataclasses.fields(cls)}
+        assert set(schema(cls)) == {f.name for f in dataclasses.fields(cls)}

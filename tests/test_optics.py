@@ -17,8 +17,9 @@ from rollcam.firmware.spec import CameraSpec
 from rollcam.host.sources import open_camera
 from rollcam.sim.codecs import codec
 from rollcam.sim.hwconfig import load_sensor
-from rollcam.sim.isp import PictureSteps, sharpen
+from rollcam.sim.isp import sharpen
 from rollcam.sim.optics import LensOptics, gaussian_kernel, vignette_map
+from rollcam.sim.picture import PictureSteps
 from rollcam.sim.render import encode_linear
 from rollcam.sim.scenegen import make_chart_scene
 from rollcam.sim.synthetic import SyntheticCamera

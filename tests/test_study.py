@@ -6,8 +6,9 @@ import json
 
 import pytest
 from rollcam.host.cli import main
-from rollcam.host.training.study import QUICK, REDUCED, plan_jobs
+from rollcam.host.training.study import plan_jobs
 from rollcam.host.training.study_report import aggregate, difference, statements
+from rollcam.host.training.study_settings import QUICK, REDUCED
 
 
 def _result(key, group, speed, train, seed, test, **kw):

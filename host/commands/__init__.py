@@ -1,6 +1,6 @@
 """The ``rollcam`` commands, one module each, registered the same way.
 
-A command module ``rollcam.host.commands.<module>`` provides
+A command module (``rollcam.host.commands.<name>``, or ``rollcam.benchmarks.command`` for ``bench``) provides
 
 - ``add_parser(subparsers) -> argparse.ArgumentParser``: its subparser, options and help;
 - ``run(args) -> int``: the work, returning the exit status (errors are raised, ``rollcam.host.cli`` turns
@@ -18,23 +18,29 @@ from collections.abc import Callable
 from typing import Any
 
 COMMANDS: dict[str, str] = {
-    "demo": "demo",
-    "list": "list",
-    "capture": "capture",
-    "calibrate": "calibrate",
-    "detect": "detect",
-    "emulate": "emulate",
-    "view": "view",
-    "run": "run",
-    "dataset": "dataset",
-    "eval": "eval",
-    "train": "train",
-    "study": "study",
-    "bench": "bench",
+    "demo": "rollcam.host.commands.demo",
+    "list": "rollcam.host.commands.list",
+    "capture": "rollcam.host.commands.capture",
+    "calibrate": "rollcam.host.commands.calibrate",
+    "detect": "rollcam.host.commands.detect",
+    "emulate": "rollcam.host.commands.emulate",
+    "view": "rollcam.host.commands.view",
+    "run": "rollcam.host.commands.run",
+    "dataset": "rollcam.host.commands.dataset",
+    "eval": "rollcam.host.commands.eval",
+    "train": "rollcam.host.commands.train",
+    "study": "rollcam.host.commands.study",
+    "bench": "rollcam.benchmarks.command",
 }
-"""Command name -> module under ``rollcam.host.commands``, in the order ``rollcam --help`` lists them."""
+"""Command name -> its module, in the order ``rollcam --help`` lists them. ``bench`` lives with the studies it
+runs (``rollcam.benchmarks``, the layer above ``host``): the table names it, so no ``host`` module imports it."""
+
 
 PROG = "rollcam"
+
+Subparsers = argparse._SubParsersAction
+"""The type of the ``subparsers`` object every command's ``add_parser`` receives. argparse keeps the class under a
+private name and gives no public one; this is the one place that reaches for it."""
 
 
 def value_type(parse: Callable[[str], Any], what: str | None = None) -> Callable[[str], Any]:

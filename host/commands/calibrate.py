@@ -7,10 +7,10 @@ import json
 
 from rollcam.common.values import finite_float, positive_int
 
-from . import value_type
+from . import Subparsers, value_type
 
 
-def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
+def add_parser(sub: Subparsers) -> argparse.ArgumentParser:
     """Add ``rollcam calibrate``."""
     p = sub.add_parser("calibrate", help="estimate the rolling-shutter line time and camera-IMU time offset",
                        description="Estimate the rolling-shutter line time and the camera-IMU time offset "

@@ -9,10 +9,10 @@ import sys
 from rollcam.common.errors import EXIT_INTERRUPTED
 from rollcam.common.values import positive_int
 
-from . import PROG, value_type
+from . import PROG, Subparsers, value_type
 
 
-def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
+def add_parser(sub: Subparsers) -> argparse.ArgumentParser:
     """Add ``rollcam capture``."""
     p = sub.add_parser("capture", help="capture frames and their ground truth to image files and frames.jsonl",
                        description="Capture N frames of SOURCE into DIR: images NNNNNN_rs.png / NNNNNN_gs.png "

@@ -7,23 +7,11 @@ silent that long looks hung. A warm cache says nothing, so the notice appears ex
 from __future__ import annotations
 
 import sys
-from pathlib import Path
 from typing import TextIO
 
+from rollcam.sim.kernel_cache import renderer_cache_cold
+
 NOTICE = "rollcam: compiling the renderer (first use on this machine, ~30 s; later runs load it from numba's cache)"
-
-
-def renderer_cache_cold() -> bool:
-    """True when numba holds no cached machine code for the renderer's entry kernel."""
-    from rollcam.sim import _kernels
-
-    try:
-        # numba keeps one index file per cached function; none means the next call compiles. The path is
-        # numba's internal, so a numba that moved it gets no notice rather than a crash.
-        index = Path(_kernels.render_lines_kernel._cache._cache_file._index_path)
-    except AttributeError:
-        return False
-    return not index.exists()
 
 
 def renders(uri: str) -> bool:

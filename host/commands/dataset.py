@@ -8,7 +8,7 @@ from typing import Any
 
 from rollcam.common.values import box_size, fraction, name_list, parse_size, positive_int
 
-from . import value_type
+from . import Subparsers, value_type
 
 DESCRIPTION = """\
 Render paired global- and rolling-shutter images of the same instants with exact labels, by default the
@@ -30,7 +30,7 @@ examples:
 _COUNT = value_type(positive_int, "an integer >= 1")
 
 
-def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
+def add_parser(sub: Subparsers) -> argparse.ArgumentParser:
     """Add ``rollcam dataset``."""
     p = sub.add_parser("dataset", help="build paired GS/RS datasets with exact labels (YOLO + COCO + card)",
                        description=DESCRIPTION, epilog=EPILOG, formatter_class=argparse.RawDescriptionHelpFormatter)

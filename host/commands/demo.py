@@ -6,10 +6,10 @@ import argparse
 
 from rollcam.common.values import parse_size, positive_float
 
-from . import value_type
+from . import Subparsers, value_type
 
 
-def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
+def add_parser(sub: Subparsers) -> argparse.ArgumentParser:
     """Add ``rollcam demo``."""
     p = sub.add_parser("demo", help="render a short emulated rolling-shutter street: MP4 and contact sheet",
                        description="Stream a few seconds of an emulated street scene with fast walkers; write an "

@@ -11,10 +11,10 @@ from rollcam.common.errors import EXIT_INTERRUPTED, ConfigError
 from rollcam.common.files import output_dir
 from rollcam.common.values import fraction, non_negative_float, positive_fraction, positive_int
 
-from . import PROG, value_type
+from . import PROG, Subparsers, value_type
 
 
-def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
+def add_parser(sub: Subparsers) -> argparse.ArgumentParser:
     """Add ``rollcam detect``."""
     p = sub.add_parser(
         "detect", help="run a detector on a source live: fps, latencies, detections.jsonl, annotated MP4",

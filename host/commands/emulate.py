@@ -26,7 +26,7 @@ from rollcam.common.values import (
     usb_id,
 )
 
-from . import value_type
+from . import Subparsers, value_type
 
 DEFAULT_HTTP = "127.0.0.1:8080"
 TRANSPORT_FLAGS = ("http", "serial", "usbip")
@@ -38,7 +38,7 @@ _EXPECTED = {finite_float: "a number", positive_float: "a number > 0", non_negat
 _HOST_PORT = value_type(parse_host_port, "HOST:PORT")
 
 
-def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
+def add_parser(sub: Subparsers) -> argparse.ArgumentParser:
     """Add ``rollcam emulate``: the sensor, one flag per camera option, the transports."""
     p = sub.add_parser("emulate", help="serve an emulated camera over HTTP (MJPEG), a serial pty and USB/IP (UVC)",
                        description="Stream an emulated sensor in real time and serve it until Ctrl-C: MJPEG over "

@@ -9,6 +9,8 @@ from pathlib import Path
 from rollcam.common.errors import ConfigError
 from rollcam.common.files import output_dir
 
+from . import Subparsers
+
 DESCRIPTION = """\
 Evaluate a detector on the GS and RS images of a rollcam dataset (or on an Ultralytics data.yaml or a COCO
 JSON) and report P, R, mAP@0.5 and mAP@0.5:0.95 per speed and shutter, as the study's tables do, with the
@@ -21,7 +23,7 @@ RS images against the GS labels and gyro-corrected from the IMU block each sampl
 built with --source-options imu=on), to OUT/DETECTOR_SPLIT_gyro.json."""
 
 
-def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
+def add_parser(sub: Subparsers) -> argparse.ArgumentParser:
     """Add ``rollcam eval``."""
     p = sub.add_parser("eval", help="P, R, mAP@0.5 and mAP@0.5:0.95 of a detector per shutter and speed",
                        description=DESCRIPTION, formatter_class=argparse.RawDescriptionHelpFormatter)

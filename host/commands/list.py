@@ -6,8 +6,10 @@ import argparse
 import json
 from typing import Any
 
+from . import Subparsers
 
-def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
+
+def add_parser(sub: Subparsers) -> argparse.ArgumentParser:
     """Add ``rollcam list``."""
     p = sub.add_parser("list", help="list the emulated sensors and attached cameras",
                        description="List the emulated sensors (shutter, default mode, frame rate, line time), then "

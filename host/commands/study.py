@@ -8,7 +8,7 @@ import shlex
 
 from rollcam.common.values import positive_int
 
-from . import value_type
+from . import Subparsers, value_type
 
 DESCRIPTION = """\
 Reproduce the study's experiments with rollcam's own detector: build (or reuse) paired GS/RS datasets, train
@@ -26,7 +26,7 @@ examples:
   rollcam study --setting full --out /data/study_full                      # on a GPU machine"""
 
 
-def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
+def add_parser(sub: Subparsers) -> argparse.ArgumentParser:
     """Add ``rollcam study``."""
     p = sub.add_parser("study", help="the study's tables end to end: datasets, training, tests, report",
                        description=DESCRIPTION, epilog=EPILOG, formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -44,7 +44,8 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
 
 def run(args: argparse.Namespace) -> int:
     """Run the study and print its answers and where the report is."""
-    from ..training.study import SETTINGS, run_study
+    from ..training.study import run_study
+    from ..training.study_settings import SETTINGS
     from .compile_notice import notify_if_cold
 
     notify_if_cold()

@@ -8,7 +8,7 @@ import os
 
 from rollcam.common.values import fraction, parse_size, positive_float, positive_int
 
-from . import value_type
+from . import Subparsers, value_type
 
 DESCRIPTION = """\
 Train rollcam's own small anchor-free person detector (plain PyTorch, MIT; needs the 'train' extra,
@@ -27,7 +27,7 @@ examples:
 _COUNT = value_type(positive_int, "an integer >= 1")
 
 
-def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
+def add_parser(sub: Subparsers) -> argparse.ArgumentParser:
     """Add ``rollcam train``."""
     p = sub.add_parser("train", help="train a person detector on a rollcam dataset and export ONNX",
                        description=DESCRIPTION, epilog=EPILOG, formatter_class=argparse.RawDescriptionHelpFormatter)

@@ -10,12 +10,12 @@ import threading
 
 from rollcam.common.values import JPEG_QUALITY, jpeg_quality, non_negative_float, parse_host_port
 
-from . import value_type
+from . import Subparsers, value_type
 
 DEFAULT_BIND = "127.0.0.1:8081"
 
 
-def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
+def add_parser(sub: Subparsers) -> argparse.ArgumentParser:
     """Add ``rollcam view``."""
     p = sub.add_parser("view", help="open the live page (stream, truth, row timing, detections) for any source",
                        description="Serve the live view of SOURCE in the browser: the stream, overlays of its ground "

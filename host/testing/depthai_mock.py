@@ -62,6 +62,10 @@ class ImgFrame:
         self._type = _ImgType.BGR888i
         self._seq, self._ts_ns, self._exp_ns, self._iso = 0, 0, 0, 100
 
+    def stamp(self, seq: int, ts_ns: int, exp_ns: int, iso: int) -> None:
+        """Set what the device stamps on a frame (the mock's own setter: depthai's host side has none for all)."""
+        self._seq, self._ts_ns, self._exp_ns, self._iso = seq, ts_ns, exp_ns, iso
+
     def setCvFrame(self, image: np.ndarray, type: _ImgType) -> None:
         """Set the pixels (BGR, grey) as depthai's ``setCvFrame`` does."""
         self._data, self._type = np.asarray(image), type
@@ -224,9 +228,8 @@ class _Output:
         msg = ImgFrame()
         msg.setCvFrame(np.ascontiguousarray(img), self.type if self.type != _ImgType.NV12 else _ImgType.BGR888i)
         # A real OAK stamps the frame at the end of exposure and keeps the exposure in whole microseconds.
-        msg._exp_ns = frame.exposure_ns // 1000 * 1000
-        msg._seq, msg._ts_ns = frame.sequence, frame.timestamp_ns + msg._exp_ns
-        msg._iso = self.camera.iso
+        exp_ns = frame.exposure_ns // 1000 * 1000
+        msg.stamp(frame.sequence, frame.timestamp_ns + exp_ns, exp_ns, self.camera.iso)
         return msg
 
 

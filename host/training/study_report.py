@@ -17,7 +17,7 @@ from typing import Any
 
 from rollcam.common.files import write_atomic
 
-from .study import SHUTTERS, StudySettings, subset
+from .study_settings import SHUTTERS, StudySettings, subset
 
 METRICS = ("P", "R", "mAP50", "mAP50_95")
 STUDY_REFERENCE = {

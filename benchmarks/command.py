@@ -1,5 +1,8 @@
 """``rollcam bench STUDY``: one speed-versus-error study per call (the studies are ``rollcam.benchmarks``).
 
+The command's module lives with the studies, on top of ``rollcam.host``, so no module of ``host`` imports
+``benchmarks``: the command table (``rollcam.host.commands.COMMANDS``) names it like every other command.
+
 Every study takes ``--out DIR`` (its JSON, and plots, go there), ``--json`` (the JSON document on stdout
 instead of the report), ``--check`` (exit status 1 when a target is missed, naming each) and ``--progress``.
 """
@@ -11,6 +14,7 @@ import json
 from typing import Any
 
 from rollcam.common.errors import ConfigError
+from rollcam.host.commands import Subparsers
 
 OLD_FLAGS = {"--quick": "render --quick", "--hog": "realism", "--detect": "detect", "--ptc": "ptc",
              "--sensor": "sensor", "--uvc": "uvc", "--soak": "soak", "--dataset": "dataset"}
@@ -26,9 +30,9 @@ class _OldFlag(argparse.Action):
         raise ConfigError(f"bench: {option_string} is now {new!r}")
 
 
-def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
+def add_parser(sub: Subparsers) -> argparse.ArgumentParser:
     """Add ``rollcam bench`` with one subcommand per study of ``rollcam.benchmarks.studies``."""
-    from rollcam.benchmarks.studies import STUDIES
+    from .studies import STUDIES
 
     p = sub.add_parser("bench", help="speed-versus-error studies, one per call ('rollcam bench STUDY --help')",
                        description="Run one of rollcam's benchmark studies: " + ", ".join(STUDIES) + ".")
@@ -50,10 +54,10 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
 
 def run(args: argparse.Namespace) -> int:
     """Run the chosen study, print its report (or JSON), and with ``--check`` judge its targets."""
-    from rollcam.benchmarks.studies import STUDIES, TargetMissed, missed
+    from rollcam.host.commands.compile_notice import notify_if_cold
+    from rollcam.host.progress import Progress
 
-    from ..progress import Progress
-    from .compile_notice import notify_if_cold
+    from .studies import STUDIES, TargetMissed, missed
 
     study = STUDIES[args.study]
     notify_if_cold()
