@@ -2,15 +2,19 @@
 
 Every capture takes the next completed request (with ``queue``, the newest one already waiting), as
 picamera2's do, and each takes ``wait`` and ``signal_function`` with picamera2's meaning (``job.dispatch``).
-A capture on a camera that is not started is a RuntimeError at once (picamera2 would wait for ever).
+A capture on a camera that is not started waits for ``start()`` (a thread that captures may be started
+before the camera is), as picamera2's does.
 """
 
 from __future__ import annotations
 
 import contextlib
+import threading
 import time
 from collections.abc import Iterator
 from typing import Any
+
+from rollcam.common.lifecycle import Deadline
 
 from .job import Job, dispatch
 from .request import CompletedRequest
@@ -21,16 +25,30 @@ class CaptureMixin:
     ``capture_image``, ``capture_file``, ``drop_frames``, ``switch_mode*``, ``wait``."""
 
     _queue: Any
+    _state: threading.Condition  # notified when the camera starts, stops or closes
     started: bool
+    is_open: bool
 
     def _take(self, timeout_s: float | None, flush: Any = None) -> CompletedRequest:
-        if not self.started or self._queue is None:
-            raise RuntimeError("Camera is not running (start() it before capturing)")
+        deadline = Deadline(timeout_s)
+        queue = self._running_queue(deadline)
         accept = None
         if flush:
             after = time.monotonic_ns() if flush is True else int(flush)
-            accept = lambda r: r.metadata["SensorTimestamp"] >= after  # noqa: E731
-        return self._queue.take(timeout_s, accept=accept)
+            # picamera2's test: the frame started exposing (SensorTimestamp less ExposureTime) at or after it.
+            accept = lambda r: r.metadata["SensorTimestamp"] - 1000 * r.metadata["ExposureTime"] >= after  # noqa: E731
+        return queue.take(deadline.remaining(), accept=accept)
+
+    def _running_queue(self, deadline: Deadline) -> Any:
+        """The started camera's request queue, waiting for ``start()`` as picamera2's captures do."""
+        with self._state:
+            while not (self.started and self._queue is not None):
+                if not self.is_open:
+                    raise RuntimeError("Camera is closed")
+                if deadline.expired:
+                    raise TimeoutError("the camera was not started in time")
+                self._state.wait(deadline.remaining())
+            return self._queue
 
     def _with_request(self, use: Any, wait: Any, signal_function: Any) -> Any:
         def call(timeout_s: float | None) -> Any:

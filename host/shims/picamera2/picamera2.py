@@ -63,6 +63,7 @@ class Picamera2(ConfigMixin, CaptureMixin):
     def __init__(self, camera_num: int = 0, verbose_console: Any = None, tuning: Any = None,
                  allocator: Any = None) -> None:
         self.is_open, self.started, self._cam, self._engine, self._queue = False, False, None, None, None
+        self._state = threading.Condition()  # captures made before start() wait on it
         found = sources()
         if not isinstance(camera_num, int) or not 0 <= camera_num < len(found):
             raise IndexError(f"list index out of range (camera {camera_num!r} of {len(found)} emulated)")
@@ -177,7 +178,9 @@ class Picamera2(ConfigMixin, CaptureMixin):
         self._queue = RequestQueue(int(c["buffer_count"]), 1 if c["queue"] and c["buffer_count"] > 1 else 0)
         self._engine = Engine(self._cam, self._queue, self.controls.take, self._complete)
         self._engine.start()
-        self.started = True
+        with self._state:
+            self.started = True
+            self._state.notify_all()
 
     def stop(self) -> None:
         """Stop streaming (harmless when stopped)."""
@@ -195,7 +198,9 @@ class Picamera2(ConfigMixin, CaptureMixin):
         try:
             self.stop()
         finally:
-            self.is_open = False
+            with self._state:
+                self.is_open = False
+                self._state.notify_all()
             with _OPEN_LOCK:
                 if _OPEN.get(self.camera_idx) is self:
                     del _OPEN[self.camera_idx]

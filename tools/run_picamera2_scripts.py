@@ -1,0 +1,171 @@
+"""Run a folder of picamera2 scripts unchanged on rollcam's stand-in and report which pass (docs/picamera2.md).
+
+Usage, from the repository root: `python tools/run_picamera2_scripts.py FOLDER [FOLDER ...] [--timeout S]
+[--only NAME ...] [--json OUT]`. It fetches nothing: point it at a checkout of picamera2's `examples/` and
+`tests/` (or any scripts written for picamera2). Each script runs in a fresh scratch folder with only
+`rollcam.host.standin_env` (the stand-in first on PYTHONPATH, the cameras named in ROLLCAM_PICAMERA2), stdin
+closed and no display. A script is
+
+- `n/a` when it needs what the stand-in cannot give: a display (a Qt application, an OpenCV window, a preview
+  window), a Pi-only module or accelerator (Hailo, the IMX708 device helper), or a module this Python lacks;
+- `pass` when it exits 0, or when it is still running at the timeout without having printed a traceback and it
+  is written to run until stopped (a server, a `while True` loop);
+- `fail` otherwise, with the last line of its error output.
+"""
+
+from __future__ import annotations
+
+import argparse
+import ast
+import importlib.util
+import json
+import re
+import subprocess
+import sys
+import tempfile
+import time
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+from rollcam.host.standins import standin_env
+
+DISPLAY = re.compile(r"PyQt[56]|PySide[26]|QApplication|picamera2\.previews\.qt|cv2\.imshow|cv2\.namedWindow")
+"""What needs a person to look at a window. Preview windows (``Preview.QTGL``, ``show_preview=True``) are not
+here: the stand-in runs them as the NULL preview, so the script still runs."""
+
+PI_ONLY = {"picamera2.devices.hailo": "Hailo accelerator", "picamera2.devices.imx708": "the IMX708 device helper",
+           "pose_utils": "Hailo pose helpers", "ai_edge_litert": "TF Lite models stored outside git (LFS)"}
+"""Imports that need a Pi, an accelerator, or files the published repository does not carry."""
+
+FOREVER = re.compile(r"while True:|serve_forever\(|\.join\(\)\s*$", re.M)
+"""Scripts written to run until stopped."""
+
+SOURCES = {"imx500": ("imx500",), "imx708": ("imx708", "imx219"), "autofocus": ("imx708", "imx219")}
+"""Cameras for scripts whose name asks for a sensor (first match); others get two cameras (imx219, imx477)."""
+DEFAULT_SOURCES = ("imx219", "imx477")
+
+
+@dataclass
+class Result:
+    """One script's outcome."""
+
+    script: str
+    status: str  # pass, fail, n/a
+    reason: str
+    seconds: float
+
+
+def imports_of(text: str) -> set[str]:
+    """Every module a script imports (dotted names and their parents)."""
+    names: set[str] = set()
+    try:
+        tree = ast.parse(text)
+    except SyntaxError:
+        return names
+    for node in ast.walk(tree):
+        found = []
+        if isinstance(node, ast.Import):
+            found = [a.name for a in node.names]
+        elif isinstance(node, ast.ImportFrom) and node.module and not node.level:
+            found = [node.module] + [f"{node.module}.{a.name}" for a in node.names]
+        for name in found:
+            parts = name.split(".")
+            names.update(".".join(parts[:i]) for i in range(1, len(parts) + 1))
+    return names
+
+
+def not_applicable(path: Path, siblings: set[str]) -> str | None:
+    """Why the script cannot run on the stand-in, or None."""
+    text = path.read_text(errors="replace")
+    shown = DISPLAY.search(text)
+    if shown:
+        return f"needs a display ({shown.group(0)})"
+    mods = imports_of(text)
+    for mod, why in PI_ONLY.items():
+        if mod in mods:
+            return f"needs {why} ({mod})"
+    for mod in sorted(m for m in mods if "." not in m):
+        if mod in siblings or mod in ("picamera2", "libcamera"):
+            continue
+        if importlib.util.find_spec(mod) is None:
+            return f"needs module {mod!r}, not installed here"
+    return None
+
+
+def sources_for(path: Path) -> tuple[str, ...]:
+    """The cameras a script runs with."""
+    for key, sources in SOURCES.items():
+        if key in str(path):
+            return sources
+    return DEFAULT_SOURCES
+
+
+def run_one(path: Path, timeout_s: float) -> Result:
+    """Run one script in a scratch folder; its Result."""
+    siblings = {p.stem for p in path.parent.glob("*.py")}
+    name = str(path)
+    why = not_applicable(path, siblings)
+    if why:
+        return Result(name, "n/a", why, 0.0)
+    env = standin_env(sources_for(path))
+    env["PYTHONPATH"] = f"{env['PYTHONPATH']}:{path.parent}"
+    env.pop("DISPLAY", None)
+    env.pop("WAYLAND_DISPLAY", None)
+    start = time.monotonic()
+    with tempfile.TemporaryDirectory(prefix="picamera2-script-") as scratch:
+        proc = subprocess.Popen([sys.executable, str(path.resolve())], cwd=scratch, env=env,
+                                stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
+                                text=True, start_new_session=True)
+        try:
+            _, err = proc.communicate(timeout=timeout_s)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            _, err = proc.communicate()
+            seconds = time.monotonic() - start
+            forever = FOREVER.search(path.read_text(errors="replace"))
+            if forever and "Traceback" not in err:
+                return Result(name, "pass", f"still running after {timeout_s:.0f} s (runs until stopped)", seconds)
+            return Result(name, "fail", f"timed out after {timeout_s:.0f} s: {last_line(err)}", seconds)
+    seconds = time.monotonic() - start
+    if proc.returncode == 0:
+        return Result(name, "pass", "", seconds)
+    return Result(name, "fail", f"exit {proc.returncode}: {last_line(err)}", seconds)
+
+
+def last_line(err: str) -> str:
+    """The line of error output that says what went wrong."""
+    lines = [ln.strip() for ln in err.strip().splitlines() if ln.strip()]
+    return lines[-1][:300] if lines else "(no error output)"
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Run the scripts and print one line each, then the counts."""
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("folders", nargs="+", type=Path)
+    parser.add_argument("--timeout", type=float, default=60.0, help="seconds per script (default 60)")
+    parser.add_argument("--only", nargs="*", default=None, help="script names (stems) to run")
+    parser.add_argument("--json", type=Path, default=None, help="write the results here")
+    args = parser.parse_args(argv)
+    scripts = []
+    for folder in args.folders:
+        if not folder.is_dir():
+            parser.error(f"{folder} is not a folder")
+        scripts += sorted(folder.glob("*.py"))
+    if args.only:
+        scripts = [s for s in scripts if s.stem in args.only]
+    results = []
+    for path in scripts:
+        res = run_one(path, args.timeout)
+        results.append(res)
+        print(f"{res.status:5} {res.seconds:6.1f}s {res.script} {res.reason}", flush=True)
+    applicable = [r for r in results if r.status != "n/a"]
+    passed = [r for r in applicable if r.status == "pass"]
+    print(f"applicable {len(applicable)}, passed {len(passed)}, failed {len(applicable) - len(passed)}, "
+          f"not applicable {len(results) - len(applicable)}")
+    if args.json:
+        args.json.write_text(json.dumps([asdict(r) for r in results], indent=1))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
