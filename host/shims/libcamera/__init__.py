@@ -61,17 +61,39 @@ class Transform:
         return f"<libcamera.Transform '{'/'.join(flags) or 'identity'}'>"
 
 
+_COLOUR_SPACE_FIELDS: dict[str, tuple[str, str, str, str]] = {
+    "Sycc": ("Rec709", "Srgb", "Rec601", "Full"), "Smpte170m": ("Smpte170m", "Rec709", "Rec601", "Limited"),
+    "Rec709": ("Rec709", "Rec709", "Rec709", "Limited"), "Raw": ("Raw", "Linear", "Null", "Full"),
+}
+"""Each named colour space's primaries, transfer function, Y'CbCr encoding and range (libcamera's)."""
+
+
 class ColorSpace:
-    """A colour space by name (``Sycc``, ``Smpte170m``, ``Rec709``, ``Raw``); rollcam's ISP has one look."""
+    """A colour space: a name (``Sycc``, ``Smpte170m``, ``Rec709``, ``Raw``) and libcamera's four fields
+    (``primaries``, ``transferFunction``, ``ycbcrEncoding``, ``range``); rollcam's ISP has one look."""
+
+    Primaries = enum.IntEnum("Primaries", {"Raw": 0, "Smpte170m": 1, "Rec709": 2, "Rec2020": 3})
+    TransferFunction = enum.IntEnum("TransferFunction", {"Linear": 0, "Srgb": 1, "Rec709": 2})
+    YcbcrEncoding = enum.IntEnum("YcbcrEncoding", {"Null": 0, "Rec601": 1, "Rec709": 2, "Rec2020": 3})
+    Range = enum.IntEnum("Range", {"Full": 0, "Limited": 1})
 
     def __init__(self, name: str | ColorSpace = "Sycc") -> None:
         self.name = name.name if isinstance(name, ColorSpace) else str(name)
+        if isinstance(name, ColorSpace):
+            fields = (name.primaries, name.transferFunction, name.ycbcrEncoding, name.range)
+        else:
+            p, t, y, r = _COLOUR_SPACE_FIELDS.get(self.name, _COLOUR_SPACE_FIELDS["Sycc"])
+            fields = (self.Primaries[p], self.TransferFunction[t], self.YcbcrEncoding[y], self.Range[r])
+        self.primaries, self.transferFunction, self.ycbcrEncoding, self.range = fields
+
+    def _key(self) -> tuple[Any, ...]:
+        return (self.primaries, self.transferFunction, self.ycbcrEncoding, self.range)
 
     def __eq__(self, other: object) -> bool:
-        return isinstance(other, ColorSpace) and other.name == self.name
+        return isinstance(other, ColorSpace) and other._key() == self._key()
 
     def __hash__(self) -> int:
-        return hash(self.name)
+        return hash(self._key())
 
     def __repr__(self) -> str:
         return f"<libcamera.ColorSpace '{self.name}'>"

@@ -130,52 +130,87 @@ class CaptureMixin:
             return self.camera_config
         return dispatch(call, wait, signal_function)
 
-    def _switch_and(self, camera_config: Any, use: Any, wait: Any, signal_function: Any, back: bool = True) -> Any:
+    def _switch_and(self, camera_config: Any, use: Any, wait: Any, signal_function: Any, delay: int = 0,
+                    then: str = "back") -> Any:
+        """Switch to ``camera_config``, drop ``delay`` frames, ``use`` the next request, then switch back
+        (``then="back"``), stop (``"stop"``) or stay (``"stay"``)."""
         def call(timeout_s: float | None) -> Any:
             previous = self.camera_config
             self.switch_mode(camera_config)
             try:
+                for _ in range(int(delay)):
+                    self._take(timeout_s).release()
                 req = self._take(timeout_s)
                 try:
                     return use(req)
                 finally:
                     req.release()
             finally:
-                if back and previous:
+                if then == "stop":
+                    self.stop()
+                elif then == "back" and previous:
                     self.switch_mode(previous)
         return dispatch(call, wait, signal_function)
 
     def switch_mode_and_capture_array(self, camera_config: Any, name: str = "main", wait: Any = None,
                                       signal_function: Any = None, delay: int = 0) -> Any:
         """Switch mode, capture an array of stream ``name``, switch back."""
-        return self._switch_and(camera_config, lambda r: r.make_array(name), wait, signal_function)
+        return self._switch_and(camera_config, lambda r: r.make_array(name), wait, signal_function, delay)
+
+    def switch_mode_and_capture_buffers(self, camera_config: Any, names: list[str] | None = None,
+                                        wait: Any = None, signal_function: Any = None, delay: int = 0) -> Any:
+        """Switch mode, capture the buffers of ``names`` (default main) and the metadata, switch back."""
+        names = names or ["main"]
+        return self._switch_and(camera_config, lambda r: ([r.make_buffer(n) for n in names], r.get_metadata()),
+                                wait, signal_function, delay)
+
+    def switch_mode_and_capture_image(self, camera_config: Any, name: str = "main", wait: Any = None,
+                                      signal_function: Any = None, delay: int = 0) -> Any:
+        """Switch mode, capture stream ``name`` as a PIL image, switch back."""
+        return self._switch_and(camera_config, lambda r: r.make_image(name), wait, signal_function, delay)
 
     def switch_mode_and_capture_file(self, camera_config: Any, file_output: Any, name: str = "main",
                                      format: str | None = None, wait: Any = None,
                                      signal_function: Any = None, delay: int = 0, exif_data: Any = None) -> Any:
         """Switch mode, save stream ``name`` to a file, switch back; returns the frame's metadata."""
         def use(r: CompletedRequest) -> dict[str, Any]:
-            r.save(name, file_output, format=format)
+            r.save(name, file_output, format=format, exif_data=exif_data)
             return r.get_metadata()
-        return self._switch_and(camera_config, use, wait, signal_function)
+        return self._switch_and(camera_config, use, wait, signal_function, delay)
 
     def switch_mode_and_capture_request(self, camera_config: Any, wait: Any = None, signal_function: Any = None,
                                         delay: int = 0) -> Any:
         """Switch mode and capture a request (its arrays stay valid after the switch back)."""
-        def use(r: CompletedRequest) -> CompletedRequest:
-            r.acquire()
-            return r
-        return self._switch_and(camera_config, use, wait, signal_function)
+        return self._switch_and(camera_config, _keep, wait, signal_function, delay)
+
+    def switch_mode_capture_request_and_stop(self, camera_config: Any, wait: Any = None,
+                                             signal_function: Any = None) -> Any:
+        """Switch mode, capture a request and stop the camera (the request stays valid until released)."""
+        return self._switch_and(camera_config, _keep, wait, signal_function, then="stop")
 
     def start_and_capture_file(self, name: str = "image.jpg", delay: float = 1, preview_mode: Any = "preview",
-                               capture_mode: Any = "still", show_preview: bool = False) -> None:
+                               capture_mode: Any = "still", show_preview: bool = False,
+                               exif_data: Any = None) -> None:
         """Start in ``preview_mode``, wait ``delay`` seconds, save a still in ``capture_mode``, stop."""
+        self.start_and_capture_files(name, delay, preview_mode, capture_mode, 1, 0, show_preview, exif_data)
+
+    def start_and_capture_files(self, name: str = "image{:03d}.jpg", initial_delay: float = 1,
+                                preview_mode: Any = "preview", capture_mode: Any = "still", num_files: int = 1,
+                                delay: float = 1, show_preview: bool = False, exif_data: Any = None) -> None:
+        """Start in ``preview_mode``, wait ``initial_delay`` s, then save ``num_files`` stills in
+        ``capture_mode`` (``name`` formatted with the count), ``delay`` s apart, and stop. With a delay the
+        camera goes back to the preview mode between stills; without one it stays in the still mode."""
+        if self.started:
+            self.stop()
         self.configure(preview_mode)
         self.start(show_preview=show_preview)
-        time.sleep(delay)
-        self.switch_mode_and_capture_file(capture_mode, name)
+        time.sleep(initial_delay)
+        for i in range(int(num_files)):
+            if i and delay:
+                time.sleep(delay)
+            self._switch_and(capture_mode, lambda r, i=i: r.save("main", name.format(i), exif_data=exif_data),
+                             True, None, then="back" if delay else "stay")
         self.stop()
-
 
     def start_recording(self, *args: Any, **kwargs: Any) -> None:
         """Not emulated (no encoders): RuntimeError saying so."""
@@ -183,3 +218,9 @@ class CaptureMixin:
                            "(capture frames with capture_array/capture_request and encode them yourself)")
 
     start_encoder = start_recording
+
+
+def _keep(request: CompletedRequest) -> CompletedRequest:
+    """Take a reference, so that the request outlives the capture that made it."""
+    request.acquire()
+    return request

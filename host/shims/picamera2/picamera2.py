@@ -11,8 +11,12 @@ from __future__ import annotations
 import atexit
 import enum
 import logging
+import sys
 import threading
+from types import SimpleNamespace
 from typing import Any
+
+import libcamera
 
 from ._camera import PiCamera, sources
 from ._capture import CaptureMixin
@@ -20,7 +24,9 @@ from ._configs import ConfigMixin
 from ._engine import Engine, RequestQueue
 from ._isp import aspect_crop, crop_pixels, isp_picture, stream_arrays
 from .configuration import CameraConfiguration
+from .allocators import DmaAllocator
 from .controls import Controls
+from .platform import Platform
 from .request import CompletedRequest
 
 _log = logging.getLogger("picamera2")
@@ -47,6 +53,20 @@ class Preview(enum.Enum):
 
 class Picamera2(ConfigMixin, CaptureMixin):
     """One emulated camera, opened for this process until ``close()``."""
+
+    DEBUG, INFO, WARNING, ERROR, CRITICAL = (logging.DEBUG, logging.INFO, logging.WARNING, logging.ERROR,
+                                             logging.CRITICAL)
+    platform = Platform.VC4
+
+    @staticmethod
+    def set_logging(level: int = logging.WARNING, output: Any = sys.stderr, msg: str | None = None) -> None:
+        """Send the ``picamera2`` logger's messages of ``level`` and above to ``output`` (picamera2's helper for
+        standalone scripts)."""
+        logger = logging.getLogger("picamera2")
+        handler = logging.StreamHandler(output)
+        handler.setFormatter(logging.Formatter(msg or "%(name)s %(levelname)s: %(message)s"))
+        logger.setLevel(level)
+        logger.handlers = [handler]
 
     @staticmethod
     def global_camera_info() -> list[dict[str, Any]]:
@@ -82,6 +102,8 @@ class Picamera2(ConfigMixin, CaptureMixin):
         self.camera_config: dict[str, Any] = {}
         self.options: dict[str, Any] = {}
         self.pre_callback = self.post_callback = None
+        self.overlay = None
+        self.allocator = allocator if allocator is not None else DmaAllocator()
         self.controls = Controls(self)
         self._lock = threading.RLock()
         native = max(self._cam.modes, key=lambda m: (m.size[0] * m.size[1], m.bit_depth))
@@ -133,6 +155,11 @@ class Picamera2(ConfigMixin, CaptureMixin):
         return [self._cam.mode_info(m) for m in self._cam.modes]
 
     @property
+    def camera(self) -> Any:
+        """The camera behind this object (libcamera's ``Camera`` on a Pi; here the emulated one)."""
+        return self._cam
+
+    @property
     def rollcam_device(self) -> Any:
         """The ``rollcam.firmware.FirmwareCamera`` behind this camera (rollcam's extra): its controls and spec
         are what every other door of the device reads."""
@@ -162,6 +189,7 @@ class Picamera2(ConfigMixin, CaptureMixin):
         config = self._resolve(given)
         self._cam.apply(Controls(self, config.get("controls") or {}).make_dict())
         self.camera_config = config
+        self.allocator.allocate(config)
         if isinstance(given, str) and given in ("preview", "still", "video"):
             getattr(self, f"{given}_configuration").update(config)
         self.controls = Controls(self)
@@ -216,6 +244,26 @@ class Picamera2(ConfigMixin, CaptureMixin):
 
     def stop_preview(self) -> None:
         """Nothing to stop (no preview window)."""
+
+    def set_overlay(self, overlay: Any) -> None:
+        """An overlay for the preview: None, or a 4-channel (RGBA) array, checked as picamera2 does and kept
+        in ``overlay``; with no preview window it is drawn nowhere."""
+        if overlay is not None and (getattr(overlay, "ndim", 0) != 3 or overlay.shape[2] != 4):
+            raise RuntimeError("Overlay must be a 4-channel image")
+        self.overlay = overlay
+
+    @property
+    def stream_map(self) -> dict[str, Any]:
+        """Each configured stream as libcamera describes it: ``stream_map["main"].configuration.size``,
+        ``.stride``, ``.pixel_format``."""
+        out = {}
+        for name in ("main", "lores", "raw"):
+            c = self.camera_config.get(name) if self.camera_config else None
+            if c is not None:
+                conf = SimpleNamespace(size=libcamera.Size(*c["size"]), stride=c.get("stride"),
+                                       pixel_format=str(c["format"]), frame_size=c.get("framesize"))
+                out[name] = SimpleNamespace(name=name, configuration=conf)
+        return out
 
     # ------------------------------------------------------------------------------------ frames
     def _complete(self, plan: Any, frame: Any) -> CompletedRequest | None:

@@ -11,11 +11,13 @@ from __future__ import annotations
 
 import io
 import os
+import struct
 import threading
 from collections.abc import Callable
 from typing import Any
 
 import numpy as np
+from rollcam.common.errors import require
 
 from . import formats
 from ._isp import RGB_LAYOUTS, YUV_CODECS
@@ -40,6 +42,11 @@ class CompletedRequest:
 
     def __enter__(self) -> CompletedRequest:
         return self
+
+    @property
+    def stream_map(self) -> dict[str, Any]:
+        """The camera's streams as libcamera describes them (``stream_map["main"].configuration.size``)."""
+        return self.picam2.stream_map
 
     def __exit__(self, *exc: object) -> None:
         self.release()
@@ -104,7 +111,11 @@ class CompletedRequest:
             raise RuntimeError("rollcam's picamera2 stand-in cannot save raw streams (DNG is not supported)")
         ext = _format_of(file_output, format)
         quality = int(getattr(self.picam2, "options", {}).get("quality", 90))
-        write_image(file_output, to_bgr(self._array(name), fmt), ext, quality)
+        exif = None
+        if exif_data and ext in ("jpg", "jpeg"):
+            piexif = require("piexif", extra="picamera2", feature="picamera2's exif_data")
+            exif = piexif.dump(exif_data)
+        write_image(file_output, to_bgr(self._array(name), fmt), ext, quality, exif)
 
     def save_dng(self, file_output: Any, name: str = "raw") -> None:
         """Not supported: DNG needs pidng; the raw stream's array is available with ``make_array('raw')``."""
@@ -150,15 +161,18 @@ def _format_of(file_output: Any, format: str | None) -> str:
     raise RuntimeError("Cannot determine format to save")
 
 
-def write_image(file_output: Any, bgr: np.ndarray, ext: str, quality: int = 90) -> None:
-    """Encode a BGR picture (``ext``: jpg/jpeg through the codec table's one JPEG encoder; png, bmp, ... with
-    OpenCV) to a path (atomically) or a writable file object."""
+def write_image(file_output: Any, bgr: np.ndarray, ext: str, quality: int = 90, exif: bytes | None = None) -> None:
+    """Encode a BGR picture (``ext``: jpg/jpeg through the codec table's one JPEG encoder, with an EXIF
+    block ``exif`` (``Exif\\0\\0`` and a TIFF structure, as ``piexif.dump`` makes) when given; png, bmp, ...
+    with OpenCV) to a path (atomically) or a writable file object."""
     import cv2
     from rollcam.common.files import write_atomic
     from rollcam.sim.codecs import codec
 
     if ext in ("jpg", "jpeg"):
         data = codec("MJPG").encode(bgr, quality=quality).tobytes()
+        if exif:  # an APP1 segment right after the start-of-image marker
+            data = data[:2] + b"\xff\xe1" + struct.pack(">H", len(exif) + 2) + exif + data[2:]
     else:
         ok, buf = cv2.imencode(f".{ext}", bgr)
         if not ok:

@@ -1,0 +1,92 @@
+"""The picamera2 calls that published picamera2 scripts use beyond capturing: logging, overlays, platform,
+allocators, stream descriptions, colour spaces, the switch-mode captures and EXIF (docs/picamera2.md)."""
+
+from __future__ import annotations
+
+import io
+import logging
+
+import numpy as np
+import pytest
+from PIL import Image
+
+SMALL = {"size": (320, 240)}
+
+
+def test_logging_overlay_platform_and_module_names(rollcam_picamera2):
+    picamera2 = rollcam_picamera2()
+    from picamera2 import Picamera2, Platform, TimeoutError, get_platform, libcamera  # noqa: A004
+
+    out = io.StringIO()
+    Picamera2.set_logging(Picamera2.INFO, output=out, msg="%(levelname)s %(message)s")
+    logging.getLogger("picamera2").info("hello")
+    assert out.getvalue() == "INFO hello\n"
+    Picamera2.set_logging()
+    assert get_platform() is Platform.VC4 and Picamera2.platform is Platform.VC4
+    assert libcamera.Transform is __import__("libcamera").Transform
+    with pytest.raises(TimeoutError):  # what a capture with wait=<seconds> raises when it runs out
+        picamera2.Job(lambda: __import__("time").sleep(1)).get_result(0.01)
+    with Picamera2() as cam:
+        cam.start_preview(picamera2.Preview.NULL)
+        cam.set_overlay(np.zeros((10, 10, 4), np.uint8))
+        cam.set_overlay(None)
+        with pytest.raises(RuntimeError, match="4-channel"):
+            cam.set_overlay(np.zeros((10, 10, 3), np.uint8))
+
+
+def test_colour_space_fields(rollcam_picamera2):
+    rollcam_picamera2()
+    from libcamera import ColorSpace
+
+    cs = ColorSpace(ColorSpace.Sycc())
+    assert cs == ColorSpace.Sycc() and cs.ycbcrEncoding == ColorSpace.YcbcrEncoding.Rec601
+    cs.ycbcrEncoding, cs.range = ColorSpace.YcbcrEncoding.Null, ColorSpace.Range.Full
+    assert cs != ColorSpace.Sycc()
+    assert ColorSpace.Rec709().range == ColorSpace.Range.Limited
+
+
+def test_allocators_are_accepted(rollcam_picamera2):
+    picamera2 = rollcam_picamera2()
+    from picamera2.allocators import DmaAllocator, LibcameraAllocator, PersistentAllocator
+
+    with picamera2.Picamera2(allocator=PersistentAllocator()) as cam:
+        cam.configure(cam.create_preview_configuration(main=SMALL, use_case="small"))
+        assert set(cam.allocator.allocated) == {"preview"}
+        cam.allocator.deallocate("preview")
+        cam.allocator = LibcameraAllocator(cam.camera)
+        cam.configure("still")
+        assert isinstance(DmaAllocator(), picamera2.allocators.Allocator)
+
+
+def test_switch_mode_captures_and_stream_map(rollcam_picamera2, tmp_path):
+    picamera2 = rollcam_picamera2()
+    with picamera2.Picamera2() as cam:
+        cam.start(cam.create_preview_configuration(main=SMALL, controls={"FrameRate": 30}))
+        other = cam.create_still_configuration(main={"size": (640, 480)}, raw={})
+        buffers, md = cam.switch_mode_and_capture_buffers(other, ["main", "raw"], delay=1)
+        assert buffers[0].shape == (640 * 480 * 3,) and buffers[1].ndim == 1 and "SensorTimestamp" in md
+        assert cam.camera_configuration()["main"]["size"] == (320, 240)  # switched back
+        image = cam.switch_mode_and_capture_image(other)
+        assert isinstance(image, Image.Image) and image.size == (640, 480)
+        assert cam.stream_map["main"].configuration.size == (320, 240)
+        request = cam.switch_mode_capture_request_and_stop(other)
+        assert not cam.started and request.make_array("main").shape == (480, 640, 3)
+        assert request.stream_map["main"].configuration.size == (640, 480)
+        request.release()
+        name = str(tmp_path / "still{:d}.jpg")
+        cam.start_and_capture_files(name, initial_delay=0, preview_mode=cam.create_preview_configuration(SMALL),
+                                    capture_mode=other, num_files=2, delay=0.1)
+        assert not cam.started
+        assert [Image.open(name.format(i)).size for i in range(2)] == [(640, 480)] * 2
+
+
+def test_capture_file_writes_exif_data(rollcam_picamera2):
+    piexif = pytest.importorskip("piexif")
+    picamera2 = rollcam_picamera2()
+    with picamera2.Picamera2() as cam:
+        cam.start(cam.create_preview_configuration(main=SMALL))
+        mem = io.BytesIO()
+        cam.capture_file(mem, format="jpeg", exif_data={"0th": {piexif.ImageIFD.Model: "Rolling"}})
+    image = Image.open(io.BytesIO(mem.getvalue()))
+    assert image.size == (320, 240)
+    assert piexif.load(image.info["exif"])["0th"][piexif.ImageIFD.Model] == b"Rolling"
