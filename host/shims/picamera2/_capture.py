@@ -212,13 +212,6 @@ class CaptureMixin:
                              True, None, then="back" if delay else "stay")
         self.stop()
 
-    def start_recording(self, *args: Any, **kwargs: Any) -> None:
-        """Not emulated (no encoders): RuntimeError saying so."""
-        raise RuntimeError("rollcam's picamera2 stand-in has no encoders: recording is not emulated "
-                           "(capture frames with capture_array/capture_request and encode them yourself)")
-
-    start_encoder = start_recording
-
 
 def _keep(request: CompletedRequest) -> CompletedRequest:
     """Take a reference, so that the request outlives the capture that made it."""

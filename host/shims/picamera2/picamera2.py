@@ -23,8 +23,9 @@ from ._capture import CaptureMixin
 from ._configs import ConfigMixin
 from ._engine import Engine, RequestQueue
 from ._isp import aspect_crop, crop_pixels, isp_picture, stream_arrays
-from .configuration import CameraConfiguration
+from ._record import RecordMixin
 from .allocators import DmaAllocator
+from .configuration import CameraConfiguration
 from .controls import Controls
 from .platform import Platform
 from .request import CompletedRequest
@@ -51,7 +52,7 @@ class Preview(enum.Enum):
     QTGL = 3
 
 
-class Picamera2(ConfigMixin, CaptureMixin):
+class Picamera2(ConfigMixin, CaptureMixin, RecordMixin):
     """One emulated camera, opened for this process until ``close()``."""
 
     DEBUG, INFO, WARNING, ERROR, CRITICAL = (logging.DEBUG, logging.INFO, logging.WARNING, logging.ERROR,
@@ -102,6 +103,7 @@ class Picamera2(ConfigMixin, CaptureMixin):
         self.camera_config: dict[str, Any] = {}
         self.options: dict[str, Any] = {}
         self.pre_callback = self.post_callback = None
+        self._init_recording()
         self.overlay = None
         self.allocator = allocator if allocator is not None else DmaAllocator()
         self.controls = Controls(self)
@@ -288,4 +290,5 @@ class Picamera2(ConfigMixin, CaptureMixin):
         for hook in (self.pre_callback, self.post_callback):
             if hook is not None:
                 hook(req)
+        self._encode(req)
         return req

@@ -1,4 +1,8 @@
-"""picamera2's outputs are not part of rollcam's stand-in: importing them says so (docs/picamera2.md)."""
+"""picamera2's outputs: where encoders send frames (``FileOutput``, ``FfmpegOutput``, ``CircularOutput``)."""
 
-raise ImportError("rollcam's picamera2 stand-in has no outputs (FileOutput, FfmpegOutput, CircularOutput: "
-                  "recording is not emulated); see rollcam's docs/picamera2.md")
+from .circularoutput import CircularOutput
+from .ffmpegoutput import FfmpegOutput
+from .fileoutput import FileOutput
+from .output import Output
+
+__all__ = ["CircularOutput", "FfmpegOutput", "FileOutput", "Output"]
