@@ -237,12 +237,6 @@ def test_standins_ship_as_package_data():
     assert env["ROLLCAM_PICAMERA2"] == "emu:imx477?scene=flat"
 
 
-def test_recording_says_it_is_not_emulated(rollcam_picamera2):
-    picamera2 = rollcam_picamera2()
-    with picamera2.Picamera2() as cam, pytest.raises(RuntimeError, match="recording is not emulated"):
-        cam.start_recording(object(), "video.h264")
-
-
 def test_a_bad_control_value_is_logged_and_the_frames_go_on(rollcam_picamera2, caplog):
     picamera2 = rollcam_picamera2()
     with picamera2.Picamera2() as cam:

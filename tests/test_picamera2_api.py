@@ -15,7 +15,7 @@ SMALL = {"size": (320, 240)}
 
 def test_logging_overlay_platform_and_module_names(rollcam_picamera2):
     picamera2 = rollcam_picamera2()
-    from picamera2 import Picamera2, Platform, TimeoutError, get_platform, libcamera  # noqa: A004
+    from picamera2 import Picamera2, Platform, TimeoutError, get_platform, libcamera
 
     out = io.StringIO()
     Picamera2.set_logging(Picamera2.INFO, output=out, msg="%(levelname)s %(message)s")
