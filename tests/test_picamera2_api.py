@@ -90,3 +90,31 @@ def test_capture_file_writes_exif_data(rollcam_picamera2):
     image = Image.open(io.BytesIO(mem.getvalue()))
     assert image.size == (320, 240)
     assert piexif.load(image.info["exif"])["0th"][piexif.ImageIFD.Model] == b"Rolling"
+
+
+def test_dng_files_develop_in_libraw(rollcam_picamera2, tmp_path):
+    rawpy = pytest.importorskip("rawpy")
+    pytest.importorskip("pidng")
+    picamera2 = rollcam_picamera2("emu:imx219?scene=flat&level=0.4")
+    with picamera2.Picamera2() as cam:
+        cam.start(cam.create_preview_configuration(main=SMALL, raw={"size": (640, 480)}))
+        with cam.captured_request() as request:
+            raw = request.make_array("raw")
+            request.save_dng(str(tmp_path / "a.dng"))
+            metadata = request.get_metadata()
+        mem = io.BytesIO()
+        cam.capture_file(mem, name="raw")
+        buffers, md = cam.capture_buffers(["raw"])
+        cam.helpers.save_dng(buffers[0], md, cam.camera_config["raw"], str(tmp_path / "b.dng"))
+    assert raw.shape == (480, 800)  # SRGGB10_CSI2P: 5 bytes per 4 samples
+    samples = raw.astype(np.uint16).reshape(480, 160, 5)
+    expected = (samples[..., :4] << 2) | ((samples[..., 4:5] >> (2 * np.arange(4))) & 3)
+    for source in (str(tmp_path / "a.dng"), io.BytesIO(mem.getvalue()), str(tmp_path / "b.dng")):
+        with rawpy.imread(source) as dng:
+            assert dng.raw_image.shape == (480, 640) and dng.raw_pattern.tolist() == [[0, 1], [3, 2]]  # RGGB
+            assert dng.white_level == 1023 and dng.black_level_per_channel == [64] * 4
+            rgb = dng.postprocess(use_camera_wb=True, no_auto_bright=True)
+            assert rgb.shape == (480, 640, 3) and 10 < rgb.mean() < 245
+            if source == str(tmp_path / "a.dng"):
+                assert np.array_equal(dng.raw_image, expected.reshape(480, 640))  # the samples, bit for bit
+    assert metadata["SensorBlackLevels"] == (4096,) * 4

@@ -22,6 +22,7 @@ from ._camera import PiCamera, sources
 from ._capture import CaptureMixin
 from ._configs import ConfigMixin
 from ._engine import Engine, RequestQueue
+from ._helpers import Helpers
 from ._isp import aspect_crop, crop_pixels, isp_picture, stream_arrays
 from ._record import RecordMixin
 from .allocators import DmaAllocator
@@ -104,6 +105,7 @@ class Picamera2(ConfigMixin, CaptureMixin, RecordMixin):
         self.options: dict[str, Any] = {}
         self.pre_callback = self.post_callback = None
         self._init_recording()
+        self.helpers = Helpers(self)
         self.overlay = None
         self.allocator = allocator if allocator is not None else DmaAllocator()
         self.controls = Controls(self)

@@ -20,6 +20,7 @@ import numpy as np
 from rollcam.common.errors import require
 
 from . import formats
+from ._dng import write_dng
 from ._isp import RGB_LAYOUTS, YUV_CODECS
 
 
@@ -108,8 +109,9 @@ class CompletedRequest:
         if fmt is None:
             raise RuntimeError(f"Stream {name!r} is not defined")
         if formats.is_raw(fmt):
-            raise RuntimeError("rollcam's picamera2 stand-in cannot save raw streams (DNG is not supported)")
-        ext = _format_of(file_output, format)
+            write_dng(self._array(name), self.config[name], self.metadata, file_output)
+            return
+        ext = image_format(file_output, format)
         quality = int(getattr(self.picam2, "options", {}).get("quality", 90))
         exif = None
         if exif_data and ext in ("jpg", "jpeg"):
@@ -118,8 +120,10 @@ class CompletedRequest:
         write_image(file_output, to_bgr(self._array(name), fmt), ext, quality, exif)
 
     def save_dng(self, file_output: Any, name: str = "raw") -> None:
-        """Not supported: DNG needs pidng; the raw stream's array is available with ``make_array('raw')``."""
-        raise RuntimeError("rollcam's picamera2 stand-in cannot save DNG files; use make_array('raw')")
+        """Save the raw stream as a DNG (pidng) to a path or a file object."""
+        if name not in self.arrays:
+            raise RuntimeError(f"Stream {name!r} is not defined")
+        write_dng(self._array(name), self.config[name], self.metadata, file_output)
 
 
 class MappedArray:
@@ -153,7 +157,8 @@ def to_bgr(array: np.ndarray, fmt: str) -> np.ndarray:
     raise RuntimeError(f"Stream format {fmt} cannot be saved as an image")
 
 
-def _format_of(file_output: Any, format: str | None) -> str:
+def image_format(file_output: Any, format: str | None) -> str:
+    """The file format to write: ``format``, else the path's extension (lower case, no dot)."""
     if isinstance(format, str):
         return format.lower().lstrip(".")
     if isinstance(file_output, (str, os.PathLike)):
