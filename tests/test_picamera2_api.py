@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import io
 import logging
+import os
 
 import numpy as np
 import pytest
@@ -118,3 +119,34 @@ def test_dng_files_develop_in_libraw(rollcam_picamera2, tmp_path):
             if source == str(tmp_path / "a.dng"):
                 assert np.array_equal(dng.raw_image, expected.reshape(480, 640))  # the samples, bit for bit
     assert metadata["SensorBlackLevels"] == (4096,) * 4
+
+
+def _remote_run(request, scale=1):
+    from picamera2 import RemoteMappedArray  # in the child: the stand-in the parent imported
+
+    with RemoteMappedArray(request, "main") as m:
+        mean = float(m.array[..., :3].mean())
+    return os.getpid(), request.make_array("main").shape, request.get_metadata()["RollcamSequence"], mean * scale
+
+
+def test_requests_go_to_other_processes(rollcam_picamera2, tmp_path):
+    picamera2 = rollcam_picamera2()
+    from picamera2 import Pool, Process
+
+    with picamera2.Picamera2() as cam:
+        cam.start(cam.create_preview_configuration(main=SMALL, buffer_count=6))
+        with Pool(_remote_run, 2, cam) as pool:
+            futures, seqs = [], []
+            for _ in range(4):
+                with cam.captured_request() as request:
+                    futures.append(pool.send(request, scale=2))
+                    seqs.append(request.get_metadata()["RollcamSequence"])
+        results = [f.result(30) for f in futures]
+        assert len({r[0] for r in results}) == 2  # both processes got requests
+        assert os.getpid() not in {r[0] for r in results}
+        assert [r[2] for r in results] == seqs and all(tuple(r[1]) == (240, 320, 4) and r[3] > 0 for r in results)
+        process = Process(lambda request: request.save(str(tmp_path / "child.png")) or "saved", cam)
+        with cam.captured_request() as request:
+            future = process.send(request)
+        assert future.result(30) == "saved" and Image.open(tmp_path / "child.png").size == (320, 240)
+        process.close()

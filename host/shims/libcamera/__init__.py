@@ -68,14 +68,19 @@ _COLOUR_SPACE_FIELDS: dict[str, tuple[str, str, str, str]] = {
 """Each named colour space's primaries, transfer function, Y'CbCr encoding and range (libcamera's)."""
 
 
+def _member_enum(name: str, members: dict[str, int]) -> type[enum.IntEnum]:
+    """An enum nested in ColorSpace, named so that pickle finds it (requests go to other processes)."""
+    return enum.IntEnum(name, members, module=__name__, qualname=f"ColorSpace.{name}")
+
+
 class ColorSpace:
     """A colour space: a name (``Sycc``, ``Smpte170m``, ``Rec709``, ``Raw``) and libcamera's four fields
     (``primaries``, ``transferFunction``, ``ycbcrEncoding``, ``range``); rollcam's ISP has one look."""
 
-    Primaries = enum.IntEnum("Primaries", {"Raw": 0, "Smpte170m": 1, "Rec709": 2, "Rec2020": 3})
-    TransferFunction = enum.IntEnum("TransferFunction", {"Linear": 0, "Srgb": 1, "Rec709": 2})
-    YcbcrEncoding = enum.IntEnum("YcbcrEncoding", {"Null": 0, "Rec601": 1, "Rec709": 2, "Rec2020": 3})
-    Range = enum.IntEnum("Range", {"Full": 0, "Limited": 1})
+    Primaries = _member_enum("Primaries", {"Raw": 0, "Smpte170m": 1, "Rec709": 2, "Rec2020": 3})
+    TransferFunction = _member_enum("TransferFunction", {"Linear": 0, "Srgb": 1, "Rec709": 2})
+    YcbcrEncoding = _member_enum("YcbcrEncoding", {"Null": 0, "Rec601": 1, "Rec709": 2, "Rec2020": 3})
+    Range = _member_enum("Range", {"Full": 0, "Limited": 1})
 
     def __init__(self, name: str | ColorSpace = "Sycc") -> None:
         self.name = name.name if isinstance(name, ColorSpace) else str(name)

@@ -17,6 +17,7 @@ from .job import CancelledError, Job
 from .metadata import Metadata
 from .picamera2 import Picamera2, Preview
 from .platform import Platform, get_platform
+from .remote import Pool, Process, RemoteMappedArray, RemoteRequest
 from .request import CompletedRequest, MappedArray
 from .sensor_format import SensorFormat
 
@@ -24,5 +25,6 @@ ROLLCAM_STANDIN = True
 """Marks this picamera2 as rollcam's stand-in (scripts and tests can tell it from the real one)."""
 
 __all__ = ["CameraConfiguration", "CancelledError", "CompletedRequest", "Controls", "Job", "MappedArray",
-           "Metadata", "Picamera2", "Platform", "Preview", "SensorConfiguration", "SensorFormat",
+           "Metadata", "Picamera2", "Platform", "Pool", "Preview", "Process", "RemoteMappedArray",
+           "RemoteRequest", "SensorConfiguration", "SensorFormat",
            "StreamConfiguration", "TimeoutError", "formats", "get_platform", "libcamera"]
