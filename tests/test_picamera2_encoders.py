@@ -127,3 +127,25 @@ def test_the_null_encoder_passes_raw_frames_and_start_and_record_video(rollcam_p
         assert not cam.started
     stream, packets = probe_packets(tmp_path / "v.mp4")
     assert stream["codec_name"] == "h264" and len(packets) > 0
+
+
+def test_circular_output2_into_a_pyav_output(rollcam_picamera2, tmp_path):
+    picamera2 = rollcam_picamera2()
+    from picamera2.encoders import H264Encoder
+    from picamera2.outputs import CircularOutput2, PyavOutput
+
+    with picamera2.Picamera2() as cam:
+        cam.configure(cam.create_video_configuration(main=SMALL, controls={"FrameRate": 20}))
+        ring = CircularOutput2(buffer_duration_ms=500)
+        stamps = record(picamera2, cam, H264Encoder(iperiod=4), ring, seconds=0.1)  # nothing opened: dropped
+        cam.start_recording(H264Encoder(iperiod=4), ring)
+        time.sleep(1)
+        ring.open_output(PyavOutput(str(tmp_path / "ring.mp4")))
+        time.sleep(0.5)
+        ring.close_output()
+        cam.stop_recording()
+    stream, packets = probe_packets(tmp_path / "ring.mp4")
+    assert stream["codec_name"] == "h264" and len(packets) >= 2 and stamps is not None
+    assert float(packets[0]["pts_time"]) == 0 and "K" in packets[0]["flags"]  # from the ring's oldest keyframe
+    times = [float(p["pts_time"]) for p in packets]
+    assert times == sorted(times) and len(set(times)) == len(times)

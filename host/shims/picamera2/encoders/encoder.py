@@ -64,9 +64,9 @@ class Encoder:
         self.width, self.height = value
 
     @property
-    def output(self) -> list[Output]:
-        """Where frames go."""
-        return self._output
+    def output(self) -> Any:
+        """Where frames go: the Output, or the list of them when there are several (as picamera2's)."""
+        return self._output[0] if len(self._output) == 1 else self._output
 
     @output.setter
     def output(self, value: Any) -> None:

@@ -1,8 +1,10 @@
-"""picamera2's outputs: where encoders send frames (``FileOutput``, ``FfmpegOutput``, ``CircularOutput``)."""
+"""picamera2's outputs: where encoders send frames (``FileOutput``, ``FfmpegOutput``, ``PyavOutput``,
+``CircularOutput``, ``CircularOutput2``)."""
 
 from .circularoutput import CircularOutput
-from .ffmpegoutput import FfmpegOutput
+from .circularoutput2 import CircularOutput2
+from .ffmpegoutput import FfmpegOutput, PyavOutput
 from .fileoutput import FileOutput
 from .output import Output
 
-__all__ = ["CircularOutput", "FfmpegOutput", "FileOutput", "Output"]
+__all__ = ["CircularOutput", "CircularOutput2", "FfmpegOutput", "FileOutput", "Output", "PyavOutput"]

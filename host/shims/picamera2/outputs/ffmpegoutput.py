@@ -99,3 +99,15 @@ class FfmpegOutput(Output):
                 raise RuntimeError(f"ffmpeg for {self.output_filename!r} stopped taking frames: {exc}") from exc
             self.error_callback(exc)
         self.outputtimestamp(timestamp)
+
+
+class PyavOutput(FfmpegOutput):
+    """picamera2's PyAV output (a file or URL in any container, ``format`` naming it when the name does not),
+    here muxed by ffmpeg the same way as ``FfmpegOutput``."""
+
+    def __init__(self, output_name: str, format: str | None = None, pts: Any = None,
+                 options: dict[str, str] | None = None) -> None:
+        args = ["-f", format] if format else []
+        for key, value in (options or {}).items():
+            args += [f"-{key}", str(value)]
+        super().__init__(shlex.join([*args, output_name]), pts=pts)
