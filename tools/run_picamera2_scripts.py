@@ -6,8 +6,9 @@ Usage, from the repository root: `python tools/run_picamera2_scripts.py FOLDER [
 `rollcam.host.standin_env` (the stand-in first on PYTHONPATH, the cameras named in ROLLCAM_PICAMERA2), stdin
 closed and no display. A script is
 
-- `n/a` when it needs what the stand-in cannot give: a display (a Qt application, an OpenCV window, a preview
-  window), a Pi-only module or accelerator (Hailo, the IMX708 device helper), or a module this Python lacks;
+- `n/a` when it needs what the stand-in cannot give: a display (a Qt application, an OpenCV window), a
+  Pi-only module or accelerator (Hailo, the IMX708 device helper), a network peer (it waits for a client to
+  connect, or sends to an address to fill in), or a module this Python lacks;
 - `pass` when it exits 0, or when it is still running at the timeout without having printed a traceback and it
   is written to run until stopped (a server, a `while True` loop);
 - `fail` otherwise, with the last line of its error output.
@@ -37,10 +38,36 @@ PI_ONLY = {"picamera2.devices.hailo": "Hailo accelerator", "picamera2.devices.im
            "pose_utils": "Hailo pose helpers", "ai_edge_litert": "TF Lite models stored outside git (LFS)"}
 """Imports that need a Pi, an accelerator, or files the published repository does not carry."""
 
-FOREVER = re.compile(r"while True:|serve_forever\(|\.join\(\)\s*$", re.M)
-"""Scripts written to run until stopped."""
+def runs_until_stopped(text: str) -> bool:
+    """True for a script written to run until stopped: a server (``serve_forever``), or a ``while True`` loop
+    of the script itself (not one inside a function, which may return)."""
+    if "serve_forever(" in text:
+        return True
+    try:
+        tree = ast.parse(text)
+    except SyntaxError:
+        return False
 
-SOURCES = {"imx500": ("imx500",), "imx708": ("imx708", "imx219"), "autofocus": ("imx708", "imx219")}
+    def walk(nodes: list[ast.stmt]) -> bool:
+        for node in nodes:
+            if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef, ast.ClassDef)):
+                continue
+            if isinstance(node, ast.While) and isinstance(node.test, ast.Constant) and node.test.value is True:
+                return True
+            children = [getattr(node, f, []) for f in ("body", "orelse", "finalbody", "handlers")]
+            if any(walk([c for c in group if isinstance(c, ast.stmt)]) for group in children if group):
+                return True
+            if isinstance(node, ast.Try) and any(walk(h.body) for h in node.handlers):
+                return True
+        return False
+
+    return walk(tree.body)
+
+NETWORK_PEER = re.compile(r"\.accept\(\)|[\"']REMOTEIP[\"']")
+"""Scripts that wait for a client to connect, or send to an address the user must fill in."""
+
+SOURCES = {"imx500": ("imx500",), "imx708": ("imx708", "imx219"), "autofocus": ("imx708", "imx219"),
+           "multiplexer": ("imx219",) * 4}
 """Cameras for scripts whose name asks for a sensor (first match); others get two cameras (imx219, imx477)."""
 DEFAULT_SOURCES = ("imx219", "imx477")
 
@@ -80,6 +107,9 @@ def not_applicable(path: Path, siblings: set[str]) -> str | None:
     shown = DISPLAY.search(text)
     if shown:
         return f"needs a display ({shown.group(0)})"
+    peer = NETWORK_PEER.search(text)
+    if peer:
+        return f"needs a network peer ({peer.group(0)})"
     mods = imports_of(text)
     for mod, why in PI_ONLY.items():
         if mod in mods:
@@ -100,8 +130,8 @@ def sources_for(path: Path) -> tuple[str, ...]:
     return DEFAULT_SOURCES
 
 
-def run_one(path: Path, timeout_s: float) -> Result:
-    """Run one script in a scratch folder; its Result."""
+def run_one(path: Path, timeout_s: float, forever_s: float) -> Result:
+    """Run one script in a scratch folder (one written to run until stopped for ``forever_s``); its Result."""
     siblings = {p.stem for p in path.parent.glob("*.py")}
     name = str(path)
     why = not_applicable(path, siblings)
@@ -111,6 +141,9 @@ def run_one(path: Path, timeout_s: float) -> Result:
     env["PYTHONPATH"] = f"{env['PYTHONPATH']}:{path.parent}"
     env.pop("DISPLAY", None)
     env.pop("WAYLAND_DISPLAY", None)
+    forever = runs_until_stopped(path.read_text(errors="replace"))
+    if forever:
+        timeout_s = min(timeout_s, forever_s)
     start = time.monotonic()
     with tempfile.TemporaryDirectory(prefix="picamera2-script-") as scratch:
         proc = subprocess.Popen([sys.executable, str(path.resolve())], cwd=scratch, env=env,
@@ -122,7 +155,6 @@ def run_one(path: Path, timeout_s: float) -> Result:
             proc.kill()
             _, err = proc.communicate()
             seconds = time.monotonic() - start
-            forever = FOREVER.search(path.read_text(errors="replace"))
             if forever and "Traceback" not in err:
                 return Result(name, "pass", f"still running after {timeout_s:.0f} s (runs until stopped)", seconds)
             return Result(name, "fail", f"timed out after {timeout_s:.0f} s: {last_line(err)}", seconds)
@@ -142,7 +174,9 @@ def main(argv: list[str] | None = None) -> int:
     """Run the scripts and print one line each, then the counts."""
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("folders", nargs="+", type=Path)
-    parser.add_argument("--timeout", type=float, default=60.0, help="seconds per script (default 60)")
+    parser.add_argument("--timeout", type=float, default=120.0, help="seconds per script (default 120)")
+    parser.add_argument("--forever", type=float, default=30.0,
+                        help="seconds a script written to run until stopped must survive (default 30)")
     parser.add_argument("--only", nargs="*", default=None, help="script names (stems) to run")
     parser.add_argument("--json", type=Path, default=None, help="write the results here")
     args = parser.parse_args(argv)
@@ -155,7 +189,7 @@ def main(argv: list[str] | None = None) -> int:
         scripts = [s for s in scripts if s.stem in args.only]
     results = []
     for path in scripts:
-        res = run_one(path, args.timeout)
+        res = run_one(path, args.timeout, args.forever)
         results.append(res)
         print(f"{res.status:5} {res.seconds:6.1f}s {res.script} {res.reason}", flush=True)
     applicable = [r for r in results if r.status != "n/a"]
