@@ -19,10 +19,12 @@ class RecordMixin:
     ``start_and_record_video``."""
 
     camera_config: dict[str, Any]
+    encode_stream_name: str
     started: bool
     _cam: Any
 
     def _init_recording(self) -> None:
+        self.encode_stream_name = "main"  # the stream encoders take unless told (configure sets it)
         self._encoders: set[Encoder] = set()
         self._encoders_lock = threading.Lock()
 
@@ -39,11 +41,6 @@ class RecordMixin:
             self._encoders.update(value)
         else:
             raise RuntimeError("Must pass Encoder or set of")
-
-    @property
-    def encode_stream_name(self) -> str:
-        """The stream encoders take unless told (the configuration's ``encode``, default main)."""
-        return (self.camera_config or {}).get("encode") or "main"
 
     def _encode(self, request: Any) -> None:
         with self._encoders_lock:

@@ -196,6 +196,12 @@ class Picamera2(ConfigMixin, CaptureMixin, RecordMixin):
         self.allocator.allocate(config)
         if isinstance(given, str) and given in ("preview", "still", "video"):
             getattr(self, f"{given}_configuration").update(config)
+        elif isinstance(given, dict):  # as picamera2 does: the caller's dict gets what configure worked out
+            for name in ("main", "lores", "raw"):
+                if isinstance(given.get(name), dict) and config.get(name) is not None:
+                    given[name].update({k: config[name][k] for k in ("format", "size", "stride", "framesize")
+                                        if k in config[name]})
+        self.encode_stream_name = config.get("encode") or "main"
         self.controls = Controls(self)
 
     def start(self, config: Any = None, show_preview: Any = False) -> None:
