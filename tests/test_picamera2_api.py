@@ -6,6 +6,7 @@ from __future__ import annotations
 import io
 import logging
 import os
+import time
 
 import numpy as np
 import pytest
@@ -150,3 +151,20 @@ def test_requests_go_to_other_processes(rollcam_picamera2, tmp_path):
             future = process.send(request)
         assert future.result(30) == "saved" and Image.open(tmp_path / "child.png").size == (320, 240)
         process.close()
+
+
+def test_cancel_all_and_flush_cancels_jobs_in_flight(rollcam_picamera2):
+    picamera2 = rollcam_picamera2()
+    from picamera2 import CancelledError
+
+    with picamera2.Picamera2() as cam:
+        cam.start(cam.create_preview_configuration(main=SMALL, lores=SMALL, controls={"FrameRate": 1}))
+        assert (cam.main_index, cam.lores_index, cam.raw_index) == (0, 1, 2)
+        cam.capture_metadata()
+        job = cam.capture_array(wait=False)  # the next frame is a second away
+        cam.cancel_all_and_flush()
+        with pytest.raises(CancelledError):
+            job.get_result(1)
+        started = time.monotonic()
+        cam.stop()
+        assert time.monotonic() - started < 1

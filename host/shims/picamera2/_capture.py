@@ -26,6 +26,7 @@ class CaptureMixin:
 
     _queue: Any
     _state: threading.Condition  # notified when the camera starts, stops or closes
+    _jobs: set[Job]  # jobs in flight (cancel_all_and_flush)
     started: bool
     is_open: bool
 
@@ -57,7 +58,17 @@ class CaptureMixin:
                 return use(req)
             finally:
                 req.release()
-        return dispatch(call, wait, signal_function)
+        return self._dispatch(call, wait, signal_function)
+
+    def _dispatch(self, call: Any, wait: Any, signal_function: Any) -> Any:
+        return dispatch(call, wait, signal_function, self._jobs)
+
+    def cancel_all_and_flush(self) -> None:
+        """Fail every job in flight with CancelledError and release the requests waiting to be captured."""
+        for job in list(self._jobs):
+            job.cancel_running()
+        if self._queue is not None:
+            self._queue.flush()
 
     def wait(self, job: Job, timeout: float | None = None) -> Any:
         """The result of a job from a call made with ``wait=False``."""
@@ -66,7 +77,7 @@ class CaptureMixin:
     def capture_request(self, wait: Any = None, signal_function: Any = None, flush: Any = None) -> Any:
         """The next completed request; the caller must ``release()`` it (``flush``: one that started exposing
         after now (True) or after a time.monotonic_ns() value)."""
-        return dispatch(lambda t: self._take(t, flush), wait, signal_function)
+        return self._dispatch(lambda t: self._take(t, flush), wait, signal_function)
 
     @contextlib.contextmanager
     def captured_request(self, wait: Any = None, flush: Any = None) -> Iterator[CompletedRequest]:
@@ -119,7 +130,7 @@ class CaptureMixin:
         def call(timeout_s: float | None) -> None:
             for _ in range(int(num_frames)):
                 self._take(timeout_s).release()
-        return dispatch(call, wait, signal_function)
+        return self._dispatch(call, wait, signal_function)
 
     def switch_mode(self, camera_config: Any, wait: Any = None, signal_function: Any = None) -> Any:
         """Stop, configure with ``camera_config`` and start again; returns the configuration in effect."""
@@ -128,7 +139,7 @@ class CaptureMixin:
             self.configure(camera_config)
             self.start()
             return self.camera_config
-        return dispatch(call, wait, signal_function)
+        return self._dispatch(call, wait, signal_function)
 
     def _switch_and(self, camera_config: Any, use: Any, wait: Any, signal_function: Any, delay: int = 0,
                     then: str = "back") -> Any:
@@ -150,7 +161,7 @@ class CaptureMixin:
                     self.stop()
                 elif then == "back" and previous:
                     self.switch_mode(previous)
-        return dispatch(call, wait, signal_function)
+        return self._dispatch(call, wait, signal_function)
 
     def switch_mode_and_capture_array(self, camera_config: Any, name: str = "main", wait: Any = None,
                                       signal_function: Any = None, delay: int = 0) -> Any:

@@ -92,6 +92,13 @@ class RequestQueue:
         finally:
             _release_all(discard)  # outside the lock: a release returns its buffer under it
 
+    def flush(self) -> None:
+        """Release the requests waiting to be captured."""
+        with self.cond:
+            out = list(self.waiting)
+            self.waiting.clear()
+        _release_all(out)
+
     def stop(self) -> list[CompletedRequest]:
         """Stop: waiting readers fail, queued requests are returned for release."""
         with self.cond:

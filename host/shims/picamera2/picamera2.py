@@ -86,6 +86,7 @@ class Picamera2(ConfigMixin, CaptureMixin, RecordMixin):
                  allocator: Any = None) -> None:
         self.is_open, self.started, self._cam, self._engine, self._queue = False, False, None, None, None
         self._state = threading.Condition()  # captures made before start() wait on it
+        self._jobs: set[Any] = set()
         found = sources()
         if not isinstance(camera_num, int) or not 0 <= camera_num < len(found):
             raise IndexError(f"list index out of range (camera {camera_num!r} of {len(found)} emulated)")
@@ -107,6 +108,7 @@ class Picamera2(ConfigMixin, CaptureMixin, RecordMixin):
         self._init_recording()
         self.helpers = Helpers(self)
         self.overlay = None
+        self.title_fields: list[str] = []  # metadata fields a preview window's title shows (no window here)
         self.allocator = allocator if allocator is not None else DmaAllocator()
         self.controls = Controls(self)
         self._lock = threading.RLock()
@@ -157,6 +159,23 @@ class Picamera2(ConfigMixin, CaptureMixin, RecordMixin):
     def sensor_modes(self) -> list[dict[str, Any]]:
         """The sensor's raw modes: format, unpacked, bit_depth, size, fps, crop_limits, exposure_limits."""
         return [self._cam.mode_info(m) for m in self._cam.modes]
+
+    @property
+    def main_index(self) -> int:
+        """The main stream's index among the configured streams (libcamera's order: main, lores, raw)."""
+        return 0
+
+    @property
+    def lores_index(self) -> int:
+        """The lores stream's index, -1 when there is none."""
+        return 1 if self.camera_config.get("lores") is not None else -1
+
+    @property
+    def raw_index(self) -> int:
+        """The raw stream's index, -1 when there is none."""
+        if self.camera_config.get("raw") is None:
+            return -1
+        return 2 if self.camera_config.get("lores") is not None else 1
 
     @property
     def camera(self) -> Any:
