@@ -148,3 +148,20 @@ def test_circular_output2_into_a_pyav_output(rollcam_picamera2, tmp_path):
     assert float(packets[0]["pts_time"]) == 0 and "K" in packets[0]["flags"]  # from the ring's oldest keyframe
     times = [float(p["pts_time"]) for p in packets]
     assert times == sorted(times) and len(set(times)) == len(times)
+
+
+def test_splittable_output_switches_at_a_keyframe(rollcam_picamera2, tmp_path):
+    picamera2 = rollcam_picamera2()
+    from picamera2.encoders import H264Encoder
+    from picamera2.outputs import FileOutput, SplittableOutput
+
+    with picamera2.Picamera2() as cam:
+        cam.configure(cam.create_video_configuration(main=SMALL, controls={"FrameRate": 20}))
+        splitter = SplittableOutput(output=FileOutput(str(tmp_path / "a.h264")))
+        cam.start_recording(H264Encoder(iperiod=3), splitter)
+        time.sleep(0.7)
+        splitter.split_output(FileOutput(str(tmp_path / "b.h264")))
+        time.sleep(0.7)
+        cam.stop_recording()
+    first, second = (decoded_frames(tmp_path / n, "h264") for n in ("a.h264", "b.h264"))
+    assert first > 0 and second > 0  # b starts at a keyframe, so it decodes from its first frame

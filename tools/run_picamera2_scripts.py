@@ -108,7 +108,7 @@ def not_applicable(path: Path, siblings: set[str]) -> str | None:
     if shown:
         return f"needs a display ({shown.group(0)})"
     peer = NETWORK_PEER.search(text)
-    if peer:
+    if peer and not (peer.group(0) == ".accept()" and "127.0.0.1" in text):  # its own client is no peer
         return f"needs a network peer ({peer.group(0)})"
     mods = imports_of(text)
     for mod, why in PI_ONLY.items():
