@@ -168,3 +168,24 @@ def test_cancel_all_and_flush_cancels_jobs_in_flight(rollcam_picamera2):
         started = time.monotonic()
         cam.stop()
         assert time.monotonic() - started < 1
+
+
+def test_autofocus_states_of_the_camera_module_3(rollcam_picamera2):
+    picamera2 = rollcam_picamera2("imx708")
+    from libcamera import controls
+
+    with picamera2.Picamera2() as cam:
+        cam.start(cam.create_preview_configuration(main=SMALL, controls={"FrameRate": 30}))
+        assert cam.capture_metadata()["AfState"] == controls.AfStateEnum.Idle
+        cam.set_controls({"AfMode": controls.AfModeEnum.Continuous})
+        cam.drop_frames(3)
+        assert cam.capture_metadata()["AfState"] == controls.AfStateEnum.Focused
+        cam.set_controls({"AfPause": controls.AfPauseEnum.Deferred})
+        cam.drop_frames(3)
+        assert cam.capture_metadata()["AfPauseState"] == controls.AfPauseStateEnum.Paused
+        cam.set_controls({"AfMode": controls.AfModeEnum.Manual, "LensPosition": 3.0})
+        cam.drop_frames(3)
+        md = cam.capture_metadata()
+        assert md["AfState"] == controls.AfStateEnum.Idle and md["LensPosition"] == 3.0
+        assert cam.autofocus_cycle(wait=10) is True
+        assert cam.capture_metadata()["AfState"] == controls.AfStateEnum.Focused

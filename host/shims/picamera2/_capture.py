@@ -199,6 +199,22 @@ class CaptureMixin:
         """Switch mode, capture a request and stop the camera (the request stays valid until released)."""
         return self._switch_and(camera_config, _keep, wait, signal_function, then="stop")
 
+    def autofocus_cycle(self, wait: Any = None, signal_function: Any = None) -> Any:
+        """Run one autofocus scan (AfMode Auto, AfTrigger Start) and wait for its end: True when Focused."""
+        self.set_controls({"AfMode": 1, "AfTrigger": 0})
+
+        def call(timeout_s: float | None) -> bool:
+            deadline = Deadline(timeout_s)
+            while True:
+                req = self._take(deadline.remaining())
+                try:
+                    md = req.get_metadata()
+                finally:
+                    req.release()
+                if md.get("AfMode") == 1 and md.get("AfState") in (2, 3):
+                    return md["AfState"] == 2
+        return self._dispatch(call, wait, signal_function)
+
     def start_and_capture_file(self, name: str = "image.jpg", delay: float = 1, preview_mode: Any = "preview",
                                capture_mode: Any = "still", show_preview: bool = False,
                                exif_data: Any = None) -> None:
