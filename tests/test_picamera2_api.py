@@ -189,3 +189,22 @@ def test_autofocus_states_of_the_camera_module_3(rollcam_picamera2):
         assert md["AfState"] == controls.AfStateEnum.Idle and md["LensPosition"] == 3.0
         assert cam.autofocus_cycle(wait=10) is True
         assert cam.capture_metadata()["AfState"] == controls.AfStateEnum.Focused
+
+
+def test_configure_fills_in_the_callers_dict_and_its_controls(rollcam_picamera2):
+    picamera2 = rollcam_picamera2()
+    from libcamera import ColorSpace
+
+    with picamera2.Picamera2() as cam:
+        config = cam.create_video_configuration(main={**SMALL, "format": "RGB888"}, lores={"size": (160, 120)},
+                                                raw={}, controls={"ExposureTime": 10000, "FrameRate": 25})
+        cam.configure(config)
+        assert config["main"]["stride"] == 320 * 3 and config["raw"]["stride"] > 0  # as picamera2 does
+        assert cam.controls.ExposureTime == 10000 and cam.controls.FrameRate == pytest.approx(25)
+        streams = cam.libcamera_config
+        main = streams.at(cam.main_index).color_space
+        assert (main.ycbcrEncoding, main.range) == (ColorSpace.YcbcrEncoding.Null, ColorSpace.Range.Full)
+        assert streams.at(cam.lores_index).color_space == config["colour_space"]
+        assert streams.at(cam.raw_index).color_space == ColorSpace.Raw()
+        cam.encode_stream_name = "lores"
+        assert cam.encode_stream_name == "lores"

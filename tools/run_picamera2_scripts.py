@@ -9,7 +9,8 @@ closed and no display. A script is
 - `n/a` when it needs what the stand-in cannot give: a display (a Qt application, an OpenCV window), a
   Pi-only module or accelerator (Hailo, the IMX708 device helper), a network peer (it waits for a client to
   connect, or sends to an address to fill in), or a module this Python lacks;
-- `pass` when it exits 0, or when it is still running at the timeout without having printed a traceback and it
+- `pass` when it exits 0 without printing a line that starts with ``ERROR`` (picamera2's tests report failures
+  so and go on), or when it is still running at the timeout without having printed a traceback and it
   is written to run until stopped (a server, a `while True` loop);
 - `fail` otherwise, with the last line of its error output.
 """
@@ -20,7 +21,9 @@ import argparse
 import ast
 import importlib.util
 import json
+import os
 import re
+import signal
 import subprocess
 import sys
 import tempfile
@@ -147,21 +150,32 @@ def run_one(path: Path, timeout_s: float, forever_s: float) -> Result:
     start = time.monotonic()
     with tempfile.TemporaryDirectory(prefix="picamera2-script-") as scratch:
         proc = subprocess.Popen([sys.executable, str(path.resolve())], cwd=scratch, env=env,
-                                stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
-                                text=True, start_new_session=True)
+                                stdin=subprocess.DEVNULL, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                                text=True, errors="replace", start_new_session=True)
         try:
-            _, err = proc.communicate(timeout=timeout_s)
+            out, err = proc.communicate(timeout=timeout_s)
         except subprocess.TimeoutExpired:
-            proc.kill()
-            _, err = proc.communicate()
+            os.killpg(proc.pid, signal.SIGKILL)
+            out, err = proc.communicate()
+            errors = reported_errors(out)
+            if errors:
+                return Result(name, "fail", f"reported {errors[0]!r}", time.monotonic() - start)
             seconds = time.monotonic() - start
             if forever and "Traceback" not in err:
                 return Result(name, "pass", f"still running after {timeout_s:.0f} s (runs until stopped)", seconds)
             return Result(name, "fail", f"timed out after {timeout_s:.0f} s: {last_line(err)}", seconds)
     seconds = time.monotonic() - start
+    errors = reported_errors(out)
+    if proc.returncode == 0 and errors:
+        return Result(name, "fail", f"exit 0 but reported {errors[0]!r}", seconds)
     if proc.returncode == 0:
         return Result(name, "pass", "", seconds)
     return Result(name, "fail", f"exit {proc.returncode}: {last_line(err)}", seconds)
+
+
+def reported_errors(out: str) -> list[str]:
+    """The lines where a script says it failed (picamera2's tests print ``ERROR: ...`` and go on)."""
+    return [ln.strip()[:200] for ln in out.splitlines() if ln.lstrip().startswith("ERROR")]
 
 
 def last_line(err: str) -> str:

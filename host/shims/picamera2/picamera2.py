@@ -18,6 +18,7 @@ from typing import Any
 
 import libcamera
 
+from . import formats
 from ._camera import PiCamera, sources
 from ._capture import CaptureMixin
 from ._configs import ConfigMixin
@@ -161,6 +162,25 @@ class Picamera2(ConfigMixin, CaptureMixin, RecordMixin):
         return [self._cam.mode_info(m) for m in self._cam.modes]
 
     @property
+    def libcamera_config(self) -> Any:
+        """The configured streams as libcamera holds them: ``libcamera_config.at(i)`` (``main_index``, ...)
+        has ``size``, ``stride``, ``pixel_format`` and ``color_space`` (an RGB stream's is the headline one
+        with no Y'CbCr encoding and full range; the raw stream's is Raw)."""
+        streams = []
+        for name in ("main", "lores", "raw"):
+            c = self.camera_config.get(name) if self.camera_config else None
+            if c is None:
+                continue
+            space = libcamera.ColorSpace(self.camera_config["colour_space"])
+            if name == "raw":
+                space = libcamera.ColorSpace.Raw()
+            elif formats.is_RGB(c["format"]):
+                space.ycbcrEncoding, space.range = space.YcbcrEncoding.Null, space.Range.Full
+            streams.append(SimpleNamespace(size=libcamera.Size(*c["size"]), stride=c.get("stride"),
+                                           pixel_format=str(c["format"]), color_space=space))
+        return SimpleNamespace(at=streams.__getitem__, size=lambda: len(streams))
+
+    @property
     def main_index(self) -> int:
         """The main stream's index among the configured streams (libcamera's order: main, lores, raw)."""
         return 0
@@ -221,7 +241,9 @@ class Picamera2(ConfigMixin, CaptureMixin, RecordMixin):
                     given[name].update({k: config[name][k] for k in ("format", "size", "stride", "framesize")
                                         if k in config[name]})
         self.encode_stream_name = config.get("encode") or "main"
-        self.controls = Controls(self)
+        # As picamera2's: the configuration's controls, readable (picam2.controls.ExposureTime) and applied
+        # (again: the same values) with the first frame.
+        self.controls = Controls(self, config.get("controls") or {})
 
     def start(self, config: Any = None, show_preview: Any = False) -> None:
         """Start streaming (configuring first with ``config``, or 'preview' when never configured)."""
