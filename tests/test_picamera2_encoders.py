@@ -165,3 +165,22 @@ def test_splittable_output_switches_at_a_keyframe(rollcam_picamera2, tmp_path):
         cam.stop_recording()
     first, second = (decoded_frames(tmp_path / n, "h264") for n in ("a.h264", "b.h264"))
     assert first > 0 and second > 0  # b starts at a keyframe, so it decodes from its first frame
+
+
+def test_an_output_attached_while_recording_starts_at_a_fresh_keyframe(rollcam_picamera2, tmp_path):
+    picamera2 = rollcam_picamera2()
+    from picamera2.encoders import H264Encoder
+    from picamera2.outputs import FfmpegOutput
+
+    with picamera2.Picamera2() as cam:
+        cam.configure(cam.create_video_configuration(main=SMALL, controls={"FrameRate": 20}))
+        encoder = H264Encoder(iperiod=1000)  # no keyframe of its own after the first
+        cam.start_recording(encoder, None)
+        cam.capture_metadata()
+        output = FfmpegOutput(str(tmp_path / "late.mp4"))
+        output.start()
+        encoder.output = output
+        time.sleep(0.5)
+        cam.stop_recording()
+    _, packets = probe_packets(tmp_path / "late.mp4")
+    assert packets and "K" in packets[0]["flags"]

@@ -133,8 +133,9 @@ def sources_for(path: Path) -> tuple[str, ...]:
     return DEFAULT_SOURCES
 
 
-def run_one(path: Path, timeout_s: float, forever_s: float) -> Result:
-    """Run one script in a scratch folder (one written to run until stopped for ``forever_s``); its Result."""
+def run_one(path: Path, timeout_s: float, forever_s: float, netns: bool = False) -> Result:
+    """Run one script in a scratch folder (one written to run until stopped for ``forever_s``; ``netns``: in a
+    network namespace of its own, which needs root); its Result."""
     siblings = {p.stem for p in path.parent.glob("*.py")}
     name = str(path)
     why = not_applicable(path, siblings)
@@ -149,7 +150,10 @@ def run_one(path: Path, timeout_s: float, forever_s: float) -> Result:
         timeout_s = min(timeout_s, forever_s)
     start = time.monotonic()
     with tempfile.TemporaryDirectory(prefix="picamera2-script-") as scratch:
-        proc = subprocess.Popen([sys.executable, str(path.resolve())], cwd=scratch, env=env,
+        command = [sys.executable, str(path.resolve())]
+        if netns:  # a network namespace of its own: its ports clash with nothing else on the machine
+            command = ["unshare", "--net", "sh", "-c", 'ip link set lo up && exec "$@"', "sh", *command]
+        proc = subprocess.Popen(command, cwd=scratch, env=env,
                                 stdin=subprocess.DEVNULL, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
                                 text=True, errors="replace", start_new_session=True)
         try:
@@ -191,6 +195,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--timeout", type=float, default=120.0, help="seconds per script (default 120)")
     parser.add_argument("--forever", type=float, default=30.0,
                         help="seconds a script written to run until stopped must survive (default 30)")
+    parser.add_argument("--netns", action="store_true",
+                        help="run each script in a network namespace of its own (root; `unshare`, `ip`)")
     parser.add_argument("--only", nargs="*", default=None, help="script names (stems) to run")
     parser.add_argument("--json", type=Path, default=None, help="write the results here")
     args = parser.parse_args(argv)
@@ -203,7 +209,7 @@ def main(argv: list[str] | None = None) -> int:
         scripts = [s for s in scripts if s.stem in args.only]
     results = []
     for path in scripts:
-        res = run_one(path, args.timeout, args.forever)
+        res = run_one(path, args.timeout, args.forever, args.netns)
         results.append(res)
         print(f"{res.status:5} {res.seconds:6.1f}s {res.script} {res.reason}", flush=True)
     applicable = [r for r in results if r.status != "n/a"]

@@ -73,10 +73,13 @@ class Encoder:
         outputs = value if isinstance(value, list) else [value]
         if not all(isinstance(o, Output) for o in outputs):
             raise RuntimeError("Must pass Output")
-        for out in outputs:
-            if self._running and out not in self._output:
+        added = [out for out in outputs if out not in self._output]
+        for out in added:
+            if self._running:
                 self._send_streams(out)
         self._output = outputs
+        if self._running and added:
+            self._output_added()
 
     @property
     def name(self) -> str | None:
@@ -145,6 +148,9 @@ class Encoder:
         """Hand a frame to every output."""
         for out in self._output:
             out.outputframe(frame, keyframe, timestamp, packet, audio)
+
+    def _output_added(self) -> None:
+        """An output was attached while running (it will take frames from a keyframe on)."""
 
     def _setup(self, quality: Quality | None) -> None:
         """Choose settings from ``quality`` where none were given."""

@@ -42,12 +42,13 @@ def is_idr(unit: bytes) -> bool:
 
 
 class H264Encoder(Encoder):
-    """H.264 at ``bitrate`` (bit/s), or quantiser ``qp``, or a Quality; an IDR frame every ``iperiod`` frames;
-    ``repeat``: SPS and PPS before every IDR frame (a stream a client may join at any keyframe)."""
+    """H.264 at ``bitrate`` (bit/s), or quantiser ``qp``, or a Quality; an IDR frame every ``iperiod`` frames
+    (30, as picamera2's software encoder; 0 or None: the first only); ``repeat``: SPS and PPS before every IDR
+    frame (a stream a client may join, or an output be attached, at any keyframe)."""
 
     codec = "h264"
 
-    def __init__(self, bitrate: int | None = None, repeat: bool = False, iperiod: int | None = None,
+    def __init__(self, bitrate: int | None = None, repeat: bool = True, iperiod: int | None = 30,
                  framerate: float | None = None, enable_sps_framerate: bool = False, qp: int | None = None,
                  profile: str | None = None) -> None:
         super().__init__(framerate=framerate)
@@ -57,6 +58,7 @@ class H264Encoder(Encoder):
         self._reader: threading.Thread | None = None
         self._stamps: collections.deque[int] = collections.deque()
         self._failed = False
+        self._keyframe_wanted = False
 
     def _setup(self, quality: Quality | None) -> None:
         if quality is not None:
@@ -83,8 +85,7 @@ class H264Encoder(Encoder):
             cmd += ["-qp", str(int(self.qp))] if codec == "libx264" else ["-qmin", str(self.qp), "-qmax", str(self.qp)]
         elif codec == "libx264":
             cmd += ["-crf", str(self._crf)]
-        if self.iperiod:
-            cmd += ["-g", str(int(self.iperiod))]
+        cmd += ["-g", str(int(self.iperiod) if self.iperiod else (1 << 31) - 1)]
         if self.profile:
             cmd += ["-profile:v", str(self.profile).lower()]
         return [*cmd, "-bsf:v", "h264_metadata=aud=insert", "-f", "h264", "pipe:1"]
@@ -97,7 +98,16 @@ class H264Encoder(Encoder):
         self._reader = threading.Thread(target=self._read, args=(self._proc,), name="picamera2-h264", daemon=True)
         self._reader.start()
 
+    def _output_added(self) -> None:
+        # The new output waits for a keyframe: make the next frame one (a Pi's encoder would make one within
+        # iperiod frames, a second at most; this machine may deliver far fewer frames a second).
+        self._keyframe_wanted = True
+
     def _encode(self, array: Any, timestamp_us: int) -> None:
+        if self._keyframe_wanted:  # a fresh ffmpeg starts with an IDR frame; the old one finishes its frames
+            self._keyframe_wanted = False
+            self._stop()
+            self._start()
         proc = self._proc
         if proc is None or self._failed:
             return
