@@ -25,8 +25,8 @@ from .encoder import FFMPEG_PIXEL_FORMATS, Encoder, Quality
 _log = logging.getLogger("picamera2")
 _AUD = re.compile(b"\\x00\\x00\\x00\\x01\\x09")
 _NAL_START = re.compile(b"\\x00\\x00\\x01(.)", re.S)
-_CRF = {Quality.VERY_LOW: 35, Quality.LOW: 30, Quality.MEDIUM: 25, Quality.HIGH: 21, Quality.VERY_HIGH: 17}
-"""x264's constant rate factor for each Quality (lower is better)."""
+_MBPS_1080P30 = {Quality.VERY_LOW: 2, Quality.LOW: 4, Quality.MEDIUM: 6, Quality.HIGH: 9, Quality.VERY_HIGH: 15}
+"""picamera2's bitrates (Mbit/s) for each Quality at 1080p30, scaled by pixels a second for other streams."""
 
 
 def split_access_units(data: bytes) -> tuple[list[bytes], bytes]:
@@ -42,9 +42,10 @@ def is_idr(unit: bytes) -> bool:
 
 
 class H264Encoder(Encoder):
-    """H.264 at ``bitrate`` (bit/s), or quantiser ``qp``, or a Quality; an IDR frame every ``iperiod`` frames
-    (30, as picamera2's software encoder; 0 or None: the first only); ``repeat``: SPS and PPS before every IDR
-    frame (a stream a client may join, or an output be attached, at any keyframe)."""
+    """H.264 at ``bitrate`` (bit/s), or quantiser ``qp``, or a Quality (picamera2's bitrate for it); an IDR
+    frame every ``iperiod`` frames (30, as picamera2's software encoder; 0 or None: the first only) and when
+    asked (``force_key_frame``); ``repeat``: SPS and PPS before every IDR frame (a stream a client may join, or
+    an output be attached, at any keyframe)."""
 
     codec = "h264"
 
@@ -52,17 +53,33 @@ class H264Encoder(Encoder):
                  framerate: float | None = None, enable_sps_framerate: bool = False, qp: int | None = None,
                  profile: str | None = None) -> None:
         super().__init__(framerate=framerate)
-        self.bitrate, self.repeat, self.iperiod, self.qp, self.profile = bitrate, repeat, iperiod, qp, profile
-        self._crf = _CRF[Quality.MEDIUM]
+        self._bitrate = bitrate
+        self.repeat, self.iperiod, self.qp, self.profile = repeat, iperiod, qp, profile
         self._proc: subprocess.Popen[bytes] | None = None
         self._reader: threading.Thread | None = None
         self._stamps: collections.deque[int] = collections.deque()
         self._failed = False
         self._keyframe_wanted = False
 
+    @property
+    def bitrate(self) -> int | None:
+        """Bits a second (None: the quantiser ``qp`` decides)."""
+        return self._bitrate
+
+    @bitrate.setter
+    def bitrate(self, value: int | None) -> None:
+        self._bitrate = value
+
     def _setup(self, quality: Quality | None) -> None:
-        if quality is not None:
-            self._crf = _CRF[quality]
+        # As picamera2: a Quality given, or neither bitrate nor qp set, picks the bitrate.
+        if quality is not None or (self._bitrate is None and self.qp is None):
+            quality = Quality.MEDIUM if quality is None else quality
+            pixels_per_s = self.width * self.height * (self.framerate or 30)
+            self._bitrate = int(_MBPS_1080P30[quality] * 1_000_000 * pixels_per_s / (1920 * 1080 * 30))
+
+    def force_key_frame(self) -> None:
+        """Make the next frame a keyframe."""
+        self._keyframe_wanted = True
 
     def command(self) -> list[str]:
         """The ffmpeg command line for this stream and these settings."""
@@ -79,12 +96,10 @@ class H264Encoder(Encoder):
             cmd += ["-preset", "veryfast", "-tune", "zerolatency"]
             if self.repeat:
                 cmd += ["-x264-params", "repeat-headers=1"]
-        if self.bitrate:
-            cmd += ["-b:v", str(int(self.bitrate))]
+        if self._bitrate:
+            cmd += ["-b:v", str(int(self._bitrate))]
         elif self.qp is not None:
             cmd += ["-qp", str(int(self.qp))] if codec == "libx264" else ["-qmin", str(self.qp), "-qmax", str(self.qp)]
-        elif codec == "libx264":
-            cmd += ["-crf", str(self._crf)]
         cmd += ["-g", str(int(self.iperiod) if self.iperiod else (1 << 31) - 1)]
         if self.profile:
             cmd += ["-profile:v", str(self.profile).lower()]
@@ -101,7 +116,7 @@ class H264Encoder(Encoder):
     def _output_added(self) -> None:
         # The new output waits for a keyframe: make the next frame one (a Pi's encoder would make one within
         # iperiod frames, a second at most; this machine may deliver far fewer frames a second).
-        self._keyframe_wanted = True
+        self.force_key_frame()
 
     def _encode(self, array: Any, timestamp_us: int) -> None:
         if self._keyframe_wanted:  # a fresh ffmpeg starts with an IDR frame; the old one finishes its frames
