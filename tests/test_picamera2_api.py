@@ -208,3 +208,18 @@ def test_configure_fills_in_the_callers_dict_and_its_controls(rollcam_picamera2)
         assert streams.at(cam.raw_index).color_space == ColorSpace.Raw()
         cam.encode_stream_name = "lores"
         assert cam.encode_stream_name == "lores"
+
+
+def test_tuning_files_are_described_and_accepted(rollcam_picamera2):
+    picamera2 = rollcam_picamera2()
+    from picamera2 import Picamera2
+
+    tuning = Picamera2.load_tuning_file("imx477.json")
+    contrast = Picamera2.find_tuning_algo(tuning, "rpi.contrast")
+    curve = contrast["gamma_curve"]
+    assert curve[:2] == [0, 0] and curve[-2:] == [65535, 65535] and curve[33] > curve[32]  # sRGB lifts mid-tones
+    Picamera2.find_tuning_algo(tuning, "rpi.agc")["exposure_modes"]["normal"] = {"shutter": [100], "gain": [1.0]}
+    fresh = Picamera2.find_tuning_algo(Picamera2.load_tuning_file("imx477.json"), "rpi.agc")
+    assert fresh["exposure_modes"]["normal"]["shutter"] != [100]  # each load is a copy
+    with picamera2.Picamera2(tuning=tuning) as cam:
+        cam.configure("preview")

@@ -18,7 +18,7 @@ from typing import Any
 
 import libcamera
 
-from . import formats
+from . import formats, tuning
 from ._camera import PiCamera, sources
 from ._capture import CaptureMixin
 from ._configs import ConfigMixin
@@ -60,6 +60,9 @@ class Picamera2(ConfigMixin, CaptureMixin, RecordMixin):
     DEBUG, INFO, WARNING, ERROR, CRITICAL = (logging.DEBUG, logging.INFO, logging.WARNING, logging.ERROR,
                                              logging.CRITICAL)
     platform = Platform.VC4
+
+    load_tuning_file = staticmethod(tuning.load_tuning_file)
+    find_tuning_algo = staticmethod(tuning.find_tuning_algo)
 
     @staticmethod
     def set_logging(level: int = logging.WARNING, output: Any = sys.stderr, msg: str | None = None) -> None:
