@@ -118,7 +118,12 @@ def not_applicable(path: Path, siblings: set[str]) -> str | None:
         if mod in mods:
             return f"needs {why} ({mod})"
     for mod in sorted(m for m in mods if "." not in m):
-        if mod in siblings or mod in ("picamera2", "libcamera"):
+        if mod in siblings:
+            shown = DISPLAY.search((path.parent / f"{mod}.py").read_text(errors="replace"))
+            if shown:
+                return f"needs a display (through {mod}: {shown.group(0)})"
+            continue
+        if mod in ("picamera2", "libcamera"):
             continue
         if importlib.util.find_spec(mod) is None:
             return f"needs module {mod!r}, not installed here"
@@ -150,6 +155,9 @@ def run_one(path: Path, timeout_s: float, forever_s: float, netns: bool = False)
         timeout_s = min(timeout_s, forever_s)
     start = time.monotonic()
     with tempfile.TemporaryDirectory(prefix="picamera2-script-") as scratch:
+        for item in path.parent.iterdir():  # the script's own files (assets/, labels) where it looks for them
+            if not item.name.endswith(".py"):
+                (Path(scratch) / item.name).symlink_to(item.resolve())
         command = [sys.executable, str(path.resolve())]
         if netns:  # a network namespace of its own: its ports clash with nothing else on the machine
             command = ["unshare", "--net", "sh", "-c", 'ip link set lo up && exec "$@"', "sh", *command]
