@@ -14,6 +14,7 @@ import logging
 import shlex
 import struct
 import subprocess
+import threading
 from typing import Any
 
 from rollcam.host.video import ffmpeg_exe
@@ -46,7 +47,8 @@ class FfmpegOutput(Output):
         self.output_filename = output_filename
         self.audio = audio
         self.ffmpeg: subprocess.Popen[bytes] | None = None
-        self.error_callback: Any = None
+        self.error_callback: Any = None  # called with the error when ffmpeg stops taking frames
+        self._stopping = False
         self._last_pts = -1
 
     def start(self) -> None:
@@ -58,10 +60,19 @@ class FfmpegOutput(Output):
         self.ffmpeg = subprocess.Popen(command, stdin=subprocess.PIPE, stderr=subprocess.PIPE)
         self._started_stream = False
         self._last_pts = -1
+        self._stopping = False
         super().start()
+        threading.Thread(target=self._watch, args=(self.ffmpeg,), name="picamera2-ffmpeg", daemon=True).start()
+
+    def _watch(self, proc: subprocess.Popen[bytes]) -> None:
+        """Tell ``error_callback`` at once when ffmpeg ends on its own (its destination went away)."""
+        proc.wait()
+        if not self._stopping and self.ffmpeg is proc and self.error_callback is not None:
+            self.error_callback(RuntimeError(f"ffmpeg for {self.output_filename!r} exited {proc.returncode}"))
 
     def stop(self) -> None:
         """Close ffmpeg's input and wait for it to finish the file."""
+        self._stopping = True
         super().stop()
         proc, self.ffmpeg = self.ffmpeg, None
         if proc is None:
