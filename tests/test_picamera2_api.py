@@ -208,6 +208,8 @@ def test_configure_fills_in_the_callers_dict_and_its_controls(rollcam_picamera2)
         assert streams.at(cam.raw_index).color_space == ColorSpace.Raw()
         cam.encode_stream_name = "lores"
         assert cam.encode_stream_name == "lores"
+        assert cam.create_preview_configuration(raw=None)["raw"] is None  # no raw stream, as asked
+        assert cam.create_preview_configuration()["raw"] is not None
 
 
 def test_tuning_files_are_described_and_accepted(rollcam_picamera2):
