@@ -61,17 +61,44 @@ class Transform:
         return f"<libcamera.Transform '{'/'.join(flags) or 'identity'}'>"
 
 
+_COLOUR_SPACE_FIELDS: dict[str, tuple[str, str, str, str]] = {
+    "Sycc": ("Rec709", "Srgb", "Rec601", "Full"), "Smpte170m": ("Smpte170m", "Rec709", "Rec601", "Limited"),
+    "Rec709": ("Rec709", "Rec709", "Rec709", "Limited"), "Raw": ("Raw", "Linear", "Null", "Full"),
+}
+"""Each named colour space's primaries, transfer function, Y'CbCr encoding and range (libcamera's)."""
+
+
+def _member_enum(name: str, members: dict[str, int]) -> type[enum.IntEnum]:
+    """An enum nested in ColorSpace, named so that pickle finds it (requests go to other processes)."""
+    return enum.IntEnum(name, members, module=__name__, qualname=f"ColorSpace.{name}")
+
+
 class ColorSpace:
-    """A colour space by name (``Sycc``, ``Smpte170m``, ``Rec709``, ``Raw``); rollcam's ISP has one look."""
+    """A colour space: a name (``Sycc``, ``Smpte170m``, ``Rec709``, ``Raw``) and libcamera's four fields
+    (``primaries``, ``transferFunction``, ``ycbcrEncoding``, ``range``); rollcam's ISP has one look."""
+
+    Primaries = _member_enum("Primaries", {"Raw": 0, "Smpte170m": 1, "Rec709": 2, "Rec2020": 3})
+    TransferFunction = _member_enum("TransferFunction", {"Linear": 0, "Srgb": 1, "Rec709": 2})
+    YcbcrEncoding = _member_enum("YcbcrEncoding", {"Null": 0, "Rec601": 1, "Rec709": 2, "Rec2020": 3})
+    Range = _member_enum("Range", {"Full": 0, "Limited": 1})
 
     def __init__(self, name: str | ColorSpace = "Sycc") -> None:
         self.name = name.name if isinstance(name, ColorSpace) else str(name)
+        if isinstance(name, ColorSpace):
+            fields = (name.primaries, name.transferFunction, name.ycbcrEncoding, name.range)
+        else:
+            p, t, y, r = _COLOUR_SPACE_FIELDS.get(self.name, _COLOUR_SPACE_FIELDS["Sycc"])
+            fields = (self.Primaries[p], self.TransferFunction[t], self.YcbcrEncoding[y], self.Range[r])
+        self.primaries, self.transferFunction, self.ycbcrEncoding, self.range = fields
+
+    def _key(self) -> tuple[Any, ...]:
+        return (self.primaries, self.transferFunction, self.ycbcrEncoding, self.range)
 
     def __eq__(self, other: object) -> bool:
-        return isinstance(other, ColorSpace) and other.name == self.name
+        return isinstance(other, ColorSpace) and other._key() == self._key()
 
     def __hash__(self) -> int:
-        return hash(self.name)
+        return hash(self._key())
 
     def __repr__(self) -> str:
         return f"<libcamera.ColorSpace '{self.name}'>"
@@ -108,6 +135,9 @@ _CONTROL_ENUMS: dict[str, Any] = {
     "AfSpeedEnum": _enum("AfSpeedEnum", "Normal", "Fast"),
     "AfTriggerEnum": _enum("AfTriggerEnum", "Start", "Cancel"),
     "AfStateEnum": _enum("AfStateEnum", "Idle", "Scanning", "Focused", "Failed"),
+    "AfPauseEnum": _enum("AfPauseEnum", "Immediate", "Deferred", "Resume"),
+    "AfPauseStateEnum": _enum("AfPauseStateEnum", "Running", "Pausing", "Paused"),
+    "AfMeteringEnum": _enum("AfMeteringEnum", "Auto", "Windows"),
     "ExposureTimeModeEnum": _enum("ExposureTimeModeEnum", "Auto", "Manual"),
     "AnalogueGainModeEnum": _enum("AnalogueGainModeEnum", "Auto", "Manual"),
     "HdrModeEnum": _enum("HdrModeEnum", "Off", "MultiExposureUnmerged", "MultiExposure", "SingleExposure",

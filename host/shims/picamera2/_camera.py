@@ -120,6 +120,7 @@ class PiCamera:
         self.exposure_us = 0  # 0: not set (the source's exposure), as libcamera's 0 means automatic
         self.analogue_gain = 0.0
         self.extra: dict[str, Any] = {}  # accepted controls without effect on the sensor (AeEnable, ...)
+        self.af_state = 0  # libcamera's AfState: Idle, Scanning, Focused, Failed
         self.scaler_crop: tuple[int, int, int, int] | None = None
 
     @property
@@ -208,8 +209,20 @@ class PiCamera:
                 md[name] = self.extra[name]
         if self.sensor.name in FOCUS_SENSORS:
             md.setdefault("LensPosition", 1.0)
-            md["AfState"] = 0
+            md.update(self._focus_state())
         return md
+
+    def _focus_state(self) -> dict[str, int]:
+        """libcamera's AfState and AfPauseState of a frame. Every scene is in focus at every lens position
+        (rollcam renders no depth of field), so a scan ends at once: Continuous mode is Focused (Paused while
+        paused), and an Auto cycle started with ``AfTrigger`` Start is Focused from the next frame."""
+        mode, trigger = int(self.extra.get("AfMode", 0)), self.extra.pop("AfTrigger", None)
+        if mode != 1:
+            self.af_state = 0 if mode == 0 else 2
+        elif trigger is not None:
+            self.af_state = 2 if int(trigger) == 0 else 0
+        paused = mode == 2 and int(self.extra.get("AfPause", 2)) in (0, 1)
+        return {"AfState": self.af_state, "AfPauseState": 2 if paused else 0}
 
     def select_mode(self, bit_depth: int, output_size: tuple[int, int]) -> RawMode:
         """The mode libcamera's Raspberry Pi pipeline would pick for this bit depth and size (its scoring: size

@@ -71,33 +71,33 @@ class ConfigMixin:
             config[role] = name
         return config
 
-    def create_preview_configuration(self, main: Any = None, lores: Any = None, raw: Any = None,
+    def create_preview_configuration(self, main: Any = None, lores: Any = None, raw: Any = ...,
                                      transform: Any = None, colour_space: Any = None, buffer_count: int = 4,
                                      controls: Any = None, display: Any = "main", encode: Any = "main",
                                      queue: bool = True, sensor: Any = None, use_case: str = "preview") -> dict:
         """A configuration for preview: main 640x480 XBGR8888, 4 buffers, 12 fps or faster."""
         return self._create("preview", {"format": "XBGR8888", "size": (640, 480), "preserve_ar": True},
-                            {} if main is None else main, lores, {} if raw is None else raw,
+                            {} if main is None else main, lores, {} if raw is ... else raw,
                             transform or libcamera.Transform(), colour_space or libcamera.ColorSpace.Sycc(),
                             buffer_count, controls, display, encode, queue, {} if sensor is None else sensor)
 
-    def create_still_configuration(self, main: Any = None, lores: Any = None, raw: Any = None,
+    def create_still_configuration(self, main: Any = None, lores: Any = None, raw: Any = ...,
                                    transform: Any = None, colour_space: Any = None, buffer_count: int = 1,
                                    controls: Any = None, display: Any = None, encode: Any = None,
                                    queue: bool = True, sensor: Any = None, use_case: str = "still") -> dict:
         """A configuration for stills: main at the full sensor resolution, BGR888, 1 buffer."""
         return self._create("still", {"format": "BGR888", "size": self.sensor_resolution, "preserve_ar": True},
-                            {} if main is None else main, lores, {} if raw is None else raw,
+                            {} if main is None else main, lores, {} if raw is ... else raw,
                             transform or libcamera.Transform(), colour_space or libcamera.ColorSpace.Sycc(),
                             buffer_count, controls, display, encode, queue, {} if sensor is None else sensor)
 
-    def create_video_configuration(self, main: Any = None, lores: Any = None, raw: Any = None,
+    def create_video_configuration(self, main: Any = None, lores: Any = None, raw: Any = ...,
                                    transform: Any = None, colour_space: Any = None, buffer_count: int = 6,
                                    controls: Any = None, display: Any = "main", encode: Any = "main",
                                    queue: bool = True, sensor: Any = None, use_case: str = "video") -> dict:
         """A configuration for video: main 1280x720 XBGR8888, 6 buffers, 30 fps."""
         return self._create("video", {"format": "XBGR8888", "size": (1280, 720), "preserve_ar": True},
-                            {} if main is None else main, lores, {} if raw is None else raw,
+                            {} if main is None else main, lores, {} if raw is ... else raw,
                             transform or libcamera.Transform(), colour_space, buffer_count, controls, display,
                             encode, queue, {} if sensor is None else sensor)
 

@@ -29,7 +29,7 @@ class RequestQueue:
 
     def __init__(self, buffer_count: int, keep: int) -> None:
         self.buffer_count, self.keep = buffer_count, keep
-        self.cond = threading.Condition()
+        self.cond = threading.Condition(threading.RLock())  # reentrant: a release under it returns a buffer
         self.waiting = collections.deque[CompletedRequest]()
         self.held = 0  # requests completed and not yet released: queued here or with the application
         self.readers = 0
@@ -62,7 +62,8 @@ class RequestQueue:
     def take(self, timeout_s: float | None, fresh: bool = False,
              accept: Callable[[CompletedRequest], bool] | None = None) -> CompletedRequest:
         """The oldest waiting request (``fresh``: one completed after this call); ``accept`` refuses stale
-        ones (they are released). TimeoutError after ``timeout_s``; RuntimeError when the camera stops."""
+        ones, released at once so that their buffers take new frames (picamera2's flush does the same).
+        TimeoutError after ``timeout_s``; RuntimeError when the camera stops."""
         deadline = None if timeout_s is None else time.monotonic() + timeout_s
         discard: list[CompletedRequest] = []
         try:
@@ -77,7 +78,7 @@ class RequestQueue:
                             req = self.waiting.popleft()
                             if accept is None or accept(req):
                                 return req
-                            discard.append(req)
+                            req.release()  # the lock is reentrant: its buffer comes back now
                         if not self.running:
                             if self.failure is not None:
                                 raise RuntimeError(f"the camera failed: {self.failure!r}") from self.failure
@@ -90,6 +91,13 @@ class RequestQueue:
                     self.readers -= 1
         finally:
             _release_all(discard)  # outside the lock: a release returns its buffer under it
+
+    def flush(self) -> None:
+        """Release the requests waiting to be captured."""
+        with self.cond:
+            out = list(self.waiting)
+            self.waiting.clear()
+        _release_all(out)
 
     def stop(self) -> list[CompletedRequest]:
         """Stop: waiting readers fail, queued requests are returned for release."""

@@ -11,16 +11,25 @@ from __future__ import annotations
 import atexit
 import enum
 import logging
+import sys
 import threading
+from types import SimpleNamespace
 from typing import Any
 
+import libcamera
+
+from . import formats, tuning
 from ._camera import PiCamera, sources
 from ._capture import CaptureMixin
 from ._configs import ConfigMixin
 from ._engine import Engine, RequestQueue
+from ._helpers import Helpers
 from ._isp import aspect_crop, crop_pixels, isp_picture, stream_arrays
+from ._record import RecordMixin
+from .allocators import DmaAllocator
 from .configuration import CameraConfiguration
 from .controls import Controls
+from .platform import Platform
 from .request import CompletedRequest
 
 _log = logging.getLogger("picamera2")
@@ -45,8 +54,25 @@ class Preview(enum.Enum):
     QTGL = 3
 
 
-class Picamera2(ConfigMixin, CaptureMixin):
+class Picamera2(ConfigMixin, CaptureMixin, RecordMixin):
     """One emulated camera, opened for this process until ``close()``."""
+
+    DEBUG, INFO, WARNING, ERROR, CRITICAL = (logging.DEBUG, logging.INFO, logging.WARNING, logging.ERROR,
+                                             logging.CRITICAL)
+    platform = Platform.VC4
+
+    load_tuning_file = staticmethod(tuning.load_tuning_file)
+    find_tuning_algo = staticmethod(tuning.find_tuning_algo)
+
+    @staticmethod
+    def set_logging(level: int = logging.WARNING, output: Any = sys.stderr, msg: str | None = None) -> None:
+        """Send the ``picamera2`` logger's messages of ``level`` and above to ``output`` (picamera2's helper for
+        standalone scripts)."""
+        logger = logging.getLogger("picamera2")
+        handler = logging.StreamHandler(output)
+        handler.setFormatter(logging.Formatter(msg or "%(name)s %(levelname)s: %(message)s"))
+        logger.setLevel(level)
+        logger.handlers = [handler]
 
     @staticmethod
     def global_camera_info() -> list[dict[str, Any]]:
@@ -63,6 +89,8 @@ class Picamera2(ConfigMixin, CaptureMixin):
     def __init__(self, camera_num: int = 0, verbose_console: Any = None, tuning: Any = None,
                  allocator: Any = None) -> None:
         self.is_open, self.started, self._cam, self._engine, self._queue = False, False, None, None, None
+        self._state = threading.Condition()  # captures made before start() wait on it
+        self._jobs: set[Any] = set()
         found = sources()
         if not isinstance(camera_num, int) or not 0 <= camera_num < len(found):
             raise IndexError(f"list index out of range (camera {camera_num!r} of {len(found)} emulated)")
@@ -81,6 +109,11 @@ class Picamera2(ConfigMixin, CaptureMixin):
         self.camera_config: dict[str, Any] = {}
         self.options: dict[str, Any] = {}
         self.pre_callback = self.post_callback = None
+        self._init_recording()
+        self.helpers = Helpers(self)
+        self.overlay = None
+        self.title_fields: list[str] = []  # metadata fields a preview window's title shows (no window here)
+        self.allocator = allocator if allocator is not None else DmaAllocator()
         self.controls = Controls(self)
         self._lock = threading.RLock()
         native = max(self._cam.modes, key=lambda m: (m.size[0] * m.size[1], m.bit_depth))
@@ -132,6 +165,47 @@ class Picamera2(ConfigMixin, CaptureMixin):
         return [self._cam.mode_info(m) for m in self._cam.modes]
 
     @property
+    def libcamera_config(self) -> Any:
+        """The configured streams as libcamera holds them: ``libcamera_config.at(i)`` (``main_index``, ...)
+        has ``size``, ``stride``, ``pixel_format`` and ``color_space`` (an RGB stream's is the headline one
+        with no Y'CbCr encoding and full range; the raw stream's is Raw)."""
+        streams = []
+        for name in ("main", "lores", "raw"):
+            c = self.camera_config.get(name) if self.camera_config else None
+            if c is None:
+                continue
+            space = libcamera.ColorSpace(self.camera_config["colour_space"])
+            if name == "raw":
+                space = libcamera.ColorSpace.Raw()
+            elif formats.is_RGB(c["format"]):
+                space.ycbcrEncoding, space.range = space.YcbcrEncoding.Null, space.Range.Full
+            streams.append(SimpleNamespace(size=libcamera.Size(*c["size"]), stride=c.get("stride"),
+                                           pixel_format=str(c["format"]), color_space=space))
+        return SimpleNamespace(at=streams.__getitem__, size=lambda: len(streams))
+
+    @property
+    def main_index(self) -> int:
+        """The main stream's index among the configured streams (libcamera's order: main, lores, raw)."""
+        return 0
+
+    @property
+    def lores_index(self) -> int:
+        """The lores stream's index, -1 when there is none."""
+        return 1 if self.camera_config.get("lores") is not None else -1
+
+    @property
+    def raw_index(self) -> int:
+        """The raw stream's index, -1 when there is none."""
+        if self.camera_config.get("raw") is None:
+            return -1
+        return 2 if self.camera_config.get("lores") is not None else 1
+
+    @property
+    def camera(self) -> Any:
+        """The camera behind this object (libcamera's ``Camera`` on a Pi; here the emulated one)."""
+        return self._cam
+
+    @property
     def rollcam_device(self) -> Any:
         """The ``rollcam.firmware.FirmwareCamera`` behind this camera (rollcam's extra): its controls and spec
         are what every other door of the device reads."""
@@ -161,9 +235,18 @@ class Picamera2(ConfigMixin, CaptureMixin):
         config = self._resolve(given)
         self._cam.apply(Controls(self, config.get("controls") or {}).make_dict())
         self.camera_config = config
+        self.allocator.allocate(config)
         if isinstance(given, str) and given in ("preview", "still", "video"):
             getattr(self, f"{given}_configuration").update(config)
-        self.controls = Controls(self)
+        elif isinstance(given, dict):  # as picamera2 does: the caller's dict gets what configure worked out
+            for name in ("main", "lores", "raw"):
+                if isinstance(given.get(name), dict) and config.get(name) is not None:
+                    given[name].update({k: config[name][k] for k in ("format", "size", "stride", "framesize")
+                                        if k in config[name]})
+        self.encode_stream_name = config.get("encode") or "main"
+        # As picamera2's: the configuration's controls, readable (picam2.controls.ExposureTime) and applied
+        # (again: the same values) with the first frame.
+        self.controls = Controls(self, config.get("controls") or {})
 
     def start(self, config: Any = None, show_preview: Any = False) -> None:
         """Start streaming (configuring first with ``config``, or 'preview' when never configured)."""
@@ -177,7 +260,9 @@ class Picamera2(ConfigMixin, CaptureMixin):
         self._queue = RequestQueue(int(c["buffer_count"]), 1 if c["queue"] and c["buffer_count"] > 1 else 0)
         self._engine = Engine(self._cam, self._queue, self.controls.take, self._complete)
         self._engine.start()
-        self.started = True
+        with self._state:
+            self.started = True
+            self._state.notify_all()
 
     def stop(self) -> None:
         """Stop streaming (harmless when stopped)."""
@@ -195,7 +280,9 @@ class Picamera2(ConfigMixin, CaptureMixin):
         try:
             self.stop()
         finally:
-            self.is_open = False
+            with self._state:
+                self.is_open = False
+                self._state.notify_all()
             with _OPEN_LOCK:
                 if _OPEN.get(self.camera_idx) is self:
                     del _OPEN[self.camera_idx]
@@ -211,6 +298,26 @@ class Picamera2(ConfigMixin, CaptureMixin):
 
     def stop_preview(self) -> None:
         """Nothing to stop (no preview window)."""
+
+    def set_overlay(self, overlay: Any) -> None:
+        """An overlay for the preview: None, or a 4-channel (RGBA) array, checked as picamera2 does and kept
+        in ``overlay``; with no preview window it is drawn nowhere."""
+        if overlay is not None and (getattr(overlay, "ndim", 0) != 3 or overlay.shape[2] != 4):
+            raise RuntimeError("Overlay must be a 4-channel image")
+        self.overlay = overlay
+
+    @property
+    def stream_map(self) -> dict[str, Any]:
+        """Each configured stream as libcamera describes it: ``stream_map["main"].configuration.size``,
+        ``.stride``, ``.pixel_format``."""
+        out = {}
+        for name in ("main", "lores", "raw"):
+            c = self.camera_config.get(name) if self.camera_config else None
+            if c is not None:
+                conf = SimpleNamespace(size=libcamera.Size(*c["size"]), stride=c.get("stride"),
+                                       pixel_format=str(c["format"]), frame_size=c.get("framesize"))
+                out[name] = SimpleNamespace(name=name, configuration=conf)
+        return out
 
     # ------------------------------------------------------------------------------------ frames
     def _complete(self, plan: Any, frame: Any) -> CompletedRequest | None:
@@ -235,4 +342,5 @@ class Picamera2(ConfigMixin, CaptureMixin):
         for hook in (self.pre_callback, self.post_callback):
             if hook is not None:
                 hook(req)
+        self._encode(req)
         return req

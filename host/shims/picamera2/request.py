@@ -11,13 +11,16 @@ from __future__ import annotations
 
 import io
 import os
+import struct
 import threading
 from collections.abc import Callable
 from typing import Any
 
 import numpy as np
+from rollcam.common.errors import require
 
 from . import formats
+from ._dng import write_dng
 from ._isp import RGB_LAYOUTS, YUV_CODECS
 
 
@@ -40,6 +43,11 @@ class CompletedRequest:
 
     def __enter__(self) -> CompletedRequest:
         return self
+
+    @property
+    def stream_map(self) -> dict[str, Any]:
+        """The camera's streams as libcamera describes them (``stream_map["main"].configuration.size``)."""
+        return self.picam2.stream_map
 
     def __exit__(self, *exc: object) -> None:
         self.release()
@@ -101,14 +109,21 @@ class CompletedRequest:
         if fmt is None:
             raise RuntimeError(f"Stream {name!r} is not defined")
         if formats.is_raw(fmt):
-            raise RuntimeError("rollcam's picamera2 stand-in cannot save raw streams (DNG is not supported)")
-        ext = _format_of(file_output, format)
+            write_dng(self._array(name), self.config[name], self.metadata, file_output)
+            return
+        ext = image_format(file_output, format)
         quality = int(getattr(self.picam2, "options", {}).get("quality", 90))
-        write_image(file_output, to_bgr(self._array(name), fmt), ext, quality)
+        exif = None
+        if exif_data and ext in ("jpg", "jpeg"):
+            piexif = require("piexif", extra="picamera2", feature="picamera2's exif_data")
+            exif = piexif.dump(exif_data)
+        write_image(file_output, to_bgr(self._array(name), fmt), ext, quality, exif)
 
     def save_dng(self, file_output: Any, name: str = "raw") -> None:
-        """Not supported: DNG needs pidng; the raw stream's array is available with ``make_array('raw')``."""
-        raise RuntimeError("rollcam's picamera2 stand-in cannot save DNG files; use make_array('raw')")
+        """Save the raw stream as a DNG (pidng) to a path or a file object."""
+        if name not in self.arrays:
+            raise RuntimeError(f"Stream {name!r} is not defined")
+        write_dng(self._array(name), self.config[name], self.metadata, file_output)
 
 
 class MappedArray:
@@ -142,7 +157,8 @@ def to_bgr(array: np.ndarray, fmt: str) -> np.ndarray:
     raise RuntimeError(f"Stream format {fmt} cannot be saved as an image")
 
 
-def _format_of(file_output: Any, format: str | None) -> str:
+def image_format(file_output: Any, format: str | None) -> str:
+    """The file format to write: ``format``, else the path's extension (lower case, no dot)."""
     if isinstance(format, str):
         return format.lower().lstrip(".")
     if isinstance(file_output, (str, os.PathLike)):
@@ -150,15 +166,18 @@ def _format_of(file_output: Any, format: str | None) -> str:
     raise RuntimeError("Cannot determine format to save")
 
 
-def write_image(file_output: Any, bgr: np.ndarray, ext: str, quality: int = 90) -> None:
-    """Encode a BGR picture (``ext``: jpg/jpeg through the codec table's one JPEG encoder; png, bmp, ... with
-    OpenCV) to a path (atomically) or a writable file object."""
+def write_image(file_output: Any, bgr: np.ndarray, ext: str, quality: int = 90, exif: bytes | None = None) -> None:
+    """Encode a BGR picture (``ext``: jpg/jpeg through the codec table's one JPEG encoder, with an EXIF
+    block ``exif`` (``Exif\\0\\0`` and a TIFF structure, as ``piexif.dump`` makes) when given; png, bmp, ...
+    with OpenCV) to a path (atomically) or a writable file object."""
     import cv2
     from rollcam.common.files import write_atomic
     from rollcam.sim.codecs import codec
 
     if ext in ("jpg", "jpeg"):
         data = codec("MJPG").encode(bgr, quality=quality).tobytes()
+        if exif:  # an APP1 segment right after the start-of-image marker
+            data = data[:2] + b"\xff\xe1" + struct.pack(">H", len(exif) + 2) + exif + data[2:]
     else:
         ok, buf = cv2.imencode(f".{ext}", bgr)
         if not ok:

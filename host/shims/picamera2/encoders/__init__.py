@@ -1,5 +1,9 @@
-"""picamera2's encoders are not part of rollcam's stand-in: importing them says so (docs/picamera2.md)."""
+"""picamera2's encoders: ``H264Encoder`` (ffmpeg as its own program), ``MJPEGEncoder`` and ``JpegEncoder``
+(rollcam's JPEG encoder), and ``Encoder`` itself, which passes raw frames on; ``Quality``."""
 
-raise ImportError("rollcam's picamera2 stand-in has no encoders (H.264, MJPEG, JPEG recording is not emulated); "
-                  "capture frames with capture_array/capture_request and encode them yourself "
-                  "(see rollcam's docs/picamera2.md)")
+from .encoder import Encoder, Quality
+from .h264_encoder import H264Encoder, LibavH264Encoder
+from .jpeg_encoder import JpegEncoder, LibavMjpegEncoder, MJPEGEncoder
+
+__all__ = ["Encoder", "H264Encoder", "JpegEncoder", "LibavH264Encoder", "LibavMjpegEncoder", "MJPEGEncoder",
+           "Quality"]

@@ -1,4 +1,12 @@
-"""picamera2's outputs are not part of rollcam's stand-in: importing them says so (docs/picamera2.md)."""
+"""picamera2's outputs: where encoders send frames (``FileOutput``, ``FfmpegOutput``, ``PyavOutput``,
+``CircularOutput``, ``CircularOutput2``, ``SplittableOutput``)."""
 
-raise ImportError("rollcam's picamera2 stand-in has no outputs (FileOutput, FfmpegOutput, CircularOutput: "
-                  "recording is not emulated); see rollcam's docs/picamera2.md")
+from .circularoutput import CircularOutput
+from .circularoutput2 import CircularOutput2
+from .ffmpegoutput import FfmpegOutput, PyavOutput
+from .fileoutput import FileOutput
+from .output import Output
+from .splittableoutput import SplittableOutput
+
+__all__ = ["CircularOutput", "CircularOutput2", "FfmpegOutput", "FileOutput", "Output", "PyavOutput",
+           "SplittableOutput"]
