@@ -36,6 +36,12 @@ from .render_result import LinearFrame
 
 DEFAULT_BOUND_PX = 0.5
 MAX_SAMPLES = 512
+EGO_SAMPLES = 8
+"""Most samples per line when the camera moves. Every line then moves and every sample is a whole-line render
+(the background shader), so the bound's count (30-200 at 1080p for the ego presets) cost seconds a frame; capped,
+a frame costs at most this many renders whatever the image speed, and the plan says it is ``capped``. What the
+cap costs in error against the many-sample reference is stated and tested in tests/test_sensor_path.py
+(``EGO_ERROR_DN``) and docs/sensor-model.md."""
 BATCH_SAMPLES = 32_768  # (line, sample) pairs per render call: bounds the per-call tables (actors x pairs)
 _SPEED_STEP_NS = 250_000  # actor speed sampling step; gait changes little within a quarter millisecond
 
@@ -100,8 +106,11 @@ def _swept_bounds(renderer: Renderer, by_column: bool, start_s: np.ndarray, exp_
 
 
 def plan_samples(renderer: Renderer, starts_ns: np.ndarray, exposure_ns: int, *, by_column: bool = False,
-                 bound_px: float = DEFAULT_BOUND_PX, max_samples: int = MAX_SAMPLES) -> SamplePlan:
-    """The adaptive plan: per line, ceil(speed * exposure / bound) samples (1 where nothing moves)."""
+                 bound_px: float = DEFAULT_BOUND_PX, max_samples: int = MAX_SAMPLES,
+                 ego_samples: int = EGO_SAMPLES) -> SamplePlan:
+    """The adaptive plan: per line, ceil(speed * exposure / bound) samples (1 where nothing moves), at most
+    ``max_samples``, and at most ``ego_samples`` when the camera moves (where that cuts a line's count, the
+    bound no longer holds and the plan is ``capped``)."""
     starts = np.asarray(starts_ns, np.int64)
     n_lines = starts.shape[0]
     if not bound_px > 0 or not math.isfinite(bound_px):
@@ -128,8 +137,9 @@ def plan_samples(renderer: Renderer, starts_ns: np.ndarray, exposure_ns: int, *,
                 touch = (b[:, 0] <= centre) & (centre <= b[:, 1]) & (b[:, 2] < n_along) & (b[:, 3] > 0)
                 speed[touch] = np.maximum(speed[touch], act_speed[o])
     want = np.ceil(speed * exp_s / bound_px)
-    n = np.clip(np.nan_to_num(want, nan=max_samples, posinf=max_samples), 1, max_samples).astype(np.int64)
-    return SamplePlan(starts, int(exposure_ns), n, speed, bool((want > max_samples).any()))
+    cap = min(max_samples, max(int(ego_samples), 1)) if renderer.camera_moving else max_samples
+    n = np.clip(np.nan_to_num(want, nan=cap, posinf=cap), 1, cap).astype(np.int64)
+    return SamplePlan(starts, int(exposure_ns), n, speed, bool((want > cap).any()))
 
 
 def dense_plan(plan: SamplePlan, step_px: float = 0.05) -> SamplePlan:
