@@ -2,7 +2,8 @@
 
 Each study's code lives in its own module of ``rollcam.benchmarks`` (``bench`` renders, ``realism``,
 ``detect``, ``ptc``, ``sensor_bench``, ``uvc``, ``soak``, ``mjpeg``, ``dataset``, ``imu``, ``view``,
-``preload``, ``personnet``, ``flicker``, ``insensor``); an entry here is the thin layer the command line needs.
+``preload``, ``personnet``, ``flicker``, ``device``, ``insensor``);
+an entry here is the thin layer the command line needs.
 ``run(args, progress)`` does the work, writes its files under ``args.out`` and returns the JSON document with
 its plain-text report; ``targets(doc)`` reads the document's targets as ``{name: {"value", "op", "limit",
 "pass"}}`` (``pass`` None when a target did not apply). This module imports only the standard library at the
@@ -383,6 +384,30 @@ def _flicker(args: argparse.Namespace, progress: Any) -> tuple[Doc, str]:
     return doc, format_report(doc)
 
 
+# --------------------------------------------------------------------------------------------- device
+def _device_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--quick", action="store_true", help="3 reads after 1 warm-up per row instead of 8 after 2")
+    p.add_argument("--frames", type=_COUNT, default=None, help="timed reads per row (default: 8, quick 3)")
+    p.add_argument("--size", type=value_type(parse_size), default=(1920, 1080), metavar="WxH",
+                   help="frame size (default: the issue's 1920x1080)")
+    p.add_argument("--rows", type=value_type(name_list), default=None,
+                   help="comma-separated subset of static_bgr3,static_yuyv,static_raw10,static_yuyv_noblur,"
+                        "ego_walk,ego_pan,ego_drone,ego_vehicle,night_steady,night_lights")
+
+
+def _device(args: argparse.Namespace, progress: Any) -> tuple[Doc, str]:
+    from .device import format_report, row_uris, run_device_bench
+
+    bad = [r for r in args.rows or () if r not in row_uris(args.size)]
+    if bad:
+        raise ConfigError(f"--rows: {bad[0]!r} is not one of {list(row_uris(args.size))}")
+    frames = args.frames or (3 if args.quick else 8)
+    doc = run_device_bench(args.size, frames=frames, warmup=1 if args.quick else 2,
+                           only=tuple(args.rows) if args.rows else None, say=progress.status)
+    write_json(args.out, "device.json", doc)
+    return doc, format_report(doc)
+
+
 # ------------------------------------------------------------------------------------------- insensor
 def _insensor_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--scenes", type=_COUNT, default=4, help="street scenes, x 3 cameras (default: %(default)s)")
@@ -431,6 +456,8 @@ STUDIES: dict[str, Study] = {s.name: s for s in (
           _personnet_arguments, _personnet, _doc_targets),
     Study("flicker", "modulated light: cost of flicker on vs off (night street RS) and the bands vs analytic",
           _flicker_arguments, _flicker, _doc_targets),
+    Study("device", "frames through open_camera(uri).read() as users stream them: sensor model, ego presets, "
+          "static RS vs a frame copy, night lights (issue 42's targets)", _device_arguments, _device, _doc_targets),
     Study("insensor", "ISP + host detector against the in-sensor detector on raw: accuracy, latency, bytes, energy",
           _insensor_arguments, _insensor, _doc_targets),
 )}

@@ -95,13 +95,13 @@ class Compositor:
         return RenderResult(_oriented(u8, by_column, contiguous=True), lin_out, gt, painted)
 
     def truth(self, p: Pass, layer: StaticLayer, by_column: bool) -> RenderResult:
-        """Ground truth only: every line for a moving camera, else the composite's with touched lines redone."""
+        """Ground truth only, of the lines some actor's bounds reach: over empty truth for a moving camera (every
+        actor moves in its view), else over the composite's. No pixel is shaded, so a moving camera's truth
+        costs its actors' touches, not a whole-frame pass."""
         n_actors, n_lines = self._painter.n_actors, self._painter.shape(by_column)[0]
-        if self._moving:
-            lines, gt = np.arange(n_lines), LineTruth.empty(n_actors, n_lines, by_column)
-        else:
-            lines, gt = np.flatnonzero(p.touched(self._all)), layer.truth(n_actors, by_column)
-        self._painter.paint(p, self._all, lines, gt, bg=layer.bg_lin, full_lines=self._moving, gt_only=True)
+        lines = np.flatnonzero(p.touched(self._all))
+        gt = LineTruth.empty(n_actors, n_lines, by_column) if self._moving else layer.truth(n_actors, by_column)
+        self._painter.paint(p, self._all, lines, gt, bg=layer.bg_lin, full_lines=False, gt_only=True)
         return RenderResult(np.empty((0, 0, 3), np.uint8), None, gt, int(lines.size))
 
     def linear_into(self, p: Pass, layer: StaticLayer, by_column: bool, subset: np.ndarray, out: np.ndarray,

@@ -31,6 +31,9 @@ tens of microseconds on a quiet machine and milliseconds on a busy one (a parked
 TOUCH_WORK = 128
 """Pixels' shading one actor costs on one line over the cached composite (measured at 1080p: ~4 us a touch
 against ~30 ns a background pixel), for ``PARALLEL_MIN_PIXELS``."""
+TRUTH_TOUCH_WORK = 16
+"""The same for a truth-only touch (parts, spans and covered pixels, no shading; ~0.5 us at 1080p): a frame's
+ground truth at another instant stays on the calling thread unless hundreds of actors make it worth the threads."""
 PARALLEL_MIN_ITEMS = 2048
 """Actor bounds or parts below which they are computed on the calling thread alone (same reason)."""
 
@@ -172,8 +175,11 @@ class Painter:
             e_start, ents = np.arange(lines.size + 1), lines
         # Whole lines shade every pixel; over a composite only the actors' spans, each touch of an actor and
         # a line costing about TOUCH_WORK pixels' shading (its parts on that line, its spans, their pixels).
-        work = (ents.size * n_along if full_lines
-                else TOUCH_WORK * int((p.obj_k >= 0).sum(axis=0)[ents].sum()))
+        if full_lines and not gt_only:
+            work = ents.size * n_along
+        else:
+            touches = int((p.obj_k >= 0).sum(axis=0)[ents].sum())
+            work = (TRUTH_TOUCH_WORK if gt_only else TOUCH_WORK) * touches
         self._run(
             K.render_lines_kernel, K.render_lines_par, work, PARALLEL_MIN_PIXELS,
             t.world, t.building_lut, t.buildings, t.light, p.cam, p.rot, p.pos, t.actors, p.times_s, p.entry_k,

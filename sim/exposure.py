@@ -36,7 +36,15 @@ from .render_result import LinearFrame
 
 DEFAULT_BOUND_PX = 0.5
 MAX_SAMPLES = 512
+EGO_SAMPLES = 8
+"""Most samples per line when the camera moves. Every line then moves and every sample is a whole-line render
+(the background shader), so the bound's count (30-200 at 1080p for the ego presets) cost seconds a frame; capped,
+a frame costs at most this many renders whatever the image speed, and the plan says it is ``capped``. What the
+cap costs in error against the many-sample reference is stated and tested in tests/test_sensor_path.py
+(``EGO_ERROR_DN``) and docs/sensor-model.md."""
 BATCH_SAMPLES = 32_768  # (line, sample) pairs per render call: bounds the per-call tables (actors x pairs)
+GRID_FRACTION = 0.125
+"""Largest shift of a sample by snapping to the shared time grid, in blur bounds (at the fastest image speed)."""
 _SPEED_STEP_NS = 250_000  # actor speed sampling step; gait changes little within a quarter millisecond
 
 
@@ -49,6 +57,8 @@ class SamplePlan:
     n: np.ndarray
     speed_px_s: np.ndarray
     capped: bool
+    grid_ns: int = 0
+    """Sample times snap to the nearest multiple of this (0: not at all), so lines share them (below)."""
 
     @property
     def evaluations(self) -> int:
@@ -58,8 +68,21 @@ class SamplePlan:
     def times_ns(self, j: int) -> np.ndarray:
         """Per-line times of pass ``j``: sample j of each line (its last sample where it has fewer)."""
         k = np.minimum(j, self.n - 1)
-        # Midpoint rule on integer ns: sample k of n sits at start + (2k + 1) * exposure / (2n).
-        return self.starts_ns + ((2 * k + 1) * self.exposure_ns) // (2 * self.n)
+        return sample_times_ns(self.starts_ns, self.exposure_ns, k, self.n, self.grid_ns)
+
+
+def sample_times_ns(starts_ns: np.ndarray, exposure_ns: int, k: np.ndarray, n: np.ndarray, grid_ns: int) -> np.ndarray:
+    """Sample k of n of windows starting at ``starts_ns``: the midpoint rule on integer ns, start + (2k + 1) *
+    exposure / (2n), snapped to the nearest multiple of ``grid_ns`` when it is > 0.
+
+    A rolling shutter's lines start one line time apart, so their own midpoints are all different instants and
+    each needs every walker touching it posed afresh; snapped to a grid finer than the blur bound needs, the
+    lines a walker crosses share its poses (the renderer computes an actor's parts once per shared instant).
+    """
+    t = starts_ns + ((2 * k + 1) * exposure_ns) // (2 * n)
+    if grid_ns > 0:
+        t = ((t + grid_ns // 2) // grid_ns) * grid_ns
+    return t
 
 
 def _ego_speed_px_s(renderer: Renderer, by_column: bool, t0_s: float, t1_s: float) -> float:
@@ -100,8 +123,11 @@ def _swept_bounds(renderer: Renderer, by_column: bool, start_s: np.ndarray, exp_
 
 
 def plan_samples(renderer: Renderer, starts_ns: np.ndarray, exposure_ns: int, *, by_column: bool = False,
-                 bound_px: float = DEFAULT_BOUND_PX, max_samples: int = MAX_SAMPLES) -> SamplePlan:
-    """The adaptive plan: per line, ceil(speed * exposure / bound) samples (1 where nothing moves)."""
+                 bound_px: float = DEFAULT_BOUND_PX, max_samples: int = MAX_SAMPLES,
+                 ego_samples: int = EGO_SAMPLES) -> SamplePlan:
+    """The adaptive plan: per line, ceil(speed * exposure / bound) samples (1 where nothing moves), at most
+    ``max_samples``, and at most ``ego_samples`` when the camera moves (where that cuts a line's count, the
+    bound no longer holds and the plan is ``capped``)."""
     starts = np.asarray(starts_ns, np.int64)
     n_lines = starts.shape[0]
     if not bound_px > 0 or not math.isfinite(bound_px):
@@ -128,12 +154,17 @@ def plan_samples(renderer: Renderer, starts_ns: np.ndarray, exposure_ns: int, *,
                 touch = (b[:, 0] <= centre) & (centre <= b[:, 1]) & (b[:, 2] < n_along) & (b[:, 3] > 0)
                 speed[touch] = np.maximum(speed[touch], act_speed[o])
     want = np.ceil(speed * exp_s / bound_px)
-    n = np.clip(np.nan_to_num(want, nan=max_samples, posinf=max_samples), 1, max_samples).astype(np.int64)
-    return SamplePlan(starts, int(exposure_ns), n, speed, bool((want > max_samples).any()))
+    cap = min(max_samples, max(int(ego_samples), 1)) if renderer.camera_moving else max_samples
+    n = np.clip(np.nan_to_num(want, nan=cap, posinf=cap), 1, cap).astype(np.int64)
+    # Snapping moves a sample by at most half the grid: at the fastest speed, GRID_FRACTION of the bound.
+    fastest = float(speed.max()) if speed.size else 0.0
+    grid = int(GRID_FRACTION * 2 * bound_px / fastest * 1e9) if fastest > 0 and math.isfinite(fastest) else 0
+    return SamplePlan(starts, int(exposure_ns), n, speed, bool((want > cap).any()), grid)
 
 
 def dense_plan(plan: SamplePlan, step_px: float = 0.05) -> SamplePlan:
-    """Fixed dense sampling: every line gets the samples the fastest line needs at ``step_px``."""
+    """Fixed dense sampling: every line gets the samples the fastest line needs at ``step_px``, at each line's own
+    midpoints (a reference: no shared grid, which would merge samples finer than it)."""
     fastest = float(plan.speed_px_s.max()) if plan.speed_px_s.size else 0.0
     n = max(1, math.ceil(fastest * plan.exposure_ns * 1e-9 / step_px))
     return SamplePlan(plan.starts_ns, plan.exposure_ns, np.full_like(plan.n, n), plan.speed_px_s, False)
@@ -204,8 +235,7 @@ def integrate(renderer: Renderer, plan: SamplePlan, *, by_column: bool = False, 
     line_of = np.repeat(np.arange(n_lines, dtype=np.int64), n)
     first = np.cumsum(n) - n
     k = np.arange(line_of.size, dtype=np.int64) - first[line_of]
-    # Midpoint rule on integer ns, as SamplePlan.times_ns: sample k of n at start + (2k + 1) exposure / (2n).
-    times = plan.starts_ns[line_of] + ((2 * k + 1) * plan.exposure_ns) // (2 * n[line_of])
+    times = sample_times_ns(plan.starts_ns[line_of], plan.exposure_ns, k, n[line_of], plan.grid_ns)
     painted = 0
     static = None
     bounds = np.searchsorted(first, np.arange(0, line_of.size, max(int(batch_samples), 1)), side="right") - 1

@@ -165,3 +165,19 @@ def test_soak_refuses_a_non_positive_duration() -> None:
 
     with pytest.raises(ConfigError, match="minutes"):
         run_soak(-1)
+
+
+def test_device_study_times_reads_and_names_each_miss_with_its_cause(tmp_path, capsys) -> None:
+    rows = "static_bgr3,static_yuyv_noblur,night_steady,night_lights"
+    args = ["bench", "device", "--size", "64x36", "--quick", "--frames", "1", "--rows", rows, "--out", str(tmp_path)]
+    assert main([*args, "--json", "--check"]) == 1  # a 64x36 frame is far more than 8 copies of itself
+    captured = capsys.readouterr()
+    doc = json.loads(captured.out)
+    assert list(doc["rows"]) == rows.split(",")
+    assert all(r["wall_ms"] > 0 and r["uri"].startswith("emu:imx219?size=64x36") for r in doc["rows"].values())
+    assert set(doc["targets"]) == {"static_rs_x_copy", "sensor_stages_vs_clean", "night_lights_x_steady"}
+    miss = doc["targets"]["static_rs_x_copy"]
+    assert miss["pass"] is False and miss["cause"]["static_bgr3"][0]["ms"] >= 0
+    assert "static_rs_x_copy" in captured.err and (tmp_path / "device.json").exists()
+    assert main(["bench", "device", "--rows", "ego_moon", "--out", str(tmp_path)]) == 2
+    assert "rollcam: error: --rows: 'ego_moon'" in capsys.readouterr().err

@@ -7,6 +7,7 @@ from __future__ import annotations
 import hashlib
 import math
 import threading
+from collections import Counter
 
 import numba
 import numpy as np
@@ -213,3 +214,31 @@ def test_line_truth_boxes_span_each_actors_lines_and_extents() -> None:
     gt.transposed = True
     assert gt.boxes()[0] == (1.0, 1.0, 5.0, 7.0)
     assert LineTruth.empty(2, 0, False).boxes() == [None, None]
+
+
+@pytest.mark.parametrize("ego", ["none", "vehicle"])
+def test_a_read_runs_the_threaded_line_kernel_once(ego: str, monkeypatch: pytest.MonkeyPatch) -> None:
+    # Through the public path a frame is one pixel render; its ground truth at the reference instant (every RS
+    # frame's GS boxes) shades nothing and runs on the calling thread over the lines actors touch. On main it
+    # was a second threaded launch over every line of a moving camera's frame (issue 42).
+    from rollcam.host import open_camera
+
+    calls: Counter[tuple[str, bool]] = Counter()  # (kernel, truth only)
+    def spy(name: str):
+        kernel = getattr(_kernels, name)
+
+        def call(*args):
+            calls[name, bool(args[27])] += 1  # (argument 27: gt_only)
+            return kernel(*args)
+        return call
+
+    for name in ("render_lines_kernel", "render_lines_par"):
+        monkeypatch.setattr(_kernels, name, spy(name))
+    with open_camera(f"emu:letsroll?size=1280x720&scene=street&ego={ego}") as cam:
+        cam.read()
+        calls.clear()
+        frame = cam.read()
+    assert frame is not None and any(o.box_gs is not None for o in frame.objects)
+    # A moving camera's frame shades every pixel (the threads); a static one's few touched lines stay serial.
+    pixels = "render_lines_par" if ego != "none" else "render_lines_kernel"
+    assert calls == {(pixels, False): 1, ("render_lines_kernel", True): 1}, calls
