@@ -116,17 +116,22 @@ REAL(FILE *, fopen, const char *, const char *)
 REAL(FILE *, fopen64, const char *, const char *)
 REAL(ssize_t, readlink, const char *, char *, size_t)
 
-static void trace(const char *fmt, ...) {
-    if (!debug)
-        return;
+/* One line to stderr through the real write (the program's own may be interposed or redirected). */
+static void vsay(const char *fmt, va_list ap) {
     char buf[512];
-    va_list ap;
-    va_start(ap, fmt);
     int n = vsnprintf(buf, sizeof buf, fmt, ap);
-    va_end(ap);
     resolve_write();
     if (n > 0)
         real_write(2, buf, (size_t)n < sizeof buf ? (size_t)n : sizeof buf - 1);
+}
+
+static void trace(const char *fmt, ...) {
+    if (!debug)
+        return;
+    va_list ap;
+    va_start(ap, fmt);
+    vsay(fmt, ap);
+    va_end(ap);
 }
 
 static void fork_prepare(void);
@@ -541,14 +546,10 @@ static int call(struct handle *h, const struct rollcam_req *q, const void *paylo
 }
 
 static void say(const char *fmt, ...) {
-    char buf[512];
     va_list ap;
     va_start(ap, fmt);
-    int n = vsnprintf(buf, sizeof buf, fmt, ap);
+    vsay(fmt, ap);
     va_end(ap);
-    resolve_write();
-    if (n > 0)
-        real_write(2, buf, (size_t)n < sizeof buf ? (size_t)n : sizeof buf - 1);
 }
 
 /* A new connection to the server, past the hello; -1 with ENODEV when there is none or it speaks another
