@@ -179,7 +179,7 @@ def test_bench_lists_one_subcommand_per_study_each_with_json_and_check(capsys):
     from rollcam.benchmarks.studies import STUDIES
 
     assert list(STUDIES) == ["render", "realism", "detect", "ptc", "sensor", "uvc", "soak", "mjpeg", "dataset", "imu",
-                            "view", "preload", "personnet", "flicker", "insensor"]
+                            "view", "preload", "personnet", "flicker", "device", "insensor"]
     with pytest.raises(SystemExit) as exc:
         main(["bench", "--help"])
     assert exc.value.code == 0
