@@ -98,20 +98,22 @@ def test_no_import_cycles(tool: ModuleType, modules: dict) -> None:
     assert not gone, f"allowed cycles that no longer exist: drop them from ALLOWED_CYCLES: {gone}"
 
 
+def _against_allow_list(found: list, allowed: dict, what: str, fix: str) -> None:
+    """Fail on a finding the allow-list does not name, and on an allow-list entry that matches nothing."""
+    new = [str(f) for f in found if (f.path, f.key) not in allowed]
+    gone = set(allowed) - {(f.path, f.key) for f in found}
+    assert not new, f"{what} ({fix}):\n" + "\n".join(new)
+    assert not gone, f"allowed {what} that no longer exist: drop them: {sorted(gone)}"
+
+
 def test_no_module_imports_another_modules_private_names(tool: ModuleType, modules: dict) -> None:
-    found = tool.private_imports(modules)
-    new = [str(f) for f in found if (f.path, f.key) not in ALLOWED_PRIVATE_IMPORTS]
-    gone = set(ALLOWED_PRIVATE_IMPORTS) - {(f.path, f.key) for f in found}
-    assert not new, "private names imported across modules (make them public where they live):\n" + "\n".join(new)
-    assert not gone, f"allowed private imports that no longer exist: drop them: {sorted(gone)}"
+    _against_allow_list(tool.private_imports(modules), ALLOWED_PRIVATE_IMPORTS,
+                        "private names imported across modules", "make them public where they live")
 
 
 def test_no_reach_into_another_objects_private_attributes(tool: ModuleType, modules: dict) -> None:
-    found = tool.private_attributes(modules)
-    new = [str(f) for f in found if (f.path, f.key) not in ALLOWED_PRIVATE_ATTRIBUTES]
-    gone = set(ALLOWED_PRIVATE_ATTRIBUTES) - {(f.path, f.key) for f in found}
-    assert not new, "private attributes read off another object (give the owner a public method):\n" + "\n".join(new)
-    assert not gone, f"allowed private attribute reads that no longer exist: drop them: {sorted(gone)}"
+    _against_allow_list(tool.private_attributes(modules), ALLOWED_PRIVATE_ATTRIBUTES,
+                        "private attributes read off another object", "give the owner a public method")
 
 
 def test_layers_import_downwards_only(tool: ModuleType, modules: dict) -> None:
