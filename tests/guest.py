@@ -367,7 +367,8 @@ class Guest:
                 self._agent_buf += chunk
         out = (self.xchg / "cmd" / f"{cmd_id}.out").read_text(errors="replace")
         if check and int(rc) != 0:
-            raise GuestError(f"guest command exited with {rc}:\n{script}\n--- output:\n{out}")
+            raise GuestError(f"guest command exited with {rc}:\n{script}\n--- output:\n{out}\n"
+                             f"--- kernel log (last lines):\n{self._kernel_tail()}")
         return int(rc), out
 
     def load_module(self, name: str) -> None:
@@ -388,6 +389,13 @@ class Guest:
                   f"[ \"$(cat $v/index)\" = {index} ] && echo /dev/${{v##*/}} && exit 0;; esac; done; sleep 0.1; "
                   "done; exit 1")
         return self.sh(script)[1].strip()
+
+    def _kernel_tail(self, lines: int = 40) -> str:
+        """The end of the guest kernel's log, for an error message (or why it could not be read)."""
+        try:
+            return "\n".join(self.sh("dmesg", timeout_s=30, check=False)[1].splitlines()[-lines:])
+        except GuestError as e:
+            return f"(not readable: {str(e).splitlines()[0]})"
 
     def dmesg(self) -> str:
         """The guest kernel's ring buffer."""

@@ -117,6 +117,11 @@ class _Conn:
         self.sock, self.server = sock, server
         self.opened = time.monotonic()
         self.phase = "handshake"  # then "devlist" or "import"
+        try:
+            host, port = sock.getpeername()[:2]
+            self.peer = f"{host}:{port}"
+        except OSError:
+            self.peer = "?"
         self.session: UrbSession | None = None
         self.deadline = Deadline(server.limits.handshake_timeout_s)
         self._poll = select.poll()
@@ -281,12 +286,15 @@ class USBIPServer(Closeable):
             else:
                 conn.sock.sendall(P.op_header(code & 0x7FFF, P.ST_ERROR))
                 raise ProtocolError(f"operation code {code:#06x} is not OP_REQ_DEVLIST or OP_REQ_IMPORT")
-        except (ProtocolError, struct.error, UnicodeError):
+        except (ProtocolError, struct.error, UnicodeError) as exc:
             self.stats.malformed += 1
-        except TimeoutError:
+            log.warning("USB/IP peer %s (%s): malformed message, connection closed: %s", conn.peer, conn.phase, exc)
+        except TimeoutError as exc:
             self.stats.timed_out += 1
-        except (ConnectionError, OSError):
-            pass
+            log.warning("USB/IP peer %s (%s): timed out, connection closed: %s", conn.peer, conn.phase, exc)
+        except (ConnectionError, OSError) as exc:
+            if export is not None and not self.closed:  # an importer gone: say why, for a kernel that lost its device
+                log.info("USB/IP peer %s released %s: %s", conn.peer, export.info.busid, exc or type(exc).__name__)
         finally:
             if export is not None:
                 export.function.reset()

@@ -158,7 +158,9 @@ class UrbSession:
             except Disconnected:
                 self.abort()  # the device is gone: the connection ends, unanswered (the stub's unplug)
                 return
-            except OSError:
+            except OSError as exc:
+                log.warning("USB/IP importer of device %d did not take a reply (%s): connection closed",
+                            self.devid, exc)
                 self.abort()  # a peer that does not take its replies loses the connection, not just a worker
                 return
             finally:
