@@ -191,6 +191,29 @@ def test_unlink_of_a_running_urb_answers_with_the_ret_unlink_alone():
         assert srv.stats.unlinked == 1
 
 
+def test_an_unlink_that_comes_before_its_urb_cancels_it_when_it_arrives():
+    """vhci-hcd sends its unlink list after its submit list, so a URB submitted and unlinked in between is
+    unlinked before it is submitted. Answering that unlink 0 (nothing pending) and running the URB later, as
+    Linux's stub does, gives vhci-hcd a reply to a URB it has given back, and it drops the device."""
+    clock = ManualClock()
+    fn = UVCFunction(FakeProducer(clock=clock), transfer="bulk", realtime=True, sleep=clock.sleep,
+                     render_ahead=False)
+    with USBIPServer([fn], port=0) as srv, ImportedDevice(*srv.address, "1-1") as dev:
+        size = _commit(dev).dwMaxPayloadTransferSize  # seqnums 1-4
+        unlink = dev.unlink(6)
+        assert unlink == 5 and dev.submit(1, P.DIR_IN, size) == 6
+        rep = dev.reply()
+        assert isinstance(rep, P.RetUnlink) and rep.seqnum == unlink and rep.status == -errno.ECONNRESET
+        clock.t_ns += 10**9
+        after = dev.submit(1, P.DIR_IN, size)
+        rep = dev.reply()
+        assert isinstance(rep, P.RetSubmit) and rep.seqnum == after and rep.status == 0  # nothing for 6
+        assert srv.stats.unlinked == 1
+        old = dev.unlink(3)  # an unlink of a URB answered long ago is still answered 0 at once
+        rep = dev.reply()
+        assert isinstance(rep, P.RetUnlink) and rep.seqnum == old and rep.status == 0
+
+
 def test_a_flooding_client_does_not_block_the_others(server):
     with socket.create_connection(server.address) as s:
         s.sendall(P.req_import("1-2"))

@@ -11,7 +11,12 @@ vhci-hcd reads ``number_of_packets`` descriptors after every isochronous RET_SUB
 queued cancels it at once (RET_UNLINK -ECONNRESET); of a URB a worker is running, it ends that URB early and
 its worker answers with the RET_UNLINK in place of the RET_SUBMIT, as the stub driver's completion handler does:
 vhci-hcd has given the URB back already, and a RET_SUBMIT for it would make it drop the device. A URB already
-answered gets RET_UNLINK 0, always after its RET_SUBMIT (both are sent under one lock). A device that is
+answered gets RET_UNLINK 0, always after its RET_SUBMIT (both are sent under one lock). vhci-hcd can send a
+CMD_UNLINK ahead of the CMD_SUBMIT it cancels (its sender drains the unlink list after the submit list, so a URB
+submitted and unlinked between the two is unlinked first); Linux's stub answers such an unlink 0, runs the URB
+when it arrives, and vhci-hcd then drops the device over a reply to a URB it gave back. Here an unlink of a
+seqnum newer than every URB received waits for that URB, which is then answered by the RET_UNLINK alone
+(-ECONNRESET), never run. A device that is
 unplugged (an injected disconnect) ends the connection without answering, as the stub driver's unplug does:
 vhci-hcd then gives the outstanding URBs back with -ENODEV and the port goes away.
 """
@@ -71,6 +76,8 @@ class UrbSession:
         self.reserved_bytes = 0  # transfer bytes of URBs queued or running
         self.peak_reserved_bytes = 0
         self._running: dict[int, int | None] = {}  # seqnum of a URB a worker runs -> seqnum of its CMD_UNLINK
+        self._unlinked_ahead: dict[int, int] = {}  # seqnum of a URB not received yet -> seqnum of its CMD_UNLINK
+        self._newest_submit: int | None = None  # seqnum of the last CMD_SUBMIT received (the reader's own)
         self._last_activity = time.monotonic()
 
     # ------------------------------------------------------------------------------------------ state
@@ -103,6 +110,13 @@ class UrbSession:
                 self.urbs_received += 1
                 if isinstance(cmd, P.Unlink):
                     self._unlink(cmd)
+                    continue
+                self._newest_submit = cmd.seqnum
+                unlink = self._unlinked_ahead.pop(cmd.seqnum, None)
+                if unlink is not None:  # unlinked before it came: answered, never run
+                    log.debug("URB %d arrived after its unlink %d: answered by the RET_UNLINK", cmd.seqnum, unlink)
+                    self.stats.unlinked += 1
+                    self.send(P.RetUnlink(unlink, -errno.ECONNRESET).pack())
                     continue
                 self._enqueue(cmd)
         finally:
@@ -140,7 +154,18 @@ class UrbSession:
                 elif target in self._running:
                     self._running[target] = cmd.seqnum  # its worker answers, with this RET_UNLINK
                     return
+                elif self._not_received_yet(target) and len(self._unlinked_ahead) < self.max_queued_urbs:
+                    log.debug("unlink %d of URB %d, which has not arrived yet: answered when it does",
+                              cmd.seqnum, target)
+                    self._unlinked_ahead[target] = cmd.seqnum
+                    return
             self._send(P.RetUnlink(cmd.seqnum, -errno.ECONNRESET if hit else 0).pack())
+
+    def _not_received_yet(self, seqnum: int) -> bool:
+        """Whether URB ``seqnum`` is newer than every CMD_SUBMIT received (vhci-hcd numbers its commands from one
+        32-bit counter, in order; a difference of less than half the range is taken as ahead)."""
+        newest = self._newest_submit
+        return newest is None or 0 < (seqnum - newest) % 2**32 < 2**31
 
     # ------------------------------------------------------------------------------------------ workers
     def _work(self, queue: deque[P.Submit]) -> None:
