@@ -33,7 +33,7 @@ def add_parser(sub: Subparsers) -> argparse.ArgumentParser:
                         "recording of the whole capture: mcap (ROS 2 messages, DIR/capture.mcap), ros2bag "
                         "(DIR/capture_ros2/), rosbag1 (DIR/capture.bag), kalibr (ROS 1 bag with Kalibr's "
                         "/cam0/image_raw and /imu0 only, DIR/kalibr.bag), mp4 (H.264 DIR/capture.mp4 and, with an "
-                        "IMU, Gyroflow's DIR/capture.gcsv); the bag formats need pip install 'rollcam[robotics]'")
+                        "IMU, Gyroflow's DIR/capture.gcsv); the bag formats need the robotics extra")
     p.add_argument("--overwrite", action="store_true", help="replace an earlier capture in DIR")
     p.add_argument("--json", action="store_true", help="print a JSON summary on stdout")
     p.add_argument("--progress", action="store_true", help="show progress even when stderr is not a terminal")
