@@ -269,3 +269,34 @@ def test_cli_records_and_refuses(tmp_path, capsys):
     assert err.startswith("rollcam: error:") and len(err.strip().splitlines()) == 1
     assert main(["capture", "emu:imx219", "--frames", "1", "--out", str(out), "--format", "rosbag3"]) == 2
     assert "invalid choice: 'rosbag3'" in capsys.readouterr().err
+
+
+def test_mjpg_frames_go_as_compressed_images_and_raw_bayer_as_bayer16(tmp_path):
+    import cv2
+
+    with open_camera("emu:imx219?size=96x64&format=MJPG&seed=1") as cam:
+        capture(cam, tmp_path / "jpeg", 2, fmt="mcap", progress=False)
+        ref = cam.read()
+    topics = by_topic(read_mcap(tmp_path / "jpeg" / "capture.mcap"))
+    assert "/cam0/image_raw" not in topics and len(topics["/cam0/image_raw/compressed"]) == 2
+    typ, _, msg = topics["/cam0/image_raw/compressed"][0]
+    assert typ == "sensor_msgs/msg/CompressedImage" and msg.format == "jpeg"
+    assert cv2.imdecode(np.frombuffer(bytes(msg.data), np.uint8), cv2.IMREAD_COLOR).shape == (64, 96, 3)
+    assert ref.format == "MJPG"
+    with open_camera("emu:imx219?size=96x64&format=RG10&seed=1") as cam:
+        capture(cam, tmp_path / "raw", 1, fmt="ros2bag", progress=False)
+    with open_camera("emu:imx219?size=96x64&format=RG10&seed=1") as cam:
+        raw = cam.read()
+    _, _, img = by_topic(read_bag(tmp_path / "raw" / "capture_ros2"))["/cam0/image_raw"][0]
+    assert (img.encoding, img.step, img.is_bigendian) == ("bayer_rggb16", 192, 0)
+    assert np.array_equal(np.frombuffer(bytes(img.data), "<u2").reshape(64, 96), raw.data)
+
+
+def test_overwrite_clears_a_killed_recordings_stage(tmp_path):
+    with open_camera("emu:imx219?size=96x64") as cam:
+        capture(cam, tmp_path, 1, fmt="ros2bag", progress=False)
+    stage = tmp_path / ".capture_ros2.999-abcd1234.part"  # what a kill -9 in the middle leaves
+    (stage / "capture_ros2").mkdir(parents=True)
+    with open_camera("emu:imx219?size=96x64") as cam:
+        capture(cam, tmp_path, 1, fmt="ros2bag", overwrite=True, progress=False)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["capture.json", "capture_ros2"]
