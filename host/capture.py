@@ -241,13 +241,13 @@ def read_capture(out_dir: str | os.PathLike[str]) -> tuple[dict[str, Any], list[
     return info, records
 
 
-def _writer(out: Path, fmt: str, fs: FileSystem, info: dict[str, Any]) -> CaptureWriter | bags.BagWriter | \
-        gcsv.VideoWithGyro:
+def _writer(out: Path, fmt: str, fs: FileSystem, info: dict[str, Any], storage: str) -> CaptureWriter | \
+        bags.BagWriter | gcsv.VideoWithGyro:
     """The writer of ``fmt``: image files and ``frames.jsonl``, a bag or MCAP file, or a video and its gcsv."""
     fps = info["source"].get("fps")
     if fmt in BAG_FORMATS:
         info["recording"] = bags.OUTPUT[fmt]
-        return bags.BagWriter(out, fmt)
+        return bags.BagWriter(out, fmt, storage=storage)
     if fmt == "mp4":
         info["recording"] = gcsv.VIDEO_NAME
         started = datetime.fromisoformat(info["started_utc"])
@@ -268,13 +268,15 @@ def capture(
     stream: TextIO | None = None,
     clock: Callable[[], float] = time.monotonic,
     fs: FileSystem = OS_FS,
+    bag_storage: str = "sqlite3",
 ) -> CaptureResult:
     """Capture ``frames`` instants of ``source`` into ``out_dir`` (see the module docstring).
 
     ``progress`` None shows progress on ``stream`` (stderr) only when it is a terminal. Ends early, and
     reports it, when a finite source runs out. Ctrl-C raises ``CaptureInterrupted`` after cleanup; a write
     error (a full disk) propagates after it, with every record already written kept whole. ``fs``: the
-    file-system seam (tests make its calls fail).
+    file-system seam (tests make its calls fail). ``fmt`` is an image format (``IMAGE_FORMATS``) or a recording
+    (``RECORDING_FORMATS``: ``rollcam.host.robotics``); ``bag_storage`` a ROS 2 bag's storage (sqlite3, mcap).
     """
     if isinstance(frames, bool) or not isinstance(frames, int) or frames <= 0:
         raise ConfigError(f"frames must be a positive integer, got {frames!r}")
@@ -283,6 +285,8 @@ def capture(
     out = Path(out_dir)
     read = frame_reader(source, shutter)
     check_out_dir(out, overwrite)
+    if bag_storage not in bags.ROS2_STORAGES:
+        raise ConfigError(f"ROS 2 bag storage {bag_storage!r} is not one of {list(bags.ROS2_STORAGES)}")
     if fmt in BAG_FORMATS:
         bags.require_libraries(fmt)  # a missing extra is named before any frame is made
     # The first instant is read before anything is written, and checked against the format: a frame the
@@ -306,7 +310,9 @@ def capture(
         "complete": False,  # frames/images/complete are added when the capture ends (read_capture counts them)
     }
     write_capture_info(out, info, fs)
-    writer = _writer(out, fmt, fs, info)
+    if fmt == "ros2bag":
+        info["bag_storage"] = bag_storage
+    writer = _writer(out, fmt, fs, info, bag_storage)
     bar = Progress(frames, label="capture", stream=stream, enabled=progress, unit="frame")
     start = clock()
     interrupted = False

@@ -152,10 +152,10 @@ def test_bags_read_back_with_rosbags(recorded, frames, fmt):
 
 
 def test_ros2_bag_with_mcap_storage_reads_back_with_both_readers(tmp_path, frames):
-    w = BagWriter(tmp_path, "ros2bag", storage="mcap")
-    for f in frames:
-        w.write([f])
-    w.close()
+    from rollcam.host.cli import main
+
+    assert main(["capture", URI, "--frames", str(N), "--out", str(tmp_path), "--format", "ros2bag",
+                 "--bag-storage", "mcap"]) == 0
     bag = tmp_path / "capture_ros2"
     assert sorted(p.name for p in bag.iterdir()) == ["capture_ros2.mcap", "metadata.yaml"]
     check_recording(read_bag(bag), frames)

@@ -34,6 +34,8 @@ def add_parser(sub: Subparsers) -> argparse.ArgumentParser:
                         "(DIR/capture_ros2/), rosbag1 (DIR/capture.bag), kalibr (ROS 1 bag with Kalibr's "
                         "/cam0/image_raw and /imu0 only, DIR/kalibr.bag), mp4 (H.264 DIR/capture.mp4 and, with an "
                         "IMU, Gyroflow's DIR/capture.gcsv); the bag formats need the robotics extra")
+    p.add_argument("--bag-storage", choices=("sqlite3", "mcap"), default="sqlite3",
+                   help="storage of --format ros2bag (default: sqlite3, rosbag2's default)")
     p.add_argument("--overwrite", action="store_true", help="replace an earlier capture in DIR")
     p.add_argument("--json", action="store_true", help="print a JSON summary on stdout")
     p.add_argument("--progress", action="store_true", help="show progress even when stderr is not a terminal")
@@ -52,7 +54,7 @@ def run(args: argparse.Namespace) -> int:
         try:
             result = capture(source, args.out, args.frames, shutter=args.shutter, fmt=args.format,
                              overwrite=args.overwrite, progress=True if args.progress else None,
-                             command=[PROG, *args.argv])
+                             command=[PROG, *args.argv], bag_storage=args.bag_storage)
         except CaptureInterrupted as exc:
             r = exc.result
             kept = r.recording if r.recording is not None else r.out_dir / "frames.jsonl"

@@ -51,6 +51,8 @@ TYPES = {"image": "sensor_msgs/msg/Image", "compressed": "sensor_msgs/msg/Compre
          "camera_info": "sensor_msgs/msg/CameraInfo", "rolling_shutter": "rollcam_msgs/msg/RollingShutter",
          "truth": "rollcam_msgs/msg/FrameTruth", "line_poses": "rollcam_msgs/msg/LinePoses"}
 IMU_TYPE = "sensor_msgs/msg/Imu"
+ROS2_STORAGES = ("sqlite3", "mcap")
+"""Storage plugins of a ROS 2 bag (rosbag2's default first)."""
 
 
 def require_libraries(fmt: str) -> None:
@@ -212,9 +214,9 @@ class _Rosbags:
             self._writer = require("rosbags.rosbag1", "rosbags", "robotics", "ROS 1 bags").Writer(path)
         else:
             rosbag2 = require("rosbags.rosbag2", "rosbags", "robotics", "ROS 2 bags")
-            plugin = {"sqlite3": rosbag2.StoragePlugin.SQLITE3, "mcap": rosbag2.StoragePlugin.MCAP}.get(storage)
-            if plugin is None:
-                raise ConfigError(f"ROS 2 bag storage {storage!r} is not one of ['sqlite3', 'mcap']")
+            if storage not in ROS2_STORAGES:
+                raise ConfigError(f"ROS 2 bag storage {storage!r} is not one of {list(ROS2_STORAGES)}")
+            plugin = rosbag2.StoragePlugin.SQLITE3 if storage == "sqlite3" else rosbag2.StoragePlugin.MCAP
             self._writer = rosbag2.Writer(path, version=9, storage_plugin=plugin)
         self._writer.open()
         self._connections: dict[str, Any] = {}
