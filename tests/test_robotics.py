@@ -181,6 +181,12 @@ def test_kalibr_bag_holds_exactly_kalibrs_topics(recorded, frames):
         assert t == _ns(img.header.stamp) == f.timestamp_ns
         assert (img.encoding, img.height, img.width, img.step, len(img.data)) == ("mono8", 120, 160, 160, 19200)
     assert [t for _, t, _ in topics["/imu0"]] == np.concatenate([f.imu.t_ns for f in frames]).tolist()
+    import yaml
+
+    chain = yaml.safe_load((recorded["kalibr"].parent / "camchain.yaml").read_text())["cam0"]
+    assert chain["rostopic"] == "/cam0/image_raw"
+    assert chain["line_delay"] == pytest.approx(frames[0].line_time_ns * 1e-9)
+    assert yaml.safe_load((recorded["kalibr"].parent / "imu.yaml").read_text())["rostopic"] == "/imu0"
 
 
 def test_stamps_split_integer_ns_exactly():
@@ -217,7 +223,8 @@ def test_ctrl_c_leaves_a_whole_readable_recording(tmp_path):
             capture(cam, tmp_path, 10, fmt="mcap", progress=False)
     assert exc.value.result.frames == 2 and exc.value.result.recording == tmp_path / "capture.mcap"
     assert len(by_topic(read_mcap(tmp_path / "capture.mcap"))["/cam0/image_raw"]) == 2
-    assert sorted(p.name for p in tmp_path.iterdir()) == ["capture.json", "capture.mcap"]  # no stage left
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["camchain.yaml", "capture.json", "capture.mcap",
+                                                          "imu.yaml"]  # no stage left
 
 
 @pytest.mark.parametrize("fmt", ["mcap", "ros2bag", "rosbag1"])
@@ -228,7 +235,7 @@ def test_an_instant_cut_short_leaves_no_recording(tmp_path, frames, fmt):
     with pytest.raises(KeyboardInterrupt):
         w.write([frames[1]])
     w.close()
-    assert list(tmp_path.iterdir()) == []
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["camchain.yaml", "imu.yaml"]  # no recording, no stage
 
 
 def test_bad_input_is_refused_before_anything_is_written(tmp_path):

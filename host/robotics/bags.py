@@ -8,7 +8,9 @@ the topics and types ``kalibr_bagcreater`` writes, ``/cam0/image_raw`` mono8 ``s
 ``sensor_msgs/Imu``). The recording is built in a temporary folder beside its final name and renamed into place
 only when finished (``rollcam.common.files.commit_tree``); ``abort()`` removes it. So after a Ctrl-C the capture
 closes what it has and the file is there, whole; after an error in the middle of an instant, or a kill, it is
-absent. The messages and their fields are ``rollcam.host.robotics.messages``'; docs/robotics.md documents them.
+absent. With an IMU, Kalibr's ``imu.yaml`` and ``camchain.yaml`` (``rollcam.host.imu_export``) go beside it,
+written atomically at the first instant. The messages and their fields are ``rollcam.host.robotics.messages``';
+docs/robotics.md documents them.
 
 Topics (Kalibr's names): ``/cam0/image_raw`` (or ``/cam0/image_raw/compressed``), ``/cam0/camera_info``,
 ``/cam0/rolling_shutter``, ``/cam0/truth``, ``/cam0/line_poses``, ``/imu0``; a GS/RS pair's global-shutter frame
@@ -26,9 +28,10 @@ from typing import Any
 
 import numpy as np
 from rollcam.common.errors import ConfigError, require
-from rollcam.common.files import commit_tree, part_path
+from rollcam.common.files import commit_tree, part_path, write_atomic
 from rollcam.sim.frame import Frame
 
+from ..imu_export import CAMCHAIN_YAML, IMU_YAML, camchain_yaml, imu_yaml
 from .messages import (
     IMU_TOPIC,
     ROLLCAM_MSGS,
@@ -245,7 +248,8 @@ class BagWriter:
     def __init__(self, out_dir: str | Path, fmt: str, *, storage: str = "sqlite3") -> None:
         require_libraries(fmt)
         self.fmt = fmt
-        self.path = Path(out_dir) / OUTPUT[fmt]
+        self.out_dir = Path(out_dir)
+        self.path = self.out_dir / OUTPUT[fmt]
         self.frames = self.images = 0
         self._stage = part_path(self.path)
         self._stage.mkdir()
@@ -267,12 +271,25 @@ class BagWriter:
         if self._backend is None:
             raise ValueError("recording is closed")
         messages = kalibr_messages(frames) if self.fmt == "kalibr" else frame_messages(frames)
+        if self.frames == 0:
+            self._write_kalibr_yaml(frames)
         self._broken = True  # until every message of the instant is in
         for topic, typename, t_ns, msg in messages:
             self._backend.write(topic, typename, t_ns, msg)
         self._broken = False
         self.frames += 1
         self.images += len(frames)
+
+    def _write_kalibr_yaml(self, frames: Sequence[Frame]) -> None:
+        """Kalibr's ``imu.yaml`` and ``camchain.yaml`` beside the recording (its topics, the true line delay and
+        time shift), as a capture to image files writes them, when the camera has an IMU."""
+        frame = next((f for f in frames if f.imu is not None and f.shutter == "rolling"), None) or \
+            next((f for f in frames if f.imu is not None), None)
+        if frame is None or frame.imu is None:
+            return
+        write_atomic(self.out_dir / IMU_YAML, imu_yaml(frame.imu.params).encode())
+        if "intrinsics" in frame.meta:
+            write_atomic(self.out_dir / CAMCHAIN_YAML, camchain_yaml(frame, frame.imu.params).encode())
 
     def close(self) -> None:
         """Finish the recording and move it into place (removed instead when an instant was cut short or no
