@@ -307,3 +307,31 @@ def test_overwrite_clears_a_killed_recordings_stage(tmp_path):
     with open_camera("emu:imx219?size=96x64") as cam:
         capture(cam, tmp_path, 1, fmt="ros2bag", overwrite=True, progress=False)
     assert sorted(p.name for p in tmp_path.iterdir()) == ["capture.json", "capture_ros2"]
+
+
+def test_kill_9_leaves_no_recording_and_overwrite_clears_its_stage(tmp_path):
+    import signal
+    import time
+
+    out = tmp_path / "cap"
+    code = ("import sys; from rollcam.host.cli import main; sys.exit(main(['capture', sys.argv[1], '--frames', "
+            "'100000', '--out', sys.argv[2], '--format', 'ros2bag']))")
+    proc = subprocess.Popen([sys.executable, "-c", code, "emu:imx219?size=96x64&imu=on", str(out)],
+                            stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+    try:
+        deadline = time.monotonic() + 120  # until the bag holds a few instants (its storage file grows)
+        while time.monotonic() < deadline and proc.poll() is None:
+            staged = list(out.glob(".capture_ros2.*.part/capture_ros2/*.db3")) if out.exists() else []
+            if staged and (out / "camchain.yaml").exists() and staged[0].stat().st_size > 20_000:
+                break
+            time.sleep(0.02)
+        proc.send_signal(signal.SIGKILL)
+        proc.wait(timeout=30)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    assert proc.returncode == -signal.SIGKILL, proc.stderr.read()
+    assert not (out / "capture_ros2").exists() and len(list(out.glob(".capture_ros2.*.part"))) == 1
+    with open_camera("emu:imx219?size=96x64") as cam:
+        capture(cam, out, 1, fmt="mcap", overwrite=True, progress=False)
+    assert sorted(p.name for p in out.iterdir()) == ["capture.json", "capture.mcap"]
