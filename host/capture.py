@@ -14,6 +14,11 @@ so a refused capture leaves nothing that would refuse the corrected command.
 
 Images are named by instant and shutter: ``NNNNNN_rs.png`` / ``NNNNNN_gs.png``, or ``NNNNNN.png`` for a camera
 whose shutter is unknown (a webcam through ``opencv:`` without ``sensor=``).
+
+A recording format (``RECORDING_FORMATS``) puts the whole capture into one file instead, beside
+``capture.json``: ROS messages in MCAP or a ROS 2 / ROS 1 / Kalibr bag, or an H.264 video with Gyroflow's
+``.gcsv`` (``rollcam.host.robotics``); the recording is renamed into place when the capture ends, whole, and
+Ctrl-C ends it with the instants it has.
 """
 
 from __future__ import annotations

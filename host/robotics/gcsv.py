@@ -30,7 +30,6 @@ import math
 from collections.abc import Sequence
 from pathlib import Path
 
-import cv2
 import numpy as np
 from rollcam.common.errors import ConfigError
 from rollcam.common.files import write_atomic
@@ -99,6 +98,8 @@ def video_image(frame: Frame) -> np.ndarray:
     if frame.format not in ("BGR3", "RGB3", "GREY"):
         raise ConfigError(f"--format mp4 takes picture frames (BGR3, RGB3, GREY), not {frame.format.strip()!r}; "
                           "capture raw streams as png or npy")
+    import cv2  # lazily, as the image files do: importing rollcam.host.capture stays light
+
     img = image_array(frame, "png")
     return cv2.cvtColor(img, cv2.COLOR_GRAY2BGR) if img.ndim == 2 else img
 
