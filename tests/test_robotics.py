@@ -181,6 +181,11 @@ def test_kalibr_bag_holds_exactly_kalibrs_topics(recorded, frames):
         assert t == _ns(img.header.stamp) == f.timestamp_ns
         assert (img.encoding, img.height, img.width, img.step, len(img.data)) == ("mono8", 120, 160, 160, 19200)
     assert [t for _, t, _ in topics["/imu0"]] == np.concatenate([f.imu.t_ns for f in frames]).tolist()
+    from rosbags.rosbag1 import Reader
+
+    with Reader(recorded["kalibr"]) as bag:  # the md5 sums ROS 1's rosbag (and so Kalibr) checks on reading
+        assert {c.topic: c.digest for c in bag.connections} == {
+            "/cam0/image_raw": "060021388200f6f0f447d0fcd9c64743", "/imu0": "6a62c6daae103f4ff57a132d6f95cec2"}
     import yaml
 
     chain = yaml.safe_load((recorded["kalibr"].parent / "camchain.yaml").read_text())["cam0"]
