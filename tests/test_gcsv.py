@@ -146,3 +146,25 @@ def test_what_one_video_cannot_hold_is_refused_before_writing(tmp_path):
     with open_camera("emu:imx219?size=96x64&format=RG10") as cam, pytest.raises(ConfigError, match="RG10"):
         capture(cam, tmp_path / "raw", 1, fmt="mp4", progress=False)
     assert list(tmp_path.iterdir()) == []
+
+
+def test_ctrl_c_keeps_the_video_and_its_log_whole(tmp_path):
+    from interrupts import ctrl_c
+    from rollcam.host.capture import CaptureInterrupted
+
+    with open_camera(URI) as cam:
+        real, reads = cam.read, []
+
+        def read():
+            reads.append(1)
+            if len(reads) == 3:
+                ctrl_c()
+            return real()
+
+        cam.read = read
+        with pytest.raises(CaptureInterrupted) as exc:
+            capture(cam, tmp_path, 10, fmt="mp4", progress=False)
+    assert exc.value.result.frames == 2 and exc.value.result.recording == tmp_path / "capture.mp4"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["capture.gcsv", "capture.json", "capture.mp4"]
+    _, header, _, rows = gyroflow_read(tmp_path / "capture.gcsv")
+    assert header["videofilename"] == "capture.mp4" and len(rows) > 0
