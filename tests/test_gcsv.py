@@ -80,12 +80,14 @@ def test_rows_are_the_imu_on_the_videos_clock(recorded):
     f0 = frames[0]
     origin = int(f0.row_times_ns.min()) + 120 * f0.line_time_ns // 2  # video time 0: the first frame's mid-readout
     stamps = np.concatenate([f.imu.t_ns for f in frames])
-    assert rows[:, 0].astype(np.int64).tolist() == (stamps - origin).tolist()
+    kept = stamps >= origin  # the log starts at video time 0 (Gyroflow's reader times it from its first row)
+    assert rows[:, 0].astype(np.int64).tolist() == (stamps[kept] - origin).tolist()
+    assert 0 <= rows[0, 0] < 1e9 / 400 and not kept.all()
     seconds = rows[:, 0] * float(header["tscale"])
     period = 1 / open_camera(URI).info()["fps"]
     assert seconds[-1] == pytest.approx((frames[-1].imu.t_ns[-1] - origin) * 1e-9) and seconds[-1] > (N - 2) * period
-    gyro = np.concatenate([f.imu.gyro for f in frames])  # rad/s, camera axes (the IMU is mounted with them)
-    accel = np.concatenate([f.imu.accel for f in frames]) / STANDARD_GRAVITY
+    gyro = np.concatenate([f.imu.gyro for f in frames])[kept]  # rad/s, camera axes (the IMU is mounted with them)
+    accel = np.concatenate([f.imu.accel for f in frames])[kept] / STANDARD_GRAVITY
     np.testing.assert_allclose(rows[:, 1:4] * float(header["gscale"]), gyro, rtol=1e-8, atol=1e-12)
     np.testing.assert_allclose(rows[:, 4:7] * float(header["ascale"]), accel, rtol=1e-8, atol=1e-12)
 
@@ -168,3 +170,24 @@ def test_ctrl_c_keeps_the_video_and_its_log_whole(tmp_path):
     assert sorted(p.name for p in tmp_path.iterdir()) == ["capture.gcsv", "capture.json", "capture.mp4"]
     _, header, _, rows = gyroflow_read(tmp_path / "capture.gcsv")
     assert header["videofilename"] == "capture.mp4" and len(rows) > 0
+
+
+def test_gyroflows_own_reader_finds_and_reads_the_log(recorded):
+    """telemetry-parser, the library Gyroflow reads motion data with: it finds the .gcsv beside the video, and
+    its normalised IMU (orientation applied, deg/s and m/s^2) is the log's rows mapped as Gyroflow maps them."""
+    telemetry_parser = pytest.importorskip("telemetry_parser")
+    out, _ = recorded
+    _, header, _, rows = gyroflow_read(out / "capture.gcsv")
+    parser = telemetry_parser.Parser(str(out / "capture.mp4"))  # the sidecar is found from the video's name
+    assert (parser.camera, parser.model) == ("rollcam", "rollcam")
+    meta = parser.telemetry()[0]["Default"]["Metadata"]
+    assert (meta["version"], meta["frame_readout_time"], meta["frame_readout_direction"]) == (
+        "1.3", header["frame_readout_time"], "0")
+    imu = parser.normalized_imu()
+    assert len(imu) == len(rows)
+    t_ms = np.array([s["timestamp_ms"] for s in imu])
+    np.testing.assert_allclose(t_ms, (rows[:, 0] - rows[0, 0]) * 1e-6, atol=1e-6)  # timed from its first row
+    gyro = np.array([s["gyro"] for s in imu])
+    accel = np.array([s["accl"] for s in imu])
+    np.testing.assert_allclose(gyro, np.degrees(orient(rows[:, 1:4], header["orientation"])), rtol=1e-9, atol=1e-9)
+    np.testing.assert_allclose(accel, orient(rows[:, 4:7], header["orientation"]) * 9.80665, rtol=1e-9, atol=1e-9)

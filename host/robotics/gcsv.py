@@ -9,7 +9,10 @@ seconds, ``g x gscale`` rad/s and ``a x ascale`` g. rollcam writes:
 - ``t`` in integer nanoseconds (``tscale`` 1e-9) on the video's clock: the device stamp minus the device instant
   that the video's first frame (presentation time 0) shows, taken as the middle of its readout (the first line's
   sample time plus half the readout), which is where Gyroflow puts a frame's time when it corrects the rolling
-  shutter (its rows at ``frame time + (row - height / 2) x readout / height``). The IMU's own time offset
+  shutter (its rows at ``frame time + (row - height / 2) x readout / height``). The log starts at the first
+  sample at or after that instant: Gyroflow's reader (telemetry-parser) times a ``.gcsv`` from its first row,
+  so an earlier row would shift every sample by its lead (the first half frame's rows, read before time 0,
+  take the first sample's rate; the first row is at most one sample period after 0). The IMU's own time offset
   (``imu_offset_us``, Kalibr's ``timeshift_cam_imu``) stays in the stamps, as a real logger's would: Gyroflow's
   synchronisation finds it.
 - gyro and accelerometer as floats in camera axes (``gscale`` and ``ascale`` 1: rad/s and g, with g = 9.80665
@@ -85,12 +88,13 @@ def gcsv_header(frame: Frame, video_name: str, *, camera_id: str = "rollcam", ti
 
 
 def gcsv_rows(samples: ImuSamples, origin_ns: int) -> str:
-    """The sample rows: ``t`` in ns from ``origin_ns``, gyro (rad/s) and accelerometer (g) in camera axes."""
+    """The rows of the samples stamped at or after ``origin_ns``: ``t`` in ns from it, gyro (rad/s) and
+    accelerometer (g) in camera axes (see the module docstring for why none before it)."""
     r = samples.params.R_cam_imu
     gyro = samples.gyro @ r.T
     accel = samples.accel @ r.T / STANDARD_GRAVITY
     return "".join(f"{t - origin_ns},{g[0]:.9g},{g[1]:.9g},{g[2]:.9g},{a[0]:.9g},{a[1]:.9g},{a[2]:.9g}\n"
-                   for t, g, a in zip(samples.t_ns.tolist(), gyro, accel, strict=True))
+                   for t, g, a in zip(samples.t_ns.tolist(), gyro, accel, strict=True) if t >= origin_ns)
 
 
 def video_image(frame: Frame) -> np.ndarray:
