@@ -80,19 +80,24 @@ def typestore(ros_version: int) -> Any:
     return store
 
 
+_NP = {"float64": np.float64, "float32": np.float32, "int64": np.int64, "uint64": np.uint64, "int32": np.int32,
+       "uint32": np.uint32, "int16": np.int16, "uint16": np.uint16, "int8": np.int8, "uint8": np.uint8,
+       "byte": np.uint8, "char": np.uint8, "bool": np.bool_}
+
+
 def _default(store: Any, node: Any) -> Any:
+    """The zero value of a field (rosbags' node kinds: 1 base type, 2 message, 3 array, 4 sequence)."""
     kind, desc = node
     if kind == 1:  # BASE
         t = desc[0]
         return "" if t == "string" else False if t == "bool" else 0.0 if t.startswith("float") else 0
     if kind == 2:  # NAME
         return to_store(store, desc, {})
-    return [] if kind == 4 else [_default(store, desc[0])] * desc[1]
-
-
-_NP = {"float64": np.float64, "float32": np.float32, "int64": np.int64, "uint64": np.uint64, "int32": np.int32,
-       "uint32": np.uint32, "int16": np.int16, "uint16": np.uint16, "int8": np.int8, "uint8": np.uint8,
-       "byte": np.uint8, "char": np.uint8, "bool": np.bool_}
+    count = 0 if kind == 4 else desc[1]  # SEQUENCE or ARRAY
+    sub_kind, sub = desc[0]
+    if sub_kind == 1 and sub[0] in _NP:
+        return np.zeros(count, _NP[sub[0]])
+    return [_default(store, desc[0]) for _ in range(count)]
 
 
 def _value(store: Any, node: Any, value: Any) -> Any:
