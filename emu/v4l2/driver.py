@@ -5,7 +5,9 @@ semantics and errnos. Frames are paced in real time (a ``FramePump`` fills the b
 lines' device times) or made as fast as possible (each DQBUF renders the next frame). A
 ``rollcam.common.faults.FaultPlan`` injects what vivid's error-injection controls do: dropped buffers (a gap
 in the sequence numbers), the ERROR flag, one-shot ioctl errors, a disconnect (ENODEV until the device is
-closed, then it is connected again) and sequence and timestamp wrap; ``fault_stats`` counts what was injected.
+closed, then it is connected again) and sequence and timestamp wrap, and the lab faults: frame-counter
+rewrite, freeze and skip in ``sequence``, grey, black and frozen images, and sensor register resets
+(``rollcam.firmware.labfaults``); ``fault_stats`` counts what was injected.
 """
 
 from __future__ import annotations
@@ -24,6 +26,7 @@ from rollcam.emu.pump import FramePump
 from rollcam.firmware.camera import FirmwareCamera, FramePlan, default_interval
 from rollcam.firmware.controls import CONTROLS
 from rollcam.firmware.imaging import mjpeg_quality
+from rollcam.firmware.labfaults import FrameFaults
 from rollcam.firmware.pixfmt import device_format
 from rollcam.sim.codecs import transcode
 from rollcam.sim.formats import YUV_PACKINGS
@@ -67,6 +70,7 @@ class EmuDriver:
         self.faults = FaultPlan.of(faults)
         self.injector = FaultInjector(self.faults)
         self.fault_stats = self.injector.stats
+        self.frame_faults = FrameFaults(self.injector, camera)
         self.queue = BufferQueue(alloc=alloc)
         self.on_change: Callable[[], None] | None = None  # called (pump thread) after a buffer completes
         self.ctrl_defaults = {name: info["value"] for name, info in camera.controls().items()}
@@ -168,6 +172,7 @@ class EmuDriver:
         self._deliver(slot, frame, payload.size)
 
     def _payload(self, frame: Frame) -> np.ndarray:
+        frame = self.frame_faults.apply(frame, frame.sequence)
         fourcc = self.fmt.pixelformat
         # A raw frame is already in its fourcc's layout (the sensor's samples); renders are encoded.
         data = transcode(frame, fourcc, quality=mjpeg_quality(self.camera.spec))
@@ -188,7 +193,7 @@ class EmuDriver:
         t_ns = self.camera.host_ns(frame.timestamp_ns)
         if self.ts0 is None:
             self.ts0 = t_ns
-        sequence = self.faults.sequence(frame.sequence - self.seq0)
+        sequence = inj.sequence(frame.sequence - self.seq0)
         timestamp_ns = self.faults.timestamp_ns(t_ns, self.ts0)
         self.queue.complete(slot, bytesused=size, sequence=sequence, timestamp_ns=timestamp_ns,
                             error=inj.hit("error", frame.sequence))

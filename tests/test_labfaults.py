@@ -1,0 +1,201 @@
+"""Lab faults (issue 41): frame-counter rewrite/freeze/skip, grey/black/frozen images and sensor register resets,
+each seen through the client that would see it (the V4L2 API, v4l2-ctl under ``rollcam run``, pyserial on the
+pty, a raw HTTP multipart reader, the ``emu:`` source) and compared with the injected counts."""
+
+from __future__ import annotations
+
+import hashlib
+import re
+
+import cv2
+import numpy as np
+import pytest
+from programs import need
+from programs import run_under as run
+from rollcam.common.errors import ConfigError
+from rollcam.common.faults import COUNTER_FAULTS, IMAGE_FAULTS, U32, FaultInjector, FaultPlan
+from rollcam.emu.serial_pty import PtySerialServer
+from rollcam.emu.v4l2 import Device, EmuDriver
+from rollcam.firmware.camera import FirmwareCamera
+from rollcam.host.preload import serving
+from rollcam.host.sources import open_camera
+from rollcam.sim.codecs import codec
+
+COUNTERS = "seqrewrite=8,seqrewrite_to=1000,seqfreeze=15,seqskip=15,seqskip_by=4,seed=3"
+
+
+def dev(faults: str, **kw) -> Device:
+    kw.setdefault("realtime", False)
+    kw.setdefault("size", (160, 120))
+    return Device.open("imx219", scene={"scene": "street"}, faults=faults, **kw)
+
+
+def expected_counters(plan: FaultPlan, frames: int) -> tuple[list[int], dict[str, int]]:
+    """What the device's counter shows for frames 0..frames-1, by hand from the plan's draws, and the faults."""
+    c = (U32 - plan.seqwrap) % U32 if plan.seqwrap else 0
+    seqs, hits = [c], dict.fromkeys(COUNTER_FAULTS, 0)
+    for n in range(1, frames):
+        kind = next((k for k in COUNTER_FAULTS if plan.fires(k, n)), None)
+        c = {"seqrewrite": plan.seqrewrite_to, "seqfreeze": c}.get(kind, c + 1 + (plan.seqskip_by if kind else 0))
+        seqs.append(c % U32)
+        hits[kind or "seqrewrite"] += kind is not None
+    return seqs, hits
+
+
+# ------------------------------------------------------------------------------------------------ the plan
+def test_lab_fault_text_round_trips_and_bad_values_are_named():
+    p = FaultPlan.parse(f"{COUNTERS},grey=1%,black=2,frozen=3,regreset=0.5,burst=1,burst_px=9,stuck=4,dead=5,"
+                        "hot=6,hot_dn_per_ms=7,soiling=2")
+    assert (p.seqrewrite_to, p.seqskip_by, p.burst_px, p.hot_dn_per_ms) == (1000, 4, 9, 7)
+    assert (p.defect("stuck"), p.defect("dead"), p.defect("hot"), p.defect("soiling")) == (4, 5, 6, 2)
+    assert p.rate("frozen") == 3 and p.rate("regreset") == 0.5 and FaultPlan.parse(p.to_text()) == p
+    assert FaultPlan.parse("stuck=1") and not FaultPlan.parse("stuck=0,seqskip_by=3").rates
+    for bad in ("seqskip_by=0", "seqrewrite_to=4294967296", "stuck=-1", "soiling", "grey=101", "hot=many",
+                "burst_px=0"):
+        with pytest.raises(ConfigError) as info:
+            FaultPlan.parse(bad, "--faults")
+        assert repr(bad) in str(info.value) and "--faults" in str(info.value)
+
+
+def test_counter_faults_follow_the_seeded_draws_and_count_as_they_are_delivered():
+    plan = FaultPlan.parse(COUNTERS)
+    seqs, hits = expected_counters(plan, 400)
+    assert [plan.sequence(n) for n in range(0, 400, 37)] == seqs[::37]
+    inj = FaultInjector(plan)
+    assert [inj.sequence(n) for n in range(400)] == seqs
+    assert (inj.stats.seq_rewrites, inj.stats.seq_freezes, inj.stats.seq_skips) == tuple(hits.values())
+    assert all(hits.values()) and 1000 in seqs
+    wrapped = FaultPlan.parse(f"{COUNTERS},seqwrap=5")
+    assert [wrapped.sequence(n) for n in range(40)] == expected_counters(wrapped, 40)[0]
+
+
+# ------------------------------------------------------------------------------------------------ V4L2
+def test_v4l2_sequence_shows_the_counter_faults_matching_the_counts():
+    with dev(COUNTERS) as d:
+        bufs = list(d.stream(buffers=4, frames=60))
+        stats = d.driver.fault_stats
+    seqs, hits = expected_counters(FaultPlan.parse(COUNTERS), 60)
+    assert [b.sequence for b in bufs] == seqs
+    assert (stats.seq_rewrites, stats.seq_freezes, stats.seq_skips) == tuple(hits.values())
+    assert stats.seq_freezes and stats.seq_skips and stats.seq_rewrites
+
+
+@pytest.mark.parametrize("fourcc", ["YUYV", "RG10"])
+def test_v4l2_grey_black_and_frozen_frames_in_the_buffers(fourcc):
+    faults = "grey=20,black=20,frozen=20,seed=4"
+    with dev(faults, pixel_format=fourcc) as d:
+        bufs = [(b.sequence, b.data.tobytes()) for b in d.stream(buffers=4, frames=30)]
+        stats, camera = d.driver.fault_stats, d.driver.camera
+    plan = FaultPlan.parse(faults)
+    c = codec(fourcc)
+    black_dn = camera.sensor.noise.black_level_dn / (1 << (camera.sensor.bit_depth - 10))
+    if c.raw:  # samples from the sensor's black level (scaled to 10 bits) to full scale
+        grey = c.encode(np.full((120, 160), round(black_dn + 0.5 * (1023 - black_dn)), np.uint16)).tobytes()
+        black = c.encode(np.full((120, 160), round(black_dn), np.uint16)).tobytes()
+    else:
+        grey = c.encode(np.full((120, 160, 3), 128, np.uint8)).tobytes()
+        black = c.encode(np.zeros((120, 160, 3), np.uint8)).tobytes()
+    seen = dict.fromkeys(IMAGE_FAULTS, 0)
+    for k, (seq, data) in enumerate(bufs):
+        kind = plan.first_of(IMAGE_FAULTS if k else IMAGE_FAULTS[:2], seq)
+        if kind == "grey":
+            assert data == grey
+        elif kind == "black":
+            assert data == black
+        elif kind == "frozen":
+            assert data == bufs[k - 1][1]
+        else:
+            assert data not in (grey, black, bufs[k - 1][1])  # the street, a new frame
+        seen[kind or "grey"] += kind is not None
+    assert (stats.grey_frames, stats.black_frames, stats.frozen_frames) == tuple(seen.values())
+    assert all(seen.values())
+
+
+@pytest.mark.parametrize("fourcc", ["YUYV", "RG10"])
+def test_no_lab_fault_keeps_every_frame_byte_identical(fourcc):
+    """A plan with only parameters, or rates of 0, changes nothing: the same bytes as a device without a plan
+    (on a fixed clock, so two devices make the same frames)."""
+
+    def digest(faults: str | None) -> str:
+        with dev(faults, pixel_format=fourcc, clock=lambda: 0) as d:
+            h = hashlib.sha256()
+            for b in d.stream(frames=4):
+                h.update(b.data.tobytes() + b.sequence.to_bytes(4, "little"))
+            return h.hexdigest()
+
+    assert digest(None) == digest("seqskip_by=3,burst_px=9,seed=4") == digest("grey=0,seqfreeze=0,regreset=0")
+
+
+def test_register_reset_returns_the_controls_mid_stream_on_v4l2_and_serial():
+    serial = pytest.importorskip("serial")
+    faults = "regreset=10,seed=2"
+    plan = FaultPlan.parse(faults)
+    first = next(n for n in range(100) if plan.fires("regreset", n))
+    assert 2 <= first < 30  # mid-stream, for this seed
+    camera = FirmwareCamera("imx219", size=(160, 120), scene={"scene": "flat"})
+    driver = EmuDriver(camera, realtime=False, faults=faults)
+    with PtySerialServer(camera) as srv, serial.Serial(srv.path, timeout=5) as port, Device(driver) as d:
+        default = d.controls["exposure"].value
+        port.write(b"CTRL exposure 100\n")
+        assert port.readline() == b"OK 100\r\n"
+        assert d.controls["exposure"].value == 100
+        exposures = [b.sequence for b in d.stream(frames=first)]  # the frames before the reset
+        assert d.controls["exposure"].value == 100 and len(exposures) == first
+        list(d.stream(frames=1))  # frame ``first``: the registers reset
+        assert d.controls["exposure"].value == default
+        port.write(b"CTRL? exposure\n")
+        assert port.readline() == f"{default}\r\n".encode()
+        port.write(b"STATS?\n")
+        assert f"register_resets={driver.fault_stats.register_resets}" in port.readline().decode()
+    assert driver.fault_stats.register_resets == camera.stats.register_resets >= 1
+
+
+# ------------------------------------------------------------------------------------------------ rollcam run
+def test_v4l2_ctl_under_rollcam_run_sees_counter_faults_and_a_register_reset(tmp_path):
+    need("v4l2-ctl")
+    faults = "seqfreeze=20,seqskip=20,seqskip_by=2,regreset=10,seed=2"
+    plan = FaultPlan.parse(faults)
+    source = f"emu:imx219?size=160x120&format=YUYV&scene=flat&faults={faults}"
+    with serving([("/dev/video0", source)], realtime=False) as s:
+        driver = s.nodes["/dev/video0"].driver
+        default = driver.ctrl_defaults["exposure"]
+        out = run(s, "v4l2-ctl", "-d", "/dev/video0", "--set-ctrl=exposure=100", "--verbose", "--stream-mmap",
+                  "--stream-count=30", f"--stream-to={tmp_path / 'a.yuyv'}")
+        text = out.stdout + out.stderr
+        seqs = [int(m) for m in re.findall(r"seq:\s*(\d+)", text)]
+        got = run(s, "v4l2-ctl", "-d", "/dev/video0", "--get-ctrl=exposure").stdout
+        stats = driver.fault_stats
+    want, hits = expected_counters(plan, 30)
+    assert seqs == want
+    assert (stats.seq_freezes, stats.seq_skips) == (hits["seqfreeze"], hits["seqskip"]) and stats.seq_freezes
+    assert f"exposure: {default}" in got and default != 100
+    assert stats.register_resets == sum(plan.fires("regreset", n) for n in range(30)) >= 1
+
+
+# ------------------------------------------------------------------------------------------------ emu: and HTTP
+def test_emu_source_frames_carry_counter_and_image_faults():
+    faults = "seqskip=100,seqskip_by=9,grey=30,seed=1"
+    src = open_camera(f"emu:imx219?size=160x120&scene=street&faults={faults}")
+    frames = [src.read() for _ in range(12)]
+    plan = FaultPlan.parse(faults)
+    assert [f.sequence for f in frames] == [10 * n for n in range(12)]
+    greys = [n for n in range(12) if plan.fires("grey", n)]
+    assert [n for n, f in enumerate(frames) if f.meta.get("image_fault") == "grey"] == greys
+    assert all(np.all(frames[n].data == 128) for n in greys) and greys
+    assert src.fault_stats.seq_skips == 11 and src.fault_stats.grey_frames == len(greys)
+    src.close()
+
+
+def test_http_parts_carry_the_faulted_counter_and_grey_images(rollcam_http_camera):
+    from test_faults_transports import _read_parts
+
+    srv = rollcam_http_camera("imx219", scene={"scene": "street"}, size=(160, 120),
+                              faults="seqskip=100,seqskip_by=4,grey=100")
+    parts, _ = _read_parts(srv.url, limit=6)
+    seqs = [int(h["X-Sequence"]) for h, _, _ in parts]
+    assert len(parts) == 6 and all(s % 5 == 0 for s in seqs) and seqs == sorted(seqs)
+    for _, body, _ in parts:
+        img = cv2.imdecode(np.frombuffer(body, np.uint8), cv2.IMREAD_COLOR)
+        assert img.shape == (120, 160, 3) and np.abs(img.astype(int) - 128).max() <= 2  # JPEG of mid-grey
+    st = srv.fault_stats  # counted on every part made (a part made before the client came too); frame 0 starts
+    assert st.seq_skips >= sum(s > 0 for s in seqs) and st.grey_frames >= 6
