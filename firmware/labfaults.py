@@ -4,7 +4,8 @@ A camera HIL rig replaces frames on the link (grey and black test frames, a froz
 sensor's registers under a running stream; ``FrameFaults`` does both for one transport, decided by the device
 frame number through the transport's ``FaultInjector`` (``rollcam.common.faults``), so every run with the same
 plan hits the same frames. The frame-counter faults are the injector's ``sequence``; the sensor defects are
-made by the sensor model itself (``rollcam.sim.defects``).
+made by the sensor model itself (``rollcam.sim.defects``): ``FrameFaults`` programs the plan's into the camera's
+spec (``CameraSpec.defects``) and counts the bursts the frames' truth reports.
 
 - ``grey``: the frame's image is mid-grey (half the format's full scale: BGR 128, raw samples at half their
   range), as a rig's "grey pattern" frame.
@@ -23,6 +24,7 @@ import dataclasses
 import numpy as np
 from rollcam.common.faults import IMAGE_FAULTS, FaultInjector
 from rollcam.sim.codecs import Levels, codec
+from rollcam.sim.defects import SensorDefects
 from rollcam.sim.frame import Frame
 
 from .camera import FirmwareCamera
@@ -34,12 +36,16 @@ class FrameFaults:
     def __init__(self, injector: FaultInjector, camera: FirmwareCamera | None = None) -> None:
         self.injector = injector
         plan = injector.plan
-        # Only a firmware camera has registers (``rollcam view`` streams other sources through the same server).
-        self.camera = camera if plan.rate("regreset") and isinstance(camera, FirmwareCamera) else None
+        # Only a firmware camera has a sensor (``rollcam view`` streams other sources through the same server).
+        firmware = camera if isinstance(camera, FirmwareCamera) else None
+        defects = SensorDefects.of(plan)
+        if firmware is not None and defects is not None and firmware.spec.defects != defects:
+            firmware.reprogram(dataclasses.replace(firmware.spec, defects=defects))
+        self.camera = firmware if plan.rate("regreset") else None
         self.defaults = self.camera.resettable_controls() if self.camera is not None else {}
         """The controls a register reset restores: the camera's when the transport opened it."""
         self._previous: list[Frame] | None = None
-        self.active = any(plan.rate(k) for k in (*IMAGE_FAULTS, "regreset"))
+        self.active = any(plan.rate(k) for k in (*IMAGE_FAULTS, "regreset", "burst"))
 
     def apply(self, frame: Frame, index: int) -> Frame:
         """``frame`` (device frame ``index``) as the plan leaves it: its image replaced, and the camera's registers
@@ -51,6 +57,8 @@ class FrameFaults:
         if not self.active:
             return frames
         inj = self.injector
+        if frames[0].meta.get("defects", {}).get("burst"):  # the sensor model's burst, by the same draw
+            inj.count("burst")
         if self.camera is not None and inj.hit("regreset", index):
             self.camera.reset_controls(self.defaults)
         previous = self._previous

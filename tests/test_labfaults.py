@@ -199,3 +199,92 @@ def test_http_parts_carry_the_faulted_counter_and_grey_images(rollcam_http_camer
         assert img.shape == (120, 160, 3) and np.abs(img.astype(int) - 128).max() <= 2  # JPEG of mid-grey
     st = srv.fault_stats  # counted on every part made (a part made before the client came too); frame 0 starts
     assert st.seq_skips >= sum(s > 0 for s in seqs) and st.grey_frames >= 6
+
+
+# ------------------------------------------------------------------------------------------------ sensor defects
+DEFECTS = "stuck=40,dead=40,hot=40,soiling=3,burst=50,burst_px=100,seed=9"
+
+
+def _raw_frames(faults: str | None, n: int = 3, **options: str) -> tuple[list, object]:
+    opts = "&".join(f"{k}={v}" for k, v in {"size": "320x240", "scene": "street", "format": "RG10", **options}.items())
+    src = open_camera(f"emu:imx219?{opts}" + (f"&faults={faults}" if faults else ""))
+    frames = [src.read() for _ in range(n)]
+    src.close()
+    return frames, src
+
+
+def test_sensor_defects_change_only_the_pixels_the_truth_names():
+    clean, _ = _raw_frames(None)
+    faulty, src = _raw_frames(DEFECTS)
+    c = codec("RG10")
+    bursts = 0
+    for a, b in zip(clean, faulty, strict=True):
+        truth = b.meta["defects"]
+        assert "defects" in b.to_json() and len(truth["stuck"]) == len(truth["dead"]) == len(truth["hot"]) == 40
+        sa, sb = c.decode(a.data, 320, 240), c.decode(b.data, 320, 240)
+        named = np.zeros(sa.shape, bool)
+        for x, y, value in truth["stuck"]:
+            assert sb[y, x] == value
+            named[y, x] = True
+        for x, y in truth["dead"]:
+            assert sb[y, x] == 0
+            named[y, x] = True
+        yy, xx = np.mgrid[0:240, 0:320]
+        near = np.zeros(sa.shape, bool)
+        for cx, cy, r, _ in truth["soiling"]:
+            near |= (xx - cx) ** 2 + (yy - cy) ** 2 < (3.5 * r) ** 2  # the blob and its blur's reach
+        for x, y in truth["hot"]:
+            if not near[y, x]:  # 40 DN/ms of dark current on top of the light
+                assert int(sb[y, x]) >= min(int(sa[y, x]) + 40 * b.exposure_ns // 10**6, 1023) - 1
+            named[y, x] = True
+        named |= near
+        if "burst" in truth:
+            bursts += 1
+            start = truth["burst"]["y"] * 320 + truth["burst"]["x"]
+            named.reshape(-1)[start:start + truth["burst"]["length"]] = True
+        changed = sa != sb
+        assert not (changed & ~named).any()  # nothing else moved: the same noise, the same scene
+        assert changed.sum() > 100
+        soiled = [(int(cy), int(cx)) for cx, cy, _, _ in truth["soiling"] if 0 <= cx < 320 and 0 <= cy < 240]
+        assert all(int(sb[p]) <= int(sa[p]) + 64 for p in soiled)  # attenuated (not brightened) under a blob
+    assert bursts == src.fault_stats.bursts >= 1
+    plan = FaultPlan.parse(DEFECTS)
+    assert [("burst" in f.meta["defects"]) for f in faulty] == [plan.fires("burst", n) for n in range(3)]
+
+
+def test_hot_pixels_scale_with_exposure_and_raw_and_processed_frames_agree():
+    short, _ = _raw_frames("hot=30,seed=2", 1, exposure_us="2000", scene="flat", level="0.05")
+    long, _ = _raw_frames("hot=30,seed=2", 1, exposure_us="8000", scene="flat", level="0.05")
+    c = codec("RG10")
+    s, lo = c.decode(short[0].data, 320, 240), c.decode(long[0].data, 320, 240)
+    hot = short[0].meta["defects"]["hot"]
+    assert hot == long[0].meta["defects"]["hot"]  # fixed on the array
+    rise = np.mean([int(lo[y, x]) - int(s[y, x]) for x, y in hot])
+    assert 40 * 6 * 0.8 < rise < 40 * 6 * 1.2 + 40  # 40 DN/ms more over 6 ms more (the scene adds a little)
+    raw = open_camera("emu:imx219?size=320x240&scene=street&format=RG10&faults=stuck=20,dead=20,soiling=2")
+    bgr = open_camera("emu:imx219?size=320x240&scene=street&format=BGR3&physics=1&faults=stuck=20,dead=20,soiling=2")
+    r, b = raw.read(), bgr.read()
+    assert r.meta["defects"] == b.meta["defects"]
+    pipe = bgr.camera.pipeline
+    assert np.array_equal(pipe.encode(c.decode(r.data, 320, 240)), b.data)  # the ISP picture of the same samples
+    raw.close()
+    bgr.close()
+
+
+def test_v4l2_ctl_under_rollcam_run_streams_the_defective_pixels(tmp_path):
+    need("v4l2-ctl")
+    faults = "stuck=30,dead=30,seed=5"
+    truth = open_camera(f"emu:imx219?size=320x240&scene=street&format=RG10&faults={faults}").read().meta["defects"]
+    with serving([("/dev/video0", f"emu:imx219?size=320x240&scene=street&format=RG10&faults={faults}")],
+                 realtime=False) as s:
+        run(s, "v4l2-ctl", "-d", "/dev/video0", "--stream-mmap", "--stream-count=3",
+            f"--stream-to={tmp_path / 'a.raw'}")
+    frames = np.fromfile(tmp_path / "a.raw", "<u2").reshape(3, 240, 320)
+    for f in frames:
+        assert all(f[y, x] == 0 for x, y in truth["dead"]) and all(f[y, x] == v for x, y, v in truth["stuck"])
+    assert (frames == 0).sum(axis=(1, 2)).min() >= 30
+
+
+def test_defects_need_the_sensor_model():
+    with pytest.raises(ConfigError, match="physics"):
+        open_camera("emu:imx219?physics=0&faults=dead=3").read()
