@@ -288,3 +288,30 @@ def test_v4l2_ctl_under_rollcam_run_streams_the_defective_pixels(tmp_path):
 def test_defects_need_the_sensor_model():
     with pytest.raises(ConfigError, match="physics"):
         open_camera("emu:imx219?physics=0&faults=dead=3").read()
+
+
+# ------------------------------------------------------------------------------------------------ UVC
+def test_pyusb_reads_grey_black_and_frozen_frames_as_counted():
+    from rollcam.emu.uvc import PayloadParser
+    from test_faults_transports import YUYV_64x48, _commit, _pyusb
+
+    faults = "grey=20,black=20,frozen=20,seed=6"
+    _producer, fn, _backend, dev = _pyusb(faults)
+    probe = _commit(dev)
+    dev.set_interface_altsetting(1, 4)
+    parser = PayloadParser(probe.dwClockFrequency, YUYV_64x48)
+    frames = []
+    while len(frames) < 30:
+        frames += parser.feed(bytes(dev.read(0x81, 3072)))
+    c = codec("YUYV")
+    grey = c.encode(np.full((48, 64, 3), 128, np.uint8)).tobytes()
+    black = c.encode(np.zeros((48, 64, 3), np.uint8)).tobytes()
+    plan = FaultPlan.parse(faults)
+    seen = dict.fromkeys(IMAGE_FAULTS, 0)
+    for k, f in enumerate(frames):  # no drops: the k-th frame read is frame k of the stream
+        kind = plan.first_of(IMAGE_FAULTS if k else IMAGE_FAULTS[:2], k)
+        want = {"grey": grey, "black": black, "frozen": frames[k - 1].data}.get(kind)
+        assert (f.data == want) if kind else f.data not in (grey, black)
+        seen[kind or "grey"] += kind is not None
+    st = fn.fault_stats
+    assert (st.grey_frames, st.black_frames, st.frozen_frames) == tuple(seen.values()) and all(seen.values())
