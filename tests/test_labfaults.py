@@ -151,9 +151,9 @@ def test_register_reset_returns_the_controls_mid_stream_on_v4l2_and_serial():
 
 
 # ------------------------------------------------------------------------------------------------ rollcam run
-def test_v4l2_ctl_under_rollcam_run_sees_counter_faults_and_a_register_reset(tmp_path):
+def test_v4l2_ctl_under_rollcam_run_sees_counter_and_image_faults_and_a_register_reset(tmp_path):
     need("v4l2-ctl")
-    faults = "seqfreeze=20,seqskip=20,seqskip_by=2,regreset=10,seed=2"
+    faults = "seqfreeze=20,seqskip=20,seqskip_by=2,regreset=10,grey=15,frozen=15,seed=2"
     plan = FaultPlan.parse(faults)
     source = f"emu:imx219?size=160x120&format=YUYV&scene=flat&faults={faults}"
     with serving([("/dev/video0", source)], realtime=False) as s:
@@ -167,6 +167,15 @@ def test_v4l2_ctl_under_rollcam_run_sees_counter_faults_and_a_register_reset(tmp
         stats = driver.fault_stats
     want, hits = expected_counters(plan, 30)
     assert seqs == want
+    frames = np.fromfile(tmp_path / "a.yuyv", np.uint8).reshape(30, -1)
+    grey = codec("YUYV").encode(np.full((120, 160, 3), 128, np.uint8)).reshape(-1)
+    kinds = [plan.first_of(("grey", "frozen") if n else ("grey",), n) for n in range(30)]
+    for n, kind in enumerate(kinds):
+        same = (frames[n] == frames[n - 1]).all() if n else False
+        assert (frames[n] == grey).all() == (kind == "grey" or (kind == "frozen" and (frames[n - 1] == grey).all()))
+        assert same if kind == "frozen" else (kind or not same)  # noise moves a clean frame: never a repeat
+    frozen = [n for n, k in enumerate(kinds) if k == "frozen"]
+    assert (stats.grey_frames, stats.frozen_frames) == (kinds.count("grey"), len(frozen))
     assert (stats.seq_freezes, stats.seq_skips) == (hits["seqfreeze"], hits["seqskip"]) and stats.seq_freezes
     assert f"exposure: {default}" in got and default != 100
     assert stats.register_resets == sum(plan.fires("regreset", n) for n in range(30)) >= 1
