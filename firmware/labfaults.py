@@ -20,6 +20,7 @@ spec (``CameraSpec.defects``) and counts the bursts the frames' truth reports.
 from __future__ import annotations
 
 import dataclasses
+from collections.abc import Callable
 
 import numpy as np
 from rollcam.common.faults import IMAGE_FAULTS, FaultInjector
@@ -33,7 +34,8 @@ from .camera import FirmwareCamera
 class FrameFaults:
     """One transport's image faults and register resets (see the module docstring)."""
 
-    def __init__(self, injector: FaultInjector, camera: FirmwareCamera | None = None) -> None:
+    def __init__(self, injector: FaultInjector, camera: FirmwareCamera | None = None,
+                 on_reset: Callable[[], None] | None = None) -> None:
         self.injector = injector
         plan = injector.plan
         # Only a firmware camera has a sensor (``rollcam view`` streams other sources through the same server).
@@ -44,6 +46,8 @@ class FrameFaults:
         self.camera = firmware if plan.rate("regreset") else None
         self.defaults = self.camera.resettable_controls() if self.camera is not None else {}
         """The controls a register reset restores: the camera's when the transport opened it."""
+        self.on_reset = on_reset
+        """Called just before a register reset (the V4L2 driver notes the controls, to announce their change)."""
         self._previous: list[Frame] | None = None
         self.active = any(plan.rate(k) for k in (*IMAGE_FAULTS, "regreset", "burst"))
 
@@ -60,6 +64,8 @@ class FrameFaults:
         if frames[0].meta.get("defects", {}).get("burst"):  # the sensor model's burst, by the same draw
             inj.count("burst")
         if self.camera is not None and inj.hit("regreset", index):
+            if self.on_reset is not None:
+                self.on_reset()
             self.camera.reset_controls(self.defaults)
         previous = self._previous
         if previous is None or len(previous) != len(frames):

@@ -10,12 +10,12 @@ import re
 import cv2
 import numpy as np
 import pytest
-from programs import need
+from programs import need, python_under
 from programs import run_under as run
 from rollcam.common.errors import ConfigError
 from rollcam.common.faults import COUNTER_FAULTS, IMAGE_FAULTS, U32, FaultInjector, FaultPlan
 from rollcam.emu.serial_pty import PtySerialServer
-from rollcam.emu.v4l2 import Device, EmuDriver
+from rollcam.emu.v4l2 import Device, EmuDriver, raw
 from rollcam.firmware.camera import FirmwareCamera
 from rollcam.host.preload import serving
 from rollcam.host.sources import open_camera
@@ -324,3 +324,29 @@ def test_pyusb_reads_grey_black_and_frozen_frames_as_counted():
         seen[kind or "grey"] += kind is not None
     st = fn.fault_stats
     assert (st.grey_frames, st.black_frames, st.frozen_frames) == tuple(seen.values()) and all(seen.values())
+
+
+def test_a_register_reset_is_a_control_event_for_a_subscribed_program_under_rollcam_run():
+    """A program subscribed to V4L2_EVENT_CTRL for the exposure hears of the reset another program's stream met:
+    the pending event (merged per control, as the kernel's) carries the default value, not the one set."""
+    need("v4l2-ctl")
+    source = "emu:imx219?size=160x120&format=YUYV&scene=flat&faults=regreset=10,seed=2"
+    with serving([("/dev/video0", source)], realtime=False) as s:
+        default = s.nodes["/dev/video0"].driver.ctrl_defaults["exposure"]
+        got = python_under(s, """
+            import fcntl, json, os, subprocess
+            from rollcam.emu.v4l2 import abi, raw
+            fd = os.open("/dev/video0", os.O_RDWR)
+            fcntl.ioctl(fd, abi.REQUESTS["SUBSCRIBE_EVENT"][0], bytes(abi.EventSubscription(3, raw.CID.EXPOSURE)))
+            subprocess.run(["v4l2-ctl", "-d", "/dev/video0", "--set-ctrl=exposure=100", "--stream-mmap",
+                            "--stream-count=30", "--stream-to=/dev/null"], check=True, capture_output=True)
+            buf = bytearray(bytes(abi.Event()))
+            fcntl.ioctl(fd, abi.REQUESTS["DQEVENT"][0], buf)
+            ev = abi.Event.from_buffer_copy(buf)
+            c = ev.u.ctrl
+            print(json.dumps({"type": ev.type, "id": ev.id, "value": c.value64, "changes": c.changes}))
+        """)
+        resets = s.nodes["/dev/video0"].driver.fault_stats.register_resets
+    assert got["type"] == 3 and got["id"] == raw.CID.EXPOSURE and got["changes"] & 1  # V4L2_EVENT_CTRL_CH_VALUE
+    assert got["value"] == default != 100 and resets >= 1
+

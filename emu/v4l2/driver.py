@@ -13,6 +13,7 @@ rewrite, freeze and skip in ``sequence``, grey, black and frozen images, and sen
 from __future__ import annotations
 
 import errno
+import threading
 from collections.abc import Callable
 from dataclasses import dataclass
 from fractions import Fraction
@@ -70,7 +71,9 @@ class EmuDriver:
         self.faults = FaultPlan.of(faults)
         self.injector = FaultInjector(self.faults)
         self.fault_stats = self.injector.stats
-        self.frame_faults = FrameFaults(self.injector, camera)
+        self.frame_faults = FrameFaults(self.injector, camera, on_reset=self._note_reset)
+        self._reset_lock = threading.Lock()
+        self._reset_before: dict[int, Any] | None = None  # the controls before a register reset not yet announced
         self.queue = BufferQueue(alloc=alloc)
         self.on_change: Callable[[], None] | None = None  # called (pump thread) after a buffer completes
         self.ctrl_defaults = {name: info["value"] for name, info in camera.controls().items()}
@@ -113,6 +116,20 @@ class EmuDriver:
         injected = self.injector.request(name) if name in REQUESTS else None
         if injected is not None:
             raise V4L2Error(injected, f"{request.value}: injected error")
+
+    def _note_reset(self) -> None:
+        """An injected register reset is about to happen (on the thread making frames): keep the controls as they
+        were, for the node to announce what changed (V4L2_EVENT_CTRL) at its next request."""
+        before = ctrls.controls(self)
+        with self._reset_lock:
+            if self._reset_before is None:
+                self._reset_before = before
+
+    def take_reset(self) -> dict[int, Any] | None:
+        """The controls before the register resets since the last call (None when there was none)."""
+        with self._reset_lock:
+            before, self._reset_before = self._reset_before, None
+            return before
 
     def disconnect(self) -> None:
         """Unplug: stop producing; every call and waiter from now on gets ENODEV."""
