@@ -5,6 +5,7 @@ pty, a raw HTTP multipart reader, the ``emu:`` source) and compared with the inj
 from __future__ import annotations
 
 import hashlib
+import json
 import re
 
 import cv2
@@ -350,3 +351,19 @@ def test_a_register_reset_is_a_control_event_for_a_subscribed_program_under_roll
     assert got["type"] == 3 and got["id"] == raw.CID.EXPOSURE and got["changes"] & 1  # V4L2_EVENT_CTRL_CH_VALUE
     assert got["value"] == default != 100 and resets >= 1
 
+
+
+def test_rollcam_capture_writes_the_defects_truth_into_frames_jsonl(tmp_path):
+    from rollcam.host.cli import main
+
+    out = tmp_path / "cap"
+    uri = "emu:imx219?size=320x240&scene=street&format=RG10&faults=dead=25,stuck=25,burst=100,burst_px=50,seed=4"
+    assert main(["capture", uri, "--frames", "2", "--out", str(out)]) == 0
+    recs = [json.loads(line) for line in (out / "frames.jsonl").read_text().splitlines()]
+    assert len(recs) == 2
+    for r in recs:
+        d = r["defects"]
+        img = cv2.imread(str(out / r["file"]), cv2.IMREAD_UNCHANGED)
+        assert img.shape == (240, 320) and img.dtype == np.uint16
+        assert all(img[y, x] == 0 for x, y in d["dead"]) and all(img[y, x] == v for x, y, v in d["stuck"])
+        assert d["burst"]["length"] == 50 and len(d["dead"]) == len(d["stuck"]) == 25
