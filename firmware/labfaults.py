@@ -79,14 +79,16 @@ class FrameFaults:
 
 def faulted_image(frame: Frame, kind: str, previous: Frame | None = None) -> Frame:
     """``frame`` with its image replaced as image fault ``kind`` (``IMAGE_FAULTS``) does, in the frame's own
-    format; ``previous`` is the image ``frozen`` repeats (same size and format, else the frame is kept)."""
+    format, and its object truth with what the image shows; ``previous`` is the frame ``frozen`` repeats (same
+    size and format, else the frame is kept)."""
     if kind == "frozen":
         if previous is None or previous.format != frame.format or previous.data.shape != frame.data.shape:
             return frame
-        data = previous.data
+        data, objects = previous.data, previous.objects
     else:
-        data = flat_image(frame, 0.5 if kind == "grey" else 0.0)
-    return dataclasses.replace(frame, data=data, meta={**frame.meta, "image_fault": kind})
+        data, objects = flat_image(frame, 0.5 if kind == "grey" else 0.0), None if frame.objects is None else ()
+    # The truth follows the picture: a frozen image shows the previous frame's objects, a flat one none.
+    return dataclasses.replace(frame, data=data, objects=objects, meta={**frame.meta, "image_fault": kind})
 
 
 def flat_image(frame: Frame, level: float) -> np.ndarray:

@@ -58,7 +58,8 @@ class SensorDefects:
         """The plan's sensor defects, or None when it gives none (no defect, no burst)."""
         if not any(plan.defect(k) for k in DEFECTS) and not plan.rate("burst"):
             return None
-        return cls(FaultPlan(seed=plan.seed, rates=(("burst", plan.rate("burst")),), burst_px=plan.burst_px,
+        burst = (("burst", plan.rate("burst")),) if plan.rate("burst") else ()
+        return cls(FaultPlan(seed=plan.seed, rates=burst, burst_px=plan.burst_px,
                              hot_dn_per_ms=plan.hot_dn_per_ms, defects=plan.defects))
 
     def __str__(self) -> str:

@@ -191,7 +191,8 @@ def test_emu_source_frames_carry_counter_and_image_faults():
     assert [f.sequence for f in frames] == [10 * n for n in range(12)]
     greys = [n for n in range(12) if plan.fires("grey", n)]
     assert [n for n, f in enumerate(frames) if f.meta.get("image_fault") == "grey"] == greys
-    assert all(np.all(frames[n].data == 128) for n in greys) and greys
+    assert all(np.all(frames[n].data == 128) and frames[n].objects == () for n in greys) and greys
+    assert all(frames[n].objects for n in range(12) if n not in greys)  # the street's truth on the others
     assert src.fault_stats.seq_skips == 11 and src.fault_stats.grey_frames == len(greys)
     src.close()
 
@@ -295,9 +296,17 @@ def test_v4l2_ctl_under_rollcam_run_streams_the_defective_pixels(tmp_path):
     assert (frames == 0).sum(axis=(1, 2)).min() >= 30
 
 
-def test_defects_need_the_sensor_model():
-    with pytest.raises(ConfigError, match="physics"):
-        open_camera("emu:imx219?physics=0&faults=dead=3").read()
+def test_bad_lab_faults_are_one_line_cli_errors(capsys, tmp_path):
+    from rollcam.host.cli import main
+
+    assert main(["emulate", "imx219", "--faults", "seqskip=5,seqskip_by=0", "--http", "127.0.0.1:0",
+                 "--duration", "0"]) == 2
+    assert main(["capture", "emu:imx219?faults=stuck=many", "--frames", "1", "--out", str(tmp_path / "a")]) == 2
+    assert main(["capture", "emu:imx219?physics=0&faults=dead=3", "--frames", "1", "--out", str(tmp_path / "b")]) == 2
+    err = capsys.readouterr().err.splitlines()
+    assert len(err) == 3 and all(line.startswith("rollcam: error: ") for line in err)
+    assert "'seqskip_by=0'" in err[0] and "'stuck=many'" in err[1]
+    assert "sensor defects (dead=3) need the sensor model (physics on)" in err[2]
 
 
 # ------------------------------------------------------------------------------------------------ UVC
