@@ -28,6 +28,7 @@ import functools
 from dataclasses import dataclass
 from typing import Any
 
+import cv2
 import numpy as np
 from rollcam.common.faults import DEFECTS, FaultPlan
 
@@ -45,6 +46,7 @@ class _Maps:
     hot: np.ndarray
     blobs: np.ndarray  # (N, 4): cx, cy, radius_px, opacity
     transmission: np.ndarray | None  # float32 (H, W), None without soiling
+    region: tuple[slice, slice] = (slice(0), slice(0))  # where the soiling changes anything (even-aligned)
 
 
 @dataclass(frozen=True)
@@ -84,7 +86,13 @@ class SensorDefects:
             t = np.ones((height, width), np.float32)
             for cx, cy, r, a in blobs:
                 t *= 1 - np.float32(a) * np.exp(-((xx - cx) ** 2 + (yy - cy) ** 2) / np.float32(r * r))
-        return _Maps(stuck, stuck_frac, dead, hot, blobs, t)
+        region = (slice(0), slice(0))
+        if t is not None:  # the blobs' reach (transmission visibly below 1), on whole CFA tiles: the only work
+            rows, cols = np.nonzero(t < 0.999)
+            if len(rows):
+                region = (slice(rows.min() & ~1, min(rows.max() + 2, height)),
+                          slice(cols.min() & ~1, min(cols.max() + 2, width)))
+        return _Maps(stuck, stuck_frac, dead, hot, blobs, t, region)
 
     def apply(self, dn: np.ndarray, frame_index: int, exposure_ns: int, *, gain: float, black_dn: float,
               max_dn: int, cfa: str, hflip: bool = False, vflip: bool = False) -> tuple[np.ndarray, dict[str, Any]]:
@@ -94,8 +102,8 @@ class SensorDefects:
         m = self.maps(h, w)
         out = dn.copy()
         a = out[::-1 if vflip else 1, ::-1 if hflip else 1]  # array orientation: the defects sit on the array
-        if m.transmission is not None:
-            a[...] = _soiled(a, m.transmission, black_dn, max_dn, cfa)
+        if m.transmission is not None and a[m.region].size:
+            a[m.region] = _soiled(a[m.region], m.transmission[m.region], black_dn, max_dn, cfa)
         flat = a.reshape(-1) if a.flags.c_contiguous else None
         if len(m.hot):
             rows, cols = np.unravel_index(m.hot, (h, w))
@@ -148,17 +156,7 @@ def _soiled(a: np.ndarray, t: np.ndarray, black_dn: float, max_dn: int, cfa: str
     for dy in range(step):
         for dx in range(step):
             sub, ts = s[dy::step, dx::step], t[dy::step, dx::step]
-            blurred = _box_blur(_box_blur(sub, 0), 1)
+            blurred = cv2.blur(np.ascontiguousarray(sub), (5, 5), borderType=cv2.BORDER_REPLICATE)
             out[dy::step, dx::step] = ts * (ts * sub + (1 - ts) * blurred)
     return np.clip(np.rint(out + np.float32(black_dn)), 0, max_dn).astype(np.uint16)
 
-
-def _box_blur(a: np.ndarray, axis: int, radius: int = 2) -> np.ndarray:
-    """``a`` averaged over ``2 * radius + 1`` samples along ``axis`` (edges repeated)."""
-    pad = [(0, 0), (0, 0)]
-    pad[axis] = (radius + 1, radius)
-    c = np.cumsum(np.pad(a, pad, mode="edge"), axis=axis, dtype=np.float64)
-    n = a.shape[axis]
-    hi = np.take(c, np.arange(2 * radius + 1, 2 * radius + 1 + n), axis=axis)
-    lo = np.take(c, np.arange(0, n), axis=axis)
-    return ((hi - lo) / (2 * radius + 1)).astype(np.float32)
