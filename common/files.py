@@ -16,6 +16,7 @@ from __future__ import annotations
 import contextlib
 import errno
 import hashlib
+import io
 import json
 import os
 import secrets
@@ -150,6 +151,19 @@ def write_atomic(path: str | os.PathLike[str], data: bytes, fs: FileSystem = OS_
             fs.unlink(part)
         raise
     fs.fsync_dir(Path(path).parent)
+
+
+def write_figure(path: str | os.PathLike[str], fig: Any, dpi: int = 110, fs: FileSystem = OS_FS) -> None:
+    """Write a matplotlib figure to ``path`` as a PNG, atomically (``write_atomic``), and close it: the one figure
+    writer of every report (pyplot keeps each figure it made until it is closed)."""
+    import matplotlib.pyplot as plt  # only the reports need matplotlib; importing it costs a second
+
+    buf = io.BytesIO()
+    try:
+        fig.savefig(buf, format="png", dpi=dpi)
+    finally:
+        plt.close(fig)
+    write_atomic(path, buf.getvalue(), fs)
 
 
 def sha256_file(path: str | os.PathLike[str]) -> str:
