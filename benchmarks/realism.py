@@ -27,6 +27,7 @@ import numpy as np
 from rollcam.common.errors import ConfigError
 from rollcam.host.detectors import load_detector
 from rollcam.host.detectors.ops import ioa_matrix, iou_matrix
+from rollcam.sim.codecs import encode_image
 from rollcam.sim.optics import LensOptics
 from rollcam.sim.picture import PictureSteps
 from rollcam.sim.render import Renderer, encode_linear
@@ -309,10 +310,7 @@ def write_gallery(folder: str | Path, *, seed: int = 0, times: Sequence[str] = t
         while len(tiles) % 2:
             tiles.append(np.zeros_like(tiles[0]))
         sheet = np.vstack([np.hstack(tiles[i:i + 2]) for i in range(0, len(tiles), 2)])
-        ok, buf = cv2.imencode(".jpg", sheet, [cv2.IMWRITE_JPEG_QUALITY, 85])
-        if not ok:
-            raise RuntimeError(f"JPEG encoding of the {tod} contact sheet failed")
         path = out_dir / f"realism_{tod}.jpg"
-        write_atomic(path, buf.tobytes())
+        write_atomic(path, encode_image(sheet, "jpg", (cv2.IMWRITE_JPEG_QUALITY, 85), what=f"the {tod} contact sheet"))
         written.append(path)
     return written

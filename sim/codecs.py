@@ -27,7 +27,7 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-from rollcam.common.errors import ConfigError, ProtocolError
+from rollcam.common.errors import ConfigError, ProtocolError, RollcamError
 from rollcam.common.values import JPEG_QUALITY, jpeg_quality
 
 from .formats import FORMATS, PixelFormat, pack_csi2, unpack_csi2
@@ -70,6 +70,18 @@ def _cv2() -> Any:
     import cv2
 
     return cv2
+
+
+def encode_image(image: np.ndarray, ext: str, params: tuple[int, ...] = (), error: type[RollcamError] = ConfigError,
+                 what: str = "image") -> bytes:
+    """``image`` as the bytes of an image file of type ``ext`` (``"png"``, ``"jpg"``...; OpenCV's encoder, with its
+    ``params``): the one place a picture becomes a file's bytes (snapshots, contact sheets, masks, captures). A
+    failed encode raises the caller's ``error`` naming ``what``."""
+    cv2 = _cv2()
+    ok, buf = cv2.imencode(f".{ext}", image, list(params))
+    if not ok:
+        raise error(f"could not encode {what} as {ext.upper()}")
+    return buf.tobytes()
 
 
 def _as_bgr(image: np.ndarray, fourcc: str) -> np.ndarray:
