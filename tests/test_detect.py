@@ -5,16 +5,15 @@ from __future__ import annotations
 import json
 import os
 import shutil
-import signal
 import subprocess
 import sys
-import time
 from pathlib import Path
 
 import cv2
 import numpy as np
 import pytest
-from interrupts import ctrl_c
+from helpers import wait_for
+from interrupts import ctrl_c, interrupt
 from rollcam.host.cli import main
 from rollcam.host.detect import LOG, SUMMARY, VIDEO, DetectInterrupted, run_detect
 from rollcam.host.detectors import PERSON, Detections
@@ -124,15 +123,13 @@ def test_cli_ctrl_c_exits_130_with_files_intact(tmp_path, terminal):
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, env={**os.environ, "PYTHONUNBUFFERED": "1"},
                             start_new_session=terminal)
     log = tmp_path / LOG
-    deadline = time.monotonic() + 120
-    while time.monotonic() < deadline and (not log.exists() or log.read_text().count("\n") < 3
-                                           or not list(tmp_path.glob(f".{VIDEO}.*.part"))):  # ffmpeg is running
-        time.sleep(0.1)
-    if terminal:
-        os.killpg(proc.pid, signal.SIGINT)
-    else:
-        proc.send_signal(signal.SIGINT)
-    _, err = proc.communicate(timeout=60)
+    try:
+        wait_for(lambda: log.exists() and log.read_text().count("\n") >= 3 and list(tmp_path.glob(f".{VIDEO}.*.part")),
+                 120, "three frames logged with ffmpeg running")
+    except AssertionError:
+        proc.kill()
+        raise
+    _, err = interrupt(proc, group=terminal)
     assert proc.returncode == 130, err
     lines = log.read_text().splitlines()
     assert len(lines) >= 3 and all(json.loads(line)["detections"] is not None for line in lines)
