@@ -45,11 +45,6 @@ ALLOWED: dict[tuple[str, str], str] = {
     ("context managers", "host/testing/depthai_mock.py"): "API replica: depthai's Device and Pipeline",
     ("context managers", "host/video.py"): "fold pending: VideoWriter could be Closeable (abort on error stays)",
     ("context managers", "host/videocapture.py"): "fold pending: VideoCapture could be Closeable (release = close)",
-    # deadlines
-    ("deadlines", "benchmarks/mjpeg.py"): "fold pending: a benchmark's run length; Deadline fits",
-    ("deadlines", "benchmarks/soak.py"): "fold pending: a benchmark's run length; Deadline fits",
-    ("deadlines", "benchmarks/view.py"): "fold pending: a benchmark's run length; Deadline fits",
-    ("deadlines", "host/shims/picamera2/_engine.py"): "fold pending: the stand-in's wait; Deadline fits",
     # image encoding and colour conversion
     ("image encoding", "benchmarks/mjpeg.py"):
         "what it times is OpenCV's JPEG encoder with each sampling option: the call itself is the subject",
