@@ -154,3 +154,29 @@ def test_out_that_is_a_file_is_one_line_exit_2(tmp_path, capsys, where):
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and err[0].startswith("rollcam: error: --out ") and str(out) in err[0], err
     assert "must be a folder, not a file" in err[0] and "Errno" not in err[0]
+
+
+def test_video_sink_reports_a_failed_write_once_and_never_blocks_the_loop(tmp_path, monkeypatch):
+    """The sink's writer thread is a Worker: a write that fails is raised by close() as an OSError naming the
+    file, the frames put after it are drained (a full queue would block the loop), and no file is left."""
+    import rollcam.host.detect as detect
+
+    class Broken:
+        def __init__(self, path, fps, size):
+            pass
+
+        def write(self, img):
+            raise OSError("disk full")
+
+        def abort(self):
+            aborted.append(True)
+
+    aborted: list[bool] = []
+    monkeypatch.setattr(detect, "VideoWriter", Broken)
+    sink = detect.VideoSink(tmp_path / "v.mp4", 30.0, max_queue=2)
+    for _ in range(20):  # ten times the queue: blocks for ever unless the thread drains after the failure
+        sink.put(np.zeros((8, 8, 3), np.uint8))
+    with pytest.raises(OSError, match=r"v\.mp4 failed: disk full"):
+        sink.close()
+    sink.close()  # twice is harmless
+    assert aborted == [True] and sink.frames == 0

@@ -31,7 +31,6 @@ ALLOWED: dict[tuple[str, str], str] = {
     ("threads", "emu/v4l2/server.py"): EDITED.format("emu/v4l2"),
     ("threads", "host/datasets/executors.py"):
         "fold pending: a pool worker's parent watchdog, started in the pool's initializer with no owner to close it",
-    ("threads", "host/detect.py"): "fold pending: VideoSink's writer thread is Worker's job (issue 38 names it)",
     ("threads", "host/shims/picamera2/encoders/h264_encoder.py"): PICAMERA2.format("encoder reader thread"),
     ("threads", "host/shims/picamera2/job.py"): PICAMERA2.format("Job thread"),
     ("threads", "host/shims/picamera2/outputs/ffmpegoutput.py"): PICAMERA2.format("FfmpegOutput watcher"),
