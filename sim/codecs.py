@@ -27,7 +27,7 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-from rollcam.common.errors import ConfigError, ProtocolError, RollcamError
+from rollcam.common.errors import ConfigError, ProtocolError
 from rollcam.common.values import JPEG_QUALITY, jpeg_quality
 
 from .formats import FORMATS, PixelFormat, pack_csi2, unpack_csi2
@@ -72,7 +72,7 @@ def _cv2() -> Any:
     return cv2
 
 
-def encode_image(image: np.ndarray, ext: str, params: tuple[int, ...] = (), error: type[RollcamError] = ConfigError,
+def encode_image(image: np.ndarray, ext: str, params: tuple[int, ...] = (), error: type[Exception] = ConfigError,
                  what: str = "image") -> bytes:
     """``image`` as the bytes of an image file of type ``ext`` (``"png"``, ``"jpg"``...; OpenCV's encoder, with its
     ``params``): the one place a picture becomes a file's bytes (snapshots, contact sheets, masks, captures). A
