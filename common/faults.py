@@ -20,6 +20,17 @@ Keys (rates are percentages, the ``%`` sign optional; a key without ``=value`` t
 - ``seqwrap[=N]``: sequence numbers start N frames before the 32-bit wrap (default 128: vivid's 0xffffff80).
 - ``tswrap[=S]``: timestamps start S seconds before the signed 64-bit nanosecond wrap (default 16, as vivid),
   counted from the stream's start.
+
+Lab faults, after what camera HIL rigs inject (docs/faults.md):
+
+- frame-counter rates: ``seqrewrite`` (the counter jumps to ``seqrewrite_to``, default 0, and counts on from
+  there), ``seqfreeze`` (the counter repeats the previous frame's), ``seqskip`` (the counter advances by
+  ``seqskip_by`` more than 1, default 1);
+- image rates: ``grey`` (a mid-grey frame), ``black`` (a black frame), ``frozen`` (the previous image again);
+- ``regreset``: the share of frames at which the sensor's registers reset: its controls return to defaults;
+- sensor defects, made by the sensor model (``rollcam.sim.defects``): ``stuck=N``, ``dead=N``, ``hot=N``
+  pixels and ``soiling=N`` blobs, at seeded places; ``burst`` (rate): a run of ``burst_px`` (default 64)
+  corrupted pixels on a frame; ``hot_dn_per_ms`` (default 40) how fast a hot pixel fills.
 """
 
 from __future__ import annotations
@@ -32,8 +43,16 @@ from typing import Any
 from .errors import ConfigError
 from .lifecycle import Stats
 
-RATES = ("drop", "error", "corrupt", "delay", "stall", "babble", "short", "cut")
+COUNTER_FAULTS = ("seqrewrite", "seqfreeze", "seqskip")
+"""Frame-counter faults, in the order they take precedence when several hit one frame."""
+IMAGE_FAULTS = ("grey", "black", "frozen")
+"""Faults that replace a frame's image, in the order they take precedence."""
+RATES = ("drop", "error", "corrupt", "delay", "stall", "babble", "short", "cut", *COUNTER_FAULTS, *IMAGE_FAULTS,
+         "regreset", "burst")
 """Fault kinds given as a percentage of the events they apply to."""
+DEFECTS = ("stuck", "dead", "hot", "soiling")
+"""Sensor defects given as a count (of pixels; of blobs for ``soiling``) placed by the seed."""
+MAX_DEFECTS = 1 << 20
 REQUESTS = ("reqbufs", "querybuf", "qbuf", "dqbuf", "streamon", "streamoff", "s_fmt", "s_parm", "s_ctrl")
 """Requests (V4L2 ioctls, lower case without ``VIDIOC_``) that a one-shot error can be injected into."""
 DEFAULT_DELAY_MS = 500
@@ -42,6 +61,12 @@ DEFAULT_TSWRAP_S = 16  # vivid: (1 << 63) - 16 s
 U32 = 1 << 32
 S64 = 1 << 63
 MAX_DELAY_MS = 60_000
+DEFAULT_BURST_PX = 64
+DEFAULT_HOT_DN_PER_MS = 40
+PARAMS = {"delay_ms": (DEFAULT_DELAY_MS, 0, MAX_DELAY_MS), "seqrewrite_to": (0, 0, U32 - 1),
+          "seqskip_by": (1, 1, U32 - 1), "burst_px": (DEFAULT_BURST_PX, 1, 1 << 24),
+          "hot_dn_per_ms": (DEFAULT_HOT_DN_PER_MS, 1, 1 << 20)}
+"""Whole-number parameters of the faults: (default, least, most)."""
 _M64 = (1 << 64) - 1
 
 
@@ -83,11 +108,19 @@ class FaultPlan:
     requests: tuple[RequestFault, ...] = ()
     seqwrap: int | None = None
     tswrap_s: int | None = None
+    seqrewrite_to: int = 0
+    seqskip_by: int = 1
+    burst_px: int = DEFAULT_BURST_PX
+    hot_dn_per_ms: int = DEFAULT_HOT_DN_PER_MS
+    defects: tuple[tuple[str, int], ...] = ()  # (kind, count) for the defects given, in DEFECTS order
 
     def __post_init__(self) -> None:
         for kind, pct in self.rates:
             if kind not in RATES or not 0.0 <= pct <= 100.0:
                 raise ConfigError(f"fault rate {kind}={pct!r}: expected one of {RATES} at 0..100 %")
+        for kind, count in self.defects:
+            if kind not in DEFECTS or not 0 <= count <= MAX_DEFECTS:
+                raise ConfigError(f"sensor defect {kind}={count!r}: expected one of {DEFECTS} at 0..{MAX_DEFECTS}")
 
     # ------------------------------------------------------------------------------------------ text
     @classmethod
@@ -115,7 +148,9 @@ class FaultPlan:
         except ValueError as exc:
             shown = key if value is None else f"{key}={value}"
             raise ConfigError(f"{owner}: fault {shown!r} in {text!r}: {exc}") from None
-        return cls(rates=tuple((k, rates[k]) for k in RATES if k in rates), requests=tuple(requests), **kw)
+        defects = tuple((k, kw.pop(k)) for k in DEFECTS if k in kw)
+        return cls(rates=tuple((k, rates[k]) for k in RATES if k in rates), requests=tuple(requests),
+                   defects=defects, **kw)
 
     @classmethod
     def of(cls, value: FaultPlan | str | None, owner: str = "faults") -> FaultPlan:
@@ -129,8 +164,8 @@ class FaultPlan:
     def to_text(self) -> str:
         """The canonical text (``parse(plan.to_text()) == plan``)."""
         items = [f"{k}={_num(p)}%" for k, p in self.rates]
-        if self.delay_ms != DEFAULT_DELAY_MS:
-            items.append(f"delay_ms={self.delay_ms}")
+        items += [f"{k}={getattr(self, k)}" for k, (default, _, _) in PARAMS.items() if getattr(self, k) != default]
+        items += [f"{k}={n}" for k, n in self.defects]
         if self.disconnect is not None:
             items.append(f"disconnect={self.disconnect}")
         items += [r.to_text() for r in self.requests]
@@ -147,7 +182,8 @@ class FaultPlan:
 
     def __bool__(self) -> bool:
         """True when the plan injects anything."""
-        return bool(self.rates or self.disconnect is not None or self.requests or self.seqwrap or self.tswrap_s)
+        return bool(self.rates or self.disconnect is not None or self.requests or self.seqwrap or self.tswrap_s
+                    or self.defects)
 
     # ------------------------------------------------------------------------------------------ decisions
     def rate(self, kind: str) -> float:
@@ -169,10 +205,39 @@ class FaultPlan:
         """The errno the ``nth`` call (1-based) of ``request`` fails with, or None."""
         return next((r.err for r in self.requests if r.request == request and r.nth == nth), None)
 
+    def defect(self, kind: str) -> int:
+        """How many ``kind`` defects (``DEFECTS``) the plan gives the sensor (0 when not given)."""
+        return next((n for k, n in self.defects if k == kind), 0)
+
+    @property
+    def counter_faults(self) -> bool:
+        """True when a frame-counter fault (``COUNTER_FAULTS``) may hit."""
+        return any(self.rate(k) for k in COUNTER_FAULTS)
+
+    def first_of(self, kinds: tuple[str, ...], index: int) -> str | None:
+        """The first of ``kinds`` that hits event ``index`` (they are drawn independently), or None."""
+        return next((k for k in kinds if self.fires(k, index)), None)
+
+    def counter_step(self, previous: int, n: int) -> tuple[int, str | None]:
+        """Frame ``n``'s 32-bit counter after frame ``n - 1``'s was ``previous``, and the counter fault that hit
+        it (``COUNTER_FAULTS``; frame 0 starts the count and is never hit)."""
+        kind = self.first_of(COUNTER_FAULTS, n) if n > 0 else None
+        if kind == "seqrewrite":
+            return self.seqrewrite_to, kind
+        if kind == "seqfreeze":
+            return previous, kind
+        return (previous + 1 + (self.seqskip_by if kind == "seqskip" else 0)) % U32, kind
+
     def sequence(self, n: int) -> int:
-        """Frame sequence number ``n`` (from 0) as a 32-bit field carries it, shifted toward the wrap by
-        ``seqwrap``."""
-        return (n + (U32 - self.seqwrap if self.seqwrap else 0)) % U32
+        """Frame sequence number ``n`` (from 0) as a 32-bit field carries it: shifted toward the wrap by
+        ``seqwrap``, with the frame-counter faults of frames 1..n applied (each counts from the counter the
+        previous frame showed; ``FaultInjector.sequence`` computes it incrementally)."""
+        c = (U32 - self.seqwrap) % U32 if self.seqwrap else 0
+        if not self.counter_faults:
+            return (c + n) % U32
+        for k in range(1, n + 1):
+            c, _ = self.counter_step(c, k)
+        return c
 
     def timestamp_ns(self, t_ns: int, start_ns: int = 0) -> int:
         """Timestamp ``t_ns`` shifted so that ``start_ns`` (the stream's start, as vivid offsets from
@@ -199,10 +264,20 @@ class FaultStats(Stats):
     disconnects: int = 0
     request_errors: int = 0
     damaged_frames: int = 0  # frames that reached the client incomplete because of payload faults
+    seq_rewrites: int = 0
+    seq_freezes: int = 0
+    seq_skips: int = 0
+    grey_frames: int = 0
+    black_frames: int = 0
+    frozen_frames: int = 0
+    register_resets: int = 0
+    bursts: int = 0  # frames delivered with a pixel-error burst (made by the sensor model)
 
 
 _COUNTER = {"drop": "dropped", "error": "errors", "corrupt": "corrupted", "delay": "delayed", "stall": "stalls",
-            "babble": "babbles", "short": "shorts", "cut": "cuts"}
+            "babble": "babbles", "short": "shorts", "cut": "cuts", "seqrewrite": "seq_rewrites",
+            "seqfreeze": "seq_freezes", "seqskip": "seq_skips", "grey": "grey_frames", "black": "black_frames",
+            "frozen": "frozen_frames", "regreset": "register_resets", "burst": "bursts"}
 
 
 @dataclass
@@ -215,6 +290,7 @@ class FaultInjector:
 
     def __post_init__(self) -> None:
         self._calls: dict[str, int] = {}
+        self._counter = (0, self.plan.sequence(0))  # (n, sequence(n)) last asked: counter faults add up
 
     def __bool__(self) -> bool:
         return bool(self.plan)
@@ -223,9 +299,39 @@ class FaultInjector:
         """``plan.fires(kind, index, events)``, counted when True."""
         if not self.plan.fires(kind, index, events):
             return False
+        self.count(kind)
+        return True
+
+    def count(self, kind: str) -> None:
+        """Count one fault of ``kind`` (a key of the rates) as injected."""
         counter = _COUNTER[kind]
         setattr(self.stats, counter, getattr(self.stats, counter) + 1)
-        return True
+
+    def first(self, kinds: tuple[str, ...], index: int) -> str | None:
+        """``plan.first_of(kinds, index)``, counted when one hits."""
+        kind = self.plan.first_of(kinds, index)
+        if kind is not None:
+            self.count(kind)
+        return kind
+
+    def sequence(self, n: int) -> int:
+        """``plan.sequence(n)`` for the frame delivered as device frame ``n`` of the stream (from 0), counting the
+        counter fault that hit it. Frames are asked in order, so the counter is carried on from the last one asked
+        (a smaller ``n``, a new stream, counts again from frame 0)."""
+        plan = self.plan
+        if not plan.counter_faults:
+            return plan.sequence(n)
+        k, c = self._counter
+        if n < k:
+            k, c = 0, plan.sequence(0)
+        kind = None
+        while k < n:
+            k += 1
+            c, kind = plan.counter_step(c, k)
+        self._counter = (k, c)
+        if kind is not None:
+            self.count(kind)
+        return c
 
     def request(self, name: str) -> int | None:
         """Count one call of request ``name``; the errno it must fail with, or None."""
@@ -251,8 +357,10 @@ def _take(key: str, value: str | None, kw: dict[str, Any], rates: dict[str, floa
         rates[key] = _percent(_needs(value))
     elif key == "seed":
         kw["seed"] = _int(_needs(value), 0, _M64)
-    elif key == "delay_ms":
-        kw["delay_ms"] = _int(_needs(value), 0, MAX_DELAY_MS)
+    elif key in PARAMS:
+        kw[key] = _int(_needs(value), *PARAMS[key][1:])
+    elif key in DEFECTS:
+        kw[key] = _int(_needs(value), 0, MAX_DEFECTS)
     elif key == "disconnect":
         kw["disconnect"] = _int(_needs(value), 0, U32)
     elif key == "seqwrap":
@@ -311,7 +419,7 @@ def _num(x: float) -> str:
 
 
 def _known() -> list[str]:
-    return ["seed", *RATES, "delay_ms", "disconnect", *REQUESTS, "seqwrap", "tswrap"]
+    return ["seed", *RATES, *PARAMS, "disconnect", *REQUESTS, "seqwrap", "tswrap", *DEFECTS]
 
 
 FAULT_COUNTERS = tuple(f.name for f in fields(FaultStats))

@@ -131,6 +131,25 @@ def commit(part: str | os.PathLike[str], path: str | os.PathLike[str], fs: FileS
     fs.fsync_dir(Path(path).parent)
 
 
+def commit_tree(staged: str | os.PathLike[str], path: str | os.PathLike[str], fs: FileSystem = OS_FS) -> None:
+    """Move a finished file or folder (a ROS 2 bag is a folder) into place durably: every file and folder under
+    ``staged`` fsynced, one rename onto ``path`` (which must not be a non-empty folder), the parent fsynced.
+    ``staged`` is left where it was if a step fails, for its writer to remove."""
+    root = Path(staged)
+    tree = [root] if root.is_file() else [*sorted(root.rglob("*"), reverse=True), root]
+    for p in tree:
+        if p.is_dir():
+            fs.fsync_dir(p)
+        else:
+            fd = fs.open(p, os.O_RDONLY)
+            try:
+                fs.fsync(fd)
+            finally:
+                fs.close(fd)
+    fs.replace(root, path)
+    fs.fsync_dir(Path(path).parent)
+
+
 def write_atomic(path: str | os.PathLike[str], data: bytes, fs: FileSystem = OS_FS) -> None:
     """Replace ``path`` with ``data`` durably: after any failure it holds its old content or all of ``data``.
 

@@ -12,6 +12,10 @@ streams, decided by the part's frame sequence number (so a plan hits the same fr
   connects again is served as before.
 - ``seqwrap`` / ``tswrap``: ``X-Sequence`` counts in 32 bits from near its wrap, ``X-Timestamp-Ns`` in
   signed 64 bits from near its wrap.
+- ``seqrewrite`` / ``seqfreeze`` / ``seqskip``: ``X-Sequence`` is the faulted frame counter.
+
+The image faults (``grey``, ``black``, ``frozen``) and register resets are applied to the frame before it is
+encoded (``rollcam.firmware.labfaults``, in ``MjpegServer``), so a snapshot taken then shows them too.
 
 After a cut or a disconnect no part goes out for ``REPLUG_S`` (the camera is away), so the final part is the
 last every stream gets. Snapshots (``/snapshot.jpg``) are not faulted. Everything here runs on the server's
@@ -70,10 +74,10 @@ class StreamFaults:
 
     def _wrapped(self, part: Any) -> Any:
         plan = self.injector.plan
-        if not (plan.seqwrap or plan.tswrap_s):
+        if not (plan.seqwrap or plan.tswrap_s or plan.counter_faults):
             return part
         headers = dict(part.headers)
-        seq = plan.sequence(int(headers["X-Sequence"]))
+        seq = self.injector.sequence(int(headers["X-Sequence"]))
         headers["X-Sequence"] = str(seq)
         t_ns = int(headers["X-Timestamp-Ns"])
         if self._ts0 is None:

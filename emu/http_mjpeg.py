@@ -34,6 +34,7 @@ from rollcam.common.errors import DeviceError
 from rollcam.common.faults import FaultInjector, FaultPlan
 from rollcam.common.lifecycle import Closeable, Stats, Worker
 from rollcam.firmware.camera import FirmwareCamera, FramePlan
+from rollcam.firmware.labfaults import FrameFaults
 from rollcam.sim.codecs import JPEG_QUALITY, Levels, jpeg_quality, transcode
 from rollcam.sim.frame import Frame
 
@@ -184,6 +185,7 @@ class MjpegServer(Closeable):
         injector = FaultInjector(FaultPlan.of(faults))
         self.fault_stats = injector.stats
         self._faults = StreamFaults(injector, self.slots.offer, self.http.loop, Part)
+        self._frame_faults = FrameFaults(injector, camera)  # image faults and register resets, on the encoder thread
         self._encoder = Worker(self._encode_loop, name="rollcam-http-jpeg", wrap=DeviceError)
 
     @property
@@ -246,6 +248,7 @@ class MjpegServer(Closeable):
             f = self._latest.get(0.2)
             if f is None:
                 continue
+            f = self._frame_faults.apply(f, f.sequence)
             t0 = time.perf_counter_ns()
             part = Part.of(f, transcode(f, "MJPG", levels, self.quality).tobytes())
             ms = (time.perf_counter_ns() - t0) / 1e6

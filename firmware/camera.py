@@ -191,6 +191,24 @@ class FirmwareCamera(DeviceStream):
             self.reprogram(state.to_spec())
             return value
 
+    def resettable_controls(self) -> dict[str, int]:
+        """The writable controls' values now, frame length first: what ``reset_controls`` restores (flips
+        excepted: they change the readout's Bayer order, which a stream cannot)."""
+        c = self.controls()
+        names = ["vblank", *(n for n in c if n != "vblank")]
+        return {n: c[n]["value"] for n in names if n in c and not c[n]["read_only"] and n not in ("hflip", "vflip")}
+
+    def reset_controls(self, values: Mapping[str, int]) -> None:
+        """A sensor register reset under a running stream: the controls return to ``values``
+        (``resettable_controls`` of the camera as it came up) from the next frame; counted in
+        ``stats.register_resets``."""
+        with self.lock:
+            state = self.state
+            for name, value in values.items():
+                ctl.set_control(state, name, value)
+            self.stats.register_resets += 1
+            self.reprogram(state.to_spec())
+
     def read_register(self, key: str | int) -> int:
         """Read a register by address or name."""
         return self.registers.read(self.state, key)

@@ -2,10 +2,10 @@
 
 Sensor, output size, frame and line length, shutter, readout, exposure, gain, pixel format, sensor-model stages,
 blur bound, lens (``lens``: vignetting, PSF), ISP picture steps (``picture``: sharpening, JPEG), flips, test
-pattern, scene, IMU and in-sensor network (``insensor``): everything that decides a frame's bytes besides the
-frame's sequence number and start time. It is validated once, when it is made (``dataclasses.replace``
-re-validates), and never changes; a device that is reprogrammed holds a new one. Every
-front door builds or replaces it: ``from_options`` for text (``emu:`` URIs, ``rollcam emulate`` flags,
+pattern, scene, IMU, in-sensor network (``insensor``) and injected sensor defects (``defects``): everything that
+decides a frame's bytes besides the frame's sequence number and start time. It is validated once, when it is
+made (``dataclasses.replace`` re-validates), and never changes; a device that is reprogrammed holds a new one.
+Every front door builds or replaces it: ``from_options`` for text (``emu:`` URIs, ``rollcam emulate`` flags,
 ``rollcam://`` URLs, serial ``SCENE``), ``create`` for typed values, and the firmware's controls, registers,
 V4L2 and UVC requests through ``rollcam.firmware.controls.SensorState``.
 
@@ -25,6 +25,7 @@ from typing import Any
 
 from rollcam.common.errors import ConfigError, RollcamError
 from rollcam.sim import formats as sf
+from rollcam.sim.defects import SensorDefects
 from rollcam.sim.hwconfig import SensorConfig, load_sensor
 from rollcam.sim.imu import ImuParams
 from rollcam.sim.noise import parse_stages
@@ -73,6 +74,7 @@ class CameraSpec:
     imu: ImuParams | None = None
     rs_correct: str = "none"
     insensor: InSensorConfig | None = None
+    defects: SensorDefects | None = None  # a fault plan's sensor defects (docs/faults.md), made by the sensor model
     settings: StreamSettings = field(init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
@@ -163,11 +165,12 @@ class CameraSpec:
 
     @property
     def uses_physics(self) -> bool:
-        """True when frames go through the sensor model (default: every format but BGR3, and any stream whose
-        in-sensor network reads the raw mosaic)."""
+        """True when frames go through the sensor model (default: every format but BGR3, any stream whose
+        in-sensor network reads the raw mosaic, and any with sensor defects, which the model makes)."""
         if self.physics is not None:
             return self.physics
-        return self.pixel_format != "BGR3" or (self.insensor is not None and self.insensor.input == "raw")
+        return (self.pixel_format != "BGR3" or (self.insensor is not None and self.insensor.input == "raw")
+                or self.defects is not None)
 
     @property
     def output_format(self) -> str:
@@ -310,6 +313,11 @@ def _check_values(spec: CameraSpec) -> None:
         spec.insensor.resolved_input(load_network(spec.insensor.network))  # the network loads now: bad specs fail
         if spec.insensor.input == "raw" and spec.physics is False:
             raise ConfigError("insensor_input=raw needs the sensor model (physics on): the mosaic is its output")
+    if spec.defects is not None:
+        if not isinstance(spec.defects, SensorDefects):
+            raise ConfigError(f"defects must be a SensorDefects or None, got {spec.defects!r}")
+        if spec.physics is False:
+            raise ConfigError(f"sensor defects ({spec.defects}) need the sensor model (physics on): it makes them")
     scene_of(spec).camera(spec.camera)  # the scene is built (and cached) now: bad options fail here
 
 

@@ -32,8 +32,9 @@ Clock = Callable[[], int]
 
 @dataclass
 class CameraStats(Stats):
-    """What a device has done: frames made, frames skipped because they were late, external triggers, and
-    in-sensor inferences run and frames the in-sensor accelerator was too busy for."""
+    """What a device has done: frames made, frames skipped because they were late, external triggers,
+    in-sensor inferences run and frames the in-sensor accelerator was too busy for, and register resets (an
+    injected fault, ``rollcam.firmware.labfaults``)."""
 
     frames: int = 0
     skipped: int = 0
@@ -41,6 +42,7 @@ class CameraStats(Stats):
     triggers_ignored: int = 0
     insensor_runs: int = 0
     insensor_skipped: int = 0
+    register_resets: int = 0
 
 
 @dataclass(frozen=True)

@@ -14,6 +14,11 @@ so a refused capture leaves nothing that would refuse the corrected command.
 
 Images are named by instant and shutter: ``NNNNNN_rs.png`` / ``NNNNNN_gs.png``, or ``NNNNNN.png`` for a camera
 whose shutter is unknown (a webcam through ``opencv:`` without ``sensor=``).
+
+A recording format (``RECORDING_FORMATS``) puts the whole capture into one file instead, beside
+``capture.json``: ROS messages in MCAP or a ROS 2 / ROS 1 / Kalibr bag, or an H.264 video with Gyroflow's
+``.gcsv`` (``rollcam.host.robotics``); the recording is renamed into place when the capture ends, whole, and
+Ctrl-C ends it with the instants it has.
 """
 
 from __future__ import annotations
@@ -22,6 +27,7 @@ import contextlib
 import json
 import os
 import re
+import shutil
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
@@ -32,23 +38,28 @@ from typing import Any, TextIO
 import numpy as np
 from rollcam.common.errors import ConfigError, SourceError, is_interrupt
 from rollcam.common.files import OS_FS, AppendLog, FileSystem, output_dir, part_target, read_jsonl, write_atomic
-from rollcam.sim.codecs import codec
-from rollcam.sim.formats import FORMATS
 from rollcam.sim.frame import Frame
 
+from .imagefiles import encode_image, image_array
 from .imu_export import ImuLog
 from .progress import Progress
+from .robotics import bags, gcsv
+from .robotics.bags import BAG_FORMATS
 from .sources import CameraSource
 
 FRAMES_LOG = "frames.jsonl"
 CAPTURE_INFO = "capture.json"
 IMAGE_FORMATS = ("png", "jpg", "npy")
+RECORDING_FORMATS = (*BAG_FORMATS, "mp4")
+"""Formats that record the whole capture in one file (or ROS 2 bag folder) instead of an image per frame."""
+CAPTURE_FORMATS = IMAGE_FORMATS + RECORDING_FORMATS
 SHUTTER_CHOICES = ("rolling", "global", "both")
 SUFFIX = {"rolling": "_rs", "global": "_gs"}
 """File-name suffix of each shutter; any other (``unknown``) gets none."""
 # Files a capture writes (and their temporary files); --overwrite removes only these, nothing else the folder holds.
 _CAPTURE_FILE = re.compile(r"\d{6,}(_rs|_gs)?\.(png|jpg|npy)|\.?(frames\.jsonl|capture\.json|imu\.csv|camera_poses\.csv"
-                           r"|imu\.yaml|camchain\.yaml|camera\.yaml|camchain-imucam\.yaml)")
+                           r"|imu\.yaml|camchain\.yaml|camera\.yaml|camchain-imucam\.yaml"
+                           r"|capture\.mcap|capture_ros2|capture\.bag|kalibr\.bag|capture\.mp4|capture\.gcsv)")
 _INSTANT = re.compile(r"\d+")
 
 
@@ -65,12 +76,18 @@ class CaptureResult:
     images: int
     seconds: float
     complete: bool
+    recording: Path | None = None
+    """The MCAP file, bag or video of a recording format (no images or ``frames.jsonl`` then)."""
 
     def to_json(self) -> dict[str, Any]:
         """The summary ``rollcam capture --json`` prints."""
-        return {"frames": self.frames, "images": self.images, "out": str(self.out_dir),
-                "frames_jsonl": str(self.out_dir / FRAMES_LOG), "seconds": round(self.seconds, 3),
-                "complete": self.complete}
+        out = {"frames": self.frames, "images": self.images, "out": str(self.out_dir),
+               "frames_jsonl": str(self.out_dir / FRAMES_LOG), "seconds": round(self.seconds, 3),
+               "complete": self.complete}
+        if self.recording is not None:
+            del out["frames_jsonl"]
+            out["recording"] = str(self.recording)
+        return out
 
 
 class CaptureInterrupted(KeyboardInterrupt):
@@ -81,58 +98,12 @@ class CaptureInterrupted(KeyboardInterrupt):
         self.result = result
 
 
-_PICTURES = ("BGR3", "RGB3", "GREY")
-
-
-def image_array(frame: Frame, fmt: str) -> np.ndarray:
-    """Pixel data in the layout ``cv2.imencode`` stores for image format ``fmt``.
-
-    BGR3/RGB3 become BGR pictures, GREY a grey one. Any other format (raw Bayer or mono, CSI-2 packed,
-    YUYV, NV12) is stored losslessly as its memory layout in 2-D: rows by bytes (uint8) or by samples
-    (uint16, 16-bit PNG), so ``frames.jsonl``'s format, width, height and bytesperline restore the frame.
-    JPEG would lose samples, so it takes only the picture formats.
-    """
-    data = frame.data
-    if frame.format in _PICTURES or frame.format not in FORMATS:
-        if data.ndim == 3 and data.shape[2] == 3:
-            img = codec("RGB3").decode(data, frame.width, frame.height) if frame.format == "RGB3" else data
-        elif data.ndim == 2 or (data.ndim == 3 and data.shape[2] == 1):
-            img = data
-        else:
-            raise SourceError(f"frame {frame.sequence} ({frame.format}, shape {data.shape}) cannot be stored as an "
-                              "image file; capture needs BGR3, RGB3 or single-channel frames")
-        if img.dtype != np.uint8 and not (img.dtype == np.uint16 and fmt == "png"):
-            raise ConfigError(f"--format {fmt} cannot hold {frame.format} frames of dtype {img.dtype}"
-                              + ("; use --format png" if img.dtype == np.uint16 else ""))
-        return img
-    if fmt == "jpg":
-        raise ConfigError(f"--format jpg would lose the samples of {frame.format!r} frames; use png or npy")
-    if data.dtype not in (np.uint8, np.uint16):
-        raise SourceError(f"frame {frame.sequence} ({frame.format}) has dtype {data.dtype}, not uint8/uint16")
-    return data.reshape(data.shape[0], -1)
-
-
-def encode_image(frame: Frame, fmt: str) -> bytes:
-    """The frame as PNG or JPEG bytes, or its data array exactly as ``.npy``."""
-    if fmt == "npy":
-        import io
-
-        buf = io.BytesIO()
-        np.save(buf, np.ascontiguousarray(frame.data), allow_pickle=False)
-        return buf.getvalue()
-    import cv2
-
-    ok, buf = cv2.imencode(f".{fmt}", image_array(frame, fmt))
-    if not ok:
-        raise SourceError(f"could not encode frame {frame.sequence} as {fmt}")
-    return buf.tobytes()
-
-
 def check_out_dir(out_dir: Path, overwrite: bool) -> None:
     """Refuse an ``out_dir`` that is a file, or holds a capture while ``overwrite`` is off; writes nothing."""
     output_dir(out_dir, make=False)
-    if (out_dir / FRAMES_LOG).exists() and not overwrite:
-        raise ConfigError(f"{str(out_dir)!r} already holds a capture ({FRAMES_LOG}); pass --overwrite to "
+    held = next((n for n in (FRAMES_LOG, CAPTURE_INFO) if (out_dir / n).exists()), None)
+    if held is not None and not overwrite:
+        raise ConfigError(f"{str(out_dir)!r} already holds a capture ({held}); pass --overwrite to "
                           "replace it, or choose another --out")
 
 
@@ -140,10 +111,12 @@ def prepare_out_dir(out_dir: Path, overwrite: bool) -> None:
     """Create ``out_dir``; refuse one that already holds a capture unless ``overwrite`` (then clear it)."""
     check_out_dir(out_dir, overwrite)
     output_dir(out_dir)
-    if (out_dir / FRAMES_LOG).exists():
+    if (out_dir / FRAMES_LOG).exists() or (out_dir / CAPTURE_INFO).exists():
         for p in out_dir.iterdir():
             if p.is_file() and _is_capture_file(p.name):
                 p.unlink()
+            elif p.is_dir() and not p.is_symlink() and _is_capture_file(p.name):  # a ROS 2 bag, a bag's stage
+                shutil.rmtree(p)
 
 
 def frame_reader(source: CameraSource, shutter: str | None) -> Callable[[], Sequence[Frame] | None]:
@@ -273,6 +246,20 @@ def read_capture(out_dir: str | os.PathLike[str]) -> tuple[dict[str, Any], list[
     return info, records
 
 
+def _writer(out: Path, fmt: str, fs: FileSystem, info: dict[str, Any], storage: str) -> CaptureWriter | \
+        bags.BagWriter | gcsv.VideoWithGyro:
+    """The writer of ``fmt``: image files and ``frames.jsonl``, a bag or MCAP file, or a video and its gcsv."""
+    fps = info["source"].get("fps")
+    if fmt in BAG_FORMATS:
+        info["recording"] = bags.OUTPUT[fmt]
+        return bags.BagWriter(out, fmt, storage=storage)
+    if fmt == "mp4":
+        info["recording"] = gcsv.VIDEO_NAME
+        started = datetime.fromisoformat(info["started_utc"])
+        return gcsv.VideoWithGyro(out, fps, timestamp_s=int(started.timestamp()))
+    return CaptureWriter(out, fmt, fs=fs, fps=fps)
+
+
 def capture(
     source: CameraSource,
     out_dir: str | os.PathLike[str],
@@ -286,26 +273,36 @@ def capture(
     stream: TextIO | None = None,
     clock: Callable[[], float] = time.monotonic,
     fs: FileSystem = OS_FS,
+    bag_storage: str = "sqlite3",
 ) -> CaptureResult:
     """Capture ``frames`` instants of ``source`` into ``out_dir`` (see the module docstring).
 
     ``progress`` None shows progress on ``stream`` (stderr) only when it is a terminal. Ends early, and
     reports it, when a finite source runs out. Ctrl-C raises ``CaptureInterrupted`` after cleanup; a write
     error (a full disk) propagates after it, with every record already written kept whole. ``fs``: the
-    file-system seam (tests make its calls fail).
+    file-system seam (tests make its calls fail). ``fmt`` is an image format (``IMAGE_FORMATS``) or a recording
+    (``RECORDING_FORMATS``: ``rollcam.host.robotics``); ``bag_storage`` a ROS 2 bag's storage (sqlite3, mcap).
     """
     if isinstance(frames, bool) or not isinstance(frames, int) or frames <= 0:
         raise ConfigError(f"frames must be a positive integer, got {frames!r}")
-    if fmt not in IMAGE_FORMATS:
-        raise ConfigError(f"image format {fmt!r} is not one of {list(IMAGE_FORMATS)}")
+    if fmt not in CAPTURE_FORMATS:
+        raise ConfigError(f"capture format {fmt!r} is not one of {list(CAPTURE_FORMATS)}")
     out = Path(out_dir)
     read = frame_reader(source, shutter)
     check_out_dir(out, overwrite)
-    # The first instant is read before anything is written, and checked against the image format: a frame the
+    if bag_storage not in bags.ROS2_STORAGES:
+        raise ConfigError(f"ROS 2 bag storage {bag_storage!r} is not one of {list(bags.ROS2_STORAGES)}")
+    if fmt in BAG_FORMATS:
+        bags.require_libraries(fmt)  # a missing extra is named before any frame is made
+    # The first instant is read before anything is written, and checked against the format: a frame the
     # format cannot hold (jpg of a raw stream) is refused while the folder is still as it was.
     first = read()
+    if first and fmt in BAG_FORMATS:
+        bags.check_frames(first, fmt)
+    elif first and fmt == "mp4":
+        gcsv.check_frames(first)
     for frame in first or ():
-        if fmt != "npy":
+        if fmt in ("png", "jpg"):
             image_array(frame, fmt)
     prepare_out_dir(out, overwrite)
     info: dict[str, Any] = {
@@ -318,7 +315,9 @@ def capture(
         "complete": False,  # frames/images/complete are added when the capture ends (read_capture counts them)
     }
     write_capture_info(out, info, fs)
-    writer = CaptureWriter(out, fmt, fs=fs, fps=info["source"].get("fps"))
+    if fmt == "ros2bag":
+        info["bag_storage"] = bag_storage
+    writer = _writer(out, fmt, fs, info, bag_storage)
     bar = Progress(frames, label="capture", stream=stream, enabled=progress, unit="frame")
     start = clock()
     interrupted = False
@@ -340,7 +339,9 @@ def capture(
         bar.close()
         try:
             writer.close()
-            result = CaptureResult(out, writer.frames, writer.images, clock() - start, writer.frames == frames)
+            recording = out / info["recording"] if "recording" in info else None
+            result = CaptureResult(out, writer.frames, writer.images, clock() - start, writer.frames == frames,
+                                   recording if recording is not None and recording.exists() else None)
             info.update(frames=result.frames, images=result.images, seconds=round(result.seconds, 3),
                         complete=result.complete, interrupted=interrupted)
             if error is not None:

@@ -28,6 +28,7 @@ from dataclasses import dataclass
 import numpy as np
 from rollcam.common.errors import ConfigError
 
+from .defects import SensorDefects
 from .exposure import DEFAULT_BOUND_PX, integrate, plan_samples
 from .formats import pixel_format as fourcc_of
 from .frame import Box, Frame, ObjectTruth
@@ -185,7 +186,7 @@ class SyntheticCamera:
                  pixel_format: str = "BGR3", physics: bool | None = None, blur_px: float | None = DEFAULT_BOUND_PX,
                  noise: frozenset[str] | None = None, serial: str = "0", noise_seed: int = 0, hflip: bool = False,
                  vflip: bool = False, optics: LensOptics | None = None, settings: StreamSettings | None = None,
-                 **programming) -> None:
+                 defects: SensorDefects | None = None, **programming) -> None:
         self.sensor = sensor
         self.scene = scene
         if settings is not None and programming:
@@ -212,6 +213,7 @@ class SyntheticCamera:
         self._lens = LensStage(self.optics)  # keeps the lens image of the renderer's static composite
         self._lens_u8: tuple[np.ndarray, np.ndarray] | None = None  # (that image, its 8-bit encoding)
         self.pipeline: SensorPipeline | None = None
+        self.defects = defects  # injected sensor defects (``rollcam.sim.defects``), made on the ADC samples
         # The ADC samples (uint16 H x W, output orientation) of the last frame made through the sensor model: the
         # raw mosaic an in-sensor network reads even when the stream's format is an ISP picture.
         self.last_samples: np.ndarray | None = None
@@ -336,6 +338,11 @@ class SyntheticCamera:
             radiance = self._lens.radiance(radiance)
             extra["optics"] = self.optics.info()
         dn = pipe.samples(radiance, s.exposure_ns, index)
+        if self.defects is not None:  # only when injected: no cost otherwise
+            dn, extra["defects"] = self.defects.apply(
+                dn, index, s.exposure_ns, gain=pipe.analog_gain * pipe.digital_gain,
+                black_dn=pipe.model.noise.black_level_dn, max_dn=pipe.model.max_dn, cfa=pipe.model.cfa,
+                hflip=self.hflip, vflip=self.vflip)
         self.last_samples = dn
         return res, pipe.encode(dn), extra
 

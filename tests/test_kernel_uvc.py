@@ -9,13 +9,18 @@ from __future__ import annotations
 
 import contextlib
 import hashlib
+import json
 import re
+import sys
 import threading
 import time
 from collections.abc import Iterator
 from dataclasses import dataclass
+from pathlib import Path
 
+import cv2
 import guest as guest_module
+import numpy as np
 import pytest
 from rollcam.common.lifecycle import Deadline
 from rollcam.emu.usbip.server import ServerLimits, USBIPServer
@@ -40,7 +45,8 @@ class RecordingProducer:
         self.inner = inner
         self.function: UVCFunction | None = None
         self.digests: dict[bytes, int] = {}
-        self.frames: dict[int, tuple[int, int, tuple]] = {}  # index -> (device sequence, timestamp_ns, insensor)
+        self.bgr_digests: dict[bytes, int] = {}  # of YUYV frames as OpenCV's V4L2 backend converts them
+        self.frames: dict[int, EmulatorFrame] = {}
         self._lock = threading.Lock()
 
     def __getattr__(self, name: str):
@@ -50,10 +56,28 @@ class RecordingProducer:
         frame = self.inner.frame(index)
         committed = self.function.controls.committed
         data = encode(frame.data, committed.fourcc, committed.jpeg_quality)
+        bgr = None
+        if committed.fourcc == "YUYV":
+            h, w = frame.data.shape[:2]
+            bgr = hashlib.sha1(cv2.cvtColor(data.reshape(h, w, 2), cv2.COLOR_YUV2BGR_YUYV).tobytes()).digest()
         with self._lock:
             self.digests[hashlib.sha1(data.tobytes()).digest()] = index
-            self.frames[index] = (frame.sequence, frame.timestamp_ns, frame.insensor)
+            if bgr is not None:
+                self.bgr_digests[bgr] = index
+            self.frames[index] = EmulatorFrame(frame.sequence, frame.timestamp_ns, frame.insensor,
+                                               frame.row_times_ns)
         return frame
+
+
+@dataclass(frozen=True)
+class EmulatorFrame:
+    """What the emulator knows of a frame it sent: device sequence, first row's start of exposure, in-sensor
+    results, and every row's sample time (mid-exposure, device clock ns)."""
+
+    sequence: int
+    timestamp_ns: int
+    insensor: tuple | None
+    row_times_ns: np.ndarray
 
 
 @dataclass
@@ -213,7 +237,7 @@ def test_the_metadata_node_carries_each_frames_pts_and_scr(kernel_guest):
             header = payload_headers(metas[seq])[0]
             assert header[1] & 0x0C == 0x0C  # PTS and SCR present
             pts = int.from_bytes(header[2:6], "little")
-            assert pts == att.recorder.frames[index][1] % 2**32  # the 1 GHz device clock of its first row
+            assert pts == att.recorder.frames[index].timestamp_ns % 2**32  # the 1 GHz device clock of its first row
 
 
 
@@ -306,3 +330,86 @@ def test_others_are_served_while_one_is_attached_and_a_vanished_guest_frees_its_
         assert wait_until(lambda: server.exports["1-1"].owner is None, 60)
         with open_camera(uri + "1-1") as again:
             assert len(list(again)) == 3
+
+
+# ------------------------------------------------------------------------------------ rollcam's sources in the guest
+PROBE = Path(__file__).with_name("kernel_probe.py")
+
+
+def probe(guest, uri: str, count: int) -> dict:
+    """Read ``count`` frames from rollcam source ``uri`` with rollcam itself in the guest (``kernel_probe.py``
+    under this Python, over the shared root), as a user's program would; returns what each Frame said."""
+    name = f"probe-{hashlib.sha1(uri.encode()).hexdigest()[:8]}.json"
+    guest.sh(f"{sys.executable} {PROBE} '{uri}' {count} /mnt/{name}", timeout_s=900)
+    out = json.loads((guest.xchg / name).read_text())
+    (guest.xchg / name).unlink()
+    return out
+
+
+@dataclass(frozen=True)
+class RowTimeError:
+    """How far a source's row times are from the emulator's, after one clock offset (the guest's monotonic
+    clock against the emulator's device clock) is taken out: ``frame_ns`` per frame (first row), ``rows_ns``
+    the largest error across one frame's rows beyond its first row's."""
+
+    offset_ns: int
+    frame_ns: np.ndarray
+    rows_ns: np.ndarray
+
+    @classmethod
+    def of(cls, pairs: list[tuple[np.ndarray, np.ndarray]]) -> RowTimeError:
+        d = np.stack([host - emu for host, emu in pairs]).astype(np.int64)
+        offset = int(np.median(d[:, 0]))
+        return cls(offset, d[:, 0] - offset, np.abs(d - d[:, :1]).max(axis=1))
+
+    def summary(self) -> str:
+        f = np.abs(self.frame_ns)
+        return (f"offset {self.offset_ns} ns; frame error median {np.median(f):.0f} ns, max {f.max()} ns; "
+                f"row model error max {self.rows_ns.max()} ns over {len(f)} frames")
+
+
+@pytest.mark.parametrize("hwtimestamps", [0, 1])
+def test_the_v4l2_source_times_every_row_of_the_uvc_camera(kernel_guest, hwtimestamps):
+    """``v4l2:/dev/videoN?sensor=imx219`` on the uvcvideo-bound camera (5 fps, which a TCG guest keeps up with):
+    each frame matched by its pixels (as OpenCV converts YUYV) to the emulator's, its row times compared with the
+    emulator's own. uvcvideo stamps a frame when its first payload arrives (``hwtimestamps=0``, the default) or
+    from the payload headers' PTS and SCR (1), which through vhci-hcd has no bus frame number to relate them to."""
+    with attached_camera(kernel_guest, "iso") as att:
+        kernel_guest.sh(f"echo {hwtimestamps} > /sys/module/uvcvideo/parameters/hwtimestamps")
+        got = probe(kernel_guest, f"v4l2:{att.node}?sensor=imx219&size=640x480&fourcc=YUYV&fps=5", 30)
+        assert_device_kept(kernel_guest, att)
+    assert got["info"]["line_time_ns"] > 0 and got["info"]["shutter"] == "rolling"
+    pairs = []
+    for f in got["frames"]:
+        index = att.recorder.bgr_digests.get(bytes.fromhex(f["sha1"]))
+        assert index is not None, f"a v4l2: frame ({f['shape']}) is no frame the emulator sent"
+        pairs.append((np.array(f["row_times_ns"]), att.recorder.frames[index].row_times_ns))
+    err = RowTimeError.of(pairs)
+    print(f"hwtimestamps={hwtimestamps}: {err.summary()}")
+    assert err.rows_ns.max() <= 1_000, err.summary()  # the sensor's line time is the emulator's, to the ns
+    if hwtimestamps == 0:  # the driver's arrival time: before the program has the frame, within the delivery jitter
+        assert all(f["host_ns"] > f["timestamp_ns"] for f in got["frames"])
+        assert np.median(np.abs(err.frame_ns)) < 500_000_000, err.summary()
+
+
+def test_v4l2_and_opencv_sources_read_the_kernels_vivid_camera(kernel_guest):
+    """The kernel's own test driver through the same sources: the size asked for, the driver's timestamps
+    (the guest's monotonic clock, one frame period apart; vivid stamps each frame with its nominal time, which
+    can lie a few ms after the moment the program has it), row times from ``sensor=`` and none without it."""
+    kernel_guest.load_module("vivid")
+    node = kernel_guest.video_node("vivid")
+    index = int(node.removeprefix("/dev/video"))
+    for uri, sensor in ((f"v4l2:{node}?size=640x360&sensor=imx219", True), (f"opencv:{index}?size=640x360", False)):
+        got = probe(kernel_guest, uri, 12)
+        frames = got["frames"]
+        assert all(f["shape"] == [360, 640, 3] for f in frames), uri
+        stamps = np.array([f["timestamp_ns"] for f in frames])
+        hosts = np.array([f["host_ns"] for f in frames])
+        assert np.all(np.abs(hosts - stamps) < 2_000_000_000), uri  # the same clock, not another one
+        period_ns = 1e9 / got["info"]["fps"]
+        assert abs(np.median(np.diff(stamps)) - period_ns) < period_ns * 0.05, (uri, np.diff(stamps))
+        rows = frames[0]["row_times_ns"]
+        if sensor:
+            assert len(rows) == 360 and rows[-1] - rows[0] == 359 * frames[0]["line_time_ns"], uri
+        else:
+            assert rows is None and frames[0]["shutter"] == "unknown", uri

@@ -47,11 +47,14 @@ ALLOWED: dict[tuple[str, str], str] = {
     # image encoding and colour conversion
     ("image encoding", "benchmarks/mjpeg.py"):
         "what it times is OpenCV's JPEG encoder with each sampling option: the call itself is the subject",
-    ("image encoding", "host/capture.py"): EDITED.format("host/capture.py"),
+    ("image encoding", "host/imagefiles.py"):
+        EDITED.format("capture's image files (host/capture.py, host/imagefiles.py)") + "; encode_image fits",
     ("colour conversion", "host/flowcorrect.py"): "fold pending: grey for optical flow (as sim/compose.py's): one "
                                                    "grey-for-flow helper",
     ("colour conversion", "sim/compose.py"): "fold pending: grey for optical flow (as host/flowcorrect.py's)",
     ("colour conversion", "sim/footage.py"): "fold pending: decoded footage BGR(A) -> RGB(A); a codecs row fits",
+    ("colour conversion", "host/robotics/bags.py"): "fold pending: a mono8 message's grey picture; a codecs row fits",
+    ("colour conversion", "host/robotics/gcsv.py"): "fold pending: a grey frame drawn on in colour; a codecs row fits",
     # parsers
     ("query parsing", "host/sources/http.py"): "a Content-Type header's ;-parameters, not a URI query",
     ("integer parsers", "common/faults.py"): EDITED.format("common/faults.py") + " (values.bounded fits)",

@@ -6,7 +6,9 @@ too slowly gets the newest completed frame, the ones it missed counted in ``stat
 mid-frame counts in ``frames_aborted``. Without render-ahead (``render_ahead=False``) frames are rendered
 when the host asks, and frames the host fell behind on are skipped without being rendered. A fault plan
 (``faults``) drops frames (never sent), sends frames with ERR set, unplugs the device after N frames
-(``Disconnected``) and damages payloads (``faults.PayloadFaults``), decided by frame and payload index.
+(``Disconnected``), damages payloads (``faults.PayloadFaults``), decided by frame and payload index, and sends
+grey, black or frozen images and resets a firmware camera's registers (``rollcam.firmware.labfaults``), decided
+by the frame's index in the stream.
 
 A bulk payload larger than the host's transfer continues in the next transfers (``next_bulk``), as on the
 wire: a payload is a run of 512-byte packets ended by a short one, or by a zero-length packet when it ends on
@@ -24,6 +26,7 @@ from typing import Any
 import numpy as np
 from rollcam.common.errors import DeviceError
 from rollcam.common.faults import FaultInjector
+from rollcam.firmware.labfaults import FrameFaults
 from rollcam.sim.frame import Frame
 
 from .ahead import RenderAhead, newest_due
@@ -92,6 +95,8 @@ class StreamEndpoint:
         self.render_ahead = render_ahead and realtime
         self.faults = faults or FaultInjector()
         self.payload_faults = PayloadFaults(self.faults, bulk)
+        # Image faults and register resets (of a firmware camera's producer: ``FirmwareProducer.camera``).
+        self.frame_faults = FrameFaults(self.faults, getattr(producer, "camera", None))
         self._ahead: RenderAhead | None = None
         self.stats = StreamStats()
         self._error_frames = 0
@@ -248,6 +253,9 @@ class StreamEndpoint:
             self._next_index = index + 1
             if not self.faults.hit("drop", index):  # an injected drop: the frame never goes on the bus
                 break
+        faulted = self.frame_faults.apply(frame, index)
+        if faulted is not frame:  # an image fault: the frame goes out as the fault made it
+            frame, data = faulted, encode(faulted.data, self._format.fourcc, self._format.jpeg_quality)
         err = self._error_frames > 0
         self._error_frames -= err
         err = err or self.faults.hit("error", index)

@@ -5,12 +5,15 @@ semantics and errnos. Frames are paced in real time (a ``FramePump`` fills the b
 lines' device times) or made as fast as possible (each DQBUF renders the next frame). A
 ``rollcam.common.faults.FaultPlan`` injects what vivid's error-injection controls do: dropped buffers (a gap
 in the sequence numbers), the ERROR flag, one-shot ioctl errors, a disconnect (ENODEV until the device is
-closed, then it is connected again) and sequence and timestamp wrap; ``fault_stats`` counts what was injected.
+closed, then it is connected again) and sequence and timestamp wrap, and the lab faults: frame-counter
+rewrite, freeze and skip in ``sequence``, grey, black and frozen images, and sensor register resets
+(``rollcam.firmware.labfaults``); ``fault_stats`` counts what was injected.
 """
 
 from __future__ import annotations
 
 import errno
+import threading
 from collections.abc import Callable
 from dataclasses import dataclass
 from fractions import Fraction
@@ -24,6 +27,7 @@ from rollcam.emu.pump import FramePump
 from rollcam.firmware.camera import FirmwareCamera, FramePlan, default_interval
 from rollcam.firmware.controls import CONTROLS
 from rollcam.firmware.imaging import mjpeg_quality
+from rollcam.firmware.labfaults import FrameFaults
 from rollcam.firmware.pixfmt import device_format
 from rollcam.sim.codecs import transcode
 from rollcam.sim.formats import YUV_PACKINGS
@@ -67,6 +71,9 @@ class EmuDriver:
         self.faults = FaultPlan.of(faults)
         self.injector = FaultInjector(self.faults)
         self.fault_stats = self.injector.stats
+        self.frame_faults = FrameFaults(self.injector, camera, on_reset=self._note_reset)
+        self._reset_lock = threading.Lock()
+        self._reset_before: dict[int, Any] | None = None  # the controls before a register reset not yet announced
         self.queue = BufferQueue(alloc=alloc)
         self.on_change: Callable[[], None] | None = None  # called (pump thread) after a buffer completes
         self.ctrl_defaults = {name: info["value"] for name, info in camera.controls().items()}
@@ -109,6 +116,20 @@ class EmuDriver:
         injected = self.injector.request(name) if name in REQUESTS else None
         if injected is not None:
             raise V4L2Error(injected, f"{request.value}: injected error")
+
+    def _note_reset(self) -> None:
+        """An injected register reset is about to happen (on the thread making frames): keep the controls as they
+        were, for the node to announce what changed (V4L2_EVENT_CTRL) at its next request."""
+        before = ctrls.controls(self)
+        with self._reset_lock:
+            if self._reset_before is None:
+                self._reset_before = before
+
+    def take_reset(self) -> dict[int, Any] | None:
+        """The controls before the register resets since the last call (None when there was none)."""
+        with self._reset_lock:
+            before, self._reset_before = self._reset_before, None
+            return before
 
     def disconnect(self) -> None:
         """Unplug: stop producing; every call and waiter from now on gets ENODEV."""
@@ -168,6 +189,7 @@ class EmuDriver:
         self._deliver(slot, frame, payload.size)
 
     def _payload(self, frame: Frame) -> np.ndarray:
+        frame = self.frame_faults.apply(frame, frame.sequence)
         fourcc = self.fmt.pixelformat
         # A raw frame is already in its fourcc's layout (the sensor's samples); renders are encoded.
         data = transcode(frame, fourcc, quality=mjpeg_quality(self.camera.spec))
@@ -188,7 +210,7 @@ class EmuDriver:
         t_ns = self.camera.host_ns(frame.timestamp_ns)
         if self.ts0 is None:
             self.ts0 = t_ns
-        sequence = self.faults.sequence(frame.sequence - self.seq0)
+        sequence = inj.sequence(frame.sequence - self.seq0)
         timestamp_ns = self.faults.timestamp_ns(t_ns, self.ts0)
         self.queue.complete(slot, bytesused=size, sequence=sequence, timestamp_ns=timestamp_ns,
                             error=inj.hit("error", frame.sequence))

@@ -3,7 +3,8 @@
 ``handle(node, file, request, data)`` does what Linux's v4l2-ioctl.c and the vb2 ioctl helpers do before and
 after a driver: unknown requests get ENOTTY, the buffer type and memory are checked, priority and queue
 ownership give EBUSY, and the structure is translated to the driver's ``raw`` values and back with
-``abi``'s layouts. Control changes are announced as events to the files that subscribed.
+``abi``'s layouts. Control changes are announced as events to the files that subscribed, those an injected
+register reset made (``rollcam.firmware.labfaults``) at the next request any file makes.
 """
 
 from __future__ import annotations
@@ -52,6 +53,9 @@ def handle(node: DeviceNode, f: OpenFile, request: int, data: bytes) -> Answer:
     with node.lock:
         if node.driver.queue.disconnected and name not in ("QUERYCAP", "DQEVENT"):
             raise V4L2Error(errno.ENODEV, f"{name}: device disconnected")
+        reset = node.driver.take_reset() if _has_controls(node) else None
+        if reset is not None:  # an injected register reset changed the controls: subscribers hear of it now
+            node.notify_controls(reset, None)
         if name in _PRIO_CHECKED:
             node.check_priority(f)
         if name in _QUEUE_CHECKED:

@@ -27,8 +27,15 @@ def add_parser(sub: Subparsers) -> argparse.ArgumentParser:
     p.add_argument("--out", required=True, metavar="DIR", help="output folder")
     p.add_argument("--shutter", choices=("rolling", "global", "both"), default=None,
                    help="'both' stores GS and RS frames of the same instants (default: the source's shutter)")
-    p.add_argument("--format", choices=("png", "jpg", "npy"), default="png",
-                   help="image file format (default: png; raw frames go losslessly into png or npy)")
+    p.add_argument("--format", choices=("png", "jpg", "npy", "mcap", "ros2bag", "rosbag1", "kalibr", "mp4"),
+                   default="png",
+                   help="image file format (default: png; raw frames go losslessly into png or npy), or one "
+                        "recording of the whole capture: mcap (ROS 2 messages, DIR/capture.mcap), ros2bag "
+                        "(DIR/capture_ros2/), rosbag1 (DIR/capture.bag), kalibr (ROS 1 bag with Kalibr's "
+                        "/cam0/image_raw and /imu0 only, DIR/kalibr.bag), mp4 (H.264 DIR/capture.mp4 and, with an "
+                        "IMU, Gyroflow's DIR/capture.gcsv); the bag formats need the robotics extra")
+    p.add_argument("--bag-storage", choices=("sqlite3", "mcap"), default="sqlite3",
+                   help="storage of --format ros2bag (default: sqlite3, rosbag2's default)")
     p.add_argument("--overwrite", action="store_true", help="replace an earlier capture in DIR")
     p.add_argument("--json", action="store_true", help="print a JSON summary on stdout")
     p.add_argument("--progress", action="store_true", help="show progress even when stderr is not a terminal")
@@ -47,11 +54,11 @@ def run(args: argparse.Namespace) -> int:
         try:
             result = capture(source, args.out, args.frames, shutter=args.shutter, fmt=args.format,
                              overwrite=args.overwrite, progress=True if args.progress else None,
-                             command=[PROG, *args.argv])
+                             command=[PROG, *args.argv], bag_storage=args.bag_storage)
         except CaptureInterrupted as exc:
             r = exc.result
-            print(f"{PROG}: interrupted: kept {r.frames} complete frame(s) in {r.out_dir / 'frames.jsonl'}",
-                  file=sys.stderr)
+            kept = r.recording if r.recording is not None else r.out_dir / "frames.jsonl"
+            print(f"{PROG}: interrupted: kept {r.frames} complete frame(s) in {kept}", file=sys.stderr)
             if args.json:
                 print(json.dumps(r.to_json()))
             return EXIT_INTERRUPTED
@@ -59,6 +66,9 @@ def run(args: argparse.Namespace) -> int:
         print(json.dumps(result.to_json()))
     else:
         short = "" if result.complete else f" (source ended after {result.frames} of {args.frames})"
-        print(f"wrote {result.frames} frame(s), {result.images} image(s) to {result.out_dir}/ in "
-              f"{result.seconds:.1f} s{short}; metadata in {result.out_dir / 'frames.jsonl'}")
+        if result.recording is not None:
+            print(f"recorded {result.frames} frame(s) in {result.recording} in {result.seconds:.1f} s{short}")
+        else:
+            print(f"wrote {result.frames} frame(s), {result.images} image(s) to {result.out_dir}/ in "
+                  f"{result.seconds:.1f} s{short}; metadata in {result.out_dir / 'frames.jsonl'}")
     return 0

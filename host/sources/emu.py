@@ -10,7 +10,9 @@ in-sensor network's (``insensor=personnet-raw``: frames carry its results, docs/
 the source: ``start_ns`` (device clock at frame 0), ``frames`` (stop after N frames; endless by default) and
 ``faults`` (a ``rollcam.common.faults`` plan, e.g. ``faults=drop=5,error=2,seed=3``; in process ``drop`` skips
 frames (a gap in ``sequence``), ``error`` sets ``meta["error"]``, ``disconnect=N`` makes the read after N
-frames raise ``SourceError``, ``seqwrap``/``tswrap`` shift ``sequence``/``timestamp_ns``; every device a
+frames raise ``SourceError``, ``seqwrap``/``tswrap`` shift ``sequence``/``timestamp_ns``, the frame-counter
+faults rewrite, freeze or skip ``sequence``, ``grey``/``black``/``frozen`` replace the image (``meta["image_fault"]``
+names it) and ``regreset`` returns the device's controls to those it was made with; every device a
 ``rollcam run`` or ``rollcam emulate`` makes from the URI takes the same plan, see docs/faults.md).
 
 Frames come from a ``FirmwareCamera`` holding the ``CameraSpec`` the options build, the same device object the
@@ -28,6 +30,7 @@ from rollcam.common.faults import FaultInjector, FaultPlan
 from rollcam.common.values import non_negative_int, positive_int
 from rollcam.firmware.camera import FirmwareCamera, FramePlan
 from rollcam.firmware.imaging import encode
+from rollcam.firmware.labfaults import FrameFaults
 from rollcam.firmware.options import MAX_DEVICE_NS, OPTIONS, bounded
 from rollcam.firmware.spec import CameraSpec
 from rollcam.sim.frame import Frame
@@ -79,6 +82,7 @@ class EmuSource(CameraSource):
         self.limit = uri.get("frames", positive_int)
         self.faults = FaultInjector(fault_plan(uri))
         self.fault_stats = self.faults.stats
+        self.frame_faults = FrameFaults(self.faults, self.device)
         self.index = 0
         self.delivered = 0
         self._schedule = self.device.schedule(self.start_ns)
@@ -106,6 +110,7 @@ class EmuSource(CameraSource):
         error = inj.hit("error", self.index)
         frames = [self._faulted(encode(self.device.render(plan, shutter), self.device.spec), error)
                   for shutter in shutters]
+        frames = self.frame_faults.apply_all(frames, self.index)
         self.index += 1
         self.delivered += 1
         return frames
@@ -114,7 +119,7 @@ class EmuSource(CameraSource):
         p = self.faults.plan
         if not p:
             return frame
-        return dataclasses.replace(frame, sequence=p.sequence(frame.sequence),
+        return dataclasses.replace(frame, sequence=self.faults.sequence(frame.sequence),
                                    timestamp_ns=p.timestamp_ns(frame.timestamp_ns, self.start_ns),
                                    meta={**frame.meta, "error": True} if error else frame.meta)
 
