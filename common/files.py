@@ -25,6 +25,7 @@ from pathlib import Path
 from typing import Any
 
 from .errors import ConfigError
+from .lifecycle import Closeable
 
 PART_SUFFIX = ".part"
 """Temporary files end in this; ``.NAME.<token>.part`` sits beside the file NAME it will become."""
@@ -251,7 +252,7 @@ def _json_line(path: str | os.PathLike[str], number: int, line: bytes) -> dict[s
         raise ValueError(f"{str(path)!r} line {number} is not JSON ({exc}): {line[:80]!r}") from None
 
 
-class AppendLog:
+class AppendLog(Closeable):
     """A JSON-lines file that only ever holds whole lines, for logs whose lines are commit records.
 
     Each ``append`` is one write of complete lines on an ``O_APPEND`` descriptor; if it fails (or is
@@ -292,20 +293,14 @@ class AppendLog:
         except OSError:
             self.size = None  # the tail is unknown now; readers drop a torn line, and no more appends go in
 
-    def close(self) -> None:
-        """fsync and close; safe to call twice."""
+    def _close(self) -> None:
+        """fsync and close (``close()``, from Closeable: once, however often it is called)."""
         if self._fd is not None:
             fd, self._fd = self._fd, None
             try:
                 self.fs.fsync(fd)
             finally:
                 self.fs.close(fd)
-
-    def __enter__(self) -> AppendLog:
-        return self
-
-    def __exit__(self, *_: object) -> None:
-        self.close()
 
 
 def output_dir(path: str | os.PathLike[str], what: str = "--out", *, make: bool = True) -> Path:

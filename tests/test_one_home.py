@@ -36,7 +36,6 @@ ALLOWED: dict[tuple[str, str], str] = {
     ("threads", "host/shims/picamera2/outputs/ffmpegoutput.py"): PICAMERA2.format("FfmpegOutput watcher"),
     ("threads", "host/shims/picamera2/remote.py"): PICAMERA2.format("remote results thread"),
     # context managers
-    ("context managers", "common/files.py"): "fold pending: AppendLog could be Closeable",
     ("context managers", "host/shims/picamera2/controls.py"): PICAMERA2.format("Controls context manager"),
     ("context managers", "host/shims/picamera2/picamera2.py"): PICAMERA2.format("Picamera2 context manager"),
     ("context managers", "host/shims/picamera2/remote.py"): PICAMERA2.format("RemoteMappedArray and Pool"),
