@@ -41,8 +41,10 @@ ALLOWED: dict[tuple[str, str], str] = {
     ("context managers", "host/shims/picamera2/remote.py"): PICAMERA2.format("RemoteMappedArray and Pool"),
     ("context managers", "host/shims/picamera2/request.py"): PICAMERA2.format("CompletedRequest and MappedArray"),
     ("context managers", "host/testing/depthai_mock.py"): "API replica: depthai's Device and Pipeline",
-    ("context managers", "host/video.py"): "fold pending: VideoWriter could be Closeable (abort on error stays)",
-    ("context managers", "host/videocapture.py"): "fold pending: VideoCapture could be Closeable (release = close)",
+    ("context managers", "host/video.py"):
+        "VideoWriter's with-block aborts the file on an exception and keeps it otherwise; Closeable's exit cannot tell",
+    ("context managers", "host/videocapture.py"):
+        "API replica: cv2.VideoCapture opens again after release(), which Closeable's one-way close does not allow",
     # image encoding and colour conversion
     ("image encoding", "benchmarks/mjpeg.py"):
         "what it times is OpenCV's JPEG encoder with each sampling option: the call itself is the subject",
