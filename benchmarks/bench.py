@@ -23,8 +23,8 @@ exact RS boxes (composed frames use the ground truth of the footage frame each r
 rows have none, so linear and flow report null). The floor is one plain copy of a frame (``np.copyto``
 into a preallocated array, median of many); every row reports its cost as a multiple of it.
 
-``rollcam bench render --quick`` (under a minute once numba's cache is warm; a cold cache adds ~30 s of
-compiling) runs two scenes and fewer methods and frames. Its reference is timed on every 27th line's full
+``rollcam bench render --quick`` (under a minute once numba's cache is warm; a cold cache adds about 100 s of
+CPU time compiling) runs two scenes and fewer methods and frames. Its reference is timed on every 27th line's full
 render (every 108th with ego-motion) and scaled to all lines, and its error baseline is the exact per-line
 image: that the exact path equals the reference is checked on the full image of each scene at 192x108 and on
 the sampled lines at full size.
@@ -210,7 +210,7 @@ def _notes(cfg: BenchConfig) -> list[str]:
     notes = [f"flow composes with flow_preset={cfg.flow_preset!r}, flow_margin_px={cfg.flow_margin_px} "
              "(full-frame DIS at 1080p costs seconds per frame)",
              "timings are medians after a warm-up; on a cold numba cache the first scene's warm-up compiles "
-             "for ~30 s (not timed)"]
+             "for about 100 s of CPU time (not timed)"]
     if LINE_RATE not in cfg.footage_fps:
         notes.append("line-rate footage (32,400 fps at 1080 lines) skipped: rendering it costs a full reference")
     return notes

@@ -29,6 +29,7 @@ import urllib.request
 from typing import Any
 
 import numpy as np
+from rollcam.common.lifecycle import Deadline
 
 from .http_attacks import read_part, stop
 
@@ -114,8 +115,8 @@ class Reader(threading.Thread):
                     return
                 while f.readline().strip():  # response headers
                     pass
-                end = time.monotonic() + self.seconds
-                while time.monotonic() < end:
+                deadline = Deadline(self.seconds)
+                while not deadline.expired:
                     heads, _ = read_part(f)
                     self.seqs.append(int(heads["x-sequence"]))
         except OSError as exc:

@@ -267,14 +267,9 @@ def plot_ptc(result: PtcResult, path: str | Path) -> None:
     ax.grid(True, which="both", alpha=0.3)
     ax.legend(fontsize=8)
     fig.tight_layout()
-    import io
+    from rollcam.common.files import write_figure
 
-    from rollcam.common.files import write_atomic
-
-    buf = io.BytesIO()
-    fig.savefig(buf, format="png", dpi=110)
-    plt.close(fig)
-    write_atomic(path, buf.getvalue())
+    write_figure(path, fig, dpi=110)
 
 
 def run_ptc(sensor: str, out_dir: str | Path) -> PtcResult:

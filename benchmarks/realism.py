@@ -26,6 +26,8 @@ from pathlib import Path
 import numpy as np
 from rollcam.common.errors import ConfigError
 from rollcam.host.detectors import load_detector
+from rollcam.host.detectors.ops import ioa_matrix, iou_matrix
+from rollcam.sim.codecs import encode_image
 from rollcam.sim.optics import LensOptics
 from rollcam.sim.picture import PictureSteps
 from rollcam.sim.render import Renderer, encode_linear
@@ -47,21 +49,13 @@ Box = tuple[float, float, float, float]
 
 
 def iou(a: Box, b: Box) -> float:
-    """Intersection over union of two (x0, y0, x1, y1) boxes."""
-    iw = min(a[2], b[2]) - max(a[0], b[0])
-    ih = min(a[3], b[3]) - max(a[1], b[1])
-    if iw <= 0 or ih <= 0:
-        return 0.0
-    inter = iw * ih
-    return inter / ((a[2] - a[0]) * (a[3] - a[1]) + (b[2] - b[0]) * (b[3] - b[1]) - inter)
+    """Intersection over union of two (x0, y0, x1, y1) boxes (rollcam.host.detectors.ops.iou_matrix)."""
+    return float(iou_matrix([a], [b])[0, 0])
 
 
 def inside_fraction(a: Box, b: Box) -> float:
     """The fraction of box ``a``'s area that lies inside box ``b`` (Caltech's overlap with an ignore region)."""
-    iw = min(a[2], b[2]) - max(a[0], b[0])
-    ih = min(a[3], b[3]) - max(a[1], b[1])
-    area = (a[2] - a[0]) * (a[3] - a[1])
-    return iw * ih / area if iw > 0 and ih > 0 and area > 0 else 0.0
+    return float(ioa_matrix([a], [b])[0, 0])
 
 
 def match_frame(dets: Sequence[tuple[Box, float]], kept: Sequence[Box],
@@ -316,10 +310,7 @@ def write_gallery(folder: str | Path, *, seed: int = 0, times: Sequence[str] = t
         while len(tiles) % 2:
             tiles.append(np.zeros_like(tiles[0]))
         sheet = np.vstack([np.hstack(tiles[i:i + 2]) for i in range(0, len(tiles), 2)])
-        ok, buf = cv2.imencode(".jpg", sheet, [cv2.IMWRITE_JPEG_QUALITY, 85])
-        if not ok:
-            raise RuntimeError(f"JPEG encoding of the {tod} contact sheet failed")
         path = out_dir / f"realism_{tod}.jpg"
-        write_atomic(path, buf.tobytes())
+        write_atomic(path, encode_image(sheet, "jpg", (cv2.IMWRITE_JPEG_QUALITY, 85), what=f"the {tod} contact sheet"))
         written.append(path)
     return written

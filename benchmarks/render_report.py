@@ -2,11 +2,11 @@
 
 from __future__ import annotations
 
-import io
 from pathlib import Path
 from typing import Any
 
 import numpy as np
+from rollcam.common.files import write_figure
 
 _ZERO_ERR_PLOT = 1e-3  # where zero error sits on the plot's log axis when no error is above zero
 
@@ -36,12 +36,7 @@ def plot(rows: list[dict[str, Any]], path: Path, floor_ms: float) -> None:
                ylabel=f"mean abs error, DN (0 drawn at {zero:g})")
         ax.grid(True, which="both", alpha=0.3)
     fig.tight_layout()
-    buf = io.BytesIO()
-    fig.savefig(buf, format="png", dpi=110)
-    plt.close(fig)
-    from rollcam.common.files import write_atomic
-
-    write_atomic(Path(path), buf.getvalue())
+    write_figure(Path(path), fig, dpi=110)
 
 
 def format_table(doc: dict[str, Any]) -> str:

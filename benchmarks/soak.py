@@ -35,6 +35,7 @@ from typing import Any
 
 import numpy as np
 from rollcam.common.errors import ConfigError
+from rollcam.common.lifecycle import Deadline
 from rollcam.emu.v4l2 import Device
 from rollcam.emu.v4l2 import functions as fn
 
@@ -92,18 +93,17 @@ def run_soak(minutes: float = 10.0, *, sensor: str = "imx219", size: tuple[int, 
         if rt_priority is not None:
             reader_rt = _set_fifo(rt_priority)
         timing = cam.state.timing
-        end = time.monotonic() + minutes * 60
-        next_say = time.monotonic() + 10
-        while time.monotonic() < end:
+        deadline, say_at = Deadline(minutes * 60), Deadline(10)
+        while not deadline.expired:
             buf, _view = fn.dequeue_buffer(d, timeout_s=5)
             arrivals.append(time.monotonic_ns())
             fn.queue_buffer(d, buf.index)
             seqs.append(buf.sequence)
             stamps.append(buf.timestamp_ns)
-            if time.monotonic() >= next_say:
+            if say_at.expired:
                 gaps = int(np.sum(np.diff(seqs) - 1)) if len(seqs) > 1 else 0
-                say(f"soak: {len(seqs)} frames, {gaps} dropped, {(end - time.monotonic()) / 60:.1f} min left")
-                next_say += 10
+                say(f"soak: {len(seqs)} frames, {gaps} dropped, {(deadline.remaining() or 0) / 60:.1f} min left")
+                say_at.restart()
         if reader_rt and reader_rt.startswith("SCHED_FIFO"):
             os.sched_setscheduler(0, os.SCHED_OTHER, os.sched_param(0))
         pump_stats = d.pump.stats.to_json() if d.pump else {}

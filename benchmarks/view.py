@@ -24,6 +24,8 @@ import urllib.request
 from pathlib import Path
 from typing import Any
 
+from rollcam.common.lifecycle import Deadline
+
 FPS_RATIO_TARGET = 0.95  # the device with a page watching keeps >= 95% of its frame rate without one
 TAP_US_TARGET = 500.0  # device-thread cost per frame (1.5% of a 33 ms frame)
 MESSAGE_US_TARGET = 2000.0  # event-loop cost per page message
@@ -85,9 +87,9 @@ def _chromium_page(url: str, seconds: float, profile: Path, result: dict[str, An
     driver = webdriver.Chrome(options=opts, service=Service(shutil.which("chromedriver")))
     try:
         driver.get(url)
-        end = time.monotonic() + 60
+        deadline = Deadline(60)
         while driver.execute_script("return window.rollcamView ? rollcamView.stats.drawn : 0") < 3:
-            if time.monotonic() > end:
+            if deadline.expired:
                 raise TimeoutError("the page drew no frame in 60 s")
             time.sleep(0.2)
         d0, t0 = driver.execute_script("return rollcamView.stats.drawn"), time.monotonic()

@@ -16,6 +16,7 @@ from __future__ import annotations
 import contextlib
 import errno
 import hashlib
+import io
 import json
 import os
 import secrets
@@ -24,6 +25,7 @@ from pathlib import Path
 from typing import Any
 
 from .errors import ConfigError
+from .lifecycle import Closeable
 
 PART_SUFFIX = ".part"
 """Temporary files end in this; ``.NAME.<token>.part`` sits beside the file NAME it will become."""
@@ -171,6 +173,19 @@ def write_atomic(path: str | os.PathLike[str], data: bytes, fs: FileSystem = OS_
     fs.fsync_dir(Path(path).parent)
 
 
+def write_figure(path: str | os.PathLike[str], fig: Any, dpi: int = 110, fs: FileSystem = OS_FS) -> None:
+    """Write a matplotlib figure to ``path`` as a PNG, atomically (``write_atomic``), and close it: the one figure
+    writer of every report (pyplot keeps each figure it made until it is closed)."""
+    import matplotlib.pyplot as plt  # only the reports need matplotlib; importing it costs a second
+
+    buf = io.BytesIO()
+    try:
+        fig.savefig(buf, format="png", dpi=dpi)
+    finally:
+        plt.close(fig)
+    write_atomic(path, buf.getvalue(), fs)
+
+
 def sha256_file(path: str | os.PathLike[str]) -> str:
     """Hex SHA-256 of a file's bytes."""
     h = hashlib.sha256()
@@ -237,7 +252,7 @@ def _json_line(path: str | os.PathLike[str], number: int, line: bytes) -> dict[s
         raise ValueError(f"{str(path)!r} line {number} is not JSON ({exc}): {line[:80]!r}") from None
 
 
-class AppendLog:
+class AppendLog(Closeable):
     """A JSON-lines file that only ever holds whole lines, for logs whose lines are commit records.
 
     Each ``append`` is one write of complete lines on an ``O_APPEND`` descriptor; if it fails (or is
@@ -278,20 +293,14 @@ class AppendLog:
         except OSError:
             self.size = None  # the tail is unknown now; readers drop a torn line, and no more appends go in
 
-    def close(self) -> None:
-        """fsync and close; safe to call twice."""
+    def _close(self) -> None:
+        """fsync and close (``close()``, from Closeable: once, however often it is called)."""
         if self._fd is not None:
             fd, self._fd = self._fd, None
             try:
                 self.fs.fsync(fd)
             finally:
                 self.fs.close(fd)
-
-    def __enter__(self) -> AppendLog:
-        return self
-
-    def __exit__(self, *_: object) -> None:
-        self.close()
 
 
 def output_dir(path: str | os.PathLike[str], what: str = "--out", *, make: bool = True) -> Path:

@@ -90,7 +90,7 @@ class Worker(Closeable):
     """
 
     def __init__(self, target: Callable[..., Any], *args: Any, name: str, wrap: type[RollcamError] | None = None,
-                 stop_event: threading.Event | None = None, join_timeout_s: float = 5.0) -> None:
+                 stop_event: threading.Event | None = None, join_timeout_s: float | None = 5.0) -> None:
         self.name, self.wrap, self.join_timeout_s = name, wrap, join_timeout_s
         self.stop_event = stop_event or threading.Event()
         self._target, self._args = target, args

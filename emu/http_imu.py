@@ -14,10 +14,11 @@ from __future__ import annotations
 from typing import Any, ClassVar
 
 from aiohttp import web
+from rollcam.common.values import non_negative_int
 from rollcam.firmware.camera import FirmwareCamera
 from rollcam.firmware.imu import device_samples
 
-from .http_jsonl import JsonLinesStreams, query_int
+from .http_jsonl import JsonLinesStreams, query_option
 
 IMU_PATH = "/imu.jsonl"
 MAX_BATCH = 4096
@@ -47,7 +48,7 @@ class ImuStreams(JsonLinesStreams):
             raise web.HTTPNotFound(text="this source has no IMU")
         if spec.imu is None:
             raise web.HTTPNotFound(text="the IMU is off (imu=on turns it on)")
-        start = query_int(request, "from_ns")
+        start = query_option(request, "from_ns", non_negative_int)
         return {"t": self.camera.clock_ns() if start is None else start}
 
     def header(self) -> dict[str, Any]:

@@ -16,9 +16,10 @@ from typing import Any, ClassVar
 
 from aiohttp import web
 from rollcam.common.errors import DeviceError
+from rollcam.common.values import non_negative_int, parse_bool
 from rollcam.firmware.camera import FirmwareCamera
 
-from .http_jsonl import JsonLinesStreams, query_int
+from .http_jsonl import JsonLinesStreams, query_option
 
 INSENSOR_PATH = "/insensor.jsonl"
 
@@ -43,8 +44,8 @@ class InSensorStreams(JsonLinesStreams):
         spec = getattr(self.camera, "spec", None)
         if spec is None or spec.insensor is None:
             raise web.HTTPNotFound(text="this camera has no in-sensor network (insensor=SPEC sets one)")
-        start = query_int(request, "from_seq")
-        tensors = request.query.get("tensors", "0") not in ("0", "off", "false", "")
+        start = query_option(request, "from_seq", non_negative_int)
+        tensors = query_option(request, "tensors", parse_bool, False)
         cam = self.camera
         if start is None:  # from the next result done after now
             done = cam.insensor.recent(cam.clock_ns())

@@ -17,10 +17,12 @@ from __future__ import annotations
 import asyncio
 import dataclasses
 import json
+from collections.abc import Callable
 from typing import Any, ClassVar
 
 from aiohttp import web
 from rollcam.common.errors import RollcamError
+from rollcam.common.values import non_negative_int
 
 from .http_server import Connection, HttpLimits
 from .http_slots import StreamClient, StreamSlots
@@ -36,18 +38,16 @@ def jsonl_limits(limits: HttpLimits) -> HttpLimits:
                                max_streams_per_peer=min(limits.max_streams_per_peer, MAX_STREAMS_PER_PEER))
 
 
-def query_int(request: web.Request, name: str) -> int | None:
-    """Query option ``name`` as an integer >= 0, None when absent (HTTP 400 naming it when bad)."""
+def query_option(request: web.Request, name: str, parse: Callable[[str], Any], default: Any = None) -> Any:
+    """Query option ``name`` read by ``parse`` (one of rollcam.common.values' parsers), ``default`` when absent;
+    HTTP 400 naming the option and what it must be when the value is bad."""
     text = request.query.get(name)
     if text is None:
-        return None
+        return default
     try:
-        value = int(text)
-    except ValueError:
-        raise web.HTTPBadRequest(text=f"{name}={text!r} is not an integer") from None
-    if value < 0:
-        raise web.HTTPBadRequest(text=f"{name}={text!r} must be >= 0")
-    return value
+        return parse(text)
+    except ValueError as exc:
+        raise web.HTTPBadRequest(text=f"{name}={text!r} is invalid ({exc})") from None
 
 
 class JsonLinesStreams:
@@ -89,7 +89,7 @@ class JsonLinesStreams:
     async def handle(self, request: web.Request) -> web.StreamResponse:
         """Stream items as JSON lines until the client leaves or the asked number are sent."""
         cursor = self.open(request)
-        limit = query_int(request, self.limit_option)
+        limit = query_option(request, self.limit_option, non_negative_int)
         conn = Connection.of(request)
         if conn is None:  # gone before its turn
             raise web.HTTPServiceUnavailable(text="the connection closed")

@@ -45,7 +45,7 @@ from urllib.parse import urlsplit
 from aiohttp import WSCloseCode, WSMsgType, web
 from rollcam.common.errors import ConfigError, DeviceError
 from rollcam.common.lifecycle import Closeable, Stats
-from rollcam.sim.codecs import preview_frame
+from rollcam.sim.codecs import encode_image, preview_frame
 from rollcam.sim.frame import Frame
 
 from .http_mjpeg import MjpegServer, Part
@@ -334,9 +334,4 @@ class _Page:
 
 def _png(frame: Frame) -> bytes:
     """``frame``'s 8-bit preview as PNG (lossless: the snapshot is the frame, not the stream's JPEG)."""
-    import cv2
-
-    ok, buf = cv2.imencode(".png", preview_frame(frame))
-    if not ok:
-        raise DeviceError(f"PNG encoding of frame {frame.sequence} failed")
-    return buf.tobytes()
+    return encode_image(preview_frame(frame), "png", error=DeviceError, what=f"frame {frame.sequence}")

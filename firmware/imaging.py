@@ -15,7 +15,7 @@ encode it to their wire formats. A test pattern in a raw format is the BGR patte
 (``rollcam.sim.formats.mosaic``) at full scale of the format's bits, without noise or black level.
 
 ``warm`` makes the first frame of a new kind of programming once, before a device's clock starts: the render
-and sensor kernels are compiled by numba on first use (about 16 s on a cold cache, more than a client's
+and sensor kernels are compiled by numba on first use (about 100 s of CPU time on a cold cache, more than a client's
 DQBUF or HTTP timeout), and a real-time stream must not open by waiting for that.
 """
 

@@ -13,7 +13,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 from rollcam.common.errors import ConfigError, DeviceError, ProtocolError
-from rollcam.common.values import parse_bool
+from rollcam.common.values import parse_bool, parse_size
 
 from .camera import FirmwareCamera
 from .imu import device_samples
@@ -64,8 +64,7 @@ def _ctrl_line(cam: FirmwareCamera) -> str:
 
 
 def _size(cam: FirmwareCamera, text: str) -> str:
-    w, _, h = text.lower().partition("x")
-    cam.set_size(parse_int(w, "width"), parse_int(h, "height"))
+    cam.set_size(*parse_size(text))
     return "OK"
 
 

@@ -25,6 +25,7 @@ import numpy as np
 from rollcam.common.errors import ConfigError, RollcamError
 from rollcam.common.files import output_dir, write_atomic
 from rollcam.common.lifecycle import Stats
+from rollcam.sim.codecs import encode_image
 from rollcam.sim.frame import Frame
 from rollcam.sim.hwconfig import load_sensor
 
@@ -186,8 +187,6 @@ def run_demo(
     stream: TextIO | None = None,
 ) -> DemoResult:
     """Stream ``seconds`` of the emulated street and write the video and contact sheet into ``out_dir``."""
-    import cv2
-
     if not math.isfinite(seconds) or seconds <= 0:
         raise ConfigError(f"seconds must be a positive number, got {seconds!r}")
     size = size or default_size(sensor)
@@ -244,10 +243,7 @@ def run_demo(
                 writer.abort()
         if not sheet_pairs:
             raise RollcamError(f"source {uri!r} gave no frames")
-    ok, png = cv2.imencode(".png", contact_sheet(sheet_pairs))
-    if not ok:
-        raise RollcamError("could not encode the contact sheet as PNG")
-    write_atomic(sheet, png.tobytes())
+    write_atomic(sheet, encode_image(contact_sheet(sheet_pairs), "png", error=RollcamError, what="the contact sheet"))
     return DemoResult(video, sheet, uri, n, fps, int(info["line_time_ns"]), len(seen),
                       float(np.mean(shifts)) if shifts else 0.0,
                       DemoStats(float(np.max(shifts)) if shifts else 0.0, (int(size[0]), int(size[1]))),

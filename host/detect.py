@@ -24,7 +24,6 @@ from __future__ import annotations
 
 import json
 import queue
-import threading
 import time
 from array import array
 from collections.abc import Callable, Sequence
@@ -35,6 +34,7 @@ from typing import Any, TextIO
 import numpy as np
 from rollcam.common.errors import SourceError, is_interrupt
 from rollcam.common.files import AppendLog, output_dir
+from rollcam.common.lifecycle import Worker
 from rollcam.sim.frame import Frame
 
 from .detectors import Detections, Detector
@@ -64,16 +64,16 @@ class DetectionLog:
 
 
 class VideoSink:
-    """An MP4 written on a background thread from a bounded queue (the loop only hands over images)."""
+    """An MP4 written on a background thread (a ``Worker``) from a bounded queue (the loop only hands over
+    images)."""
 
     def __init__(self, path: Path, fps: float, max_queue: int = 8) -> None:
         self.path, self.fps = path, fps
         self._queue: queue.Queue[np.ndarray | None] = queue.Queue(max_queue)
         self._writer: VideoWriter | None = None
-        self.error: BaseException | None = None
         self.frames = 0
-        self._thread = threading.Thread(target=self._run, name="detect-video", daemon=True)
-        self._thread.start()
+        # close() waits for the last frames to be encoded however long that takes: no join timeout
+        self._worker = Worker(self._run, name="detect-video", join_timeout_s=None).start()
 
     def _run(self) -> None:
         try:
@@ -82,28 +82,31 @@ class VideoSink:
                     self._writer = VideoWriter(self.path, self.fps, (img.shape[1], img.shape[0]))
                 self._writer.write(img)
                 self.frames += 1
-        except BaseException as exc:  # reported by close(); keep draining so put() never blocks forever
-            self.error = exc
+        except BaseException:  # the Worker keeps it for close(); keep draining so put() never blocks forever
             while self._queue.get() is not None:
                 pass
+            raise
 
     def put(self, image: np.ndarray) -> None:
         self._queue.put(image)
 
     def close(self) -> None:
         """Finish the file and move it into place; safe to call twice."""
-        if self._thread.is_alive():
+        if self._worker.alive:
             self._queue.put(None)
-            self._thread.join()
+        error = None
+        try:
+            self._worker.close()
+        except BaseException as exc:  # the writer's failure, raised once
+            error = exc
         if self._writer is not None:
             writer, self._writer = self._writer, None
-            if self.error is None:
+            if error is None:
                 writer.close()  # an OSError naming the file if ffmpeg failed
             else:
                 writer.abort()  # a video cut short by a failed write is not kept under its final name
-        if self.error is not None:
-            err, self.error = self.error, None
-            raise OSError(f"writing {self.path} failed: {err}")
+        if error is not None:
+            raise OSError(f"writing {self.path} failed: {error}")
 
 
 def annotate(image: np.ndarray, dets: Detections, frame: Frame, names: dict[int, str]) -> np.ndarray:

@@ -72,6 +72,18 @@ def _cv2() -> Any:
     return cv2
 
 
+def encode_image(image: np.ndarray, ext: str, params: tuple[int, ...] = (), error: type[Exception] = ConfigError,
+                 what: str = "image") -> bytes:
+    """``image`` as the bytes of an image file of type ``ext`` (``"png"``, ``"jpg"``...; OpenCV's encoder, with its
+    ``params``): the one place a picture becomes a file's bytes (snapshots, contact sheets, masks, captures). A
+    failed encode raises the caller's ``error`` naming ``what``."""
+    cv2 = _cv2()
+    ok, buf = cv2.imencode(f".{ext}", image, list(params))
+    if not ok:
+        raise error(f"could not encode {what} as {ext.upper()}")
+    return buf.tobytes()
+
+
 def _as_bgr(image: np.ndarray, fourcc: str) -> np.ndarray:
     """``image`` checked to be an 8-bit BGR picture, contiguous."""
     a = np.asarray(image)

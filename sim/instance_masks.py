@@ -12,7 +12,6 @@ from __future__ import annotations
 import math
 from pathlib import Path
 
-import cv2
 import numpy as np
 from numba import njit
 from rollcam.common.errors import SourceError
@@ -22,6 +21,7 @@ from . import _actors as A
 from ._jitcache import guard
 from ._kernels import part_span
 from ._parts import PART_SHADOW
+from .codecs import encode_image
 from .render import Renderer
 
 
@@ -106,11 +106,9 @@ def write_labelled_footage(renderer: Renderer, times_ns: np.ndarray, folder: str
 
 
 def _write_png(path: Path, img: np.ndarray, fs: FileSystem) -> None:
-    ok, buf = cv2.imencode(".png", img)
-    if not ok:
-        raise SourceError(f"{str(path)!r}: cannot encode PNG")
+    data = encode_image(img, "png", error=SourceError, what=repr(str(path)))
     path.parent.mkdir(parents=True, exist_ok=True)
-    write_atomic(path, buf.tobytes(), fs)
+    write_atomic(path, data, fs)
 
 
 guard(__name__)  # after every kernel: see rollcam.sim._jitcache

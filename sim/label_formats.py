@@ -22,13 +22,13 @@ from __future__ import annotations
 import json
 import math
 import re
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
 from pathlib import Path
 from typing import Any
 
 import cv2
 import numpy as np
-from rollcam.common.errors import ConfigError, SourceError
+from rollcam.common.errors import ConfigError, RollcamError, SourceError
 
 from .footage import natural_key
 from .footage_labels import BoxLabels, LabelTrack, MaskLabels
@@ -401,33 +401,53 @@ def _load_mot(path: Path, n_frames: int, size: tuple[int, int], names: Sequence[
 
 
 # ------------------------------------------------------------------------------------------------- YOLO
+def yolo_lines(path: Path, error: type[RollcamError]) -> Iterator[tuple[str, list[float], str]]:
+    """Each non-blank line of an Ultralytics label file as (where, its numbers, the line): the one reader of YOLO
+    label lines (footage labels here, evaluation sets in rollcam.host.evaluation.loaders). ``where`` names the
+    file and line for the caller's errors; a file that cannot be read, or a line that is not numbers, raises
+    ``error`` (the caller's kind: SourceError for footage, ConfigError for a dataset)."""
+    try:
+        text = path.read_text()
+    except (OSError, UnicodeDecodeError) as exc:
+        raise error(f"{str(path)!r}: cannot read YOLO labels ({exc})") from None
+    for number, line in enumerate(text.splitlines(), start=1):
+        if not line.strip():
+            continue
+        at = f"{str(path)!r} line {number}"
+        try:
+            values = [float(v) for v in line.split()]
+        except ValueError:
+            raise error(f"{at}: not numbers: {line.strip()[:80]!r}") from None
+        yield at, values, line
+
+
+def yolo_box(cxcywh: Sequence[float], size: tuple[int, int], at: str) -> list[float]:
+    """A YOLO line's normalised ``cx cy w h`` as a pixel box ``[x0, y0, x1, y1]`` in an image of ``size``
+    (checked by ``check_box``)."""
+    cx, cy, bw, bh = cxcywh
+    w, h = size
+    return check_box((cx - bw / 2) * w, (cy - bh / 2) * h, bw * w, bh * h, size, at)
+
+
 def _load_yolo(folder: Path, n_frames: int, size: tuple[int, int], names: Sequence[str] | None) -> LabelTrack:
     if not folder.is_dir():
         raise SourceError(f"{str(folder)!r}: YOLO labels must be a folder of .txt files, one per frame")
     files = _per_frame_files(folder, (".txt",), n_frames, names, "label")
-    w_img, h_img = size
     classes: dict[int, str] = {}
 
     def load(k: int) -> BoxLabels:
         ids, boxes = [], []
-        for ln, line in enumerate(files[k].read_text().splitlines(), start=1):
-            if not line.strip():
-                continue
-            at = f"{str(files[k])!r} line {ln}"
-            try:
-                vals = [float(p) for p in line.split()]
-            except ValueError:
-                raise SourceError(f"{at}: not numbers: {line.strip()!r}") from None
+        for at, vals, line in yolo_lines(files[k], SourceError):
             if len(vals) not in (6, 7):
                 raise SourceError(f"{at}: need 'class cx cy w h id' (or with conf before id) to follow objects "
                                   f"across frames, got {len(vals)} values")
-            cls, cx, cy, bw, bh, oid = vals[0], *vals[1:5], vals[-1]
+            cls, oid = vals[0], vals[-1]
             if not (math.isfinite(oid) and math.isfinite(cls)) or oid != int(oid) or oid <= 0 or cls != int(cls) \
                     or cls < 0:
                 raise SourceError(f"{at}: class and id must be integers (id >= 1), got {line.strip()!r}")
             if int(oid) in ids:
                 raise SourceError(f"{at}: id {int(oid)} appears twice")
-            box = check_box((cx - bw / 2) * w_img, (cy - bh / 2) * h_img, bw * w_img, bh * h_img, size, at)
+            box = yolo_box(vals[1:5], size, at)
             classes[int(oid)] = "person" if cls == 0 else f"class{int(cls)}"
             ids.append(int(oid))
             boxes.append(box)

@@ -11,16 +11,15 @@ import io
 import json
 import os
 import re
-import signal
 import subprocess
 import sys
-import time
 from pathlib import Path
 
 import cv2
 import numpy as np
 import pytest
-from interrupts import ctrl_c
+from helpers import wait_for
+from interrupts import ctrl_c, interrupt
 from rollcam.host import SourceError, open_camera
 from rollcam.host.capture import FRAMES_LOG, CaptureInterrupted, capture
 from rollcam.host.cli import main
@@ -582,14 +581,9 @@ def test_ctrl_c_exits_130_with_complete_log(tmp_path: Path):
     proc = subprocess.Popen([*rollcam_cmd(), "capture", URI, "--frames", "100000", "--out", str(out),
                              "--shutter", "both"], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     try:
-        deadline = time.monotonic() + 120
-        while time.monotonic() < deadline:
-            log = out / FRAMES_LOG
-            if log.exists() and log.read_text().count("\n") >= 4:
-                break
-            time.sleep(0.05)
-        proc.send_signal(signal.SIGINT)
-        _, err = proc.communicate(timeout=60)
+        log = out / FRAMES_LOG
+        wait_for(lambda: log.exists() and log.read_text().count("\n") >= 4, 120, "four frames logged")
+        _, err = interrupt(proc)
     finally:
         if proc.poll() is None:
             proc.kill()

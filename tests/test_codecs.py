@@ -200,3 +200,14 @@ def test_no_pixel_conversion_outside_the_codec_table():
         if _CODEC_CALLS.search(path.read_text()):
             offenders.append(rel)
     assert offenders == []
+
+
+def test_encode_image_writes_the_file_format_asked_for():
+    import cv2
+    from rollcam.sim.codecs import encode_image
+
+    img = (np.arange(24 * 32 * 3) % 251).astype(np.uint8).reshape(24, 32, 3)
+    png = encode_image(img, "png")
+    assert png[:8] == b"\x89PNG\r\n\x1a\n"
+    np.testing.assert_array_equal(cv2.imdecode(np.frombuffer(png, np.uint8), cv2.IMREAD_COLOR), img)
+    assert encode_image(img, "jpg", (cv2.IMWRITE_JPEG_QUALITY, 85))[:2] == b"\xff\xd8"

@@ -5,16 +5,15 @@ from __future__ import annotations
 import json
 import os
 import shutil
-import signal
 import subprocess
 import sys
-import time
 from pathlib import Path
 
 import cv2
 import numpy as np
 import pytest
-from interrupts import ctrl_c
+from helpers import wait_for
+from interrupts import ctrl_c, interrupt
 from rollcam.host.cli import main
 from rollcam.host.detect import LOG, SUMMARY, VIDEO, DetectInterrupted, run_detect
 from rollcam.host.detectors import PERSON, Detections
@@ -124,15 +123,13 @@ def test_cli_ctrl_c_exits_130_with_files_intact(tmp_path, terminal):
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, env={**os.environ, "PYTHONUNBUFFERED": "1"},
                             start_new_session=terminal)
     log = tmp_path / LOG
-    deadline = time.monotonic() + 120
-    while time.monotonic() < deadline and (not log.exists() or log.read_text().count("\n") < 3
-                                           or not list(tmp_path.glob(f".{VIDEO}.*.part"))):  # ffmpeg is running
-        time.sleep(0.1)
-    if terminal:
-        os.killpg(proc.pid, signal.SIGINT)
-    else:
-        proc.send_signal(signal.SIGINT)
-    _, err = proc.communicate(timeout=60)
+    try:
+        wait_for(lambda: log.exists() and log.read_text().count("\n") >= 3 and list(tmp_path.glob(f".{VIDEO}.*.part")),
+                 120, "three frames logged with ffmpeg running")
+    except AssertionError:
+        proc.kill()
+        raise
+    _, err = interrupt(proc, group=terminal)
     assert proc.returncode == 130, err
     lines = log.read_text().splitlines()
     assert len(lines) >= 3 and all(json.loads(line)["detections"] is not None for line in lines)
@@ -157,3 +154,29 @@ def test_out_that_is_a_file_is_one_line_exit_2(tmp_path, capsys, where):
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and err[0].startswith("rollcam: error: --out ") and str(out) in err[0], err
     assert "must be a folder, not a file" in err[0] and "Errno" not in err[0]
+
+
+def test_video_sink_reports_a_failed_write_once_and_never_blocks_the_loop(tmp_path, monkeypatch):
+    """The sink's writer thread is a Worker: a write that fails is raised by close() as an OSError naming the
+    file, the frames put after it are drained (a full queue would block the loop), and no file is left."""
+    import rollcam.host.detect as detect
+
+    class Broken:
+        def __init__(self, path, fps, size):
+            pass
+
+        def write(self, img):
+            raise OSError("disk full")
+
+        def abort(self):
+            aborted.append(True)
+
+    aborted: list[bool] = []
+    monkeypatch.setattr(detect, "VideoWriter", Broken)
+    sink = detect.VideoSink(tmp_path / "v.mp4", 30.0, max_queue=2)
+    for _ in range(20):  # ten times the queue: blocks for ever unless the thread drains after the failure
+        sink.put(np.zeros((8, 8, 3), np.uint8))
+    with pytest.raises(OSError, match=r"v\.mp4 failed: disk full"):
+        sink.close()
+    sink.close()  # twice is harmless
+    assert aborted == [True] and sink.frames == 0

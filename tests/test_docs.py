@@ -266,3 +266,31 @@ def test_emu_option_table_is_the_firmware_option_table() -> None:
         else:
             want = f"`{as_text(option.default)}`"
             assert default.split(" ")[0] == want, f"{name}: default {want} in firmware/options.py, {default} in the doc"
+
+
+def _api_docs():
+    import importlib.util
+
+    spec = importlib.util.spec_from_file_location("api_docs", ROOT / "tools" / "api_docs.py")
+    assert spec is not None and spec.loader is not None
+    module = importlib.util.module_from_spec(spec)
+    sys.modules.setdefault("api_docs", module)  # dataclasses look their module up there
+    spec.loader.exec_module(module)
+    return module
+
+
+def test_api_reference_is_the_docstrings_of_today() -> None:
+    """docs/api.md is generated from the source; a docstring or signature changed without regenerating it fails."""
+    assert (ROOT / "docs" / "api.md").read_text() == _api_docs().render(ROOT), \
+        "docs/api.md is stale: run python tools/api_docs.py"
+
+
+def test_api_reference_notices_a_changed_docstring(tmp_path: Path) -> None:
+    api = _api_docs()
+    for entry in {e.path for _, _, entries in api.SECTIONS for e in entries} | {api.PLUGIN}:
+        (tmp_path / entry).parent.mkdir(parents=True, exist_ok=True)
+        (tmp_path / entry).write_text((ROOT / entry).read_text())
+    before = api.render(tmp_path)
+    frame = tmp_path / "sim" / "frame.py"
+    frame.write_text(frame.read_text().replace('"""One captured image and its timing.', '"""One image.'))
+    assert api.render(tmp_path) != before and "One image." in api.render(tmp_path)

@@ -6,7 +6,6 @@ from __future__ import annotations
 import json
 import os
 import re
-import signal
 import socket
 import subprocess
 import sys
@@ -20,6 +19,7 @@ import pytest
 import serial
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
+from interrupts import interrupt
 from rollcam.emu.http_mjpeg import MjpegServer
 from rollcam.emu.http_server import HttpLimits
 from rollcam.emu.protocol_rollcam import register_camera
@@ -227,8 +227,7 @@ def test_rollcam_emulate_serves_until_interrupted_and_frees_its_port():
         with serial.Serial(path, timeout=5) as port:
             port.write(b"*IDN?\n")
             assert port.readline().startswith(b"rollcam,IMX219-EMU,")
-        proc.send_signal(signal.SIGINT)
-        _out, err = proc.communicate(timeout=30)
+        _out, err = interrupt(proc, 30)
     finally:
         if proc.poll() is None:
             proc.kill()

@@ -215,3 +215,17 @@ def test_output_dir_makes_folders_and_refuses_a_file_in_the_way(tmp_path: Path):
         output_dir(tmp_path / "f")
     with pytest.raises(ConfigError, match=r"--out '.*f/sub' must be a folder, not a file: '.*f' is a file"):
         output_dir(tmp_path / "f" / "sub", make=False)
+
+
+def test_write_figure_writes_a_png_atomically_and_closes_the_figure(tmp_path: Path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    from rollcam.common.files import write_figure
+
+    fig, ax = plt.subplots()
+    ax.plot([0, 1], [1, 0])
+    write_figure(tmp_path / "f.png", fig, dpi=50)
+    assert (tmp_path / "f.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    assert fig.number not in plt.get_fignums() and not list(tmp_path.glob("*.part*"))

@@ -4,22 +4,13 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from helpers import FakeClock
 from rollcam.common.errors import ConfigError, DeviceError
 from rollcam.firmware.camera import FirmwareCamera
 from rollcam.firmware.patterns import render_pattern
 from rollcam.firmware.scheduler import FrameSchedule
 from rollcam.sim.hwconfig import list_sensors, load_sensor
 from rollcam.sim.timing import NS_PER_S, LineTiming
-
-
-class FakeClock:
-    """A host clock the test moves by hand."""
-
-    def __init__(self, t: int = 1_000_000_000) -> None:
-        self.t = t
-
-    def __call__(self) -> int:
-        return self.t
 
 
 def cam(sensor: str = "imx219", **kw) -> FirmwareCamera:
@@ -90,7 +81,7 @@ def test_flips_change_bayer_order_and_are_refused_while_streaming():
 
 
 def test_vflip_keeps_first_line_read_first_and_mirrors_the_image():
-    clock = FakeClock()  # both streams start at the same device time, so the moving chart is in one place
+    clock = FakeClock(1_000_000_000)  # both streams start at the same device time, so the moving chart is in one place
     a = FirmwareCamera("imx219", scene={"scene": "chart"}, size=(640, 480), clock=clock)
     b = FirmwareCamera("imx219", scene={"scene": "chart"}, size=(640, 480), clock=clock)
     b.set_control("vflip", 1)
@@ -154,7 +145,7 @@ def test_scheduler_row_and_frame_due_times_are_exact_integers():
 
 
 def test_plan_skips_late_frames_and_timing_changes_apply_from_the_next_frame():
-    clock = FakeClock()
+    clock = FakeClock(1_000_000_000)
     c = cam(clock=clock)
     c.stream_on()
     p0 = c.plan_next(c.clock_ns())
@@ -170,7 +161,7 @@ def test_plan_skips_late_frames_and_timing_changes_apply_from_the_next_frame():
 
 
 def test_external_trigger_makes_one_frame_per_trigger():
-    clock = FakeClock()
+    clock = FakeClock(1_000_000_000)
     c = cam(clock=clock)
     with pytest.raises(DeviceError, match="external"):
         c.trigger()

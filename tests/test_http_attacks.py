@@ -21,6 +21,7 @@ from collections.abc import Iterator
 
 import pytest
 import rollcam.host  # noqa: F401  (registers the in-sensor network loader the insensor= option needs)
+from helpers import wait_for
 from rollcam.emu.http_mjpeg import MjpegServer
 from rollcam.emu.http_server import HttpLimits
 from rollcam.firmware.camera import FirmwareCamera
@@ -39,16 +40,6 @@ def camera(noise: bool = False, **kw) -> FirmwareCamera:
 def status(srv: MjpegServer) -> dict:
     with urllib.request.urlopen(srv.url.replace("stream.mjpg", "status.json"), timeout=10) as r:
         return json.load(r)
-
-
-def wait_for(predicate, timeout_s: float = 20.0, every_s: float = 0.1) -> bool:
-    """Poll ``predicate`` until it holds or ``timeout_s`` passes (a bound, not a speed target)."""
-    end = time.monotonic() + timeout_s
-    while time.monotonic() < end:
-        if predicate():
-            return True
-        time.sleep(every_s)
-    return predicate()
 
 
 def attacker(addr: tuple[str, int], source: str, request: bytes = GET, rcvbuf: int | None = 4096) -> socket.socket:

@@ -303,3 +303,32 @@ def test_bench_compares_the_two_pipelines_on_the_same_frames() -> None:
     assert host["bytes_per_frame"] == 180 * (320 + 6) + 8  # the raw 8-bit frame, CSI-2 framed
     assert chip["bytes_per_frame"] == doc["ledger"]["rows"]["meta"]["bytes_per_frame"] < host["bytes_per_frame"]
     assert doc["ledger"]["mode"] == "meta" and chip["energy_uj"] < host["energy_uj"]
+
+
+@pytest.mark.parametrize(("query", "want"), [("", False), ("?tensors=1", True), ("?tensors=yes", True),
+                                             ("?tensors=no", False), ("?tensors=OFF", False), ("?tensors=0", False)])
+def test_tensors_option_reads_the_one_boolean_vocabulary(query: str, want: bool) -> None:
+    """``?tensors=no`` sent the tensors on main: the endpoint had its own list of false words, without "no"."""
+    from types import SimpleNamespace
+
+    from aiohttp.test_utils import make_mocked_request
+    from rollcam.emu.http_insensor import InSensorStreams
+
+    cam = SimpleNamespace(spec=SimpleNamespace(insensor="personnet-raw"), clock_ns=lambda: 0,
+                          insensor=SimpleNamespace(recent=lambda now, since=0: []))
+    streams = InSensorStreams(cam, slots=None)
+    assert streams.open(make_mocked_request("GET", f"/insensor.jsonl{query}"))["tensors"] is want
+
+
+def test_a_bad_tensors_value_is_a_400_naming_it() -> None:
+    from types import SimpleNamespace
+
+    from aiohttp import web
+    from aiohttp.test_utils import make_mocked_request
+    from rollcam.emu.http_insensor import InSensorStreams
+
+    cam = SimpleNamespace(spec=SimpleNamespace(insensor="personnet-raw"), clock_ns=lambda: 0,
+                          insensor=SimpleNamespace(recent=lambda now, since=0: []))
+    with pytest.raises(web.HTTPBadRequest) as bad:
+        InSensorStreams(cam, slots=None).open(make_mocked_request("GET", "/insensor.jsonl?tensors=maybe"))
+    assert bad.value.text.startswith("tensors='maybe' is invalid (expected one of 1/on/true/yes")

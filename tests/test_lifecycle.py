@@ -5,6 +5,7 @@ from __future__ import annotations
 import threading
 
 import pytest
+from helpers import FakeClock
 from rollcam.common.errors import DeviceError, SourceError
 from rollcam.common.lifecycle import Closeable, Deadline, Stats, Worker
 
@@ -100,16 +101,8 @@ def test_worker_stops_on_its_event_and_joins():
     assert w.stopping and not w.alive and w.error is None
 
 
-class FakeClock:
-    def __init__(self) -> None:
-        self.t = 100.0
-
-    def __call__(self) -> float:
-        return self.t
-
-
 def test_deadline_on_an_injected_clock():
-    clock = FakeClock()
+    clock = FakeClock(100.0)
     d = Deadline(2.0, clock)
     assert not d.expired and d.remaining() == 2.0 and d.within(0.5) == 0.5
     clock.t += 1.5
@@ -122,7 +115,7 @@ def test_deadline_on_an_injected_clock():
 
 
 def test_forever_never_expires():
-    clock = FakeClock()
+    clock = FakeClock(100.0)
     for d in (Deadline.forever(clock), Deadline(None, clock), Deadline(float("inf"), clock)):
         clock.t += 1e9
         assert not d.expired and d.remaining() is None and d.within(0.2) == 0.2 and d.infinite

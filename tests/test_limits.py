@@ -10,6 +10,7 @@ import time
 from importlib import resources
 
 import pytest
+from helpers import FakeClock
 from rollcam.common.errors import ConfigError, DeviceError, SourceError, exit_code
 from rollcam.firmware import options as O
 from rollcam.firmware.camera import FirmwareCamera
@@ -39,14 +40,6 @@ PAST_LIMITS = [
     ("fps", "1e9", "maximum"),
     ("serial", "x" * 40, "1..32"),
 ]
-
-
-class FakeClock:
-    def __init__(self) -> None:
-        self.t = 0
-
-    def __call__(self) -> int:
-        return self.t
 
 
 @pytest.mark.parametrize(("name", "value", "limit"), PAST_LIMITS)

@@ -10,11 +10,12 @@ import shutil
 import subprocess
 import sys
 import time
-from collections.abc import Callable, Iterator
+from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
 import pytest
+from helpers import wait_for
 
 CHROMIUM, CHROMEDRIVER = shutil.which("chromium") or "/usr/bin/chromium", shutil.which("chromedriver") or ""
 webdriver = pytest.importorskip("selenium.webdriver", reason="selenium is not installed (pip install selenium)")
@@ -26,16 +27,6 @@ serial = pytest.importorskip("serial")
 BROWSER_FLAGS = ("--headless=new", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
                  "--disable-background-networking", "--disable-component-update", "--disable-sync",
                  "--disable-dev-shm-usage", "--window-size=1400,900")
-
-
-def wait_for(what: str, check: Callable[[], Any], timeout_s: float = 30.0) -> Any:
-    end = time.monotonic() + timeout_s
-    while time.monotonic() < end:
-        got = check()
-        if got:
-            return got
-        time.sleep(0.1)
-    raise AssertionError(f"timed out waiting for {what}")
 
 
 @pytest.fixture(scope="module")
@@ -71,7 +62,7 @@ def page(emulator: dict[str, Any], tmp_path_factory: pytest.TempPathFactory) -> 
     driver.downloads = downloads
     try:
         driver.get(emulator["http"]["view"])
-        wait_for("the first frames drawn", lambda: js(driver, "return rollcamView.stats.drawn") >= 3, 60)
+        wait_for(lambda: js(driver, "return rollcamView.stats.drawn") >= 3, 60, "the first frames drawn")
         yield driver
     finally:
         driver.quit()
@@ -105,7 +96,7 @@ def test_page_loads_and_the_image_updates(page):
 
     assert "rollcam" in page.title
     first = js(page, "return rollcamView.meta.seq")
-    wait_for("newer frames", lambda: js(page, "return rollcamView.meta.seq") > first + 3)
+    wait_for(lambda: js(page, "return rollcamView.meta.seq") > first + 3, what="newer frames")
     assert page.find_element(By.ID, "meta-sequence").text.isdigit()
     assert js(page, "return rollcamView.meta.objects.length") > 0  # truth came with the frames
     assert js(page, "return rollcamView.intervals.length") > 2  # the plot has data
@@ -128,19 +119,19 @@ def test_toggling_an_overlay_changes_the_picture_and_snapshot_saves_png_and_json
     finally:
         page.find_element(By.ID, "hold").click()
     page.find_element(By.ID, "snapshot").click()
-    pngs = wait_for("the snapshot files", lambda: list(page.downloads.glob("rollcam-*.png")))
-    truth_file = wait_for("the truth file", lambda: [p for p in page.downloads.glob("rollcam-*.json")
-                                                    if p.stat().st_size > 0])
+    pngs = wait_for(lambda: list(page.downloads.glob("rollcam-*.png")), what="the snapshot files")
+    truth_file = wait_for(lambda: [p for p in page.downloads.glob("rollcam-*.json") if p.stat().st_size > 0],
+                          what="the truth file")
     assert pngs[0].read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     truth = json.loads(truth_file[0].read_text())
     assert truth["width"] == 640 and truth["objects"] and pngs[0].stem == truth_file[0].stem
 
 
 def test_exposure_from_the_page_changes_brightness_and_the_serial_side_reads_it(page, emulator):
-    wait_for("2 ms exposure", lambda: abs(exposure_us(page) - 2000) < 30)
+    wait_for(lambda: abs(exposure_us(page) - 2000) < 30, what="2 ms exposure")
     dark = js(page, MEAN_LUMA)
     set_control(page, "exposure_us", "8000")
-    wait_for("8 ms exposure on the stream", lambda: abs(exposure_us(page) - 8000) < 30)
+    wait_for(lambda: abs(exposure_us(page) - 8000) < 30, what="8 ms exposure on the stream")
     time.sleep(0.3)
     bright = js(page, MEAN_LUMA)
     assert bright > dark * 1.5, (dark, bright)
@@ -149,8 +140,8 @@ def test_exposure_from_the_page_changes_brightness_and_the_serial_side_reads_it(
         assert abs(float(port.readline()) - 8000) < 30
         port.write(b"OPT exposure_us 3000\n")  # and the reverse: the serial side's change shows on the page
         assert port.readline().startswith(b"OK")
-    wait_for("the page's control to follow the serial side",
-             lambda: abs(float(js(page, "return document.getElementById('ctl-exposure_us').value")) - 3000) < 30)
+    wait_for(lambda: abs(float(js(page, "return document.getElementById('ctl-exposure_us').value")) - 3000) < 30,
+             what="the page's control to follow the serial side")
 
 
 def test_a_bad_control_value_shows_an_error_and_the_device_keeps_streaming(page):
@@ -158,7 +149,7 @@ def test_a_bad_control_value_shows_an_error_and_the_device_keeps_streaming(page)
 
     set_control(page, "exposure_us", "-5")
     error = page.find_element(By.ID, "error")
-    wait_for("the error on the page", lambda: error.is_displayed() and "exposure_us" in error.text)
+    wait_for(lambda: error.is_displayed() and "exposure_us" in error.text, what="the error on the page")
     assert "'-5'" in error.text and "must be a number >= 0" in error.text
     seq = js(page, "return rollcamView.meta.seq")
-    wait_for("frames after the error", lambda: js(page, "return rollcamView.meta.seq") > seq + 3)
+    wait_for(lambda: js(page, "return rollcamView.meta.seq") > seq + 3, what="frames after the error")

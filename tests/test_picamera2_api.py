@@ -94,6 +94,15 @@ def test_capture_file_writes_exif_data(rollcam_picamera2):
     assert piexif.load(image.info["exif"])["0th"][piexif.ImageIFD.Model] == b"Rolling"
 
 
+def test_capture_file_writes_png_through_the_one_image_encoder(rollcam_picamera2, tmp_path):
+    picamera2 = rollcam_picamera2()
+    with picamera2.Picamera2() as cam:
+        cam.start(cam.create_preview_configuration(main=SMALL))
+        cam.capture_file(str(tmp_path / "still.png"))
+    assert (tmp_path / "still.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    assert Image.open(tmp_path / "still.png").size == (320, 240)
+
+
 def test_dng_files_develop_in_libraw(rollcam_picamera2, tmp_path):
     rawpy = pytest.importorskip("rawpy")
     pytest.importorskip("pidng")

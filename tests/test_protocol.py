@@ -88,3 +88,9 @@ def test_fuzz_parser_always_answers():
     _fuzz_parser()
     assert FUZZ_COUNTS["serial_parser"] >= 100  # hypothesis really ran (it stops early only on failure)
     print(f"serial parser fuzz: {FUZZ_COUNTS['serial_parser']} inputs")
+
+
+def test_size_reads_the_one_wxh_parser():
+    s = session()
+    assert ask(s, "SIZE 640", "SIZE 0x480", "SIZE 640X480") == [
+        "ERR 102 size '640' is not WIDTHxHEIGHT (e.g. 1920x1080)", "ERR 102 size '0x480' must be positive", "OK"]

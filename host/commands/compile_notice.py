@@ -1,7 +1,8 @@
 """Say once, on stderr, that the renderer is about to compile, when numba's cache of it is cold.
 
-The first render on a machine (or after an edit of the kernels) compiles them for ~30 s; a command that is
-silent that long looks hung. A warm cache says nothing, so the notice appears exactly when it is true.
+The first render on a machine (or after an edit of the kernels) compiles them (about 100 s of CPU time, measured in
+the README's Set up); a command that is silent that long looks hung. A warm cache says nothing, so the notice
+appears exactly when it is true.
 """
 
 from __future__ import annotations
@@ -11,7 +12,8 @@ from typing import TextIO
 
 from rollcam.sim.kernel_cache import renderer_cache_cold
 
-NOTICE = "rollcam: compiling the renderer (first use on this machine, ~30 s; later runs load it from numba's cache)"
+NOTICE = ("rollcam: compiling the renderer (first use on this machine, about 100 s of CPU time; later runs load it "
+          "from numba's cache)")
 
 
 def renders(uri: str) -> bool:

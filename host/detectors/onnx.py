@@ -35,7 +35,7 @@ from typing import Any, Literal
 
 import numpy as np
 from rollcam.common.errors import ConfigError, MissingDependencyError, require
-from rollcam.common.values import fraction, parse_bool, positive_int
+from rollcam.common.values import fraction, parse_bool, parse_size, positive_int
 
 from .base import Detections, DetectorSpec
 from .ops import Placement, letterbox, nms, stretch, suppress_contained, tile_windows
@@ -71,13 +71,6 @@ def _overlap(text: str) -> float:
     if not 0.0 <= value < 1.0:
         raise ValueError("must be >= 0 and < 1")
     return value
-
-
-def _pair(text: str) -> tuple[int, int]:
-    a, b = (int(v) for v in text.lower().split("x"))
-    if a <= 0 or b <= 0:
-        raise ValueError("both numbers must be positive")
-    return a, b
 
 
 def _int_list(text: str) -> tuple[int, ...]:
@@ -336,9 +329,9 @@ def detector_options(spec: DetectorSpec) -> dict[str, Any]:
     kw: dict[str, Any] = {
         "conf": spec.get("conf", fraction, 0.25), "iou": spec.get("iou", fraction, 0.45),
         "classes": spec.get("classes", _int_list), "class_offset": spec.get("class_offset", int, 0),
-        "size": spec.get("size", _pair), "letterbox_input": spec.get("letterbox", parse_bool),
+        "size": spec.get("size", parse_size), "letterbox_input": spec.get("letterbox", parse_bool),
         "bgr": spec.get("bgr", parse_bool, False), "max_det": spec.get("max_det", positive_int, 300),
-        "threads": spec.get("threads", positive_int), "tiles": spec.get("tiles", _pair),
+        "threads": spec.get("threads", positive_int), "tiles": spec.get("tiles", parse_size),
         "overlap": spec.get("overlap", _overlap, 0.2), "full": spec.get("full", parse_bool, True),
         "merge": spec.get("merge", _choice("ios", "nms"), "ios"), "merge_ios": spec.get("merge_ios", fraction, 0.5),
         "layout": spec.get("layout", _choice(*LAYOUTS), "auto"),

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 from collections.abc import Iterator
 from dataclasses import dataclass
+from typing import Any
 
 import cv2
 import numpy as np
@@ -54,17 +55,46 @@ def stretch(image: np.ndarray, width: int, height: int) -> tuple[np.ndarray, Pla
     return out, Placement(width / w, height / h, 0.0, 0.0)
 
 
-def iou_matrix(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Pairwise IoU of boxes ``a`` (N, 4) and ``b`` (M, 4), x0, y0, x1, y1."""
-    a = np.asarray(a, np.float64).reshape(-1, 4)
-    b = np.asarray(b, np.float64).reshape(-1, 4)
+def _boxes(x: Any) -> np.ndarray:
+    return np.asarray(x, np.float64).reshape(-1, 4)
+
+
+def box_areas(boxes: Any) -> np.ndarray:
+    """The area of each (x0, y0, x1, y1) box in ``boxes`` (N, 4); an inverted box has area 0."""
+    b = _boxes(boxes)
+    return (b[:, 2] - b[:, 0]).clip(0) * (b[:, 3] - b[:, 1]).clip(0)
+
+
+def intersections(a: Any, b: Any) -> np.ndarray:
+    """The area each box of ``a`` (N, 4) shares with each box of ``b`` (M, 4), x0, y0, x1, y1: (N, M)."""
+    a, b = _boxes(a), _boxes(b)
     iw = np.clip(np.minimum(a[:, None, 2], b[None, :, 2]) - np.maximum(a[:, None, 0], b[None, :, 0]), 0, None)
     ih = np.clip(np.minimum(a[:, None, 3], b[None, :, 3]) - np.maximum(a[:, None, 1], b[None, :, 1]), 0, None)
-    inter = iw * ih
-    area_a = (a[:, 2] - a[:, 0]) * (a[:, 3] - a[:, 1])
-    area_b = (b[:, 2] - b[:, 0]) * (b[:, 3] - b[:, 1])
-    union = area_a[:, None] + area_b[None, :] - inter
+    return iw * ih
+
+
+def iou_matrix(a: Any, b: Any, eps: float = 0.0) -> np.ndarray:
+    """Pairwise IoU of boxes ``a`` (N, 4) and ``b`` (M, 4), x0, y0, x1, y1: the one IoU of rollcam.
+
+    With ``eps`` 0 it is exact, and 0 where the union is empty; ``eps`` > 0 is Ultralytics' form,
+    intersection / (union + eps), which the evaluation's P and R follow (rollcam.host.evaluation.metrics).
+    """
+    inter = intersections(a, b)
+    union = box_areas(a)[:, None] + box_areas(b)[None, :] - inter
+    if eps:
+        return inter / (union + eps)
     return np.where(union > 0, inter / np.maximum(union, 1e-12), 0.0)
+
+
+def ioa_matrix(a: Any, b: Any, eps: float = 0.0) -> np.ndarray:
+    """Pairwise intersection over the area of ``a``'s box (N, M): how much of each box of ``a`` lies inside each
+    box of ``b`` (COCO's and Caltech's overlap with a crowd or ignore region). With ``eps`` 0 it is 0 for a box
+    of no area; ``eps`` > 0 divides by (area + eps) instead."""
+    inter = intersections(a, b)
+    area = box_areas(a)[:, None]
+    if eps:
+        return inter / (area + eps)
+    return np.where(area > 0, inter / np.maximum(area, 1e-12), 0.0)
 
 
 def nms(boxes: np.ndarray, scores: np.ndarray, classes: np.ndarray, iou_threshold: float,

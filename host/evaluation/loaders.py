@@ -20,7 +20,7 @@ from typing import Any
 import numpy as np
 import yaml
 from rollcam.common.errors import ConfigError
-from rollcam.sim.label_formats import check_box
+from rollcam.sim.label_formats import check_box, yolo_box, yolo_lines
 
 from .metrics import Dets, Truth
 
@@ -159,27 +159,15 @@ def _yolo_rows(label: Path, size: tuple[int, int]) -> tuple[list[int], list[list
     """Classes and pixel boxes of an Ultralytics label file (``class cx cy w h`` per line, normalised); a line
     that is not that (non-finite values, negative sizes, a class that is not an integer >= 0 included) is one
     ConfigError naming the file and the line."""
-    try:
-        text = label.read_text()
-    except (OSError, UnicodeDecodeError) as exc:
-        raise ConfigError(f"{str(label)!r}: cannot read YOLO labels ({exc})") from None
     classes, boxes = [], []
-    w, h = size
-    for ln, line in enumerate(text.splitlines(), start=1):
-        if not line.strip():
-            continue
-        at = f"{str(label)!r} line {ln}"
-        try:
-            vals = [float(v) for v in line.split()]
-        except ValueError:
-            raise ConfigError(f"{at}: not numbers: {line.strip()[:80]!r}") from None
+    for at, vals, line in yolo_lines(label, ConfigError):
         if len(vals) < 5:
             raise ConfigError(f"{at}: need 'class cx cy w h', got {len(vals)} values")
-        c, cx, cy, bw, bh = vals[:5]
+        c = vals[0]
         if not math.isfinite(c) or c != int(c) or c < 0:
             raise ConfigError(f"{at}: class must be an integer >= 0, got {line.split()[0]!r}")
         classes.append(int(c))
-        boxes.append(check_box((cx - bw / 2) * w, (cy - bh / 2) * h, bw * w, bh * h, size, at))
+        boxes.append(yolo_box(vals[1:5], size, at))
     return classes, boxes
 
 

@@ -16,6 +16,7 @@ from typing import Any
 
 import numpy as np
 from rollcam.common.errors import require
+from rollcam.host.detectors.ops import ioa_matrix, iou_matrix
 
 EPS = 1e-16
 
@@ -55,21 +56,9 @@ class Dets:
 
 
 def box_iou(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """IoU of every box in ``a`` (N, 4) with every box in ``b`` (M, 4), xyxy: (N, M)."""
-    lt = np.maximum(a[:, None, :2], b[None, :, :2])
-    rb = np.minimum(a[:, None, 2:], b[None, :, 2:])
-    inter = np.clip(rb - lt, 0, None).prod(2)
-    area_a = (a[:, 2:] - a[:, :2]).clip(0).prod(1)
-    area_b = (b[:, 2:] - b[:, :2]).clip(0).prod(1)
-    return inter / (area_a[:, None] + area_b[None, :] - inter + EPS)
-
-
-def _ioa(dets: np.ndarray, regions: np.ndarray) -> np.ndarray:
-    """Intersection over the detection's area (COCO's measure for crowd regions): (N, M)."""
-    lt = np.maximum(dets[:, None, :2], regions[None, :, :2])
-    rb = np.minimum(dets[:, None, 2:], regions[None, :, 2:])
-    inter = np.clip(rb - lt, 0, None).prod(2)
-    return inter / ((dets[:, 2:] - dets[:, :2]).clip(0).prod(1)[:, None] + EPS)
+    """IoU of every box in ``a`` (N, 4) with every box in ``b`` (M, 4), xyxy: (N, M), in Ultralytics' form
+    (intersection / (union + EPS)), as its P and R are computed."""
+    return iou_matrix(a, b, eps=EPS)
 
 
 def match_image(truth: Truth, dets: Dets, iou_thr: float = 0.5) -> tuple[np.ndarray, np.ndarray]:
@@ -95,7 +84,7 @@ def match_image(truth: Truth, dets: Dets, iou_thr: float = 0.5) -> tuple[np.ndar
             tp[m[:, 1]] = True
     if n and truth.ignore.any():
         rb, rc = truth.boxes[truth.ignore], truth.classes[truth.ignore]
-        on_region = ((_ioa(dets.boxes, rb) >= iou_thr) & (dets.classes[:, None] == rc[None, :])).any(1)
+        on_region = ((ioa_matrix(dets.boxes, rb, eps=EPS) >= iou_thr) & (dets.classes[:, None] == rc[None, :])).any(1)
         keep = tp | ~on_region
     return tp, keep
 

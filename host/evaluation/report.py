@@ -6,6 +6,8 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
+from rollcam.common.files import write_figure
+
 METRICS = ("P", "R", "mAP50", "mAP50_95")
 HEADERS = ("P", "R", "mAP@0.5", "mAP@0.5:0.95")
 STUDY_ROW_NAMES = {"normal": "Normal", "fast": "Faster"}
@@ -62,8 +64,6 @@ def format_table(doc: dict[str, Any]) -> str:
 
 def plot(doc: dict[str, Any], path: Path) -> None:
     """Grouped bars: one group per metric, one bar per row (speed x shutter); written atomically."""
-    import io
-
     import matplotlib
 
     matplotlib.use("Agg")
@@ -84,9 +84,4 @@ def plot(doc: dict[str, Any], path: Path) -> None:
     ax.legend(fontsize=8)
     ax.grid(axis="y", alpha=0.3)
     fig.tight_layout()
-    buf = io.BytesIO()
-    fig.savefig(buf, format="png", dpi=110)
-    plt.close(fig)
-    from rollcam.common.files import write_atomic
-
-    write_atomic(Path(path), buf.getvalue())
+    write_figure(Path(path), fig, dpi=110)

@@ -7,7 +7,6 @@ uncommitted changes, torch version), the timings, the per-epoch history and the 
 
 from __future__ import annotations
 
-import io
 import json
 import platform
 import shlex
@@ -15,7 +14,7 @@ import subprocess
 from pathlib import Path
 from typing import Any
 
-from rollcam.common.files import write_atomic
+from rollcam.common.files import write_atomic, write_figure
 
 from .config import TrainConfig
 from .data import DatasetInfo
@@ -149,7 +148,4 @@ def plot_curves(history: list[dict[str, Any]], path: Path, title: str) -> None:
         ax.grid(alpha=0.3)
     fig.suptitle(title, fontsize=10)
     fig.tight_layout()
-    buf = io.BytesIO()
-    fig.savefig(buf, format="png", dpi=100)
-    plt.close(fig)
-    write_atomic(path, buf.getvalue())
+    write_figure(path, fig, dpi=100)

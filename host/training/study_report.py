@@ -9,13 +9,12 @@ normal seeds; with 3 seeds a rough one, said in the report). Files: ``report.jso
 
 from __future__ import annotations
 
-import io
 import json
 import math
 from pathlib import Path
 from typing import Any
 
-from rollcam.common.files import write_atomic
+from rollcam.common.files import write_atomic, write_figure
 
 from .study_settings import SHUTTERS, StudySettings, subset
 
@@ -220,10 +219,7 @@ def plot_report(s: StudySettings, agg: dict[str, Any], path: Path) -> None:
     for ax in (a, b, c):
         ax.grid(alpha=0.3)
     fig.tight_layout()
-    buf = io.BytesIO()
-    fig.savefig(buf, format="png", dpi=100)
-    plt.close(fig)
-    write_atomic(path, buf.getvalue())
+    write_figure(path, fig, dpi=100)
 
 
 def write_report(root: Path, s: StudySettings, results: list[dict[str, Any]], timing: dict[str, Any],

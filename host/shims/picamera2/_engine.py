@@ -17,7 +17,7 @@ import time
 from collections.abc import Callable
 from typing import Any
 
-from rollcam.common.lifecycle import Worker
+from rollcam.common.lifecycle import Deadline, Worker
 
 from .request import CompletedRequest
 
@@ -64,7 +64,7 @@ class RequestQueue:
         """The oldest waiting request (``fresh``: one completed after this call); ``accept`` refuses stale
         ones, released at once so that their buffers take new frames (picamera2's flush does the same).
         TimeoutError after ``timeout_s``; RuntimeError when the camera stops."""
-        deadline = None if timeout_s is None else time.monotonic() + timeout_s
+        deadline = Deadline(None if timeout_s is None else max(timeout_s, 0.0))  # None: wait for ever
         discard: list[CompletedRequest] = []
         try:
             with self.cond:
@@ -83,10 +83,9 @@ class RequestQueue:
                             if self.failure is not None:
                                 raise RuntimeError(f"the camera failed: {self.failure!r}") from self.failure
                             raise RuntimeError("Camera is not running (start() it before capturing)")
-                        left = None if deadline is None else deadline - time.monotonic()
-                        if left is not None and left <= 0:
+                        if deadline.expired:
                             raise TimeoutError("no frame arrived in time")
-                        self.cond.wait(left)
+                        self.cond.wait(deadline.remaining())
                 finally:
                     self.readers -= 1
         finally:

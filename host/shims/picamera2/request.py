@@ -170,19 +170,15 @@ def write_image(file_output: Any, bgr: np.ndarray, ext: str, quality: int = 90, 
     """Encode a BGR picture (``ext``: jpg/jpeg through the codec table's one JPEG encoder, with an EXIF
     block ``exif`` (``Exif\\0\\0`` and a TIFF structure, as ``piexif.dump`` makes) when given; png, bmp, ...
     with OpenCV) to a path (atomically) or a writable file object."""
-    import cv2
     from rollcam.common.files import write_atomic
-    from rollcam.sim.codecs import codec
+    from rollcam.sim.codecs import codec, encode_image
 
     if ext in ("jpg", "jpeg"):
         data = codec("MJPG").encode(bgr, quality=quality).tobytes()
         if exif:  # an APP1 segment right after the start-of-image marker
             data = data[:2] + b"\xff\xe1" + struct.pack(">H", len(exif) + 2) + exif + data[2:]
     else:
-        ok, buf = cv2.imencode(f".{ext}", bgr)
-        if not ok:
-            raise RuntimeError(f"Cannot save an image as {ext!r}")
-        data = buf.tobytes()
+        data = encode_image(bgr, ext, error=RuntimeError, what="the image")
     if isinstance(file_output, (str, os.PathLike)):
         write_atomic(file_output, data)
     elif isinstance(file_output, io.IOBase) or hasattr(file_output, "write"):
