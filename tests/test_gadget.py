@@ -100,6 +100,7 @@ def test_the_configfs_tree_says_what_the_emulated_cameras_descriptors_say(tmp_pa
         assert (tmp_path / "rollcam" / "strings" / "0x409" / "product").read_text() == "rollcam emulated UVC camera\n"
         assert (tmp_path / "rollcam" / "UDC").read_text() == "usbip-vudc.0\n"
         assert (fn / "streaming_maxpacket").read_text() == "3072\n"
+        assert len("rollcam emulated UVC camera: " + (fn / "function_name").read_text().strip()) <= 31
         assert (fn / "streaming" / "uncompressed" / "nv12" / "guidFormat").read_bytes()[:4] == b"NV12"
         assert (fn / "streaming" / "uncompressed" / "nv12" / "bBitsPerPixel").read_text() == "12\n"
         for speed in ("fs", "hs", "ss"):
@@ -243,7 +244,7 @@ def test_probe_and_commit_negotiate_and_program_the_camera(producer):
 def test_unknown_requests_are_stalled_and_logged_once(producer, caplog):
     handler = SetupHandler(_controls(producer))
     brightness = setup(GET, C.GET_INFO, 0x02, C.UNIT_PROCESSING, 0, 1)  # Linux's function advertises it
-    with caplog.at_level(logging.INFO, logger="rollcam.gadget"):
+    with caplog.at_level(logging.WARNING, logger="rollcam.gadget"):
         assert handler.setup(brightness) is None
         assert handler.setup(brightness) is None
     assert len([r for r in caplog.records if "refused" in r.getMessage()]) == 1

@@ -37,6 +37,10 @@ MAX_PACKET = 3072
 """``streaming_maxpacket``: bytes per (micro)frame of the isochronous endpoint (1024 x 3 transactions at high
 speed: the most a high-speed isochronous endpoint carries)."""
 FORMAT_DIRS = {"MJPG": "mjpeg"}  # every other wire format is uncompressed
+FUNCTION_NAME = "RS"
+"""The function's iFunction string. uvcvideo names a camera "PRODUCT: FUNCTION" in 32 bytes (with its NUL);
+the function always has one (6.1's default "UVC Camera" makes "rollcam emulated UVC camera: UV"), so a short
+one keeps the name whole: "rollcam emulated UVC camera: RS"."""
 
 
 class GadgetError(DeviceError):
@@ -73,7 +77,8 @@ def layout(formats: Sequence[StreamFormat], identity: DeviceIdentity | None = No
     steps += [Step("write", f"{g}/strings/{LANG}/{name}", f"{text}\n") for name, text in (
         ("manufacturer", ident.manufacturer), ("product", ident.product), ("serialnumber", ident.serial))]
     fn = f"{g}/{FUNCTION}"
-    steps += [Step("mkdir", fn), Step("write", f"{fn}/streaming_maxpacket", f"{max_packet}\n"),
+    steps += [Step("mkdir", fn), Step("write", f"{fn}/function_name", f"{FUNCTION_NAME}\n"),
+              Step("write", f"{fn}/streaming_maxpacket", f"{max_packet}\n"),
               Step("write", f"{fn}/streaming_interval", f"{interval}\n"),
               Step("mkdir", f"{fn}/control/header/h")]
     steps += [Step("link", f"{fn}/control/class/{speed}/h", f"{fn}/control/header/h") for speed in ("fs", "ss")]

@@ -96,5 +96,5 @@ class SetupHandler:
         if kind not in self.logged:
             self.logged.add(kind)
             name = C.REQUEST_NAMES.get(setup.bRequest, f"request {setup.bRequest:#04x}")
-            log.info("UVC gadget: %s selector %#04x wIndex %#06x refused: %s (logged once)", name,
+            log.warning("UVC gadget: %s selector %#04x wIndex %#06x refused: %s (logged once)", name,
                      setup.wValue >> 8, setup.wIndex, exc)
