@@ -236,8 +236,8 @@ def serve(args: argparse.Namespace, camera_options: dict[str, str],
         if ps.frames or ps.remade else ""
     print(f"stopped; {st.frames} frames made{paced}, {st.skipped} skipped{extra}", file=sys.stderr)
     print(f"ledger: {ledger_line(camera)}", file=sys.stderr)
-    for r in running:
+    for r in running if args.faults else ():  # a transport that injects nothing (the gadget) has no stats
         stats = _fault_stats(r.injector if r.injector is not None else r.server)
-        if args.faults and stats:
+        if stats:
             print(f"faults injected on {r.name}: {stats}", file=sys.stderr)
     return 0

@@ -243,16 +243,21 @@ def test_probe_and_commit_negotiate_and_program_the_camera(producer):
 
 def test_unknown_requests_are_stalled_and_logged_once(producer, caplog):
     handler = SetupHandler(_controls(producer))
-    brightness = setup(GET, C.GET_INFO, 0x02, C.UNIT_PROCESSING, 0, 1)  # Linux's function advertises it
+    contrast = setup(GET, C.GET_INFO, 0x03, C.UNIT_PROCESSING, 0, 1)
     with caplog.at_level(logging.WARNING, logger="rollcam.gadget"):
-        assert handler.setup(brightness) is None
-        assert handler.setup(brightness) is None
+        assert handler.setup(contrast) is None
+        assert handler.setup(contrast) is None
     assert len([r for r in caplog.records if "refused" in r.getMessage()]) == 1
     assert handler.stalls == 2
     # The request error code control says why (UVC 1.5 4.2.1.2).
     code = handler.setup(setup(GET, C.GET_CUR, C.VC_REQUEST_ERROR_CODE_CONTROL, 0, 0, 1))
     assert code == bytes((C.ERR_INVALID_CONTROL,))
-    assert handler.setup(setup(SET, C.SET_CUR, 0x02, C.UNIT_PROCESSING, 0, 2)) is None  # before any data stage
+    assert handler.setup(setup(SET, C.SET_CUR, 0x03, C.UNIT_PROCESSING, 0, 2)) is None  # before any data stage
+    brightness = (C.PU_BRIGHTNESS_CONTROL, C.UNIT_PROCESSING, 0)  # Linux 6.1's function always advertises it
+    assert handler.setup(setup(GET, C.GET_INFO, *brightness, 1)) == bytes((C.INFO_GET,))  # read-only
+    assert [handler.setup(setup(GET, r, *brightness, 2)) for r in (C.GET_MIN, C.GET_MAX, C.GET_DEF, C.GET_RES)] \
+        == [b"\0\0", b"\0\0", b"\0\0", b"\1\0"]
+    assert handler.setup(setup(SET, C.SET_CUR, *brightness, 2)) is None
     assert handler.pending is None
     assert handler.setup(setup(0x80, C.REQ_GET_DESCRIPTOR, 1, 0, 0, 18)) is None  # not a class request
     assert handler.setup(setup(GET, C.SET_CUR, C.VS_PROBE_CONTROL, 0, 1, 26)) is None  # SET_CUR with IN bit

@@ -70,8 +70,13 @@ class SetupHandler:
         if (intf, entity) not in UNITS:
             raise self._error(Stall(f"no unit {entity} on interface {intf}", C.ERR_INVALID_UNIT))
         streaming = intf == 1 and selector in (C.VS_PROBE_CONTROL, C.VS_COMMIT_CONTROL)
-        if not streaming and (intf, entity, selector) not in SCALARS:
+        if streaming:
+            return
+        control = SCALARS.get((intf, entity, selector))
+        if control is None:
             raise self._error(Stall(f"unit {entity} has no control {selector:#04x}", C.ERR_INVALID_CONTROL))
+        if control.set is None:
+            raise self._error(Stall(f"control {selector:#04x} of unit {entity} is read-only", C.ERR_INVALID_REQUEST))
 
     def _error(self, exc: Stall) -> Stall:
         self.controls.error_code = exc.code
