@@ -311,3 +311,41 @@ def test_the_kernel_interface_layouts_are_linux_6_1s():
     assert uapi.event_data(event) == b"abc"
     ctypes.memmove(event.u.data, setup(GET, C.GET_CUR, 1, 0, 1, 26), 8)
     assert uapi.event_request(event) == setup(GET, C.GET_CUR, 1, 0, 1, 26)
+
+
+# ------------------------------------------------------------------------------------------ serve()
+class _Door:
+    """A transport with no fault statistics (as the gadget is), whose loop may have died."""
+
+    def __init__(self, error: Exception | None = None) -> None:
+        self.error, self.closed = error, False
+
+    def check(self) -> None:
+        if self.error is not None:
+            raise self.error
+
+    def close(self) -> None:
+        self.closed = True
+
+
+def test_serve_runs_a_transport_without_fault_stats_and_ends_when_its_loop_dies(capsys):
+    """`rollcam gadget` used to end every run with AttributeError: 'GadgetServer' object has no attribute
+    'fault_stats' (serve() asked every transport for it, faults or not)."""
+    import argparse
+
+    from rollcam.common.errors import DeviceError
+    from rollcam.common.faults import FaultPlan
+    from rollcam.host.emulate import Running, serve
+
+    def run(door: _Door) -> int:
+        args = argparse.Namespace(sensor="imx219", json=False, duration=0.0, faults=FaultPlan())
+        starter = lambda *_: Running("door", door, ["door: here"], {}, uses_pump=False)  # noqa: E731
+        return serve(args, {"size": "640x480"}, [("door", starter)], "rollcam gadget")
+
+    quiet = _Door()
+    assert run(quiet) == 0 and quiet.closed
+    assert "door: here" in capsys.readouterr().out
+    dead = _Door(DeviceError("the gadget's loop died"))
+    with pytest.raises(DeviceError, match="loop died"):
+        run(dead)
+    assert dead.closed
