@@ -136,6 +136,7 @@ def test_the_kernel_names_the_gadget_camera_in_full(gadget):
     _, out = gadget.guest.sh(f"cat /sys/class/video4linux/{gadget.node.removeprefix('/dev/')}/name; usbip port")
     assert out.splitlines()[0] == "rollcam emulated UVC camera: RS"  # 31 bytes: uvcvideo's name, not cut
     assert "1209:0001" in out
+    print("kernel log of the attach:", *gadget.kernel_log(), sep="\n  ")  # docs/gadget.md shows it
 
 
 @pytest.mark.parametrize("fourcc", ["YUYV", "MJPG", "NV12"])

@@ -275,8 +275,13 @@ class GadgetStream:
             self.controls.request(C.SET_CUR, 1, 0, C.VS_COMMIT_CONTROL, C.PROBE_LEN_15, self.controls.probe.pack())
             committed = self.controls.committed
         assert committed is not None
+        try:
+            self.queue = OutputQueue(self.fd, committed)
+        except OSError as exc:  # the host left, or the node refused the format: wait for the next stream
+            log.warning("UVC gadget: cannot start %s %dx%d on %s: %s", committed.fourcc, committed.width,
+                        committed.height, self.node, exc.strerror or exc)
+            return
         self.controls.streaming = True
-        self.queue = OutputQueue(self.fd, committed)
         self.ahead = RenderAhead(self.producer, lambda f: encode(f.data, committed.fourcc, committed.jpeg_quality),
                                  self.stats)
         self.stats.streams += 1
