@@ -349,3 +349,39 @@ def test_serve_runs_a_transport_without_fault_stats_and_ends_when_its_loop_dies(
     with pytest.raises(DeviceError, match="loop died"):
         run(dead)
     assert dead.closed
+
+
+# ------------------------------------------------------------------------------------------ the command line
+@pytest.mark.parametrize(("argv", "words"), [
+    (["gadget", "imx219", "--usb-id", "logitech"], "gadget: argument --usb-id: 'logitech' is not VID:PID in hex"),
+    (["gadget", "imx219", "--fps", "fast"], "gadget: argument --fps: 'fast' is invalid: expected a number > 0"),
+    (["gadget", "imx219", "--http", "host"], "gadget: argument --http: expected HOST:PORT, got 'host'"),
+    (["gadget"], "the following arguments are required: SENSOR"),
+])
+def test_gadget_usage_errors_are_one_line_and_exit_2(capsys, argv, words):
+    from rollcam.host.cli import main
+
+    assert main(argv) == 2
+    err = capsys.readouterr().err.splitlines()
+    assert len(err) == 1 and err[0].startswith("rollcam: error: ") and words in err[0], err
+
+
+def test_a_missing_usb_device_controller_is_named_and_exit_1(capsys):
+    from rollcam.host.cli import main
+
+    assert main(["gadget", "imx219", "--udc", "no-such-udc.0", "--size", "640x480"]) == 1
+    err = capsys.readouterr().err.splitlines()
+    assert len(err) == 1 and "no USB device controller 'no-such-udc.0' in /sys/class/udc" in err[0], err
+
+
+def test_gadget_takes_emulates_camera_and_door_flags():
+    from rollcam.host.cli import build_parser
+    from rollcam.host.commands.emulate import camera_options
+
+    parser, _ = build_parser()
+    args = parser.parse_args(["gadget", "imx219", "--fps", "15", "--scene", "flat", "--serial", "--http", ":0",
+                              "--udc", "fe980000.usb", "--usb-id", "046d:0825"])
+    assert args.run.__module__ == "rollcam.host.commands.gadget"
+    assert camera_options(args) == {"fps": "15", "scene": "flat"}
+    assert (args.udc, args.usb_id, args.serial, args.http) == ("fe980000.usb", (0x046D, 0x0825), True,
+                                                               ("127.0.0.1", 0))
