@@ -34,6 +34,7 @@ from typing import Any
 
 import guest as guest_module
 import pytest
+from test_kernel_uvc import KNOWN_COMPLIANCE_FAILURES as UVC_KNOWN
 from test_kernel_uvc import _buffers, compliance_failures
 
 pytestmark = pytest.mark.kernel
@@ -159,10 +160,7 @@ def test_probe_commit_and_stream_on_reach_the_gadget_which_sends_the_emulators_f
     assert frames
 
 
-KNOWN_COMPLIANCE_FAILURES = {
-    # v4l-utils 1.22.1 names NV12 'Y/CbCr 4:2:0', kernel 6.1 'Y/UV 4:2:0': the kernel's vivid fails it too.
-    "VIDIOC_ENUM_FMT/FRAMESIZES/FRAMEINTERVALS": "fmtdesc.description mismatch",
-}
+KNOWN_COMPLIANCE_FAILURES = {name: UVC_KNOWN[name] for name in ("VIDIOC_ENUM_FMT/FRAMESIZES/FRAMEINTERVALS",)}
 """v4l2-compliance failures on the gadget-backed uvcvideo node that the test accepts, each with its cause."""
 
 
