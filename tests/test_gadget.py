@@ -385,3 +385,19 @@ def test_gadget_takes_emulates_camera_and_door_flags():
     assert camera_options(args) == {"fps": "15", "scene": "flat"}
     assert (args.udc, args.usb_id, args.serial, args.http) == ("fe980000.usb", (0x046D, 0x0825), True,
                                                                ("127.0.0.1", 0))
+
+
+def test_the_functions_node_is_found_under_its_controller_without_opening_any(tmp_path):
+    """Opening a UVC function's node connects its gadget (closing disconnects it): the node is found in sysfs."""
+    from rollcam.emu.gadget.device import udc_nodes
+
+    devices, video = tmp_path / "devices", tmp_path / "video4linux"
+    for name, parent in (("video0", "pci0000:00/usb1/1-1/1-1:1.0"), ("video2", "platform/usbip-vudc.0/gadget.0"),
+                         ("video3", "platform/soc/fe980000.usb/gadget.0")):
+        (devices / parent).mkdir(parents=True)
+        (video / name).mkdir(parents=True)
+        (video / name / "device").symlink_to(devices / parent)
+    (video / "video9").mkdir()  # no device link (being removed): skipped
+    assert udc_nodes("usbip-vudc.0", video) == ["/dev/video2"]
+    assert udc_nodes("fe980000.usb", video) == ["/dev/video3"]
+    assert udc_nodes("dwc2", video) == []

@@ -37,8 +37,7 @@ from rollcam.emu.uvc.convert import encode, wire_layout
 from rollcam.emu.uvc.producer import FrameProducer
 from rollcam.emu.uvc.requests import Committed, VideoControls
 from rollcam.emu.uvc.stream import StreamStats
-from rollcam.emu.v4l2.abi import REQUESTS, Buffer, Event, Format, RequestBuffers, get_str
-from rollcam.emu.v4l2.abi import Capability as CapabilityStruct
+from rollcam.emu.v4l2.abi import REQUESTS, Buffer, Event, Format, RequestBuffers
 from rollcam.emu.v4l2.raw import fourcc_code
 
 from . import uapi
@@ -57,26 +56,18 @@ def ioctl(fd: int, name: str, arg: Any) -> Any:
     return arg
 
 
-def querycap(path: str) -> tuple[str, str, str]:
-    """(driver, card, bus_info) of a V4L2 node."""
-    fd = os.open(path, os.O_RDWR | os.O_NONBLOCK)
-    try:
-        cap = ioctl(fd, "QUERYCAP", CapabilityStruct())
-    finally:
-        os.close(fd)
-    return get_str(cap.driver), get_str(cap.card), get_str(cap.bus_info)
-
-
-def gadget_nodes(sysfs: Path = Path("/sys/class/video4linux")) -> list[str]:
-    """The /dev paths of the UVC function nodes (driver ``g_uvc``) there are now."""
+def udc_nodes(udc: str, sysfs: Path = Path("/sys/class/video4linux")) -> list[str]:
+    """The /dev paths of the V4L2 nodes whose device sits under USB device controller ``udc`` (a UVC gadget
+    function's node hangs off its gadget, a child of the controller). Read from sysfs without opening a node:
+    opening a UVC function's node connects its gadget to the bus, and closing it disconnects it."""
     out = []
     for entry in sorted(sysfs.glob("video*")):
-        path = f"/dev/{entry.name}"
         try:
-            if querycap(path)[0] == uapi.DRIVER:
-                out.append(path)
+            parents = (entry / "device").resolve(strict=True).parts
         except OSError:
             continue
+        if udc in parents:
+            out.append(f"/dev/{entry.name}")
     return out
 
 

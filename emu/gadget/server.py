@@ -20,12 +20,13 @@ from rollcam.emu.uvc import DeviceIdentity, FrameProducer, iso_payload_size, off
 from rollcam.emu.uvc.requests import VideoControls
 
 from .configfs import CONFIGFS, FUNCTION, MAX_PACKET, UDC_CLASS, Gadget, GadgetError, Tree, find_udc, layout
-from .device import GadgetStream, gadget_nodes
+from .device import GadgetStream, udc_nodes
 
 CLOCK_HZ = 48_000_000
 """dwClockFrequency of the function's VideoControl header as Linux's UVC function writes it (its default)."""
 FOURCCS = ("YUYV", "NV12", "MJPG")
 NODE_TIMEOUT_S = 10.0
+VIDEO_CLASS = Path("/sys/class/video4linux")
 
 
 class GadgetServer(Closeable):
@@ -34,7 +35,7 @@ class GadgetServer(Closeable):
     def __init__(self, producer: FrameProducer, *, udc: str | None = None, identity: DeviceIdentity | None = None,
                  fourccs: Sequence[str] = FOURCCS, max_packet: int = MAX_PACKET, name: str = "rollcam",
                  frame_log: Path | None = None, root: Path = CONFIGFS, udc_class: Path = UDC_CLASS,
-                 tree: Tree | None = None) -> None:
+                 video_class: Path = VIDEO_CLASS, tree: Tree | None = None) -> None:
         self.producer = producer
         self.formats, intervals = offered_formats(producer, fourccs)
         self.controls = VideoControls(producer, self.formats, intervals, CLOCK_HZ,
@@ -43,6 +44,7 @@ class GadgetServer(Closeable):
         self.gadget = Gadget(layout(self.formats, identity, gadget=name, udc=self.udc, max_packet=max_packet),
                              root, tree)
         self.frame_log = frame_log
+        self.video_class = video_class
         self.stream: GadgetStream | None = None
         self.worker: Worker | None = None
         self.node = ""
@@ -52,7 +54,7 @@ class GadgetServer(Closeable):
 
     def start(self) -> GadgetServer:
         """Configure and bind the gadget, open its node and start answering the host."""
-        before = set(gadget_nodes())
+        before = set(udc_nodes(self.udc, self.video_class))
         self.gadget.open()
         try:
             self.node = self._wait_node(before)
@@ -73,11 +75,11 @@ class GadgetServer(Closeable):
     def _wait_node(self, before: set[str]) -> str:
         deadline = Deadline(NODE_TIMEOUT_S)
         while True:
-            new = sorted(set(gadget_nodes()) - before)
+            new = sorted(set(udc_nodes(self.udc, self.video_class)) - before)
             if new:
                 return new[0]
             if deadline.expired:
-                raise GadgetError(f"the UVC function bound to {self.udc!r} made no V4L2 node (driver g_uvc) within "
+                raise GadgetError(f"the UVC function bound to {self.udc!r} made no V4L2 node under it within "
                                   f"{NODE_TIMEOUT_S:.0f} s: see dmesg")
             time.sleep(0.05)
 

@@ -31,8 +31,6 @@ UVC_MAX_REQUEST_SIZE = 64
 
 BUF_TYPE_VIDEO_OUTPUT = 2
 V4L2_PIX_FMT_YUYV = int.from_bytes(b"YUYV", "little")
-DRIVER = "g_uvc"
-"""``VIDIOC_QUERYCAP``'s driver name of the UVC function's node."""
 
 
 class UvcRequestData(C.Structure):
