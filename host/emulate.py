@@ -123,25 +123,47 @@ def start_usbip(args: argparse.Namespace, camera: Any, pump: Any) -> Running | N
                    {"host": addr_host, "port": addr_port, "busids": busids}, uses_pump=False)
 
 
+def start_gadget(args: argparse.Namespace, camera: Any, pump: Any) -> Running | None:
+    """The camera as a USB webcam through Linux's UVC gadget function (``rollcam gadget``)."""
+    from rollcam.emu.gadget import GadgetServer
+    from rollcam.emu.uvc import DeviceIdentity, FirmwareProducer
+
+    ids = {} if args.usb_id is None else dict(zip(("vendor_id", "product_id"), args.usb_id, strict=True))
+    server = GadgetServer(FirmwareProducer(camera), udc=args.udc, identity=DeviceIdentity(
+        serial=camera.serial_number, **ids), frame_log=args.frame_log).start()
+    ident = DeviceIdentity(**ids)
+    return Running("gadget", server, [f"USB gadget:    UVC camera {ident.vendor_id:04x}:{ident.product_id:04x} on "
+                                      f"{server.udc} (node {server.node})"],
+                   {"udc": server.udc, "node": server.node, "usb_id": f"{ident.vendor_id:04x}:{ident.product_id:04x}"},
+                   uses_pump=False)
+
+
 Starter = Callable[[argparse.Namespace, Any, Any], "Running | None"]
 TRANSPORTS: list[tuple[str, Starter]] = [("http", start_http), ("serial", start_serial), ("usbip", start_usbip)]
 """Transports in start order: (name = the option's dest, starter). A starter gets the parsed arguments, the
 FirmwareCamera and the shared FramePump, and returns None when its option was not given. A new transport is
 one entry here and its flags in ``rollcam.host.commands.emulate``."""
+GADGET_TRANSPORTS: list[tuple[str, Starter]] = [("gadget", start_gadget), ("http", start_http),
+                                                ("serial", start_serial)]
+"""``rollcam gadget``'s: the UVC gadget first (a board without one fails before any door opens), then the doors."""
 
 
-def wait_until_stopped(stop: threading.Event, duration_s: float | None, pump: Any, poll_s: float = 0.5) -> None:
-    """Wait for ``stop`` or ``duration_s``, looking every ``poll_s`` whether the frame pump is still alive: a
-    pump that died raises its error (a DeviceError) here, so ``emulate`` ends with it instead of serving
-    silence."""
+def wait_until_stopped(stop: threading.Event, duration_s: float | None, pump: Any, poll_s: float = 0.5,
+                       servers: tuple = ()) -> None:
+    """Wait for ``stop`` or ``duration_s``, looking every ``poll_s`` whether the frame pump (and each of
+    ``servers`` that has a ``check()``) is still alive: one that died raises its error (a DeviceError) here, so
+    ``emulate`` ends with it instead of serving silence."""
     from rollcam.common.lifecycle import Deadline
 
+    checks = [pump.check, *(s.check for s in servers if hasattr(s, "check"))]
     deadline = Deadline(duration_s)
     while not stop.wait(deadline.within(poll_s)):
-        pump.check()
+        for check in checks:
+            check()
         if deadline.expired:
             return
-    pump.check()
+    for check in checks:
+        check()
 
 
 def _fault_stats(server: Any) -> str:
@@ -165,21 +187,22 @@ def ledger_line(camera: Any) -> str:
     return f"{sent['bytes_per_frame']:,} B/frame sent ({doc['mode']}), {sent['mbit_s']:.2f} Mbit/s, {util}{pipes}"
 
 
-def serve(args: argparse.Namespace, camera_options: dict[str, str]) -> int:
+def serve(args: argparse.Namespace, camera_options: dict[str, str],
+          transports: list[tuple[str, Starter]] | None = None, command: str = "rollcam emulate") -> int:
     """Run the emulator of ``args.sensor`` programmed by ``camera_options`` (text, as in an emu: URI) on the
-    transports ``args`` asks for, until Ctrl-C, SIGTERM or ``args.duration`` (0: stop at once); every
-    transport is closed on the way out."""
+    ``transports`` (default ``TRANSPORTS``) that ``args`` asks for, until Ctrl-C, SIGTERM or ``args.duration``
+    (0: stop at once); every transport is closed on the way out."""
     from rollcam.emu.pump import FramePump
     from rollcam.firmware.camera import FirmwareCamera
     from rollcam.firmware.spec import CameraSpec
 
-    camera = FirmwareCamera(CameraSpec.from_options(args.sensor, camera_options, "rollcam emulate"))
+    camera = FirmwareCamera(CameraSpec.from_options(args.sensor, camera_options, command))
     stop = threading.Event()
     previous = signal.signal(signal.SIGTERM, lambda *_: stop.set())
     running: list[Running] = []
     pump = FramePump(camera, bands=1, name="rollcam-emulate")
     try:
-        for _name, starter in TRANSPORTS:
+        for _name, starter in TRANSPORTS if transports is None else transports:
             started = starter(args, camera, pump)
             if started is not None:
                 running.append(started)
@@ -198,7 +221,7 @@ def serve(args: argparse.Namespace, camera_options: dict[str, str]) -> int:
             print(f"  ledger:        {ledger_line(camera)}", flush=True)
             print("press Ctrl-C to stop", flush=True)
         with contextlib.suppress(KeyboardInterrupt):  # Ctrl-C is the normal way to stop a server
-            wait_until_stopped(stop, args.duration, pump)
+            wait_until_stopped(stop, args.duration, pump, servers=tuple(r.server for r in running))
     finally:
         pump.close()
         for r in reversed(running):
@@ -213,8 +236,8 @@ def serve(args: argparse.Namespace, camera_options: dict[str, str]) -> int:
         if ps.frames or ps.remade else ""
     print(f"stopped; {st.frames} frames made{paced}, {st.skipped} skipped{extra}", file=sys.stderr)
     print(f"ledger: {ledger_line(camera)}", file=sys.stderr)
-    for r in running:
+    for r in running if args.faults else ():  # a transport that injects nothing (the gadget) has no stats
         stats = _fault_stats(r.injector if r.injector is not None else r.server)
-        if args.faults and stats:
+        if stats:
             print(f"faults injected on {r.name}: {stats}", file=sys.stderr)
     return 0

@@ -11,8 +11,16 @@ Typical use::
 
 from __future__ import annotations
 
-from .descriptors import DescriptorSet, DeviceIdentity, FrameSize, StreamFormat, build_descriptors, parse_streaming
-from .device import Setup, UVCFunction
+from .descriptors import (
+    DescriptorSet,
+    DeviceIdentity,
+    FrameSize,
+    StreamFormat,
+    build_descriptors,
+    frame_rates,
+    parse_streaming,
+)
+from .device import Intervals, Setup, UVCFunction, iso_payload_size, offered_formats
 from .faults import Disconnected
 from .firmware_producer import FirmwareProducer
 from .payload import ParsedFrame, PayloadBatch, PayloadPacker, PayloadParser, pack_header, parse_header
@@ -29,6 +37,7 @@ __all__ = [
     "FirmwareProducer",
     "FrameProducer",
     "FrameSize",
+    "Intervals",
     "ParsedFrame",
     "PayloadBatch",
     "PayloadPacker",
@@ -42,6 +51,9 @@ __all__ = [
     "TransferTimeout",
     "UVCFunction",
     "build_descriptors",
+    "frame_rates",
+    "iso_payload_size",
+    "offered_formats",
     "offered_intervals_ns",
     "pack_header",
     "parse_header",

@@ -85,6 +85,14 @@ class DescriptorSet:
     clock_hz: int = 0
 
 
+def frame_rates(fmt: StreamFormat, size: FrameSize) -> tuple[int, int, int]:
+    """A frame descriptor's (dwMinBitRate, dwMaxBitRate, dwMaxVideoFrameBufferSize): the largest frame's bits at
+    the slowest and the fastest interval offered, and that frame's bytes."""
+    buf = fmt.frame_bytes(size)
+    iv = size.intervals_100ns
+    return buf * 8 * 10_000_000 // max(iv), buf * 8 * 10_000_000 // min(iv), buf
+
+
 def encode_max_packet(size: int) -> int:
     """wMaxPacketSize with the high-bandwidth bits (bits 12..11: extra transactions per microframe)."""
     per = min(size, 1024)
@@ -134,10 +142,8 @@ def _formats(formats: Sequence[StreamFormat]) -> bytes:
             frame_subtype = C.VS_FRAME_UNCOMPRESSED
         for ri, size in enumerate(fmt.frames, 1):
             iv = size.intervals_100ns
-            buf = fmt.frame_bytes(size)
-            rate = [buf * 8 * 10_000_000 // i for i in (max(iv), min(iv))]
             out += struct.pack(f"<BBBBBHHIIIIB{len(iv)}I", 26 + 4 * len(iv), C.CS_INTERFACE, frame_subtype, ri, 0,
-                               size.width, size.height, rate[0], rate[1], buf, size.default_100ns, len(iv), *iv)
+                               size.width, size.height, *frame_rates(fmt, size), size.default_100ns, len(iv), *iv)
         out += struct.pack("<BBBBBB", 6, C.CS_INTERFACE, C.VS_COLORFORMAT, 1, 1, 4)  # BT.709 / sRGB
     return out
 

@@ -85,17 +85,7 @@ class UVCFunction(Closeable):
         self.realtime = realtime
         self.transfer = transfer
         self._lock = threading.RLock()
-        intervals: dict[tuple[int, int], tuple[tuple[int, int], ...]] = {}
-        frames = []
-        for w, h in producer.sizes():
-            offered = list(producer.intervals_ns(w, h))  # the first is the default
-            ns = sorted(set(offered))
-            units = tuple(dict.fromkeys(_units(n) for n in ns))
-            frames.append((FrameSize(w, h, units, _units(offered[0])), ns))
-        formats = tuple(StreamFormat(f, tuple(fs for fs, _ in frames)) for f in fourccs)
-        for fi in range(1, len(formats) + 1):
-            for ri, (_, ns) in enumerate(frames, 1):
-                intervals[(fi, ri)] = tuple((_units(n), n) for n in ns)
+        formats, intervals = offered_formats(producer, fourccs)
         self.descriptors: DescriptorSet = build_descriptors(formats, identity, transfer=transfer, clock_hz=clock_hz)
         self.formats = formats
         self.clock_hz = clock_hz
@@ -217,8 +207,7 @@ class UVCFunction(Closeable):
     def _payload_size(self, frame_bytes: int, interval_ns: int) -> int:
         if self.transfer == "bulk":
             return self._bulk_payload
-        per_uframe = -(-frame_bytes * 1_000_000_000 // (interval_ns * MICROFRAMES_PER_S)) + 12
-        return min(per_uframe, max(self.descriptors.iso_packet_sizes))
+        return iso_payload_size(frame_bytes, interval_ns, max(self.descriptors.iso_packet_sizes))
 
     # ------------------------------------------------------------------------------------- stream
     @property
@@ -269,6 +258,34 @@ class UVCFunction(Closeable):
         (0, or -errno for a packet that failed)."""
         with self.plug.watch(self._halt_stream):
             return self._transfers.read_packets(endpoint, n_packets, max_len)
+
+
+Intervals = dict[tuple[int, int], tuple[tuple[int, int], ...]]
+"""(format index, frame index), 1-based -> the intervals offered: ((100 ns units, exact ns), ...), ascending."""
+
+
+def offered_formats(producer: FrameProducer, fourccs: Sequence[str]) -> tuple[tuple[StreamFormat, ...], Intervals]:
+    """The formats a camera offers (each of ``fourccs`` at every size of the producer, with its intervals) and
+    their exact periods: what the descriptors advertise and what probe/commit negotiates, from one place."""
+    intervals: Intervals = {}
+    frames = []
+    for w, h in producer.sizes():
+        offered = list(producer.intervals_ns(w, h))  # the first is the default
+        ns = sorted(set(offered))
+        units = tuple(dict.fromkeys(_units(n) for n in ns))
+        frames.append((FrameSize(w, h, units, _units(offered[0])), ns))
+    formats = tuple(StreamFormat(f, tuple(fs for fs, _ in frames)) for f in fourccs)
+    for fi in range(1, len(formats) + 1):
+        for ri, (_, ns) in enumerate(frames, 1):
+            intervals[(fi, ri)] = tuple((_units(n), n) for n in ns)
+    return formats, intervals
+
+
+def iso_payload_size(frame_bytes: int, interval_ns: int, max_packet: int) -> int:
+    """dwMaxPayloadTransferSize of an isochronous stream: a frame's bytes spread over the microframes of one
+    interval, plus a header, capped at the largest packet the endpoint carries per microframe."""
+    per_uframe = -(-frame_bytes * 1_000_000_000 // (interval_ns * MICROFRAMES_PER_S)) + 12
+    return min(per_uframe, max_packet)
 
 
 def _units(interval_ns: int) -> int:

@@ -77,6 +77,10 @@ def _ae_mode_set(vc: VideoControls, value: int) -> None:
         raise Stall(f"AE mode {value:#x} is not supported (manual 0x01 only)", C.ERR_INVALID_VALUE)
 
 
+def _fixed_zero(vc: VideoControls, req: int) -> int:
+    return 1 if req == C.GET_RES else 0
+
+
 def _error_get(vc: VideoControls, req: int) -> int:
     if req != C.GET_CUR:
         raise Stall("the request error code control answers GET_CUR only", C.ERR_INVALID_REQUEST)
@@ -90,6 +94,9 @@ SCALARS: dict[tuple[int, int, int], _Scalar] = {
         4, C.INFO_GET | C.INFO_SET, _exposure_get, _ranged_set("exposure_ns", _exposure_get, EXPOSURE_UNIT_NS)),
     (0, C.UNIT_PROCESSING, C.PU_GAIN_CONTROL): _Scalar(2, C.INFO_GET | C.INFO_SET, _gain_get,
                                                        _ranged_set("gain", _gain_get, 1)),
+    # Not a knob of this camera and not in rollcam's descriptors; Linux 6.1's UVC gadget function advertises it
+    # whatever its configfs says (bmControls read-only), so a host asks: a read-only 0, not a STALL per query.
+    (0, C.UNIT_PROCESSING, C.PU_BRIGHTNESS_CONTROL): _Scalar(2, C.INFO_GET, _fixed_zero),
 }
 """(interface, entity, selector) -> control. Entity 0 on interface 0 is the VideoControl interface itself."""
 

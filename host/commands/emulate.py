@@ -47,31 +47,46 @@ def add_parser(sub: Subparsers) -> argparse.ArgumentParser:
                        epilog="Example: rollcam emulate imx219 --scene street --speed fast --http 127.0.0.1:8080 "
                               "--serial")
     p.add_argument("sensor", metavar="SENSOR", help="sensor name (see 'rollcam list') or a .yaml path")
-    _camera_flags(p)
+    add_camera_flags(p)
     g = p.add_argument_group("transports")
+    add_door_flags(g, f"default when no transport is given: {DEFAULT_HTTP}")
+    g.add_argument("--usbip", type=_HOST_PORT, default=None, metavar="HOST:PORT",
+                   help="serve the camera as a UVC device over USB/IP (the usbip protocol port is 3240)")
+    g.add_argument("--usb-transfer", choices=("iso", "bulk"), default="iso",
+                   help="UVC streaming endpoint type for --usbip (default: %(default)s)")
+    add_usb_id_flag(g, "--usbip camera")
+    p.add_argument("--faults", type=value_type(FaultPlan.parse, "a fault plan like drop=2%,error=1%,seed=7"),
+                   default=FaultPlan(), metavar="PLAN",
+                   help="inject faults on every transport, reproducibly by seed, e.g. 'drop=2%%,stall=1%%,"
+                        "disconnect=300,seed=7' (docs/faults.md lists the keys and what each transport does)")
+    add_run_flags(p)
+    return p
+
+
+def add_door_flags(g: Any, http_default: str) -> None:
+    """The HTTP and serial doors' flags (``rollcam emulate``, ``rollcam gadget``) on ``g``, a parser or group."""
     g.add_argument("--http", type=_HOST_PORT, default=None, metavar="HOST:PORT",
-                   help="serve MJPEG over HTTP and the live view at / (default when no transport is given: "
-                        f"{DEFAULT_HTTP}; beyond loopback the view needs the token printed at start)")
+                   help=f"serve MJPEG over HTTP and the live view at / ({http_default}; beyond loopback the view "
+                        "needs the token printed at start)")
     g.add_argument("--quality", type=value_type(jpeg_quality), default=JPEG_QUALITY, metavar="Q",
                    help="JPEG quality of the HTTP stream, 1..100 (default: %(default)s)")
     g.add_argument("--detector", default=None, metavar="SPEC",
                    help="draw this detector's boxes on the live view (hog, ssdlite, onnx:PATH; needs --http)")
     g.add_argument("--serial", action="store_true", help="serve the control protocol on a pseudo-terminal")
-    g.add_argument("--usbip", type=_HOST_PORT, default=None, metavar="HOST:PORT",
-                   help="serve the camera as a UVC device over USB/IP (the usbip protocol port is 3240)")
-    g.add_argument("--usb-transfer", choices=("iso", "bulk"), default="iso",
-                   help="UVC streaming endpoint type for --usbip (default: %(default)s)")
+
+
+def add_usb_id_flag(g: Any, what: str) -> None:
+    """``--usb-id VID:PID`` of a USB camera."""
     g.add_argument("--usb-id", type=value_type(usb_id, "VID:PID in hex"), default=None, metavar="VID:PID",
-                   help="USB vendor and product ID of the --usbip camera, in hex (default: 1209:0001, a "
-                        "pid.codes test ID; give a real camera's to test a driver quirk for it)")
-    p.add_argument("--faults", type=value_type(FaultPlan.parse, "a fault plan like drop=2%,error=1%,seed=7"),
-                   default=FaultPlan(), metavar="PLAN",
-                   help="inject faults on every transport, reproducibly by seed, e.g. 'drop=2%%,stall=1%%,"
-                        "disconnect=300,seed=7' (docs/faults.md lists the keys and what each transport does)")
+                   help=f"USB vendor and product ID of the {what}, in hex (default: 1209:0001, a pid.codes test "
+                        "ID; give a real camera's to test a driver quirk for it)")
+
+
+def add_run_flags(p: argparse.ArgumentParser) -> None:
+    """``--duration`` and ``--json`` of a serving command."""
     p.add_argument("--duration", type=value_type(non_negative_float, "a number of seconds >= 0"), default=None,
                    metavar="SECONDS", help="stop after this long (0: as soon as every server is up)")
     p.add_argument("--json", action="store_true", help="print the endpoints as one JSON line")
-    return p
 
 
 def run(args: argparse.Namespace) -> int:
@@ -98,7 +113,7 @@ def _checked(parse: Callable[[str], Any]) -> Callable[[str], str]:
     return check
 
 
-def _camera_flags(p: argparse.ArgumentParser) -> None:
+def add_camera_flags(p: argparse.ArgumentParser) -> None:
     """One flag per camera option of ``rollcam.firmware.options.OPTIONS`` (the emu: URI's options)."""
     from rollcam.firmware.options import OPTIONS, as_text
 
