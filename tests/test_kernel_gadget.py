@@ -35,7 +35,7 @@ from typing import Any
 import guest as guest_module
 import pytest
 from test_kernel_uvc import KNOWN_COMPLIANCE_FAILURES as UVC_KNOWN
-from test_kernel_uvc import _buffers, compliance_failures
+from test_kernel_uvc import compliance_failures, v4l2_ctl_buffers
 
 pytestmark = pytest.mark.kernel
 
@@ -128,7 +128,7 @@ def stream(run: GadgetRun, fourcc: str, count: int = 2) -> tuple[list[tuple[int,
         "break; kill -0 $pid 2>/dev/null || break; sleep 0.1; done\n"
         "for i in $(seq 100); do kill -0 $pid 2>/dev/null || break; sleep 0.1; done\n"
         "kill $pid 2>/dev/null; wait; cat /tmp/cap.log", timeout_s=400)
-    frames = _buffers(log, out.read_bytes()) if out.exists() and out.stat().st_size else []
+    frames = v4l2_ctl_buffers(log, out.read_bytes()) if out.exists() and out.stat().st_size else []
     records = [json.loads(line) for line in run.frame_log_lines()[before:]]
     return frames, [r for r in records if r["fourcc"] == fourcc]
 

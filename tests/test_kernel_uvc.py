@@ -115,7 +115,7 @@ def attached_camera(guest, transfer: str, *, usb_id: tuple[int, int] | None = No
                      "done; exit 1")
 
 
-def _buffers(log: str, raw: bytes) -> list[tuple[int, bytes]]:
+def v4l2_ctl_buffers(log: str, raw: bytes) -> list[tuple[int, bytes]]:
     """(sequence, bytes) of each buffer ``v4l2-ctl --verbose --stream-to`` logged and wrote."""
     frames, pos = [], 0
     for m in re.finditer(r"cap dqbuf: \d+ seq:\s*(\d+) bytesused:\s*(\d+)", log):
@@ -133,7 +133,7 @@ def capture(guest, node: str, fourcc: str, width: int, height: int, count: int,
     _, log = guest.sh(f"v4l2-ctl -d {node} --set-fmt-video=width={width},height={height},pixelformat={fourcc} "
                       f"--stream-mmap=4 --stream-count={count} --stream-to=/mnt/{out} --verbose",
                       timeout_s=timeout_s)
-    frames = _buffers(log, (guest.xchg / out).read_bytes())
+    frames = v4l2_ctl_buffers(log, (guest.xchg / out).read_bytes())
     (guest.xchg / out).unlink()
     assert len(frames) == count
     return frames
@@ -150,8 +150,8 @@ def capture_with_metadata(guest, node: str, meta: str, count: int,
                       f"--stream-count={count + 4} --stream-to=/mnt/video.raw --verbose >/tmp/video.log 2>&1\n"
                       "wait; cat /tmp/video.log; echo ==META==; cat /tmp/meta.log", timeout_s=180)
     video_log, meta_log = log.split("==META==")
-    frames = _buffers(video_log, (guest.xchg / "video.raw").read_bytes())
-    metas = dict(_buffers(meta_log, (guest.xchg / "meta.raw").read_bytes()))
+    frames = v4l2_ctl_buffers(video_log, (guest.xchg / "video.raw").read_bytes())
+    metas = dict(v4l2_ctl_buffers(meta_log, (guest.xchg / "meta.raw").read_bytes()))
     assert len(metas) == count, meta_log[-2000:]
     return frames, metas
 
