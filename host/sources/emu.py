@@ -6,8 +6,9 @@ emulate`` flags, ``rollcam://`` URLs and the serial ``OPT``/``SCENE`` commands r
 ``fps``, ``shutter``, ``readout``, ``exposure_us``, ``gain`` (linear total), ``format``, ``physics``,
 ``blur_px``, ``noise``, the lens's and the ISP's (``vignette``, ``lens_blur_px``, ``defocus_px``, ``sharpen``,
 ``jpeg_quality``: docs/optics.md), ``serial``, ``noise_seed``, ``hflip``, ``vflip``, ``test_pattern``, the IMU's and the
-in-sensor network's (``insensor=personnet-raw``: frames carry its results, docs/insensor.md). Three more belong to
+in-sensor network's (``insensor=personnet-raw``: frames carry its results, docs/insensor.md). Five more belong to
 the source: ``start_ns`` (device clock at frame 0), ``frames`` (stop after N frames; endless by default) and
+``rig``/``rig_cam`` (camera ``rig_cam`` of a multi-camera rig, ``rollcam.firmware.rig``: docs/rigs.md) and
 ``faults`` (a ``rollcam.common.faults`` plan, e.g. ``faults=drop=5,error=2,seed=3``; in process ``drop`` skips
 frames (a gap in ``sequence``), ``error`` sets ``meta["error"]``, ``disconnect=N`` makes the read after N
 frames raise ``SourceError``, ``seqwrap``/``tswrap`` shift ``sequence``/``timestamp_ns``, the frame-counter
@@ -25,20 +26,21 @@ from __future__ import annotations
 import dataclasses
 from typing import Any
 
-from rollcam.common.errors import SourceError
+from rollcam.common.errors import ConfigError, SourceError
 from rollcam.common.faults import FaultInjector, FaultPlan
 from rollcam.common.values import non_negative_int, positive_int
 from rollcam.firmware.camera import FirmwareCamera, FramePlan
 from rollcam.firmware.imaging import encode
 from rollcam.firmware.labfaults import FrameFaults
 from rollcam.firmware.options import MAX_DEVICE_NS, OPTIONS, bounded
+from rollcam.firmware.rig import Rig, RigSpec
 from rollcam.firmware.spec import CameraSpec
 from rollcam.sim.frame import Frame
 from rollcam.sim.synthetic import SyntheticCamera
 
 from .base import CameraSource, SourceURI
 
-SOURCE_OPTIONS = {"start_ns", "frames", "faults"}
+SOURCE_OPTIONS = {"start_ns", "frames", "faults", "rig", "rig_cam"}
 """Options of the source itself; all others are the camera's (``rollcam.firmware.options.OPTIONS``)."""
 
 
@@ -50,6 +52,26 @@ def build_device(sensor_name: str, opts: SourceURI) -> tuple[FirmwareCamera, int
     spec = CameraSpec.from_options(sensor_name, camera_opts, owner, SourceError)
     start_ns = opts.get("start_ns", bounded(non_negative_int, 0, MAX_DEVICE_NS), 0)
     return FirmwareCamera(spec, clock=lambda: 0), start_ns
+
+
+def build_rig(device: FirmwareCamera, start_ns: int, opts: SourceURI) -> tuple[Rig, int] | None:
+    """The rig of an ``emu:`` URI's ``rig=`` option (``rollcam.firmware.rig``) and the camera ``rig_cam=`` picks
+    (default 0), with world time ``start_ns`` at its frame 0; None without ``rig=``."""
+    owner = f"source {opts.uri!r}"
+    text = opts.options.get("rig")
+    if text is None:
+        if "rig_cam" in opts.options:
+            raise SourceError(f"{owner}: rig_cam= needs rig=, e.g. rig=stereo,baseline=0.12&rig_cam=1")
+        return None
+    try:
+        rig = Rig(RigSpec.parse(text, owner), device.spec, start_ns)
+    except ConfigError as exc:
+        raise SourceError(str(exc)) from None
+    index = opts.get("rig_cam", non_negative_int, 0)
+    if index >= rig.rig.n:
+        raise SourceError(f"{owner}: rig_cam={index} is not a camera of the {rig.rig.n}-camera rig "
+                          f"(0..{rig.rig.n - 1})")
+    return rig, index
 
 
 def fault_plan(opts: SourceURI) -> FaultPlan:
@@ -79,6 +101,9 @@ class EmuSource(CameraSource):
     def __init__(self, uri: SourceURI) -> None:
         self.uri = uri.uri
         self.device, self.start_ns = build_device(uri.target, uri)
+        self.rig = build_rig(self.device, self.start_ns, uri)
+        if self.rig is not None:
+            self.device = self.rig[0].cameras[self.rig[1]]
         self.limit = uri.get("frames", positive_int)
         self.faults = FaultInjector(fault_plan(uri))
         self.fault_stats = self.faults.stats
@@ -108,12 +133,17 @@ class EmuSource(CameraSource):
             self.index += 1
         plan = FramePlan(self.index, self._schedule)
         error = inj.hit("error", self.index)
-        frames = [self._faulted(encode(self.device.render(plan, shutter), self.device.spec), error)
-                  for shutter in shutters]
+        frames = [self._faulted(encode(self._render(plan, shutter), self.device.spec), error) for shutter in shutters]
         frames = self.frame_faults.apply_all(frames, self.index)
         self.index += 1
         self.delivered += 1
         return frames
+
+    def _render(self, plan: FramePlan, shutter: str | None) -> Frame:
+        if self.rig is None:
+            return self.device.render(plan, shutter)
+        rig, index = self.rig
+        return rig.frame(index, plan.seq, shutter)
 
     def _faulted(self, frame: Frame, error: bool) -> Frame:
         p = self.faults.plan

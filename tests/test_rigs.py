@@ -1,0 +1,179 @@
+"""Multi-camera rigs (rollcam.firmware.rig, docs/rigs.md): one scene, N cameras, one world clock; hardware sync or
+free-running clocks with injected offset, drift and jitter, and what a host measures from the timestamps."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from rollcam.common.errors import ConfigError, SourceError
+from rollcam.firmware.rig import CameraClock, Rig, RigSpec, world_row_times_ns
+from rollcam.firmware.spec import CameraSpec
+from rollcam.host import open_camera
+
+FLAT = {"scene": "flat", "size": "160x120"}  # cheap to render: these tests are about time
+
+
+def frames(uri: str, n: int) -> list:
+    with open_camera(uri) as src:
+        return [src.read() for _ in range(n)]
+
+
+def test_hw_sync_starts_every_camera_at_one_world_instant_and_offsets_the_device_clocks_exactly():
+    rig = "stereo,baseline=0.12,sync=hw,offset_ns=0/1500"
+    left = frames(f"emu:imx219?scene=flat&size=160x120&rig={rig}&rig_cam=0", 4)
+    right = frames(f"emu:imx219?scene=flat&size=160x120&rig={rig}&rig_cam=1", 4)
+    for a, b in zip(left, right, strict=True):
+        assert a.sequence == b.sequence
+        assert a.meta["rig"]["world_start_ns"] == b.meta["rig"]["world_start_ns"]  # one trigger
+        assert b.timestamp_ns - a.timestamp_ns == 1500  # exactly the injected offset
+        assert np.array_equal(world_row_times_ns(a), world_row_times_ns(b))  # same sensor: same line timing
+        assert int(b.row_times_ns[0] - a.row_times_ns[0]) == 1500
+    # the device clock of camera 0 is the world clock; the frames come one trigger period apart
+    assert [f.timestamp_ns for f in left] == [f.meta["rig"]["world_start_ns"] for f in left]
+
+
+def test_hw_sync_with_drift_keeps_the_world_instant_and_the_device_skew_grows_by_the_ppm():
+    rig = Rig(RigSpec.parse("stereo,sync=hw,ppm=0/50"), CameraSpec.from_options("imx219", FLAT))
+    k = 3000  # 100 s of frames at 30 fps: the schedule is closed form, only two frames are rendered
+    a0, b0, ak, bk = rig.frame(0, 0), rig.frame(1, 0), rig.frame(0, k), rig.frame(1, k)
+    assert ak.meta["rig"]["world_start_ns"] == bk.meta["rig"]["world_start_ns"]
+    world = ak.meta["rig"]["world_start_ns"] - a0.meta["rig"]["world_start_ns"]
+    measured_ppm = ((bk.timestamp_ns - b0.timestamp_ns) - (ak.timestamp_ns - a0.timestamp_ns)) / world * 1e6
+    assert measured_ppm == pytest.approx(50, abs=1e-4)  # whole-ns device clocks: 1 ns in 100 s is 1e-5 ppm
+
+
+def test_free_running_drift_is_what_a_host_measures_from_the_timestamps():
+    # Camera 1's oscillator is 25 ppm fast, with 200 ns of timestamp jitter. A host compares the two streams'
+    # timestamps against the time they arrive (here the truth's world start) by a least-squares line.
+    rig_text = "stereo,sync=free,offset_ns=0/-40000,ppm=0/25,jitter_ns=0/200,seed=4"
+    rig = Rig(RigSpec.parse(rig_text), CameraSpec.from_options("imx219", FLAT))
+    seqs = [0, 1, 2, 500, 1000, 3000, 6000, 9000]
+    for cam, ppm in ((0, 0.0), (1, 25.0)):
+        got = [rig.frame(cam, k) for k in seqs]
+        world = np.array([f.meta["rig"]["world_start_ns"] for f in got], dtype=np.float64)
+        device = np.array([f.timestamp_ns for f in got], dtype=np.float64)
+        slope = np.polyfit(world - world[0], device - device[0], 1)[0]
+        assert (slope - 1) * 1e6 == pytest.approx(ppm, abs=0.01)  # 200 ns over 300 s: 0.001 ppm
+        # free-running: every camera's timestamps advance by its own nominal period on its own clock
+        timing = rig.cameras[cam].spec.settings.timing
+        start = [f.meta["rig"]["device_start_ns"] for f in got]
+        assert start[4] == timing.frame_start_ns(1000, start[0])
+        assert start[0] == (rig.rig.clocks[1].device_ns(0) if cam else 0)
+    # ... so the cameras' frames of one index drift apart in world time: camera 1's period is P / (1 + 25 ppm)
+    a, b = rig.frame(0, 9000), rig.frame(1, 9000)
+    skew = a.meta["rig"]["world_start_ns"] - b.meta["rig"]["world_start_ns"]
+    elapsed = a.meta["rig"]["world_start_ns"]
+    assert skew == pytest.approx(elapsed * 25e-6 / (1 + 25e-6), abs=2)
+
+
+def test_jitter_is_seeded_and_bounded():
+    clock = CameraClock(jitter_ns=300, seed=9, index=1)
+    draws = [clock.jitter(k) for k in range(2000)]
+    assert max(abs(j) for j in draws) <= 300
+    assert max(draws) > 250 and min(draws) < -250  # uniform over the whole range, not a sliver of it
+    assert draws == [CameraClock(jitter_ns=300, seed=9, index=1).jitter(k) for k in range(2000)]
+    assert draws != [CameraClock(jitter_ns=300, seed=10, index=1).jitter(k) for k in range(2000)]
+    rig = "stereo,jitter_ns=300,seed=9"
+    one = frames(f"emu:imx219?scene=flat&size=160x120&rig={rig}&rig_cam=1", 3)
+    two = frames(f"emu:imx219?scene=flat&size=160x120&rig={rig}&rig_cam=1", 3)
+    assert [f.timestamp_ns for f in one] == [f.timestamp_ns for f in two]
+    for f in one:
+        t = f.meta["rig"]
+        assert f.timestamp_ns - t["device_start_ns"] == t["jitter_ns"] and abs(t["jitter_ns"]) <= 300
+        assert int(f.row_times_ns[0]) - f.timestamp_ns == int(one[0].row_times_ns[0]) - one[0].timestamp_ns
+
+
+@pytest.mark.parametrize("w", [0, 1, 999, 10**9 + 7, 86_400 * 30 * 10**9])
+def test_clock_is_integer_and_its_inverse_is_exact(w):
+    clock = CameraClock(offset_ns=-1234, ppm=-17.5)
+    d = clock.device_ns(w)
+    assert isinstance(d, int) and d == (w - 1234) * (2_000_000 - 35) // 2_000_000  # floor, exact at any age
+    assert clock.world_ns(d) == w
+
+
+def test_stereo_disparity_of_a_still_walker_is_baseline_times_focal_over_depth():
+    b = 0.3
+    spec = CameraSpec.from_options("imx219", {"scene": "street", "speed": "static", "pedestrians": "6", "seed": "3",
+                                              "size": "640x480", "noise": "off"})
+    rig = Rig(RigSpec.parse(f"stereo,baseline={b}"), spec)
+    left, right = rig.frame(0, 0), rig.frame(1, 0)
+    cam = rig.cameras[0].synthetic.camera
+    assert rig.cameras[1].synthetic.camera.position_m[0] == pytest.approx(cam.position_m[0] + b * math.cos(
+        math.radians(cam.yaw_deg)))
+    yaw, pitch = math.radians(cam.yaw_deg), math.radians(cam.pitch_deg)
+    forward = np.array([math.sin(yaw) * math.cos(pitch), math.cos(yaw) * math.cos(pitch), math.sin(pitch)])
+    boxes = {o.id: o.box_gs for o in right.objects if o.box_gs is not None}
+    checked = 0
+    for walker in rig.cameras[0].synthetic.scene.pedestrians:
+        obj = next((o for o in left.objects if o.id == walker.id and o.box_gs is not None), None)
+        if obj is None or walker.id not in boxes or obj.visible < 0.9:
+            continue
+        x0, y0, x1, y1 = obj.box_gs
+        if x0 <= 1 or x1 >= 639 or boxes[walker.id][0] <= 1 or x1 - x0 < 6:
+            continue
+        half = walker.lane_half_length_m  # the walk's triangle wave at t = 0 (speed static)
+        m = walker.start_offset_m % (4 * half)
+        y = -half + m if m < 2 * half else half - (m - 2 * half)
+        root = np.array([walker.lane_x_m, walker.lane_y_center_m + y * walker.direction, walker.height_m / 2])
+        depth = float((root - np.array(cam.position_m)) @ forward)
+        expected = b * cam.fx_px / depth
+        truth = (x0 + x1) / 2 - (boxes[walker.id][0] + boxes[walker.id][2]) / 2
+        assert truth == pytest.approx(expected, abs=1.0)
+        assert expected > 3  # a disparity worth measuring
+        # and in the pixels: the left camera's patch of the walker is found that far left in the right image
+        r0, r1, c0, c1 = int(y0), int(math.ceil(y1)), int(x0), int(math.ceil(x1))
+        patch = left.data[r0:r1, c0:c1].astype(np.float64)
+        shifts = range(0, int(expected) + 6)
+        ssd = [np.sum((right.data[r0:r1, c0 - s:c1 - s].astype(np.float64) - patch) ** 2) if c0 - s >= 0 else np.inf
+               for s in shifts]
+        assert int(np.argmin(ssd)) == pytest.approx(expected, abs=1.0)
+        checked += 1
+    assert checked >= 1
+
+
+def test_surround_turns_each_camera_by_360_over_n():
+    rig = Rig(RigSpec.parse("surround,n=4,radius=0.1"), CameraSpec.from_options("imx219", FLAT))
+    yaws = [c.spec.mount_yaw_deg for c in rig.cameras]
+    assert yaws == [0.0, 90.0, 180.0, 270.0]
+    assert rig.cameras[0].spec.mount_m == (0.0, 0.0, 0.0)
+    assert [f.meta["rig"]["camera"] for f in (rig.frame(i, 0) for i in range(4))] == [0, 1, 2, 3]
+
+
+@pytest.mark.parametrize(("text", "message"), [
+    ("trinocular", "rig kind 'trinocular' is not one of"),
+    ("stereo,n=3", "a stereo rig has 2 cameras"),
+    ("stereo,sync=maybe", "rig sync='maybe' is not one of"),
+    ("stereo,ppm=1/2/3", "gives 3 values for 2 cameras"),
+    ("stereo,ppm=5000", "beyond +-1000"),
+    ("stereo,baseline=-1", "rig baseline='-1' is invalid"),
+    ("stereo,radius=1", "rig key 'radius' is not one of"),
+    ("surround,n=0", "rig n='0' is invalid"),
+    ("stereo,jitter_ns=x", "rig jitter_ns='x' is invalid"),
+    ("stereo,offset", "rig part 'offset' is not key=value"),
+])
+def test_bad_rig_text_is_a_one_line_error(text, message):
+    with pytest.raises(ConfigError, match=message.replace("+", r"\+")) as exc:
+        RigSpec.parse(text)
+    assert "\n" not in str(exc.value)
+    with pytest.raises(SourceError, match="source 'emu:imx219"):
+        open_camera(f"emu:imx219?scene=flat&rig={text}")
+
+
+def test_rig_cam_out_of_range_or_without_rig_is_an_error():
+    with pytest.raises(SourceError, match=r"rig_cam=2 is not a camera of the 2-camera rig \(0..1\)"):
+        open_camera("emu:imx219?scene=flat&rig=stereo&rig_cam=2")
+    with pytest.raises(SourceError, match="rig_cam= needs rig="):
+        open_camera("emu:imx219?scene=flat&rig_cam=1")
+
+
+def test_a_rig_cameras_frames_match_a_lone_camera_at_the_same_place_and_time():
+    # One home for the camera: a rig camera is the emu: camera moved by mount_m, rendered at its world time.
+    spec = CameraSpec.from_options("imx219", {**FLAT, "mount_m": "0.12,0,0"})
+    rig = Rig(RigSpec.parse("stereo,baseline=0.12,offset_ns=0/777"), CameraSpec.from_options("imx219", FLAT))
+    lone = frames("emu:imx219?scene=flat&size=160x120&mount_m=0.12,0,0", 2)[1]
+    got = rig.frame(1, 1)
+    assert spec == rig.cameras[1].spec
+    assert np.array_equal(lone.data, got.data)
+    assert got.timestamp_ns == lone.timestamp_ns + 777
