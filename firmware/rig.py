@@ -23,18 +23,21 @@ host sees (timestamp and row times on the camera's device clock) and its truth s
 from __future__ import annotations
 
 import dataclasses
+import time
 from dataclasses import dataclass
 from fractions import Fraction
 from typing import Any
 
 import numpy as np
-from rollcam.common.errors import ConfigError
+from rollcam.common.errors import ConfigError, DeviceError
+from rollcam.common.lifecycle import Closeable, Worker
 from rollcam.common.values import finite_float, non_negative_int, positive_float, positive_int
 from rollcam.sim.frame import Frame
+from rollcam.sim.timing import NS_PER_S
 
 from .camera import FirmwareCamera
 from .spec import CameraSpec
-from .stream import FramePlan, schedule_of
+from .stream import Clock, FramePlan, schedule_of
 
 KINDS = ("stereo", "surround")
 SYNCS = ("hw", "free")
@@ -155,6 +158,20 @@ class RigSpec:
         return cls(kind, n, value("baseline", positive_float, 0.12), value("radius", _non_negative, 0.0), sync,
                    clocks)
 
+    def to_json(self) -> dict[str, Any]:
+        """The declaration as plain JSON: kind, cameras, geometry, sync and each camera's clock."""
+        geometry = {"baseline_m": self.baseline_m} if self.kind == "stereo" else {"radius_m": self.radius_m}
+        return {"kind": self.kind, "n": self.n, **geometry, "sync": self.sync,
+                "clocks": [{"offset_ns": c.offset_ns, "ppm": c.ppm, "jitter_ns": c.jitter_ns} for c in self.clocks],
+                "seed": self.clocks[0].seed if self.clocks else 0}
+
+    def to_text(self) -> str:
+        """The declaration as ``parse`` reads it back."""
+        geometry = f"baseline={self.baseline_m!r}" if self.kind == "stereo" else f"n={self.n},radius={self.radius_m!r}"
+        per = {k: "/".join(str(getattr(c, k)) for c in self.clocks) for k in ("offset_ns", "ppm", "jitter_ns")}
+        return (f"{self.kind},{geometry},sync={self.sync}," + ",".join(f"{k}={v}" for k, v in per.items())
+                + f",seed={self.clocks[0].seed}")
+
     def mount(self, index: int) -> tuple[tuple[float, float, float], float]:
         """Camera ``index``'s place in the rig: (right, forward, up) m from camera 0's, and its yaw in degrees."""
         if self.kind == "stereo":
@@ -185,9 +202,7 @@ class Rig:
     def __init__(self, rig: RigSpec, spec: CameraSpec, epoch_ns: int = 0) -> None:
         self.rig = rig
         self.epoch_ns = int(epoch_ns)
-        self.cameras = [FirmwareCamera(dataclasses.replace(spec, mount_m=rig.mount(i)[0],
-                                                           mount_yaw_deg=rig.mount(i)[1]), clock=lambda: 0)
-                        for i in range(rig.n)]
+        self.cameras = [FirmwareCamera(placed(rig, spec, i), clock=lambda: 0) for i in range(rig.n)]
         periods = {c.spec.settings.timing.frame_period_ns for c in self.cameras}
         if rig.sync == "hw" and max(periods) > self.cameras[0].spec.settings.timing.frame_period_ns:
             raise ConfigError("rig sync=hw: a camera's frame is longer than the trigger period")
@@ -212,6 +227,96 @@ class Rig:
         world = self.world_start_ns(index, seq)
         frame = camera.render(FramePlan(seq, schedule_of(camera.spec, world, seq)), shutter)
         return stamp(frame, self.rig.clocks[index], world, self.device_start_ns(index, seq), self.rig)
+
+
+@dataclass(frozen=True)
+class RigTimebase:
+    """Camera ``clock.index`` of ``rig`` as a ``FirmwareCamera`` holds it (``timebase=``): its frames, planned on
+    its own device clock, are rendered at world time and stamped back (``stamp``)."""
+
+    rig: RigSpec
+    clock: CameraClock
+
+    def world_ns(self, device_ns: int) -> int:
+        """World time of a device time of this camera."""
+        return self.clock.world_ns(device_ns)
+
+    def stamp(self, frame: Frame, world_start_ns: int, device_start_ns: int) -> Frame:
+        """``frame`` (rendered from ``world_start_ns``) as this camera reports it."""
+        return stamp(frame, self.clock, world_start_ns, device_start_ns, self.rig)
+
+
+class LiveRig(Closeable):
+    """A rig in real time, for ``rollcam emulate --rig``: one ``FirmwareCamera`` per camera on its own device
+    clock (the world clock ``world`` through its ``CameraClock``, counted from the rig's start), streaming.
+    ``sync=hw`` runs the trigger line: a thread that at camera 0's nominal frame starts on the world clock
+    triggers every camera (trigger mode external) at that instant on its own clock."""
+
+    def __init__(self, rig: RigSpec, spec: CameraSpec, world: Clock = time.monotonic_ns) -> None:
+        self.rig = rig
+        self.world = world
+        self.world0 = world()
+        self.cameras = [FirmwareCamera(placed(rig, spec, i), clock=self._device_clock(c), boot_ns=0,
+                                       timebase=RigTimebase(rig, c)) for i, c in enumerate(rig.clocks)]
+        self.triggers = 0
+        self._trigger: Worker | None = None
+
+    def _device_clock(self, clock: CameraClock) -> Clock:
+        return lambda: clock.device_ns(self.world() - self.world0)
+
+    def world_ns(self) -> int:
+        """World time since the rig started."""
+        return self.world() - self.world0
+
+    def start(self) -> None:
+        """Stream every camera (and, under hardware sync, start the trigger line)."""
+        for cam in self.cameras:
+            if self.rig.sync == "hw":
+                cam.set_trigger_mode("external")
+            cam.stream_on()
+        if self.rig.sync == "hw":
+            self._trigger = Worker(self._run_trigger, name="rollcam-rig-trigger", wrap=DeviceError)
+            self._trigger.start()
+
+    def check(self) -> None:
+        """Re-raise what stopped the trigger line, if anything did."""
+        if self._trigger is not None:
+            self._trigger.check()
+
+    def _run_trigger(self) -> None:
+        assert self._trigger is not None
+        timing = self.cameras[0].spec.settings.timing
+        stop = self._trigger.stop_event
+        k = 0
+        while True:
+            lead = self.world_ns()
+            if timing.frame_start_ns(k) < lead - timing.frame_period_ns:
+                # The line was held up (a busy machine, or the servers' start): go on from the next slot
+                # rather than fire a burst, as a trigger generator that never fell behind would.
+                k = lead * timing.pixel_rate_hz // (timing.frame_period_pck * NS_PER_S)
+                while timing.frame_start_ns(k) < lead:
+                    k += 1
+            at = timing.frame_start_ns(k)
+            if at > lead and stop.wait((at - lead) / 1e9):
+                return
+            if stop.is_set():
+                return
+            for cam, clock in zip(self.cameras, self.rig.clocks, strict=True):
+                cam.trigger(clock.device_ns(at))
+            self.triggers += 1
+            k += 1
+
+    def _close(self) -> None:
+        if self._trigger is not None:
+            self._trigger.close()
+        for cam in self.cameras:
+            cam.stream_off()
+
+
+def placed(rig: RigSpec, spec: CameraSpec, index: int) -> CameraSpec:
+    """``spec`` moved to camera ``index``'s place in ``rig``."""
+    offset, yaw = rig.mount(index)
+    return dataclasses.replace(spec, mount_m=offset, mount_yaw_deg=yaw)
 
 
 def stamp(frame: Frame, clock: CameraClock, world_start_ns: int, device_start_ns: int, rig: RigSpec) -> Frame:

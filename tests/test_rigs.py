@@ -3,7 +3,12 @@ free-running clocks with injected offset, drift and jitter, and what a host meas
 
 from __future__ import annotations
 
+import json
 import math
+import signal
+import subprocess
+import sys
+import threading
 
 import numpy as np
 import pytest
@@ -177,3 +182,68 @@ def test_a_rig_cameras_frames_match_a_lone_camera_at_the_same_place_and_time():
     assert spec == rig.cameras[1].spec
     assert np.array_equal(lone.data, got.data)
     assert got.timestamp_ns == lone.timestamp_ns + 777
+
+
+def _read_stream(url: str, n: int, out: list) -> None:
+    with open_camera(url) as src:
+        while len(out) < n:
+            frame = src.read()
+            if frame is None:
+                return
+            out.append(frame)
+
+
+def test_rollcam_emulate_serves_a_hw_synchronised_rig_whose_skew_a_client_measures_from_the_timestamps():
+    # Two cameras of one rig on two MJPEG servers; camera 1's clock is 5 ms ahead and 1000 ppm fast. A client
+    # reading both streams pairs frames of one trigger by timestamp and measures offset and drift from them.
+    cmd = [sys.executable, "-m", "rollcam.host.cli", "emulate", "imx219", "--size", "160x120", "--scene", "flat",
+           "--rig", "stereo,sync=hw,offset_ns=0/5000000,ppm=0/1000", "--http", "127.0.0.1:0", "--json",
+           "--duration", "120"]
+    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        info = json.loads(proc.stdout.readline())
+        assert info["rig"]["clocks"][1] == {"offset_ns": 5000000, "ppm": 1000.0, "jitter_ns": 0}
+        urls = [c["http"]["url"] for c in info["cameras"]]
+        assert len(set(urls)) == 2
+        got: list[list] = [[], []]
+        readers = [threading.Thread(target=_read_stream, args=(u, 40, g)) for u, g in zip(urls, got, strict=True)]
+        for t in readers:
+            t.start()
+        for t in readers:
+            t.join(timeout=90)
+        proc.send_signal(signal.SIGINT)
+        _out, err = proc.communicate(timeout=30)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    assert proc.returncode == 0, err
+    assert "camera 1: stopped;" in err
+    clock = CameraClock(offset_ns=5000000, ppm=1000.0)
+    timing = CameraSpec.from_options("imx219", FLAT).settings.timing
+    a_ts = {f.timestamp_ns for f in got[0]}
+    pairs = []
+    for f in got[1]:
+        world = clock.world_ns(f.timestamp_ns)  # every camera-1 frame started on a trigger slot of the world clock
+        k = round(world / timing.frame_period_ns)
+        assert clock.device_ns(timing.frame_start_ns(k)) == f.timestamp_ns
+        if timing.frame_start_ns(k) in a_ts:  # camera 0's clock is the world's: its frame of the same trigger
+            pairs.append((timing.frame_start_ns(k), f.timestamp_ns))
+    assert len(pairs) >= 10, (len(got[0]), len(got[1]))
+    a = np.array([p[0] for p in pairs], dtype=np.float64)
+    skew = np.array([p[1] - p[0] for p in pairs], dtype=np.float64)
+    slope, intercept = np.polyfit(a - a[0], skew, 1)
+    assert slope * 1e6 == pytest.approx(1000, abs=0.01)  # the drift a host measures: 1 ns over > 0.3 s
+    assert intercept == pytest.approx(clock.device_ns(int(a[0])) - a[0], abs=2)
+    assert skew.min() >= 5000000
+
+
+@pytest.mark.parametrize(("rig", "message"), [
+    ("stereo,sync=maybe", "rig sync='maybe' is not one of ('hw', 'free')"),
+    ("quad", "rig kind 'quad' is not one of ('stereo', 'surround')"),
+])
+def test_rollcam_emulate_bad_rig_is_a_one_line_usage_error(rig, message):
+    proc = subprocess.run([sys.executable, "-m", "rollcam.host.cli", "emulate", "imx219", "--rig", rig],
+                          capture_output=True, text=True, timeout=60)
+    assert proc.returncode == 2
+    lines = proc.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("rollcam: error:") and message in lines[0], proc.stderr

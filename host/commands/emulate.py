@@ -12,6 +12,7 @@ import argparse
 from collections.abc import Callable
 from typing import Any
 
+from rollcam.common.errors import ConfigError
 from rollcam.common.faults import FaultPlan
 from rollcam.common.values import (
     JPEG_QUALITY,
@@ -68,6 +69,11 @@ def add_parser(sub: Subparsers) -> argparse.ArgumentParser:
                    default=FaultPlan(), metavar="PLAN",
                    help="inject faults on every transport, reproducibly by seed, e.g. 'drop=2%%,stall=1%%,"
                         "disconnect=300,seed=7' (docs/faults.md lists the keys and what each transport does)")
+    p.add_argument("--rig", type=value_type(_rig, "a rig like stereo,baseline=0.12,sync=hw,offset_ns=0/1500"),
+                   default=None, metavar="RIG",
+                   help="emulate every camera of a multi-camera rig of one scene, camera i on each transport's port "
+                        "+ i: 'stereo,baseline=0.12' or 'surround,n=4', sync=hw|free, per-camera offset_ns=, ppm=, "
+                        "jitter_ns= (one value or one per camera joined by '/'), seed= (docs/rigs.md)")
     p.add_argument("--duration", type=value_type(non_negative_float, "a number of seconds >= 0"), default=None,
                    metavar="SECONDS", help="stop after this long (0: as soon as every server is up)")
     p.add_argument("--json", action="store_true", help="print the endpoints as one JSON line")
@@ -81,6 +87,15 @@ def run(args: argparse.Namespace) -> int:
     if not any(getattr(args, name) for name in TRANSPORT_FLAGS):
         args.http = parse_host_port(DEFAULT_HTTP)
     return serve(args, camera_options(args))
+
+
+def _rig(text: str) -> Any:
+    from rollcam.firmware.rig import RigSpec
+
+    try:
+        return RigSpec.parse(text, "--rig")
+    except ConfigError as exc:  # argparse shows a ValueError's text as the one-line error
+        raise ValueError(str(exc).removeprefix("--rig: ")) from None
 
 
 def _flag(name: str) -> str:
