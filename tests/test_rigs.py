@@ -13,7 +13,8 @@ import threading
 import numpy as np
 import pytest
 from rollcam.common.errors import ConfigError, SourceError
-from rollcam.firmware.rig import CameraClock, Rig, RigSpec, world_row_times_ns
+from rollcam.firmware.camera import FirmwareCamera
+from rollcam.firmware.rig import CameraClock, LiveRig, Rig, RigSpec, world_row_times_ns
 from rollcam.firmware.spec import CameraSpec
 from rollcam.host import open_camera
 
@@ -247,3 +248,37 @@ def test_rollcam_emulate_bad_rig_is_a_one_line_usage_error(rig, message):
     assert proc.returncode == 2
     lines = proc.stderr.strip().splitlines()
     assert len(lines) == 1 and lines[0].startswith("rollcam: error:") and message in lines[0], proc.stderr
+
+
+def test_a_live_free_running_rig_reads_each_cameras_clock_from_the_one_world_clock():
+    # The world clock is passed in (a test's own), so the device clocks and the frames' truth are exact.
+    now = [10**12]
+    rig = LiveRig(RigSpec.parse("stereo,sync=free,offset_ns=0/-2000000,ppm=0/300"),
+                  CameraSpec.from_options("imx219", FLAT), world=lambda: now[0])
+    left, right = rig.cameras
+    now[0] += 123_456_789
+    assert left.clock_ns() == 123_456_789
+    assert right.clock_ns() == rig.rig.clocks[1].device_ns(123_456_789) == (123_456_789 - 2_000_000) * 1_000_300 \
+        // 1_000_000
+    rig.start()
+    try:
+        for cam, clock in zip(rig.cameras, rig.rig.clocks, strict=True):
+            plan = cam.plan_next()
+            frame = cam.render(plan)
+            truth = frame.meta["rig"]
+            assert frame.timestamp_ns == plan.start_ns == cam.clock_ns()  # started now, on its own clock
+            assert truth["world_start_ns"] == 123_456_789 == clock.world_ns(plan.start_ns)
+            assert cam.plan_next().start_ns - plan.start_ns == cam.spec.settings.timing.frame_start_ns(1)
+    finally:
+        rig.close()
+    rig.close()  # twice is harmless
+
+
+def test_a_trigger_at_a_device_instant_starts_the_frame_then():
+    now = [5_000_000]
+    cam = FirmwareCamera(CameraSpec.from_options("imx219", FLAT), clock=lambda: now[0], boot_ns=0)
+    cam.set_trigger_mode("external")
+    cam.stream_on()
+    assert cam.trigger(4_000_000) == 4_000_000  # the line's edge, stamped before the call came
+    assert cam.plan_next().start_ns == 4_000_000
+    assert cam.trigger() == max(5_000_000, cam.schedule(4_000_000).frame_due_ns(0))
