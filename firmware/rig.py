@@ -203,9 +203,7 @@ class Rig:
         self.rig = rig
         self.epoch_ns = int(epoch_ns)
         self.cameras = [FirmwareCamera(placed(rig, spec, i), clock=lambda: 0) for i in range(rig.n)]
-        periods = {c.spec.settings.timing.frame_period_ns for c in self.cameras}
-        if rig.sync == "hw" and max(periods) > self.cameras[0].spec.settings.timing.frame_period_ns:
-            raise ConfigError("rig sync=hw: a camera's frame is longer than the trigger period")
+        check_trigger(rig, spec)
 
     def world_start_ns(self, index: int, seq: int) -> int:
         """World time camera ``index``'s frame ``seq`` starts exposing its first line."""
@@ -253,26 +251,29 @@ class LiveRig(Closeable):
     triggers every camera (trigger mode external) at that instant on its own clock."""
 
     def __init__(self, rig: RigSpec, spec: CameraSpec, world: Clock = time.monotonic_ns) -> None:
+        check_trigger(rig, spec)
         self.rig = rig
         self.world = world
-        self.world0 = world()
+        # World time starts where no camera's clock reads below 0 (a device clock starts at 0 and counts up).
+        self.world0 = world() - max(0, -min(c.offset_ns for c in rig.clocks))
         self.cameras = [FirmwareCamera(placed(rig, spec, i), clock=self._device_clock(c), boot_ns=0,
                                        timebase=RigTimebase(rig, c)) for i, c in enumerate(rig.clocks)]
         self.triggers = 0
         self._trigger: Worker | None = None
+        if rig.sync == "hw":  # before any transport streams them: no frame starts but on the trigger line
+            for cam in self.cameras:
+                cam.set_trigger_mode("external")
 
     def _device_clock(self, clock: CameraClock) -> Clock:
         return lambda: clock.device_ns(self.world() - self.world0)
 
     def world_ns(self) -> int:
-        """World time since the rig started."""
+        """World time since the rig started (plus the largest negative offset, so every device clock is >= 0)."""
         return self.world() - self.world0
 
     def start(self) -> None:
         """Stream every camera (and, under hardware sync, start the trigger line)."""
         for cam in self.cameras:
-            if self.rig.sync == "hw":
-                cam.set_trigger_mode("external")
             cam.stream_on()
         if self.rig.sync == "hw":
             self._trigger = Worker(self._run_trigger, name="rollcam-rig-trigger", wrap=DeviceError)
@@ -311,6 +312,19 @@ class LiveRig(Closeable):
             self._trigger.close()
         for cam in self.cameras:
             cam.stream_off()
+
+
+def check_trigger(rig: RigSpec, spec: CameraSpec) -> None:
+    """Under ``sync=hw`` a camera takes a trigger only once the frame before is read out (``DeviceStream.trigger``,
+    as a sensor in external-trigger mode does), so exposure plus readout must fit the trigger period: ConfigError
+    naming both when they do not."""
+    if rig.sync != "hw":
+        return
+    sched = schedule_of(spec, 0)
+    busy, period = sched.frame_due_ns(0), spec.settings.timing.frame_period_ns
+    if busy > period:
+        raise ConfigError(f"rig sync=hw: exposure + readout ({busy} ns) is longer than the trigger period "
+                          f"({period} ns); shorten exposure_us or lower fps")
 
 
 def placed(rig: RigSpec, spec: CameraSpec, index: int) -> CameraSpec:

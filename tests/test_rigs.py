@@ -144,6 +144,12 @@ def test_surround_turns_each_camera_by_360_over_n():
     yaws = [c.spec.mount_yaw_deg for c in rig.cameras]
     assert yaws == [0.0, 90.0, 180.0, 270.0]
     assert rig.cameras[0].spec.mount_m == (0.0, 0.0, 0.0)
+    # around a centre 0.1 m behind camera 0: camera 1 to its right-back, camera 2 0.2 m behind it, facing back
+    assert rig.cameras[1].spec.mount_m == pytest.approx((0.1, -0.1, 0.0))
+    assert rig.cameras[2].spec.mount_m == pytest.approx((0.0, -0.2, 0.0))
+    c0, c2 = rig.cameras[0].synthetic.camera, rig.cameras[2].synthetic.camera
+    assert math.dist(c0.position_m, c2.position_m) == pytest.approx(0.2)
+    assert c2.yaw_deg == pytest.approx(c0.yaw_deg + 180)
     assert [f.meta["rig"]["camera"] for f in (rig.frame(i, 0) for i in range(4))] == [0, 1, 2, 3]
 
 
@@ -194,20 +200,18 @@ def _read_stream(url: str, n: int, out: list) -> None:
             out.append(frame)
 
 
-def test_rollcam_emulate_serves_a_hw_synchronised_rig_whose_skew_a_client_measures_from_the_timestamps():
-    # Two cameras of one rig on two MJPEG servers; camera 1's clock is 5 ms ahead and 1000 ppm fast. A client
-    # reading both streams pairs frames of one trigger by timestamp and measures offset and drift from them.
+def _serve_rig(rig: str, n: int) -> tuple[dict, list[list], str]:
+    """``rollcam emulate --rig RIG`` on free ports, ``n`` frames read from each camera's MJPEG stream at once by the
+    ``http://`` source, then stopped by SIGINT: the JSON line, the frames per camera and stderr."""
     cmd = [sys.executable, "-m", "rollcam.host.cli", "emulate", "imx219", "--size", "160x120", "--scene", "flat",
-           "--rig", "stereo,sync=hw,offset_ns=0/5000000,ppm=0/1000", "--http", "127.0.0.1:0", "--json",
-           "--duration", "120"]
+           "--rig", rig, "--http", "127.0.0.1:0", "--json", "--duration", "120"]
     proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     try:
         info = json.loads(proc.stdout.readline())
-        assert info["rig"]["clocks"][1] == {"offset_ns": 5000000, "ppm": 1000.0, "jitter_ns": 0}
         urls = [c["http"]["url"] for c in info["cameras"]]
-        assert len(set(urls)) == 2
-        got: list[list] = [[], []]
-        readers = [threading.Thread(target=_read_stream, args=(u, 40, g)) for u, g in zip(urls, got, strict=True)]
+        assert len(set(urls)) == len(urls) == info["rig"]["n"]
+        got: list[list] = [[] for _ in urls]
+        readers = [threading.Thread(target=_read_stream, args=(u, n, g)) for u, g in zip(urls, got, strict=True)]
         for t in readers:
             t.start()
         for t in readers:
@@ -219,6 +223,14 @@ def test_rollcam_emulate_serves_a_hw_synchronised_rig_whose_skew_a_client_measur
             proc.kill()
     assert proc.returncode == 0, err
     assert "camera 1: stopped;" in err
+    return info, got, err
+
+
+def test_rollcam_emulate_serves_a_hw_synchronised_rig_whose_skew_a_client_measures_from_the_timestamps():
+    # Two cameras of one rig on two MJPEG servers; camera 1's clock is 5 ms ahead and 1000 ppm fast. A client
+    # reading both streams pairs frames of one trigger by timestamp and measures offset and drift from them.
+    info, got, _err = _serve_rig("stereo,sync=hw,offset_ns=0/5000000,ppm=0/1000", 40)
+    assert info["rig"]["clocks"][1] == {"offset_ns": 5000000, "ppm": 1000.0, "jitter_ns": 0}
     clock = CameraClock(offset_ns=5000000, ppm=1000.0)
     timing = CameraSpec.from_options("imx219", FLAT).settings.timing
     a_ts = {f.timestamp_ns for f in got[0]}
@@ -236,6 +248,22 @@ def test_rollcam_emulate_serves_a_hw_synchronised_rig_whose_skew_a_client_measur
     assert slope * 1e6 == pytest.approx(1000, abs=0.01)  # the drift a host measures: 1 ns over > 0.3 s
     assert intercept == pytest.approx(clock.device_ns(int(a[0])) - a[0], abs=2)
     assert skew.min() >= 5000000
+
+
+def test_rollcam_emulate_serves_a_free_running_rig_each_camera_on_its_own_clock():
+    # Camera 1's clock is 1 s ahead and 1000 ppm fast. Each stream's timestamps advance by exactly its own
+    # nominal frame period on its own clock, and against the host's arrival times (the same monotonic clock the
+    # emulator's world runs on) the client sees camera 1 about 1.001 s ahead.
+    _info, got, _err = _serve_rig("stereo,sync=free,offset_ns=0/1000000000,ppm=0/1000", 30)
+    timing = CameraSpec.from_options("imx219", FLAT).settings.timing
+    lead = []
+    for frames_ in got:
+        assert len(frames_) >= 10
+        first = frames_[0]
+        for f in frames_[1:]:
+            assert f.timestamp_ns - first.timestamp_ns == timing.frame_start_ns(f.sequence - first.sequence)
+        lead.append(np.median([f.timestamp_ns - f.meta["arrival_ns"] for f in frames_]))
+    assert lead[1] - lead[0] == pytest.approx(1_001_000_000, abs=15_000_000)  # delivery latency is common
 
 
 @pytest.mark.parametrize(("rig", "message"), [
@@ -256,10 +284,11 @@ def test_a_live_free_running_rig_reads_each_cameras_clock_from_the_one_world_clo
     rig = LiveRig(RigSpec.parse("stereo,sync=free,offset_ns=0/-2000000,ppm=0/300"),
                   CameraSpec.from_options("imx219", FLAT), world=lambda: now[0])
     left, right = rig.cameras
+    assert right.clock_ns() == 0  # the world starts where no camera's clock reads below 0
     now[0] += 123_456_789
-    assert left.clock_ns() == 123_456_789
-    assert right.clock_ns() == rig.rig.clocks[1].device_ns(123_456_789) == (123_456_789 - 2_000_000) * 1_000_300 \
-        // 1_000_000
+    world = rig.world_ns()
+    assert world == 123_456_789 + 2_000_000 == left.clock_ns()
+    assert right.clock_ns() == rig.rig.clocks[1].device_ns(world) == 123_456_789 * 1_000_300 // 1_000_000
     rig.start()
     try:
         for cam, clock in zip(rig.cameras, rig.rig.clocks, strict=True):
@@ -267,7 +296,7 @@ def test_a_live_free_running_rig_reads_each_cameras_clock_from_the_one_world_clo
             frame = cam.render(plan)
             truth = frame.meta["rig"]
             assert frame.timestamp_ns == plan.start_ns == cam.clock_ns()  # started now, on its own clock
-            assert truth["world_start_ns"] == 123_456_789 == clock.world_ns(plan.start_ns)
+            assert truth["world_start_ns"] == world == clock.world_ns(plan.start_ns)
             assert cam.plan_next().start_ns - plan.start_ns == cam.spec.settings.timing.frame_start_ns(1)
     finally:
         rig.close()
@@ -282,3 +311,9 @@ def test_a_trigger_at_a_device_instant_starts_the_frame_then():
     assert cam.trigger(4_000_000) == 4_000_000  # the line's edge, stamped before the call came
     assert cam.plan_next().start_ns == 4_000_000
     assert cam.trigger() == max(5_000_000, cam.schedule(4_000_000).frame_due_ns(0))
+
+
+def test_hw_sync_refuses_an_exposure_and_readout_longer_than_the_trigger_period():
+    with pytest.raises(SourceError, match=r"rig sync=hw: exposure \+ readout \(\d+ ns\) is longer than the trigger"):
+        open_camera("emu:imx219?scene=flat&size=160x120&exposure_us=30000&rig=stereo")
+    frames("emu:imx219?scene=flat&size=160x120&exposure_us=30000&rig=stereo,sync=free", 1)  # free-running: fine
