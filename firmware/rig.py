@@ -22,6 +22,7 @@ host sees (timestamp and row times on the camera's device clock) and its truth s
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import time
 from dataclasses import dataclass
@@ -275,7 +276,12 @@ class LiveRig(Closeable):
         """Stream every camera (and, under hardware sync, start the trigger line)."""
         for cam in self.cameras:
             cam.stream_on()
-        if self.rig.sync == "hw":
+        self.start_trigger()
+
+    def start_trigger(self) -> None:
+        """Under hardware sync, start the trigger line (idempotent): it triggers the cameras that stream, so
+        a camera a program streams later (``rollcam run``) joins it at the next slot."""
+        if self.rig.sync == "hw" and self._trigger is None:
             self._trigger = Worker(self._run_trigger, name="rollcam-rig-trigger", wrap=DeviceError)
             self._trigger.start()
 
@@ -303,7 +309,9 @@ class LiveRig(Closeable):
             if stop.is_set():
                 return
             for cam, clock in zip(self.cameras, self.rig.clocks, strict=True):
-                cam.trigger(clock.device_ns(at))
+                if cam.streaming:
+                    with contextlib.suppress(DeviceError):  # stopped meanwhile: that camera misses this slot
+                        cam.trigger(clock.device_ns(at))
             self.triggers += 1
             k += 1
 

@@ -12,11 +12,14 @@ import threading
 
 import numpy as np
 import pytest
+from programs import python_under
 from rollcam.common.errors import ConfigError, SourceError
 from rollcam.firmware.camera import FirmwareCamera
 from rollcam.firmware.rig import CameraClock, LiveRig, Rig, RigSpec, world_row_times_ns
 from rollcam.firmware.spec import CameraSpec
 from rollcam.host import open_camera
+from rollcam.host.preload import serving
+from rollcam.host.sources.emu import device_spec
 
 FLAT = {"scene": "flat", "size": "160x120"}  # cheap to render: these tests are about time
 
@@ -317,3 +320,49 @@ def test_hw_sync_refuses_an_exposure_and_readout_longer_than_the_trigger_period(
     with pytest.raises(SourceError, match=r"rig sync=hw: exposure \+ readout \(\d+ ns\) is longer than the trigger"):
         open_camera("emu:imx219?scene=flat&size=160x120&exposure_us=30000&rig=stereo")
     frames("emu:imx219?scene=flat&size=160x120&exposure_us=30000&rig=stereo,sync=free", 1)  # free-running: fine
+
+
+def test_rollcam_run_gives_a_program_a_hw_synchronised_stereo_pair_as_two_v4l2_devices():
+    # Two /dev/video nodes of one rig (one trigger line, camera 1's clock 5 ms ahead and 1000 ppm fast); the
+    # program reads both with rollcam's v4l2: source (ioctls through the preload library) and gets the skew
+    # in the buffers' timestamps (struct timeval: whole microseconds).
+    rig = "stereo,sync=hw,offset_ns=0/5000000,ppm=0/1000"
+    base = f"emu:imx219?scene=flat&size=160x120&rig={rig}"
+    with serving([("/dev/video0", base + "&rig_cam=0"), ("/dev/video1", base + "&rig_cam=1")]) as server:
+        r = python_under(server, """
+            import json
+            from rollcam.host import open_camera
+            out = {"0": [], "1": []}
+            with open_camera("v4l2:/dev/video0") as a, open_camera("v4l2:/dev/video1") as b:
+                while min(len(v) for v in out.values()) < 15:
+                    for key, cam in (("0", a), ("1", b)):
+                        f = cam.read()
+                        out[key].append(int(f.timestamp_ns))
+            print(json.dumps(out))
+        """)
+    clock = CameraClock(offset_ns=5000000, ppm=1000.0)
+    timing = CameraSpec.from_options("imx219", FLAT).settings.timing
+    slots = {}
+    for ts in r["0"]:  # camera 0's clock is the world's: each frame on a trigger slot
+        k = round(ts / timing.frame_period_ns)
+        assert abs(ts - timing.frame_start_ns(k)) < 1000
+        slots[k] = ts
+    pairs = []
+    for ts in r["1"]:
+        k = round(clock.world_ns(ts) / timing.frame_period_ns)
+        assert abs(ts - clock.device_ns(timing.frame_start_ns(k))) < 1000  # its own clock's reading of the slot
+        if k in slots:
+            pairs.append((slots[k], ts))
+    assert len(pairs) >= 5
+    a = np.array([p[0] for p in pairs], dtype=np.float64)
+    skew = np.array([p[1] - p[0] for p in pairs], dtype=np.float64)
+    assert np.all(np.abs(skew - (5000000 * 1.001 + a * 1e-3)) < 2000)  # offset and drift, to the microsecond
+
+
+def test_doors_without_rigs_refuse_rig_and_one_rig_camera_is_one_device():
+    with pytest.raises(SourceError, match="rig= is for emu: sources, rollcam emulate --rig and rollcam run devices"):
+        device_spec("emu:imx219?rig=stereo")  # the picamera2 stand-in's door
+    uri = "emu:imx219?scene=flat&size=160x120&rig=stereo&rig_cam=1"
+    with pytest.raises(ConfigError, match="is a rig camera another device already serves"), \
+            serving([("/dev/video0", uri), ("/dev/video1", uri)]):
+        pass

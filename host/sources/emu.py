@@ -54,24 +54,37 @@ def build_device(sensor_name: str, opts: SourceURI) -> tuple[FirmwareCamera, int
     return FirmwareCamera(spec, clock=lambda: 0), start_ns
 
 
+def rig_choice(options: dict[str, str], owner: str, error: type[Exception] = SourceError
+               ) -> tuple[RigSpec, int] | None:
+    """The ``rig=`` declaration of a URI's options and the camera ``rig_cam=`` picks (default 0); None without
+    ``rig=``. Bad text raises ``error`` naming ``owner``."""
+    text = options.get("rig")
+    if text is None:
+        if "rig_cam" in options:
+            raise error(f"{owner}: rig_cam= needs rig=, e.g. rig=stereo,baseline=0.12&rig_cam=1")
+        return None
+    try:
+        rig = RigSpec.parse(text, owner)
+        index = non_negative_int(options.get("rig_cam", "0"))
+    except ConfigError as exc:
+        raise error(str(exc)) from None
+    except ValueError as exc:
+        raise error(f"{owner}: rig_cam={options['rig_cam']!r} is invalid ({exc})") from None
+    if index >= rig.n:
+        raise error(f"{owner}: rig_cam={index} is not a camera of the {rig.n}-camera rig (0..{rig.n - 1})")
+    return rig, index
+
+
 def build_rig(device: FirmwareCamera, start_ns: int, opts: SourceURI) -> tuple[Rig, int] | None:
     """The rig of an ``emu:`` URI's ``rig=`` option (``rollcam.firmware.rig``) and the camera ``rig_cam=`` picks
     (default 0), with world time ``start_ns`` at its frame 0; None without ``rig=``."""
-    owner = f"source {opts.uri!r}"
-    text = opts.options.get("rig")
-    if text is None:
-        if "rig_cam" in opts.options:
-            raise SourceError(f"{owner}: rig_cam= needs rig=, e.g. rig=stereo,baseline=0.12&rig_cam=1")
+    choice = rig_choice(opts.options, f"source {opts.uri!r}")
+    if choice is None:
         return None
     try:
-        rig = Rig(RigSpec.parse(text, owner), device.spec, start_ns)
+        return Rig(choice[0], device.spec, start_ns), choice[1]
     except ConfigError as exc:
-        raise SourceError(str(exc)) from None
-    index = opts.get("rig_cam", non_negative_int, 0)
-    if index >= rig.rig.n:
-        raise SourceError(f"{owner}: rig_cam={index} is not a camera of the {rig.rig.n}-camera rig "
-                          f"(0..{rig.rig.n - 1})")
-    return rig, index
+        raise SourceError(f"source {opts.uri!r}: {exc}") from None
 
 
 def fault_plan(opts: SourceURI) -> FaultPlan:
@@ -82,15 +95,27 @@ def fault_plan(opts: SourceURI) -> FaultPlan:
 def device_spec(source: str, error: type[Exception] = SourceError) -> tuple[CameraSpec, FaultPlan]:
     """The spec and ``faults=`` plan of a device described by a sensor name or an ``emu:`` URI, for the doors that
     build a device of their own from one (``rollcam run``'s /dev/videoN, the picamera2 stand-in); ``error`` is
-    what a bad source raises. The in-process source's own options (``start_ns``, ``frames``) are refused."""
+    what a bad source raises. The in-process source's own options (``start_ns``, ``frames``) are refused, and so
+    is ``rig=`` (``rig_device_spec`` is for the doors that build a rig's cameras)."""
+    spec, plan, choice = rig_device_spec(source, error)
+    if choice is not None:
+        raise error(f"source {source!r}: rig= is for emu: sources, rollcam emulate --rig and rollcam run devices")
+    return spec, plan
+
+
+def rig_device_spec(source: str, error: type[Exception] = SourceError
+                    ) -> tuple[CameraSpec, FaultPlan, tuple[RigSpec, int] | None]:
+    """``device_spec``'s spec and plan, and the URI's ``rig=``/``rig_cam=`` choice (None without ``rig=``): the
+    spec is the rig's common one, before the camera is placed (``rollcam.firmware.rig.placed``)."""
     from . import parse_uri
 
     uri = parse_uri(source if source.startswith("emu:") else f"emu:{source}")
     owner = f"source {source!r}"
     if uri.scheme != "emu" or not uri.target:
         raise error(f"{owner}: name a sensor or an emu: URI, e.g. emu:imx219?size=640x480")
-    camera_opts = {k: v for k, v in uri.options.items() if k != "faults"}
-    return CameraSpec.from_options(uri.target, camera_opts, owner, error), fault_plan(uri)
+    choice = rig_choice(uri.options, owner, error)
+    camera_opts = {k: v for k, v in uri.options.items() if k not in ("faults", "rig", "rig_cam")}
+    return CameraSpec.from_options(uri.target, camera_opts, owner, error), fault_plan(uri), choice
 
 
 class EmuSource(CameraSource):
