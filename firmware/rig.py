@@ -18,6 +18,9 @@ its own clock. ``sync=free``: each camera runs its own frame timing on its own c
 drifting camera's frames walk away from the others'. The scene is rendered at world time; the frame says what the
 host sees (timestamp and row times on the camera's device clock) and its truth says when in the world that was
 (``meta["rig"]``: ``world_start_ns``, the exact device start before jitter, and the jitter).
+
+``Rig`` reads a rig's frames without pacing (the ``emu:`` source's ``rig=``); ``LiveRig`` runs one in real time,
+each camera a ``FirmwareCamera`` on its own device clock (``rollcam emulate --rig``, ``rollcam run`` devices).
 """
 
 from __future__ import annotations
