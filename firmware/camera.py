@@ -37,14 +37,18 @@ class FirmwareCamera(DeviceStream):
     """An emulated camera: its spec, controls and registers, formats, and frame production."""
 
     def __init__(self, spec: CameraSpec | SensorConfig | str, *, clock: Clock | None = None,
-                 serial_number: str | None = None, **fields: Any) -> None:
+                 serial_number: str | None = None, boot_ns: int | None = None, timebase: Any = None,
+                 **fields: Any) -> None:
         if not isinstance(spec, CameraSpec):
             if serial_number is not None:
                 fields["serial"] = serial_number
             spec = CameraSpec.create(spec, **fields)
         elif fields or serial_number is not None:
             raise ConfigError(f"give a CameraSpec or its fields, not both ({sorted(fields)})")
-        super().__init__(clock)
+        super().__init__(clock, boot_ns)
+        self.timebase = timebase
+        """None, or a rig camera's clock (``rollcam.firmware.rig.RigTimebase``): frames are rendered at the world
+        time of their device start and stamped on the device clock."""
         self.spec = spec
         self.sensor = spec.sensor
         self.traits = traits_for(self.sensor.name)
@@ -250,7 +254,11 @@ class FirmwareCamera(DeviceStream):
         """Frame ``plan.seq`` from the current spec at its lines' device times (optionally under the other shutter,
         for paired GS/RS data), flips applied, with the in-sensor results if any (``insensor``); and that spec."""
         spec = self._spec_for_frame()
-        return spec, self.insensor.make(spec, self.imager, plan.seq, plan.start_ns, shutter, self.stats)
+        if self.timebase is None:
+            return spec, self.insensor.make(spec, self.imager, plan.seq, plan.start_ns, shutter, self.stats)
+        world = self.timebase.world_ns(plan.start_ns)
+        frame = self.insensor.make(spec, self.imager, plan.seq, world, shutter, self.stats)
+        return spec, self.timebase.stamp(frame, world, plan.start_ns)
 
 
 def default_interval(spec: CameraSpec, width: int, height: int) -> Fraction:

@@ -76,7 +76,7 @@ def synthetic_camera(spec: CameraSpec) -> SyntheticCamera:
     return SyntheticCamera(spec.sensor, scene_of(spec), spec.camera, settings=spec.settings, pixel_format=fourcc,
                            physics=spec.uses_physics, blur_px=spec.blur_px or None, noise=spec.noise,
                            serial=spec.serial, noise_seed=spec.noise_seed, hflip=spec.hflip, vflip=spec.vflip,
-                           optics=spec.lens, defects=spec.defects)
+                           optics=spec.lens, defects=spec.defects, mount=(*spec.mount_m, spec.mount_yaw_deg))
 
 
 class Imager:

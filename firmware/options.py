@@ -287,6 +287,9 @@ OPTIONS: dict[str, Option] = {o.name: o for o in (
            f"format=MJPG the encoder's quality (0: {JPEG_QUALITY})"),
     Option("serial", _text, "0001", "device serial number (fixes the DSNU/PRNU patterns)"),
     Option("noise_seed", _seed, 0, "temporal noise seed"),
+    Option("mount_m", _vector3, (0.0, 0.0, 0.0), "the camera moved from the scene camera, as one camera of a "
+                                                   "rig: right,forward,up in m (docs/rigs.md)"),
+    Option("mount_yaw_deg", finite_float, 0.0, "the camera turned right from the scene camera, degrees (a rig's)"),
     Option("hflip", parse_bool, False, "mirror left-right (raw: the Bayer order changes as the sensor's does)"),
     Option("vflip", parse_bool, False, "flip top-bottom: the scene is read bottom-up, first line still first"),
     Option("imu", parse_bool, False, "IMU beside the camera (gyro + accelerometer on the device clock): on | off; "

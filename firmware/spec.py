@@ -71,6 +71,8 @@ class CameraSpec:
     seed: int = 0
     scene_options: tuple[tuple[str, Any], ...] = ()
     camera: str = "0"
+    mount_m: tuple[float, float, float] = (0.0, 0.0, 0.0)  # a rig camera's place: right, forward, up from camera
+    mount_yaw_deg: float = 0.0  # and its turn to the right (rollcam.firmware.rig)
     imu: ImuParams | None = None
     rs_correct: str = "none"
     insensor: InSensorConfig | None = None
@@ -88,6 +90,8 @@ class CameraSpec:
         fix(self, "shutter", s.shutter)
         fix(self, "readout", s.readout.value)
         fix(self, "gain", float(self.gain))
+        fix(self, "mount_m", tuple(float(v) for v in self.mount_m))
+        fix(self, "mount_yaw_deg", float(self.mount_yaw_deg))
         fix(self, "pixel_format", self._base_format(self.pixel_format))
         fix(self, "scene_options", tuple(sorted(dict(self.scene_options).items())))
         if isinstance(self.insensor, InSensorConfig) and self.insensor.input is None:  # the network's own input

@@ -74,9 +74,9 @@ class DeviceStream:
 
     spec: CameraSpec
 
-    def __init__(self, clock: Clock | None) -> None:
+    def __init__(self, clock: Clock | None, boot_ns: int | None = None) -> None:
         self.clock = clock or time.monotonic_ns
-        self.boot_ns = self.clock()
+        self.boot_ns = self.clock() if boot_ns is None else int(boot_ns)  # the clock's reading at device time 0
         self.lock = threading.RLock()
         self.changed = threading.Condition(self.lock)
         self.streaming = False
@@ -150,16 +150,17 @@ class DeviceStream:
         self._triggers.clear()
         self._busy_until_ns, self._latched_start_ns = 0, -1
 
-    def trigger(self) -> int | None:
-        """An external trigger pulse (trigger mode external, streaming): starts a frame now, or latches one to
-        start when the frame in progress is read out, or is ignored while one is latched. Returns the exposure
-        start of the frame it starts (device ns), or None when it was ignored."""
+    def trigger(self, at_ns: int | None = None) -> int | None:
+        """An external trigger pulse (trigger mode external, streaming): starts a frame now (or at device time
+        ``at_ns``, the pulse's edge as a rig's trigger line stamps it), or latches one to start when the frame in
+        progress is read out, or is ignored while one is latched. Returns the exposure start of the frame it
+        starts (device ns), or None when it was ignored."""
         with self.changed:
             if self.trigger_mode != "external":
                 raise DeviceError("trigger needs trigger mode 'external' (TRIGMODE EXTERNAL)")
             if not self.streaming:
                 raise DeviceError("trigger while not streaming (STREAM ON first)")
-            now = self.clock_ns()
+            now = self.clock_ns() if at_ns is None else int(at_ns)
             if now < self._latched_start_ns:
                 self.stats.triggers_ignored += 1
                 return None

@@ -187,57 +187,122 @@ def ledger_line(camera: Any) -> str:
     return f"{sent['bytes_per_frame']:,} B/frame sent ({doc['mode']}), {sent['mbit_s']:.2f} Mbit/s, {util}{pipes}"
 
 
+def for_camera(args: argparse.Namespace, index: int) -> argparse.Namespace:
+    """The arguments of a rig's camera ``index``: each transport's port moved up by ``index`` (port 0, a free
+    port, stays 0), so camera 0 serves where a lone camera would and the others on the next ports."""
+    if index == 0:
+        return args
+    moved = argparse.Namespace(**vars(args))
+    for name in ("http", "usbip"):
+        value = getattr(args, name, None)
+        if value is not None and value[1] != 0:
+            setattr(moved, name, (value[0], value[1] + index))
+    return moved
+
+
+class _Watch:
+    """Everything ``wait_until_stopped`` checks for a failure: each camera's pump and the rig's trigger line."""
+
+    def __init__(self, *parts: Any) -> None:
+        self.parts = parts
+
+    def check(self) -> None:
+        for part in self.parts:
+            part.check()
+
+
 def serve(args: argparse.Namespace, camera_options: dict[str, str],
           transports: list[tuple[str, Starter]] | None = None, command: str = "rollcam emulate") -> int:
     """Run the emulator of ``args.sensor`` programmed by ``camera_options`` (text, as in an emu: URI) on the
     ``transports`` (default ``TRANSPORTS``) that ``args`` asks for, until Ctrl-C, SIGTERM or ``args.duration``
-    (0: stop at once); every transport is closed on the way out."""
+    (0: stop at once); every transport is closed on the way out. With ``args.rig`` (a ``RigSpec``), every
+    camera of the rig is served, camera ``i`` on each transport's port plus ``i`` (``for_camera``)."""
     from rollcam.emu.pump import FramePump
     from rollcam.firmware.camera import FirmwareCamera
+    from rollcam.firmware.rig import LiveRig
     from rollcam.firmware.spec import CameraSpec
 
-    camera = FirmwareCamera(CameraSpec.from_options(args.sensor, camera_options, command))
+    spec = CameraSpec.from_options(args.sensor, camera_options, command)
+    rig_spec = getattr(args, "rig", None)
+    rig = None if rig_spec is None else LiveRig(rig_spec, spec)
+    cameras = [FirmwareCamera(spec)] if rig is None else rig.cameras
     stop = threading.Event()
     previous = signal.signal(signal.SIGTERM, lambda *_: stop.set())
-    running: list[Running] = []
-    pump = FramePump(camera, bands=1, name="rollcam-emulate")
+    running: list[list[Running]] = []
+    pumps: list[Any] = []
     try:
-        for _name, starter in TRANSPORTS if transports is None else transports:
-            started = starter(args, camera, pump)
-            if started is not None:
-                running.append(started)
-        camera.stream_on()
-        if any(r.uses_pump for r in running):  # UVC paces its own frames; do not render for nobody
-            pump.start()
-        if args.json:
-            print(json.dumps({"sensor": camera.sensor.name, "identity": camera.identity(),
-                              "faults": args.faults.to_text(), "ledger": camera.insensor.ledger(camera.spec).to_json(),
-                              **{r.name: r.info for r in running}}), flush=True)
+        for index, camera in enumerate(cameras):
+            pump = FramePump(camera, bands=1, name="rollcam-emulate" + (f"-{index}" if rig else ""))
+            pumps.append(pump)
+            running.append([])
+            for _name, starter in TRANSPORTS if transports is None else transports:
+                started = starter(for_camera(args, index), camera, pump)
+                if started is not None:
+                    running[-1].append(started)
+        if rig is None:
+            cameras[0].stream_on()
         else:
-            print(f"emulating {camera!r}" + (f" with faults {args.faults}" if args.faults else ""), flush=True)
-            for r in running:
-                for line in r.lines:
-                    print(f"  {line}", flush=True)
-            print(f"  ledger:        {ledger_line(camera)}", flush=True)
-            print("press Ctrl-C to stop", flush=True)
+            rig.start()
+        for pump, started_here in zip(pumps, running, strict=True):
+            if any(r.uses_pump for r in started_here):  # UVC paces its own frames; do not render for nobody
+                pump.start()
+        _announce(args, cameras, running, rig_spec)
         with contextlib.suppress(KeyboardInterrupt):  # Ctrl-C is the normal way to stop a server
-            wait_until_stopped(stop, args.duration, pump, servers=tuple(r.server for r in running))
+            wait_until_stopped(stop, args.duration, _Watch(*pumps, *([] if rig is None else [rig])),
+                               servers=tuple(r.server for started in running for r in started))
     finally:
-        pump.close()
-        for r in reversed(running):
-            r.server.close()
-        camera.stream_off()
+        for pump in pumps:
+            pump.close()
+        for started_here in reversed(running):
+            for r in reversed(started_here):
+                r.server.close()
+        if rig is None:
+            cameras[0].stream_off()
+        else:
+            rig.close()
         signal.signal(signal.SIGTERM, previous)
+    for index, (camera, pump, started_here) in enumerate(zip(cameras, pumps, running, strict=True)):
+        _report(args, camera, pump, started_here, f"camera {index}: " if rig else "")
+    return 0
+
+
+def _announce(args: argparse.Namespace, cameras: list[Any], running: list[list[Running]], rig: Any) -> None:
+    """The endpoints, on stdout: one JSON line (``--json``; a rig's is ``{"rig": ..., "cameras": [...]}``) or
+    lines for a person."""
+    def doc(camera: Any, started: list[Running]) -> dict[str, Any]:
+        return {"sensor": camera.sensor.name, "identity": camera.identity(), "faults": args.faults.to_text(),
+                "ledger": camera.insensor.ledger(camera.spec).to_json(), **{r.name: r.info for r in started}}
+
+    if args.json:
+        if rig is None:
+            print(json.dumps(doc(cameras[0], running[0])), flush=True)
+        else:
+            print(json.dumps({"rig": rig.to_json(), "cameras": [doc(c, r) for c, r in zip(cameras, running,
+                                                                                         strict=True)]}), flush=True)
+        return
+    if rig is not None:
+        print(f"emulating a rig: {rig.to_text()}", flush=True)
+    for index, (camera, started) in enumerate(zip(cameras, running, strict=True)):
+        name = "" if rig is None else f"camera {index} "
+        print(f"emulating {name}{camera!r}" + (f" with faults {args.faults}" if args.faults else ""), flush=True)
+        for r in started:
+            for line in r.lines:
+                print(f"  {line}", flush=True)
+        print(f"  ledger:        {ledger_line(camera)}", flush=True)
+    print("press Ctrl-C to stop", flush=True)
+
+
+def _report(args: argparse.Namespace, camera: Any, pump: Any, running: list[Running], name: str) -> None:
+    """What one camera did, on stderr, once stopped."""
     st = camera.stats
     extra = "" if camera.spec.insensor is None else \
         f"; in-sensor network ran on {st.insensor_runs}, skipped {st.insensor_skipped} (accelerator busy)"
     ps = pump.stats  # camera.stats.frames also counts frames the pump made ahead and threw away
     paced = f" ({ps.frames} delivered by the pump, {ps.remade} remade after a control change)" \
         if ps.frames or ps.remade else ""
-    print(f"stopped; {st.frames} frames made{paced}, {st.skipped} skipped{extra}", file=sys.stderr)
-    print(f"ledger: {ledger_line(camera)}", file=sys.stderr)
+    print(f"{name}stopped; {st.frames} frames made{paced}, {st.skipped} skipped{extra}", file=sys.stderr)
+    print(f"{name}ledger: {ledger_line(camera)}", file=sys.stderr)
     for r in running if args.faults else ():  # a transport that injects nothing (the gadget) has no stats
         stats = _fault_stats(r.injector if r.injector is not None else r.server)
         if stats:
-            print(f"faults injected on {r.name}: {stats}", file=sys.stderr)
-    return 0
+            print(f"{name}faults injected on {r.name}: {stats}", file=sys.stderr)

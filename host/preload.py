@@ -21,6 +21,7 @@ import subprocess
 import tempfile
 from collections.abc import Iterator, Sequence
 from pathlib import Path
+from typing import Any
 
 from rollcam.common.errors import ConfigError
 from rollcam.common.faults import FaultPlan
@@ -30,6 +31,7 @@ from rollcam.emu.v4l2.meta import MetaDriver
 from rollcam.emu.v4l2.node import DeviceNode
 from rollcam.emu.v4l2.server import PreloadServer
 from rollcam.firmware.camera import FirmwareCamera
+from rollcam.firmware.rig import LiveRig
 from rollcam.host.standins import standin_env
 
 DEFAULT_DEVICE = "/dev/video0"
@@ -49,13 +51,22 @@ def parse_device(text: str, index: int) -> tuple[str, str]:
     return path, source
 
 
-def build_camera(source: str) -> tuple[FirmwareCamera, FaultPlan]:
+def build_camera(source: str, rigs: dict[Any, LiveRig] | None = None) -> tuple[FirmwareCamera, FaultPlan]:
     """The camera an ``emu:`` URI or a sensor name describes, on the real device clock, and the URI's
-    ``faults=`` plan (``rollcam.common.faults``; none for a sensor name)."""
-    from rollcam.host.sources.emu import device_spec
+    ``faults=`` plan (``rollcam.common.faults``; none for a sensor name). With ``rig=`` (docs/rigs.md) it is
+    camera ``rig_cam`` of a ``LiveRig`` on its own clock, the rig shared through ``rigs`` by every device that
+    names the same camera options and rig."""
+    from rollcam.host.sources.emu import rig_device_spec
 
-    spec, plan = device_spec(source, ConfigError)
-    return FirmwareCamera(spec), plan
+    spec, plan, choice = rig_device_spec(source, ConfigError)
+    if choice is None:
+        return FirmwareCamera(spec), plan
+    rigs = {} if rigs is None else rigs
+    rig = rigs.get((spec, choice[0]))
+    if rig is None:
+        rig = rigs[(spec, choice[0])] = LiveRig(choice[0], spec)
+        rig.start_trigger()
+    return rig.cameras[choice[1]], plan
 
 
 def _next_free(path: str, taken: set[str]) -> str:
@@ -121,9 +132,12 @@ def serving(devices: Sequence[tuple[str, str]], *, realtime: bool = True) -> Ite
     reclaim_stale_folders()
     folder = tempfile.mkdtemp(prefix=f"{FOLDER_PREFIX}{os.getpid()}-")
     nodes: dict[str, DeviceNode] = {}
+    rigs: dict[Any, LiveRig] = {}
     try:
         for i, (path, source) in enumerate(devices):
-            camera, faults = build_camera(source)
+            camera, faults = build_camera(source, rigs)
+            if any(camera is n.driver.camera for n in nodes.values()):
+                raise ConfigError(f"device {path}: {source!r} is a rig camera another device already serves")
             nodes[path] = DeviceNode(EmuDriver(camera, realtime=realtime, faults=faults), path, minor_of(path, i))
         for path, node in list(nodes.items()):
             if node.driver.camera.spec.insensor is not None:  # its results on a metadata node, as uvcvideo's
@@ -137,12 +151,16 @@ def serving(devices: Sequence[tuple[str, str]], *, realtime: bool = True) -> Ite
     except BaseException:
         for node in nodes.values():
             node.close()
+        for rig in rigs.values():
+            rig.close()
         shutil.rmtree(folder, ignore_errors=True)
         raise
     try:
         yield server
     finally:
         server.close()
+        for rig in rigs.values():
+            rig.close()
         shutil.rmtree(folder, ignore_errors=True)
 
 

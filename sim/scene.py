@@ -234,6 +234,19 @@ class Camera:
             sensor_width_mm=self.sensor_width_mm if sensor_width_mm is None else float(sensor_width_mm),
         )
 
+    def mounted(self, offset_m: tuple[float, float, float], yaw_deg: float = 0.0) -> Camera:
+        """This camera moved as one camera of a rig whose reference camera it is: ``offset_m`` is (right,
+        forward, up) in its own level frame (a stereo baseline is ``(b, 0, 0)``), ``yaw_deg`` turns it to the
+        right about the vertical. Pitch and roll are the reference camera's."""
+        dx, dy, dz = (float(v) for v in offset_m)
+        if (dx, dy, dz, float(yaw_deg)) == (0.0, 0.0, 0.0, 0.0):
+            return self
+        yaw = math.radians(self.yaw_deg)
+        right, forward = (math.cos(yaw), -math.sin(yaw)), (math.sin(yaw), math.cos(yaw))
+        x, y, z = self.position_m
+        return replace(self, position_m=(x + dx * right[0] + dy * forward[0], y + dx * right[1] + dy * forward[1],
+                                         z + dz), yaw_deg=self.yaw_deg + float(yaw_deg))
+
 
 @dataclass(frozen=True)
 class ModulatedLight:

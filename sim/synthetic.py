@@ -186,7 +186,8 @@ class SyntheticCamera:
                  pixel_format: str = "BGR3", physics: bool | None = None, blur_px: float | None = DEFAULT_BOUND_PX,
                  noise: frozenset[str] | None = None, serial: str = "0", noise_seed: int = 0, hflip: bool = False,
                  vflip: bool = False, optics: LensOptics | None = None, settings: StreamSettings | None = None,
-                 defects: SensorDefects | None = None, **programming) -> None:
+                 defects: SensorDefects | None = None, mount: tuple[float, float, float, float] | None = None,
+                 **programming) -> None:
         self.sensor = sensor
         self.scene = scene
         if settings is not None and programming:
@@ -197,6 +198,8 @@ class SyntheticCamera:
         # The output covers the mode's crop of the array; its width in mm fixes the focal length in pixels.
         covered_mm = crop.width * sensor.optics.pixel_size_um / 1000.0
         cam = scene.camera(camera).with_resolution(s.width, s.height, sensor.optics.focal_mm, covered_mm)
+        if mount is not None:  # one camera of a rig (rollcam.firmware.rig): right, forward, up in m, yaw in deg
+            cam = cam.mounted(mount[:3], mount[3])
         self.camera = cam
         # Brightness is relative to the default exposure of the same readout (same line time), so it
         # scales with the requested exposure and gain only.

@@ -12,6 +12,7 @@ import argparse
 from collections.abc import Callable
 from typing import Any
 
+from rollcam.common.errors import ConfigError
 from rollcam.common.faults import FaultPlan
 from rollcam.common.values import (
     JPEG_QUALITY,
@@ -59,6 +60,11 @@ def add_parser(sub: Subparsers) -> argparse.ArgumentParser:
                    default=FaultPlan(), metavar="PLAN",
                    help="inject faults on every transport, reproducibly by seed, e.g. 'drop=2%%,stall=1%%,"
                         "disconnect=300,seed=7' (docs/faults.md lists the keys and what each transport does)")
+    p.add_argument("--rig", type=value_type(_rig, "a rig like stereo,baseline=0.12,sync=hw,offset_ns=0/1500"),
+                   default=None, metavar="RIG",
+                   help="emulate every camera of a multi-camera rig of one scene, camera i on each transport's port "
+                        "+ i: 'stereo,baseline=0.12' or 'surround,n=4', sync=hw|free, per-camera offset_ns=, ppm=, "
+                        "jitter_ns= (one value or one per camera joined by '/'), seed= (docs/rigs.md)")
     add_run_flags(p)
     return p
 
@@ -96,6 +102,15 @@ def run(args: argparse.Namespace) -> int:
     if not any(getattr(args, name) for name in TRANSPORT_FLAGS):
         args.http = parse_host_port(DEFAULT_HTTP)
     return serve(args, camera_options(args))
+
+
+def _rig(text: str) -> Any:
+    from rollcam.firmware.rig import RigSpec
+
+    try:
+        return RigSpec.parse(text, "--rig")
+    except ConfigError as exc:  # argparse shows a ValueError's text as the one-line error
+        raise ValueError(str(exc).removeprefix("--rig: ")) from None
 
 
 def _flag(name: str) -> str:

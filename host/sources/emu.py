@@ -6,8 +6,9 @@ emulate`` flags, ``rollcam://`` URLs and the serial ``OPT``/``SCENE`` commands r
 ``fps``, ``shutter``, ``readout``, ``exposure_us``, ``gain`` (linear total), ``format``, ``physics``,
 ``blur_px``, ``noise``, the lens's and the ISP's (``vignette``, ``lens_blur_px``, ``defocus_px``, ``sharpen``,
 ``jpeg_quality``: docs/optics.md), ``serial``, ``noise_seed``, ``hflip``, ``vflip``, ``test_pattern``, the IMU's and the
-in-sensor network's (``insensor=personnet-raw``: frames carry its results, docs/insensor.md). Three more belong to
+in-sensor network's (``insensor=personnet-raw``: frames carry its results, docs/insensor.md). Five more belong to
 the source: ``start_ns`` (device clock at frame 0), ``frames`` (stop after N frames; endless by default) and
+``rig``/``rig_cam`` (camera ``rig_cam`` of a multi-camera rig, ``rollcam.firmware.rig``: docs/rigs.md) and
 ``faults`` (a ``rollcam.common.faults`` plan, e.g. ``faults=drop=5,error=2,seed=3``; in process ``drop`` skips
 frames (a gap in ``sequence``), ``error`` sets ``meta["error"]``, ``disconnect=N`` makes the read after N
 frames raise ``SourceError``, ``seqwrap``/``tswrap`` shift ``sequence``/``timestamp_ns``, the frame-counter
@@ -25,20 +26,21 @@ from __future__ import annotations
 import dataclasses
 from typing import Any
 
-from rollcam.common.errors import SourceError
+from rollcam.common.errors import ConfigError, SourceError
 from rollcam.common.faults import FaultInjector, FaultPlan
 from rollcam.common.values import non_negative_int, positive_int
 from rollcam.firmware.camera import FirmwareCamera, FramePlan
 from rollcam.firmware.imaging import encode
 from rollcam.firmware.labfaults import FrameFaults
 from rollcam.firmware.options import MAX_DEVICE_NS, OPTIONS, bounded
+from rollcam.firmware.rig import Rig, RigSpec
 from rollcam.firmware.spec import CameraSpec
 from rollcam.sim.frame import Frame
 from rollcam.sim.synthetic import SyntheticCamera
 
 from .base import CameraSource, SourceURI
 
-SOURCE_OPTIONS = {"start_ns", "frames", "faults"}
+SOURCE_OPTIONS = {"start_ns", "frames", "faults", "rig", "rig_cam"}
 """Options of the source itself; all others are the camera's (``rollcam.firmware.options.OPTIONS``)."""
 
 
@@ -52,6 +54,39 @@ def build_device(sensor_name: str, opts: SourceURI) -> tuple[FirmwareCamera, int
     return FirmwareCamera(spec, clock=lambda: 0), start_ns
 
 
+def rig_choice(options: dict[str, str], owner: str, error: type[Exception] = SourceError
+               ) -> tuple[RigSpec, int] | None:
+    """The ``rig=`` declaration of a URI's options and the camera ``rig_cam=`` picks (default 0); None without
+    ``rig=``. Bad text raises ``error`` naming ``owner``."""
+    text = options.get("rig")
+    if text is None:
+        if "rig_cam" in options:
+            raise error(f"{owner}: rig_cam= needs rig=, e.g. rig=stereo,baseline=0.12&rig_cam=1")
+        return None
+    try:
+        rig = RigSpec.parse(text, owner)
+        index = non_negative_int(options.get("rig_cam", "0"))
+    except ConfigError as exc:
+        raise error(str(exc)) from None
+    except ValueError as exc:
+        raise error(f"{owner}: rig_cam={options['rig_cam']!r} is invalid ({exc})") from None
+    if index >= rig.n:
+        raise error(f"{owner}: rig_cam={index} is not a camera of the {rig.n}-camera rig (0..{rig.n - 1})")
+    return rig, index
+
+
+def build_rig(device: FirmwareCamera, start_ns: int, opts: SourceURI) -> tuple[Rig, int] | None:
+    """The rig of an ``emu:`` URI's ``rig=`` option (``rollcam.firmware.rig``) and the camera ``rig_cam=`` picks
+    (default 0), with world time ``start_ns`` at its frame 0; None without ``rig=``."""
+    choice = rig_choice(opts.options, f"source {opts.uri!r}")
+    if choice is None:
+        return None
+    try:
+        return Rig(choice[0], device.spec, start_ns), choice[1]
+    except ConfigError as exc:
+        raise SourceError(f"source {opts.uri!r}: {exc}") from None
+
+
 def fault_plan(opts: SourceURI) -> FaultPlan:
     """The ``faults=`` plan of an ``emu:`` URI (no fault when absent)."""
     return opts.get("faults", lambda text: FaultPlan.parse(text, f"source {opts.uri!r}"), FaultPlan())
@@ -60,15 +95,27 @@ def fault_plan(opts: SourceURI) -> FaultPlan:
 def device_spec(source: str, error: type[Exception] = SourceError) -> tuple[CameraSpec, FaultPlan]:
     """The spec and ``faults=`` plan of a device described by a sensor name or an ``emu:`` URI, for the doors that
     build a device of their own from one (``rollcam run``'s /dev/videoN, the picamera2 stand-in); ``error`` is
-    what a bad source raises. The in-process source's own options (``start_ns``, ``frames``) are refused."""
+    what a bad source raises. The in-process source's own options (``start_ns``, ``frames``) are refused, and so
+    is ``rig=`` (``rig_device_spec`` is for the doors that build a rig's cameras)."""
+    spec, plan, choice = rig_device_spec(source, error)
+    if choice is not None:
+        raise error(f"source {source!r}: rig= is for emu: sources, rollcam emulate --rig and rollcam run devices")
+    return spec, plan
+
+
+def rig_device_spec(source: str, error: type[Exception] = SourceError
+                    ) -> tuple[CameraSpec, FaultPlan, tuple[RigSpec, int] | None]:
+    """``device_spec``'s spec and plan, and the URI's ``rig=``/``rig_cam=`` choice (None without ``rig=``): the
+    spec is the rig's common one, before the camera is placed (``rollcam.firmware.rig.placed``)."""
     from . import parse_uri
 
     uri = parse_uri(source if source.startswith("emu:") else f"emu:{source}")
     owner = f"source {source!r}"
     if uri.scheme != "emu" or not uri.target:
         raise error(f"{owner}: name a sensor or an emu: URI, e.g. emu:imx219?size=640x480")
-    camera_opts = {k: v for k, v in uri.options.items() if k != "faults"}
-    return CameraSpec.from_options(uri.target, camera_opts, owner, error), fault_plan(uri)
+    choice = rig_choice(uri.options, owner, error)
+    camera_opts = {k: v for k, v in uri.options.items() if k not in ("faults", "rig", "rig_cam")}
+    return CameraSpec.from_options(uri.target, camera_opts, owner, error), fault_plan(uri), choice
 
 
 class EmuSource(CameraSource):
@@ -79,6 +126,9 @@ class EmuSource(CameraSource):
     def __init__(self, uri: SourceURI) -> None:
         self.uri = uri.uri
         self.device, self.start_ns = build_device(uri.target, uri)
+        self.rig = build_rig(self.device, self.start_ns, uri)
+        if self.rig is not None:
+            self.device = self.rig[0].cameras[self.rig[1]]
         self.limit = uri.get("frames", positive_int)
         self.faults = FaultInjector(fault_plan(uri))
         self.fault_stats = self.faults.stats
@@ -108,12 +158,17 @@ class EmuSource(CameraSource):
             self.index += 1
         plan = FramePlan(self.index, self._schedule)
         error = inj.hit("error", self.index)
-        frames = [self._faulted(encode(self.device.render(plan, shutter), self.device.spec), error)
-                  for shutter in shutters]
+        frames = [self._faulted(encode(self._render(plan, shutter), self.device.spec), error) for shutter in shutters]
         frames = self.frame_faults.apply_all(frames, self.index)
         self.index += 1
         self.delivered += 1
         return frames
+
+    def _render(self, plan: FramePlan, shutter: str | None) -> Frame:
+        if self.rig is None:
+            return self.device.render(plan, shutter)
+        rig, index = self.rig
+        return rig.frame(index, plan.seq, shutter)
 
     def _faulted(self, frame: Frame, error: bool) -> Frame:
         p = self.faults.plan
