@@ -27,7 +27,7 @@ from typing import Any
 
 from rollcam.common.errors import SourceError
 from rollcam.common.faults import FaultInjector, FaultPlan
-from rollcam.common.values import non_negative_int, positive_int
+from rollcam.common.values import convert_option, non_negative_int, positive_int
 from rollcam.firmware.camera import FirmwareCamera, FramePlan
 from rollcam.firmware.imaging import encode
 from rollcam.firmware.labfaults import FrameFaults
@@ -68,7 +68,8 @@ def device_spec(source: str, error: type[Exception] = SourceError) -> tuple[Came
     if uri.scheme != "emu" or not uri.target:
         raise error(f"{owner}: name a sensor or an emu: URI, e.g. emu:imx219?size=640x480")
     camera_opts = {k: v for k, v in uri.options.items() if k != "faults"}
-    return CameraSpec.from_options(uri.target, camera_opts, owner, error), fault_plan(uri)
+    plan = convert_option(uri.options, "faults", lambda text: FaultPlan.parse(text, owner), FaultPlan(), owner, error)
+    return CameraSpec.from_options(uri.target, camera_opts, owner, error), plan
 
 
 class EmuSource(CameraSource):
