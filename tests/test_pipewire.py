@@ -4,8 +4,13 @@ node and its formats, GStreamer's pipewiresrc (gstreamer1.0-pipewire) receives f
 
 from __future__ import annotations
 
+import json
+import os
 import shutil
+import signal
 import subprocess
+import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -66,3 +71,31 @@ def test_the_node_goes_when_the_camera_closes(tmp_path):
 def test_bad_input_is_one_config_error(tmp_path, source, name, message):
     with pytest.raises(ConfigError, match=message):
         PipeWireCamera(source, tmp_path / "run", name=name)
+
+
+def test_rollcam_pipewire_holds_the_node_until_ctrl_c(tmp_path):
+    """The CLI prints the node when it is up; pw-dump finds it there; Ctrl-C ends it (130) and takes the daemons."""
+    runtime = tmp_path / "run"
+    proc = subprocess.Popen([str(Path(sys.executable).with_name("rollcam")), "pipewire", "emu:imx219?size=160x120",
+                             "--name", "rollcam-cli", "--runtime-dir", str(runtime)],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        line = json.loads(proc.stdout.readline())
+        assert (line["node"], line["XDG_RUNTIME_DIR"]) == ("rollcam-cli", str(runtime))
+        env = {**os.environ, "XDG_RUNTIME_DIR": str(runtime)}
+        assert find_node(pw_objects(env), "rollcam-cli")["id"] == line["id"]
+        proc.send_signal(signal.SIGINT)
+        assert proc.wait(timeout=60) == 130
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+    with pytest.raises(DeviceError):
+        pw_objects(env)
+
+
+def test_rollcam_pipewire_bad_name_is_exit_2(tmp_path):
+    p = subprocess.run([str(Path(sys.executable).with_name("rollcam")), "pipewire", "--name", "a b",
+                        "--runtime-dir", str(tmp_path / "run")], capture_output=True, text=True, timeout=120)
+    assert p.returncode == 2 and p.stderr.startswith("rollcam: error: PipeWire node name 'a b'"), p.stderr
+    assert len(p.stderr.strip().splitlines()) == 1

@@ -26,6 +26,7 @@ COMMANDS: dict[str, str] = {
     "emulate": "rollcam.host.commands.emulate",
     "view": "rollcam.host.commands.view",
     "run": "rollcam.host.commands.run",
+    "pipewire": "rollcam.host.commands.pipewire",
     "dataset": "rollcam.host.commands.dataset",
     "eval": "rollcam.host.commands.eval",
     "train": "rollcam.host.commands.train",
