@@ -27,6 +27,7 @@ COMMANDS: dict[str, str] = {
     "view": "rollcam.host.commands.view",
     "run": "rollcam.host.commands.run",
     "gadget": "rollcam.host.commands.gadget",
+    "pipewire": "rollcam.host.commands.pipewire",
     "dataset": "rollcam.host.commands.dataset",
     "eval": "rollcam.host.commands.eval",
     "train": "rollcam.host.commands.train",

@@ -28,7 +28,7 @@ from typing import Any
 
 from rollcam.common.errors import ConfigError, SourceError
 from rollcam.common.faults import FaultInjector, FaultPlan
-from rollcam.common.values import non_negative_int, positive_int
+from rollcam.common.values import convert_option, non_negative_int, positive_int
 from rollcam.firmware.camera import FirmwareCamera, FramePlan
 from rollcam.firmware.imaging import encode
 from rollcam.firmware.labfaults import FrameFaults
@@ -115,7 +115,8 @@ def rig_device_spec(source: str, error: type[Exception] = SourceError
         raise error(f"{owner}: name a sensor or an emu: URI, e.g. emu:imx219?size=640x480")
     choice = rig_choice(uri.options, owner, error)
     camera_opts = {k: v for k, v in uri.options.items() if k not in ("faults", "rig", "rig_cam")}
-    return CameraSpec.from_options(uri.target, camera_opts, owner, error), fault_plan(uri), choice
+    plan = convert_option(uri.options, "faults", lambda text: FaultPlan.parse(text, owner), FaultPlan(), owner, error)
+    return CameraSpec.from_options(uri.target, camera_opts, owner, error), plan, choice
 
 
 class EmuSource(CameraSource):
