@@ -122,17 +122,18 @@ class Compositor:
         return RenderResult(np.empty((0, 0, 3), np.uint8), None, gt, int(painted.sum()), frame)
 
     def accumulate(self, p: Pass, layer: StaticLayer, line_of: np.ndarray, out: np.ndarray, hits: np.ndarray,
-                   by_column: bool) -> tuple[np.ndarray | None, int]:
+                   by_column: bool, actors_only: bool = False) -> tuple[np.ndarray | None, int]:
         """Paint and accumulate the pass's samples (entry e is line ``line_of[e]``) into ``out`` and ``hits``;
-        returns the shared composite and the number of samples painted."""
-        moving = self._moving
+        returns the shared composite and the number of samples painted. ``actors_only`` (a moving camera): only
+        what the actors add to the background at each sample's pose, under their spans."""
+        whole = self._moving and not actors_only
         # A moving camera changes every sample; over a composite only samples an actor touches differ from it.
-        ents = np.arange(line_of.shape[0]) if moving else np.flatnonzero(p.touched(self._all))
+        ents = np.arange(line_of.shape[0]) if whole else np.flatnonzero(p.touched(self._all))
         lines, first = np.unique(line_of[ents], return_index=True)
         gt = LineTruth.empty(self._painter.n_actors, self._painter.shape(by_column)[0], by_column)  # kernel scratch
         before = int(hits.sum())
         self._painter.paint(p, self._all, lines.astype(np.int64), gt, bg=layer.bg_lin, out_lin=out,
-                            full_lines=moving, seed=None if moving else layer.comp_lin, hits=hits,
+                            full_lines=whole, seed=None if self._moving else layer.comp_lin, hits=hits,
                             e_start=np.append(first, ents.size).astype(np.int64), ents=ents)
         return self.shared(layer), int(hits.sum()) - before
 

@@ -24,6 +24,22 @@ background_line_c = types.ExternalFunction(
     "rollcam_background_line",
     types.void(_ADDR, _ADDR, types.int64, _ADDR, _ADDR, _ADDR, _ADDR, _ADDR, types.int64, _ADDR, types.int64))
 """(world, lut, n_bins, buildings, light, cam, rot, pos, line, out, n): one line of ``n`` float32 RGB pixels."""
+background_span_c = types.ExternalFunction(
+    "rollcam_background_span",
+    types.void(_ADDR, _ADDR, types.int64, _ADDR, _ADDR, _ADDR, _ADDR, _ADDR, types.float64, types.int64, types.int64,
+               _ADDR, _ADDR))
+"""(world, lut, n_bins, buildings, light, cam, rot, pos, line, a_begin, a_end, out, surface): pixels a_begin ..
+a_end - 1 of a line (any indices, margins beyond the image included) into ``out`` from its start, and each one's
+surface code (``SURF_*``) when the ``surface`` address is not 0."""
+path_reads_c = types.ExternalFunction(
+    "rollcam_path_reads",
+    types.void(_ADDR, types.int64, types.int64, _ADDR, _ADDR, types.int64, types.int64, types.float64,
+               types.float64, types.float64, types.int64, types.int64, types.int64, _ADDR, _ADDR))
+"""(bg, n_rows, n_cols, surface, coef, n, u_slot, line, lt, dt_u, transposed, margin, n_along, scratch, acc): one
+line's background path reads summed into ``acc`` (``rollcam.sim._egoblur``)."""
+SURF_SKY, SURF_GROUND, SURF_WEST, SURF_EAST = 0, 1, 2, 3
+"""The surfaces ``background_span_c`` reports (``rollcam_shade.c``): sky, ground plane z = 0, facade planes
+x = -W_FACADE and x = +W_FACADE."""
 sun_blocked_c = types.ExternalFunction(
     "rollcam_sun_blocked",
     types.int64(_ADDR, _ADDR, types.int64, _ADDR, _ADDR, types.float64, types.float64, types.float64, types.int64))

@@ -43,7 +43,7 @@ from ._cshade import encode_line_c
 from ._jitcache import guard
 from ._parts import PART_SHADOW
 from ._texture import NO_CELL, SH_FACE, SH_GEO, SH_TEX, SHADE_COLS, SHADOW_MARK, _darken, texture_at, texture_span
-from ._world import C_MOVING, C_TRANSPOSED, background_line
+from ._world import C_MOVING, C_TRANSPOSED, background_line, background_span
 
 # slots[o, k]: >= 0 row of the shared parts table; SLOT_NONE not needed; SLOT_LOCAL needed by a single line,
 # so its parts are computed on that line (no table round trip through memory).
@@ -365,6 +365,18 @@ def _add_line(dst, lin, seed_lin, line, seed, ia, ib, n_runs, first):
                 dst[i, c] = lin[i, c] if first else dst[i, c] + lin[i, c]
 
 
+@njit(cache=True)
+def _add_over(dst, lin, base, ia, ib, n_runs, first):
+    """Accumulate what one painted line adds to its bare background ``base`` (both (w, 3)) inside the runs into
+    ``dst`` (zeroed on the line's first hit): a moving camera's actors, whose background is integrated apart."""
+    if first:
+        dst[:, :] = 0.0
+    for r in range(n_runs):
+        for i in range(ia[r], ib[r]):
+            for c in range(3):
+                dst[i, c] += lin[i, c] - base[i, c]
+
+
 @njit(cache=True, nogil=True)
 def render_lines_kernel(world, lut_b, bld, light, cam, rot_tab, pos_tab, actors, times, line_k, obj_line_k, slots,
                         parts_tab, include, lines, e_start, ents, w, bg_lin, out_u8, out_lin, gain, lut, gt_l, gt_r,
@@ -378,6 +390,9 @@ def render_lines_kernel(world, lut_b, bld, light, cam, rot_tab, pos_tab, actors,
     (moving camera, or building the composite) each line is rendered whole, from the background rendered
     at the line's own pose when the camera moves, else from the cached ``bg_lin``; otherwise only the pixel
     runs under actor spans are redone over ``bg_lin``. Ground truth of painted lines is recomputed.
+
+    A moving camera without ``full_lines`` (and not ``gt_only``) shades the background at each entry's own pose
+    under the actor spans only; accumulating, it then adds just what the actors change there (``_add_over``).
 
     An empty ``out_u8`` skips the sRGB encoding (linear-only renders). A non-empty ``seed_lin`` (the cached
     linear composite) is copied into each painted line of ``out_lin`` first, so ``out_lin`` may be a scratch
@@ -414,6 +429,7 @@ def _render_chunk(ch, n_chunks, world, lut_b, bld, light, cam, rot_tab, pos_tab,
     want_u8 = out_u8.shape[0] > 0
     seed = seed_lin.shape[0] > 0 and want_lin and not full_lines
     accumulate = acc_hits.shape[0] > 0
+    spans_moving = moving_cam and not full_lines and not gt_only  # actors over the background at their pose
     cap = max(n_obj * MAX_PARTS, 1)
     n = lines.shape[0]
     depth = np.empty(cap)
@@ -430,6 +446,8 @@ def _render_chunk(ch, n_chunks, world, lut_b, bld, light, cam, rot_tab, pos_tab,
     ia = np.empty(cap + 1, np.int64)
     ib = np.empty(cap + 1, np.int64)
     lin = np.empty((w, 3), np.float32)
+    base = np.empty((w if spans_moving else 0, 3), np.float32)
+    no_surface = np.empty(0, np.int8)
     local = np.empty((max(n_obj, 1), MAX_PARTS, PART_COLS))
     scratch = parts_scratch()
     for j in range(ch, n, n_chunks):
@@ -454,17 +472,26 @@ def _render_chunk(ch, n_chunks, world, lut_b, bld, light, cam, rot_tab, pos_tab,
                 ia[0], ib[0], n_runs = 0, w, 1
             else:
                 n_runs = _span_runs(span_l, span_r, m, w, ia, ib)
-                if not gt_only:
+                if spans_moving:
+                    k = line_k[e]
+                    for r in range(n_runs):
+                        background_span(world, lut_b, bld, light, cam, rot_tab[k], pos_tab[k], float(line), ia[r],
+                                        ib[r], base[ia[r]:ib[r]], no_surface)
+                        lin[ia[r]:ib[r]] = base[ia[r]:ib[r]]
+                elif not gt_only:
                     for r in range(n_runs):
                         lin[ia[r]:ib[r]] = bg_lin[line, ia[r]:ib[r]]
             if m > 0:
                 _paint_spans(lin, line, m, gt_vis, depth, idx_o, shade, span_l, span_r, owner, ia, ib, n_runs, order,
                              flip, gt_only)
-            if seed and m == 0:
-                continue  # no actor pixel on this line: it is the composite, nothing to write
+            if (seed or spans_moving) and m == 0:
+                continue  # no actor pixel on this line: it is the composite (or bare background), nothing to write
             if line_hit.shape[0] > 0:
                 line_hit[line] = True
-            if accumulate and not gt_only:
+            if accumulate and spans_moving:
+                _add_over(out_lin[line], lin, base, ia, ib, n_runs, acc_hits[line] == 0)
+                acc_hits[line] += 1
+            elif accumulate and not gt_only:
                 _add_line(out_lin[line], lin, seed_lin, line, seed, ia, ib, n_runs, acc_hits[line] == 0)
                 acc_hits[line] += 1
             elif not gt_only:

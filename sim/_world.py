@@ -14,7 +14,7 @@ import math
 import numpy as np
 from numba import njit, prange
 
-from ._cshade import background_line_c, check_layout, library, sun_blocked_c
+from ._cshade import background_line_c, background_span_c, check_layout, library, sun_blocked_c
 from ._jitcache import guard
 
 # ---- camera table columns -------------------------------------------------------------------------------
@@ -124,6 +124,16 @@ def background_line(world, lut, bld, light, cam, rot, pos, line, out_line):
     background_line_c(world.ctypes.data, lut.ctypes.data, lut.shape[1] - 1, bld.ctypes.data, light.ctypes.data,
                       cam.ctypes.data, rot.ctypes.data, pos.ctypes.data, line, out_line.ctypes.data,
                       out_line.shape[0])
+
+
+@njit(cache=True, inline="always")
+def background_span(world, lut, bld, light, cam, rot, pos, line, a_begin, a_end, out, surface):
+    """Pixels ``a_begin .. a_end - 1`` of render-space line ``line`` (a float: indices beyond the image are the
+    blur's margins) from pose (rot, pos) into ``out`` (float32, (a_end - a_begin) x 3) and each pixel's surface
+    code into ``surface`` (int8, same length; an empty array skips it). Same values as ``background_line``."""
+    background_span_c(world.ctypes.data, lut.ctypes.data, lut.shape[1] - 1, bld.ctypes.data, light.ctypes.data,
+                      cam.ctypes.data, rot.ctypes.data, pos.ctypes.data, line, a_begin, a_end, out.ctypes.data,
+                      surface.ctypes.data if surface.shape[0] > 0 else 0)
 
 
 @njit(cache=True, parallel=True, nogil=True)

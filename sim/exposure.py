@@ -29,6 +29,7 @@ import numpy as np
 from numba import njit, prange
 from rollcam.common.errors import ConfigError
 
+from ._egoblur import blur_margin
 from ._jitcache import guard
 from .flicker_render import FlickerRenderer
 from .render import Renderer
@@ -42,6 +43,15 @@ EGO_SAMPLES = 8
 a frame costs at most this many renders whatever the image speed, and the plan says it is ``capped``. What the
 cap costs in error against the many-sample reference is stated and tested in tests/test_sensor_path.py
 (``EGO_ERROR_DN``) and docs/sensor-model.md."""
+EGO_PATH_SAMPLES = 8
+"""Most background samples per line of a moving camera's path blur (``plan_samples(ego_path=True)``, what the
+sensor path uses): each is a bilinear read of one background render, not a render (at 1080p a frame's reads cost
+about a quarter of a frame's whole-line samples, each), so with as many samples as ``EGO_SAMPLES`` a 1080p frame
+costs half; the actors keep ``EGO_SAMPLES``. More reads buy less error where the image moves fast (drone) at
+about 40 ms of CPU per read per 1080p frame. Its error against the many-sample reference is stated and tested in
+tests/test_sensor_path.py (``PATH_ERROR_DN``) and docs/sensor-model.md."""
+EGO_MARGIN_PX = 64
+"""Most background rendered beyond each image edge for the path blur's reads (render px)."""
 BATCH_SAMPLES = 32_768  # (line, sample) pairs per render call: bounds the per-call tables (actors x pairs)
 GRID_FRACTION = 0.125
 """Largest shift of a sample by snapping to the shared time grid, in blur bounds (at the fastest image speed)."""
@@ -59,6 +69,11 @@ class SamplePlan:
     capped: bool
     grid_ns: int = 0
     """Sample times snap to the nearest multiple of this (0: not at all), so lines share them (below)."""
+    path_n: np.ndarray | None = None
+    """A moving camera's background path samples per line (``Renderer.path_blur``), the actors then sampled
+    ``n`` times over it; None: the whole line is rendered at each of its ``n`` samples."""
+    margin_px: int = 0
+    """Background rendered beyond each image edge for the path blur (render px)."""
 
     @property
     def evaluations(self) -> int:
@@ -124,20 +139,28 @@ def _swept_bounds(renderer: Renderer, by_column: bool, start_s: np.ndarray, exp_
 
 def plan_samples(renderer: Renderer, starts_ns: np.ndarray, exposure_ns: int, *, by_column: bool = False,
                  bound_px: float = DEFAULT_BOUND_PX, max_samples: int = MAX_SAMPLES,
-                 ego_samples: int = EGO_SAMPLES) -> SamplePlan:
+                 ego_samples: int = EGO_SAMPLES, ego_path: bool = False,
+                 path_samples: int = EGO_PATH_SAMPLES) -> SamplePlan:
     """The adaptive plan: per line, ceil(speed * exposure / bound) samples (1 where nothing moves), at most
     ``max_samples``, and at most ``ego_samples`` when the camera moves (where that cuts a line's count, the
-    bound no longer holds and the plan is ``capped``)."""
+    bound no longer holds and the plan is ``capped``).
+
+    ``ego_path`` (a moving camera): the static background is integrated along each pixel's image path with
+    the bound's count of samples, at most ``path_samples`` (``Renderer.path_blur``), and only the actors are
+    rendered at the ``n`` samples; ``capped`` then says either count was cut.
+    """
     starts = np.asarray(starts_ns, np.int64)
     n_lines = starts.shape[0]
     if not bound_px > 0 or not math.isfinite(bound_px):
         raise ConfigError(f"blur bound must be a finite number of pixels > 0, got {bound_px!r}")
     speed = np.zeros(n_lines)
     exp_s = exposure_ns * 1e-9
+    ego_px_s = 0.0
     if exposure_ns > 0:
         t0, t1 = int(starts.min()), int(starts.max()) + int(exposure_ns)
         if renderer.camera_moving:
-            speed[:] = _ego_speed_px_s(renderer, by_column, t0 * 1e-9, t1 * 1e-9)
+            ego_px_s = _ego_speed_px_s(renderer, by_column, t0 * 1e-9, t1 * 1e-9)
+            speed[:] = ego_px_s
         moving = renderer.moving_actors
         if moving.size:
             n_t = max(2, -(-(t1 - t0) // _SPEED_STEP_NS) + 1)
@@ -159,7 +182,15 @@ def plan_samples(renderer: Renderer, starts_ns: np.ndarray, exposure_ns: int, *,
     # Snapping moves a sample by at most half the grid: at the fastest speed, GRID_FRACTION of the bound.
     fastest = float(speed.max()) if speed.size else 0.0
     grid = int(GRID_FRACTION * 2 * bound_px / fastest * 1e9) if fastest > 0 and math.isfinite(fastest) else 0
-    return SamplePlan(starts, int(exposure_ns), n, speed, bool((want > cap).any()), grid)
+    capped = bool((want > cap).any())
+    if not (ego_path and renderer.camera_moving and exposure_ns > 0):
+        return SamplePlan(starts, int(exposure_ns), n, speed, capped, grid)
+    path_cap = max(int(path_samples), 1)
+    path_n = np.clip(np.nan_to_num(want, nan=path_cap, posinf=path_cap), 1, path_cap).astype(np.int64)
+    # Reads reach about half a window's image path either side of the pixel (the ego speed is an upper bound).
+    margin = blur_margin(ego_px_s * exp_s / 2, EGO_MARGIN_PX) if math.isfinite(ego_px_s) else EGO_MARGIN_PX
+    return SamplePlan(starts, int(exposure_ns), n, speed, capped or bool((want > path_cap).any()), grid, path_n,
+                      margin)
 
 
 def dense_plan(plan: SamplePlan, step_px: float = 0.05) -> SamplePlan:
@@ -230,7 +261,23 @@ def integrate(renderer: Renderer, plan: SamplePlan, *, by_column: bool = False, 
     acc = np.empty(shape, np.float32) if out is None else out
     hits = np.zeros(n_lines, np.int64)
     passes = int(plan.n.max())
-    # Every (line, sample) pair, a line's samples together, in batches of whole lines of bounded size.
+    path = plan.path_n is not None and renderer.camera_moving
+    static, painted = _accumulate(renderer, plan, by_column, acc, hits, batch_samples, path)
+    if path:
+        assert plan.path_n is not None
+        renderer.path_blur(plan.starts_ns, plan.exposure_ns, plan.path_n, plan.n, acc, hits, by_column=by_column,
+                           margin=plan.margin_px)
+        return Integrated(LinearFrame(None, acc, np.ones(n_lines, np.bool_), by_column), plan.evaluations, painted,
+                          passes)
+    _finish(acc, static if static is not None else np.empty((0, n_along, 3), np.float32), hits, plan.n)
+    return Integrated(LinearFrame(static, acc, hits > 0, by_column), plan.evaluations, painted, passes)
+
+
+def _accumulate(renderer: Renderer, plan: SamplePlan, by_column: bool, acc: np.ndarray, hits: np.ndarray,
+                batch_samples: int, actors_only: bool) -> tuple[np.ndarray | None, int]:
+    """Every (line, sample) pair of the plan through ``Renderer.accumulate_samples``, a line's samples together, in
+    batches of whole lines of bounded size; returns the shared composite and the samples painted."""
+    n_lines = plan.n.shape[0]
     n = plan.n.astype(np.int64)
     line_of = np.repeat(np.arange(n_lines, dtype=np.int64), n)
     first = np.cumsum(n) - n
@@ -241,10 +288,10 @@ def integrate(renderer: Renderer, plan: SamplePlan, *, by_column: bool = False, 
     bounds = np.searchsorted(first, np.arange(0, line_of.size, max(int(batch_samples), 1)), side="right") - 1
     cuts = np.unique(np.append(first[bounds], line_of.size))
     for a, b in pairwise(cuts.tolist()):
-        static, got = renderer.accumulate_samples(times[a:b], line_of[a:b], acc, hits, by_column=by_column)
+        static, got = renderer.accumulate_samples(times[a:b], line_of[a:b], acc, hits, by_column=by_column,
+                                                  actors_only=actors_only)
         painted += got
-    _finish(acc, static if static is not None else np.empty((0, n_along, 3), np.float32), hits, n)
-    return Integrated(LinearFrame(static, acc, hits > 0, by_column), plan.evaluations, painted, passes)
+    return static, painted
 
 
 def _integrate_lights(renderer: FlickerRenderer, plan: SamplePlan, by_column: bool, out: np.ndarray | None,

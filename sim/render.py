@@ -191,7 +191,7 @@ class Renderer:
         return self._composite.linear_into(p, layer, by_column, subset, out, hits)
 
     def accumulate_samples(self, times_ns: np.ndarray, line_of: np.ndarray, out: np.ndarray, hits: np.ndarray,
-                           *, by_column: bool = False) -> tuple[np.ndarray | None, int]:
+                           *, by_column: bool = False, actors_only: bool = False) -> tuple[np.ndarray | None, int]:
         """Render many (line, time) samples in one go and accumulate them, as ``render_linear(hits=...)`` does.
 
         Sample e is line ``line_of[e]`` (non-decreasing: a line's samples together) at ``times_ns[e]``. Each
@@ -200,6 +200,10 @@ class Renderer:
         composite and skipped. One call instead of one per sample index saves the per-call set-up that
         dominates many-pass exposures. Returns the shared composite (None for a moving camera) and the
         number of samples painted. Ground truth is not produced.
+
+        ``actors_only`` (a moving camera; no effect on a static one): only samples an actor touches are painted,
+        and each adds what its actors change over the background at its own pose, under their spans; the
+        background itself is ``path_blur``'s.
         """
         n_lines, n_along = self.render_shape(by_column)
         times_ns = np.asarray(times_ns, np.int64)
@@ -212,7 +216,27 @@ class Renderer:
         ut_ns, ent_k = np.unique(times_ns, return_inverse=True)
         p = self._painter.prepare(by_column, ut_ns.astype(np.float64) * 1e-9, ent_k.astype(np.int64), self._all,
                                   n_along, line_of=line_of)
-        return self._composite.accumulate(p, layer, line_of, out, hits, by_column)
+        return self._composite.accumulate(p, layer, line_of, out, hits, by_column, actors_only)
+
+    def path_blur(self, starts_ns: np.ndarray, exposure_ns: int, n_path: np.ndarray, n_actor: np.ndarray,
+                  out: np.ndarray, hits: np.ndarray, *, by_column: bool = False, margin: int = 0) -> None:
+        """A moving camera's exposure integral into ``out`` (render orientation): each line's static background
+        integrated along its pixels' image paths (``n_path[l]`` midpoint samples of the window
+        ``starts_ns[l] + [0, exposure_ns]``, each a bilinear read of one render of the background, mapped
+        through the plane the pixel's ray hits: ``rollcam.sim._egoblur``), plus on lines with ``hits`` the
+        actors' samples that ``accumulate_samples(actors_only=True)`` left in ``out``, over ``n_actor[l]``.
+        ``margin`` render pixels of background are rendered beyond each image edge for reads that leave it."""
+        if not self.camera_moving:
+            raise ConfigError("path_blur integrates a moving camera's background; a static one's is its composite")
+        n_lines, n_along = self.render_shape(by_column)
+        starts_ns = _check_times(starts_ns, n_lines)
+        _check_buffers(out, hits, (n_lines, n_along), need_hits=True)
+        n_path, n_actor = np.asarray(n_path, np.int64), np.asarray(n_actor, np.int64)
+        if n_path.shape != (n_lines,) or n_actor.shape != (n_lines,) or (n_path < 1).any() or (n_actor < 1).any():
+            raise ConfigError(f"n_path and n_actor must be {n_lines} sample counts >= 1")
+        if not isinstance(margin, int) or margin < 0:
+            raise ConfigError(f"margin must be an integer >= 0, got {margin!r}")
+        self._painter.path_blur(by_column, starts_ns, int(exposure_ns), n_path, n_actor, margin, out, hits)
 
     def reference_frame(self, t_ns: int, *, by_column: bool = False, linear: bool = False) -> RenderResult:
         """One full render with every line at ``t_ns`` and no shortcuts: every line painted over the bare

@@ -17,6 +17,7 @@
  * -1e300 that no ray hits and no shadow comes from (so no table read depends on a condition).
  */
 #include <math.h>
+#include <stddef.h>
 #include <stdint.h>
 
 /* ---- table columns (rollcam/sim/_world.py) ---- */
@@ -449,26 +450,36 @@ static inline __attribute__((always_inline)) void shade_facade(const struct line
     }
 }
 
-/* One render-space line of the background from pose (rot, pos): `n` pixels of linear RGB into out (n x 3).
- * Blocks of pixels are classified by what their rays hit, and each run of one class is shaded by its material's
- * loop alone (a street line is a few long runs of sky, facades and ground). */
-CLONES
-void rollcam_background_line(const double *restrict world, const int64_t *restrict lut, int64_t n_bins64,
-                             const double *restrict bld, const double *restrict light, const double *restrict cam,
-                             const double *restrict rot, const double *restrict pos, int64_t line,
-                             float *restrict out, int64_t n) {
+/* Surfaces a background pixel's ray can hit, for rollcam_background_span's `surface` output: the sky (at
+ * infinity), the ground plane z = 0 (asphalt, curb and sidewalk) and the west (x = -W_FACADE) and east
+ * (x = +W_FACADE) facade planes. A moving camera's background blur maps each pixel through its surface's plane
+ * (rollcam.sim._egoblur). A flat or chart scene has no geometry: its pixels say SURF_SKY. */
+enum { SURF_SKY = 0, SURF_GROUND = 1, SURF_WEST = 2, SURF_EAST = 3 };
+
+/* Pixels a_begin..a_end - 1 of one render-space line of the background from pose (rot, pos), linear RGB into
+ * out[3 a ..] (out is addressed by pixel index), and when `surface` is not NULL each pixel's surface into
+ * surface[a]. Blocks of pixels are classified by what their rays hit, and each run of one class is shaded by its
+ * material's loop alone (a street line is a few long runs of sky, facades and ground). */
+static inline __attribute__((always_inline)) void background_range(
+    const double *restrict world, const int64_t *restrict lut, int64_t n_bins64, const double *restrict bld,
+    const double *restrict light, const double *restrict cam, const double *restrict rot,
+    const double *restrict pos, double line, int32_t a_begin, int32_t a_end, float *restrict out,
+    int8_t *restrict surface) {
     int kind = (int)world[W_KIND];
     if (kind != KIND_STREET) {
         /* A flat level, or a chart's uniform matte board filling the view. */
-        for (int64_t a = 0; a < n; a++)
+        for (int32_t a = a_begin; a < a_end; a++) {
             for (int c = 0; c < 3; c++)
                 out[3 * a + c] = (float)(kind == KIND_FLAT ? world[W_LEVEL] : world[W_ASPHALT + c]);
+            if (surface)
+                surface[a] = SURF_SKY;
+        }
         return;
     }
     struct line_ctx k;
     k.n_bins = (int32_t)n_bins64, k.stride = k.n_bins + 1;
     k.transposed = cam[C_TRANSPOSED] != 0.0;
-    k.line = (double)line;
+    k.line = line;
     k.inv_fx = 1.0 / cam[C_FX], k.inv_fy = 1.0 / cam[C_FY], k.cx0 = cam[C_CX], k.cy0 = cam[C_CY];
     k.px = pos[0], k.py = pos[1], k.pz = pos[2];
     k.r00 = rot[0], k.r01 = rot[1], k.r02 = rot[2], k.r10 = rot[3], k.r11 = rot[4], k.r12 = rot[5];
@@ -496,9 +507,17 @@ void rollcam_background_line(const double *restrict world, const int64_t *restri
     const double *restrict fog = fog_table; /* a pointer: gcc gathers from it, not from the global */
     int64_t cls[BLOCK], b_hit[BLOCK];
     double t_hit[BLOCK];
-    for (int32_t a0 = 0; a0 < (int32_t)n; a0 += BLOCK) {
-        int32_t m = (int32_t)n - a0 < BLOCK ? (int32_t)n - a0 : BLOCK;
+    for (int32_t a0 = a_begin; a0 < a_end; a0 += BLOCK) {
+        int32_t m = a_end - a0 < BLOCK ? a_end - a0 : BLOCK;
         hit_pass(&k, lut, bld, a0, m, cls, t_hit, b_hit);
+        if (surface) {
+            for (int32_t j = 0; j < m; j++) {
+                double dx, dy, dz;
+                ray_dir(&k, a0 + j, &dx, &dy, &dz);
+                surface[a0 + j] = (int8_t)(cls[j] == HIT_SKY ? SURF_SKY
+                                           : cls[j] == HIT_WALL ? (dx > 0.0 ? SURF_EAST : SURF_WEST) : SURF_GROUND);
+            }
+        }
         for (int32_t j = 0; j < m;) { /* the runs of one class (and on a facade, of one building) */
             int32_t e = j + 1;
             while (e < m && cls[e] == cls[j] && b_hit[e] == b_hit[j])
@@ -512,6 +531,86 @@ void rollcam_background_line(const double *restrict world, const int64_t *restri
             else
                 shade_ground(&k, lut, bld, fog, a0 + j, a0 + e, t_hit + j, 0, out);
             j = e;
+        }
+    }
+}
+
+/* One render-space line of the background from pose (rot, pos): `n` pixels of linear RGB into out (n x 3). */
+CLONES
+void rollcam_background_line(const double *restrict world, const int64_t *restrict lut, int64_t n_bins64,
+                             const double *restrict bld, const double *restrict light, const double *restrict cam,
+                             const double *restrict rot, const double *restrict pos, int64_t line,
+                             float *restrict out, int64_t n) {
+    background_range(world, lut, n_bins64, bld, light, cam, rot, pos, (double)line, 0, (int32_t)n, out, NULL);
+}
+
+/* Pixels a_begin..a_end - 1 of render-space line `line` (any pixel or line index, inside the image or beyond
+ * it: the blur's margins) from pose (rot, pos): linear RGB into out[3 (a - a_begin) ..], and each pixel's
+ * SURF_ code into surface[a - a_begin] when `surface` is not NULL. The same IEEE operations as
+ * rollcam_background_line for the same pixel. */
+CLONES
+void rollcam_background_span(const double *restrict world, const int64_t *restrict lut, int64_t n_bins64,
+                             const double *restrict bld, const double *restrict light, const double *restrict cam,
+                             const double *restrict rot, const double *restrict pos, double line, int64_t a_begin,
+                             int64_t a_end, float *restrict out, int8_t *restrict surface) {
+    /* Pointers addressed by pixel index (a_begin may be negative), kept as integers until the shift. */
+    float *o = (float *)((uintptr_t)out - (uintptr_t)(3 * a_begin * (int64_t)sizeof(float)));
+    int8_t *s = surface ? (int8_t *)((uintptr_t)surface - (uintptr_t)a_begin) : NULL;
+    background_range(world, lut, n_bins64, bld, light, cam, rot, pos, line, (int32_t)a_begin, (int32_t)a_end, o, s);
+}
+
+/* A moving camera's background blur for one render line (rollcam.sim._egoblur): acc[a] (n_along x 3 doubles) gets
+ * the sum over the line's n time samples of the bilinear read of `bg` (a float32 frame of n_rows x n_cols x 3,
+ * the background with margins) at where the mid-exposure pose sees pixel a's ray at sample j through its
+ * surface's plane. coef[(j * 4 + s) * 6 ..] = (x0, x1, y0, y1, z0, z1): image position ((x0 + a x1) / z,
+ * (y0 + a y1) / z), z = z0 + a z1; slot u_slot maps from dt_u seconds before mid-exposure, for the image velocity
+ * behind the rolling-shutter correction (lt: seconds per render line). surf: pixel a's surface code; scratch:
+ * 2 n_along doubles. Reads are clamped to the frame. */
+CLONES
+void rollcam_path_reads(const float *restrict bg, int64_t n_rows, int64_t n_cols, const int8_t *restrict surf,
+                        const double *restrict coef, int64_t n, int64_t u_slot, double ln, double lt, double dt_u,
+                        int64_t transposed, int64_t margin, int64_t n_along, double *restrict scratch,
+                        double *restrict acc) {
+    double *restrict d_inv = scratch, *restrict k_a = scratch + n_along;
+    const double row_max = (double)(n_rows - 1), col_max = (double)(n_cols - 1);
+    const int64_t row_hi = n_rows - 2, col_hi = n_cols - 2, row = n_cols * 3;
+    const double m = (double)margin;
+    for (int64_t a = 0; a < n_along; a++) {
+        const double *restrict c = coef + (u_slot * 4 + surf[a]) * 6;
+        double z = c[4] + a * c[5];
+        z = z > 1e-9 ? z : 1e-9;
+        double x = (c[0] + a * c[1]) / z, y = (c[2] + a * c[3]) / z;
+        double u_l = ((transposed ? x : y) - ln) / dt_u, u_a = ((transposed ? y : x) - (double)a) / dt_u;
+        double den = 1.0 - u_l * lt;
+        den = den > 0.1 ? den : 0.1; /* (u_l lt is a few percent at most: a line time is microseconds) */
+        d_inv[a] = 1.0 / den;
+        k_a[a] = u_a * lt / den;
+        acc[3 * a] = 0.0, acc[3 * a + 1] = 0.0, acc[3 * a + 2] = 0.0;
+    }
+    for (int64_t j = 0; j < n; j++) {
+        const double *restrict cj = coef + j * 4 * 6;
+#pragma omp simd
+        for (int64_t a = 0; a < n_along; a++) {
+            const double *restrict c = cj + surf[a] * 6;
+            double z = c[4] + a * c[5];
+            flag ok = z > 1e-9; /* behind the camera: read the pixel itself */
+            double zz = ok ? z : 1.0;
+            double x = (c[0] + a * c[1]) / zz, y = (c[2] + a * c[3]) / zz;
+            double d_l = ok ? (transposed ? x : y) - ln : 0.0;
+            double pa = ok ? (transposed ? y : x) : (double)a;
+            double li = ln + d_l * d_inv[a] + m, ai = pa + k_a[a] * d_l + m;
+            li = li > 0.0 ? (li < row_max ? li : row_max) : 0.0;
+            ai = ai > 0.0 ? (ai < col_max ? ai : col_max) : 0.0;
+            int64_t i0 = (int64_t)li, k0 = (int64_t)ai;
+            i0 = i0 < row_hi ? i0 : row_hi;
+            k0 = k0 < col_hi ? k0 : col_hi;
+            double fl = li - (double)i0, fa = ai - (double)k0;
+            const float *restrict p = bg + i0 * row + k0 * 3;
+            for (int ch = 0; ch < 3; ch++) {
+                double top = p[ch] + fa * (p[3 + ch] - p[ch]);
+                double bot = p[row + ch] + fa * (p[row + 3 + ch] - p[row + ch]);
+                acc[3 * a + ch] += top + fl * (bot - top);
+            }
         }
     }
 }

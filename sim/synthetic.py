@@ -331,11 +331,15 @@ class SyntheticCamera:
             radiance = res.radiance
             extra["blur_samples_max"] = 1
         else:
-            plan = plan_samples(self.renderer, starts, s.exposure_ns, by_column=by_col, bound_px=self.blur_px)
+            # A moving camera's background is integrated along each pixel's path (one render, cheap reads).
+            plan = plan_samples(self.renderer, starts, s.exposure_ns, by_column=by_col, bound_px=self.blur_px,
+                                ego_path=True)
             radiance = integrate(self.renderer, plan, by_column=by_col, out=self._radiance(by_col)).radiance
             res = self.renderer.render_lines(mid_times, by_column=by_col, truth_only=True)
             extra.update(blur_bound_px=self.blur_px, blur_samples_max=int(plan.n.max()),
                          blur_evaluations=plan.evaluations, blur_capped=plan.capped)
+            if plan.path_n is not None:
+                extra["blur_path_samples_max"] = int(plan.path_n.max())
         assert radiance is not None
         if self.optics.on:  # the lens, on the light each pixel integrated, before the sensor's noise
             radiance = self._lens.radiance(radiance)
