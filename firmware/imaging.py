@@ -46,9 +46,10 @@ _WARM_KINDS: set[tuple] = set()  # process-wide, as numba's compiled kernels are
 def kernel_kind(spec: CameraSpec) -> tuple:
     """What decides which compiled kernels a spec's frames run (the path through renderer, sensor model and
     packing), leaving out values that only change numbers: size, timing, exposure, gain, seeds."""
-    return (spec.sensor.name, spec.pixel_format, spec.uses_physics, spec.blur_px > 0, spec.noise, spec.hflip,
-            spec.vflip, spec.shutter, spec.readout, spec.scene, spec.test_pattern != "none", spec.imu is not None,
-            spec.rs_correct, spec.lens.on, picture_steps(spec).on)
+    return (spec.sensor.name, spec.pixel_format, spec.uses_physics, spec.blur_px > 0, spec.ego_blur,
+            spec.noise, spec.hflip, spec.vflip, spec.shutter, spec.readout, spec.scene,
+            spec.test_pattern != "none", spec.imu is not None, spec.rs_correct, spec.lens.on,
+            picture_steps(spec).on)
 
 
 def warm(spec: CameraSpec, imager: Imager | None = None) -> None:
@@ -74,7 +75,8 @@ def synthetic_camera(spec: CameraSpec) -> SyntheticCamera:
     formats)."""
     fourcc = spec.pixel_format if spec.raw else "BGR3"
     return SyntheticCamera(spec.sensor, scene_of(spec), spec.camera, settings=spec.settings, pixel_format=fourcc,
-                           physics=spec.uses_physics, blur_px=spec.blur_px or None, noise=spec.noise,
+                           physics=spec.uses_physics, blur_px=spec.blur_px or None, ego_path=spec.ego_blur == "path",
+                           noise=spec.noise,
                            serial=spec.serial, noise_seed=spec.noise_seed, hflip=spec.hflip, vflip=spec.vflip,
                            optics=spec.lens, defects=spec.defects, mount=(*spec.mount_m, spec.mount_yaw_deg))
 

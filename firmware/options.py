@@ -272,6 +272,9 @@ OPTIONS: dict[str, Option] = {o.name: o for o in (
                                         "clean render; physics=on gives it the sensor's noise)"),
     Option("blur_px", bounded(non_negative_float, 0.0, MAX_BLUR_PX), 0.5,
            "sensor model: motion-blur bound in px (0: mid-exposure only)"),
+    Option("ego_blur", _choice("lines", "path"), "lines",
+           "sensor model, moving camera: lines (whole-line samples, the exact method) | path (one render blurred "
+           "along each pixel's image path: 1.6-2.2x less CPU, error per ego preset in docs/sensor-model.md)"),
     Option("noise", _noise, None, "sensor model: on | off | comma list of shot, dark, read, dsnu, prnu, "
                                   "saturation (default: on)"),
     Option("vignette", _sim_bounded(non_negative_float, "rollcam.sim.optics", "MAX_VIGNETTE"), 0.0,

@@ -59,6 +59,7 @@ class CameraSpec:
     pixel_format: str = "BGR3"
     physics: bool | None = None
     blur_px: float = 0.5
+    ego_blur: str = "lines"  # a moving camera's blur: "lines" (exact samples) or "path" (sim.exposure's path blur)
     noise: frozenset[str] | None = None
     lens: LensOptics = field(default_factory=LensOptics)
     picture: PictureSteps = field(default_factory=PictureSteps)
@@ -224,7 +225,8 @@ class CameraSpec:
         scene.update(scene=self.scene, seed=self.seed, camera=self.camera, **dict(self.scene_options))
         return {**scene, "size": self.size, "fps": s.timing.fps, "shutter": s.shutter, "readout": s.readout.value,
                 "exposure_us": s.exposure_ns / 1000, "gain": self.gain, "format": self.output_format,
-                "physics": self.uses_physics, "blur_px": self.blur_px, "serial": self.serial, **vars(self.lens),
+                "physics": self.uses_physics, "blur_px": self.blur_px, "ego_blur": self.ego_blur,
+                "serial": self.serial, **vars(self.lens),
                 "noise": (parse_stages(None) if self.noise is None else self.noise) - {"quantization"},
                 "noise_seed": self.noise_seed, "hflip": self.hflip, "vflip": self.vflip, **vars(self.picture),
                 "test_pattern": self.test_pattern, **imu_option_values(self.sensor, self.imu),

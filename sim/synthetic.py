@@ -187,6 +187,7 @@ class SyntheticCamera:
                  noise: frozenset[str] | None = None, serial: str = "0", noise_seed: int = 0, hflip: bool = False,
                  vflip: bool = False, optics: LensOptics | None = None, settings: StreamSettings | None = None,
                  defects: SensorDefects | None = None, mount: tuple[float, float, float, float] | None = None,
+                 ego_path: bool = False,
                  **programming) -> None:
         self.sensor = sensor
         self.scene = scene
@@ -212,6 +213,7 @@ class SyntheticCamera:
         if not self.physics and self.pixel_format != "BGR3":
             raise ConfigError(f"pixel format {pixel_format!r} needs the sensor model (physics on)")
         self.blur_px = blur_px or None
+        self.ego_path = bool(ego_path)  # a moving camera's blur along each pixel's path (sim.exposure), not lines
         self.optics = optics or LensOptics()
         self._lens = LensStage(self.optics)  # keeps the lens image of the renderer's static composite
         self._lens_u8: tuple[np.ndarray, np.ndarray] | None = None  # (that image, its 8-bit encoding)
@@ -331,9 +333,10 @@ class SyntheticCamera:
             radiance = res.radiance
             extra["blur_samples_max"] = 1
         else:
-            # A moving camera's background is integrated along each pixel's path (one render, cheap reads).
+            # ego_path: a moving camera's background integrated along each pixel's path (one render, cheap
+            # reads; its error per preset is in docs/sensor-model.md), else whole-line samples.
             plan = plan_samples(self.renderer, starts, s.exposure_ns, by_column=by_col, bound_px=self.blur_px,
-                                ego_path=True)
+                                ego_path=self.ego_path)
             radiance = integrate(self.renderer, plan, by_column=by_col, out=self._radiance(by_col)).radiance
             res = self.renderer.render_lines(mid_times, by_column=by_col, truth_only=True)
             extra.update(blur_bound_px=self.blur_px, blur_samples_max=int(plan.n.max()),

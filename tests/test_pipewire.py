@@ -7,13 +7,13 @@ from __future__ import annotations
 import json
 import os
 import shutil
-import signal
 import subprocess
 import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
+from interrupts import interrupt
 from rollcam.common.errors import ConfigError, DeviceError
 from rollcam.host import open_camera
 from rollcam.host.pipewire import PROGRAMS, PipeWireCamera, find_node, pw_objects
@@ -84,8 +84,8 @@ def test_rollcam_pipewire_holds_the_node_until_ctrl_c(tmp_path):
         assert (line["node"], line["XDG_RUNTIME_DIR"]) == ("rollcam-cli", str(runtime))
         env = {**os.environ, "XDG_RUNTIME_DIR": str(runtime)}
         assert find_node(pw_objects(env), "rollcam-cli")["id"] == line["id"]
-        proc.send_signal(signal.SIGINT)
-        assert proc.wait(timeout=60) == 130
+        interrupt(proc, timeout_s=60)
+        assert proc.returncode == 130
     finally:
         if proc.poll() is None:
             proc.kill()

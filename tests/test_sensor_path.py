@@ -343,10 +343,24 @@ def test_moving_camera_path_blur_holds_its_stated_error(ego):
         assert err <= 0.35 * point, (err, point)
 
 
-def test_sensor_frames_of_a_moving_camera_use_the_path_blur():
-    cam = _ego_camera("pan", (96, 54), pixel_format="YUYV")
-    frame = cam.frame(0)
+def test_sensor_frames_of_a_moving_camera_use_the_path_blur_when_asked():
+    frame = _ego_camera("pan", (96, 54), pixel_format="YUYV", ego_path=True).frame(0)
     assert frame.meta["blur_path_samples_max"] >= 1 and frame.meta["blur_samples_max"] >= 1
+    lines = _ego_camera("pan", (96, 54), pixel_format="YUYV").frame(0)  # the default: whole-line samples
+    assert "blur_path_samples_max" not in lines.meta and lines.meta["blur_samples_max"] > 1
+
+
+def test_the_ego_blur_option_chooses_the_method_through_the_public_api():
+    from rollcam.common.errors import SourceError
+    from rollcam.host.sources import open_camera
+
+    uri = "emu:imx219?size=160x90&scene=street&ego=pan&format=YUYV&seed=2"
+    with open_camera(uri) as lines, open_camera(uri + "&ego_blur=path") as path:
+        a, b = lines.read(), path.read()
+    assert "blur_path_samples_max" in b.meta and "blur_path_samples_max" not in a.meta
+    assert not np.array_equal(a.data, b.data)
+    with pytest.raises(SourceError, match="ego_blur"):
+        open_camera(uri + "&ego_blur=fast")
 
 
 def test_path_blur_checks_its_inputs():

@@ -8,8 +8,10 @@ import json
 import tempfile
 import threading
 
+from . import Subparsers
 
-def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
+
+def add_parser(sub: Subparsers) -> argparse.ArgumentParser:
     """Add ``rollcam pipewire``."""
     p = sub.add_parser("pipewire", help="publish the camera as a PipeWire Video/Source node (a private PipeWire)",
                        description="Start a private, headless PipeWire (and WirePlumber) whose own V4L2 source "
