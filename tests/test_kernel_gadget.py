@@ -28,6 +28,7 @@ import re
 import shutil
 import subprocess
 import sys
+from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -96,8 +97,20 @@ class GadgetRun:
 
 
 @pytest.fixture(scope="module")
-def gadget(kernel_guest):
-    g = kernel_guest
+def gadget(tmp_path_factory):
+    """``rollcam gadget`` in a guest of its own: the gadget modules, configfs and the vudc import change the
+    guest's kernel beyond what the uvcvideo tests' shared guest should carry (late disconnect lines included)."""
+    why = guest_module.missing()
+    if why:
+        pytest.skip(f"the kernel tests need: {why}")
+    g = guest_module.Guest(tmp_path_factory.mktemp("gadget-guest"))
+    try:
+        yield from _gadget_in(g)
+    finally:
+        g.close()
+
+
+def _gadget_in(g: Any) -> Iterator[GadgetRun]:
     shutil.copytree(numba_cache(), g.xchg / "numba", dirs_exist_ok=True)
     for module in ("usbip-vudc", "libcomposite", "usb_f_uvc"):
         g.load_module(module)
