@@ -9,6 +9,7 @@ from __future__ import annotations
 import numpy as np
 from rollcam.common.errors import ConfigError, SourceError
 from rollcam.sim.codecs import codec
+from rollcam.sim.codecs import encode_image as encode_file
 from rollcam.sim.formats import FORMATS
 from rollcam.sim.frame import Frame
 
@@ -16,7 +17,7 @@ _PICTURES = ("BGR3", "RGB3", "GREY")
 
 
 def image_array(frame: Frame, fmt: str) -> np.ndarray:
-    """Pixel data in the layout ``cv2.imencode`` stores for image format ``fmt``.
+    """Pixel data in the layout an image file of format ``fmt`` stores (as OpenCV writes it).
 
     BGR3/RGB3 become BGR pictures, GREY a grey one. Any other format (raw Bayer or mono, CSI-2 packed,
     YUYV, NV12) is stored losslessly as its memory layout in 2-D: rows by bytes (uint8) or by samples
@@ -51,9 +52,4 @@ def encode_image(frame: Frame, fmt: str) -> bytes:
         buf = io.BytesIO()
         np.save(buf, np.ascontiguousarray(frame.data), allow_pickle=False)
         return buf.getvalue()
-    import cv2
-
-    ok, buf = cv2.imencode(f".{fmt}", image_array(frame, fmt))
-    if not ok:
-        raise SourceError(f"could not encode frame {frame.sequence} as {fmt}")
-    return buf.tobytes()
+    return encode_file(image_array(frame, fmt), fmt, error=SourceError, what=f"frame {frame.sequence}")

@@ -48,8 +48,6 @@ ALLOWED: dict[tuple[str, str], str] = {
     # image encoding and colour conversion
     ("image encoding", "benchmarks/mjpeg.py"):
         "what it times is OpenCV's JPEG encoder with each sampling option: the call itself is the subject",
-    ("image encoding", "host/imagefiles.py"):
-        EDITED.format("capture's image files (host/capture.py, host/imagefiles.py)") + "; encode_image fits",
     ("colour conversion", "host/flowcorrect.py"): "fold pending: grey for optical flow (as sim/compose.py's): one "
                                                    "grey-for-flow helper",
     ("colour conversion", "sim/compose.py"): "fold pending: grey for optical flow (as host/flowcorrect.py's)",
