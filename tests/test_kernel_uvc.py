@@ -27,6 +27,7 @@ from rollcam.emu.usbip.server import ServerLimits, USBIPServer
 from rollcam.emu.uvc import DeviceIdentity, FirmwareProducer, UVCFunction
 from rollcam.emu.uvc.convert import encode
 from rollcam.firmware.camera import FirmwareCamera
+from rollcam.firmware.imaging import warm
 from rollcam.firmware.spec import CameraSpec
 from rollcam.host.sources import open_camera
 
@@ -98,6 +99,9 @@ def attached_camera(guest, transfer: str, *, usb_id: tuple[int, int] | None = No
     """Serve an emulated imx219 (spec ``options``, a street scene by default) over USB/IP on the host, attach it
     in the guest, and detach it at the end."""
     camera = FirmwareCamera(CameraSpec.from_options("imx219", {"scene": "street", "seed": "3", **options}))
+    # Compiled before the attach: on a cold cache the first commit would compile the renderer for longer than
+    # uvcvideo waits for its answer or v4l2-ctl for a frame (a fresh clone's first kernel test).
+    warm(camera.spec)
     recorder = RecordingProducer(FirmwareProducer(camera))
     ids = {} if usb_id is None else {"vendor_id": usb_id[0], "product_id": usb_id[1]}
     function = UVCFunction(recorder, transfer=transfer, realtime=True,
