@@ -46,9 +46,9 @@ def start_http(args: argparse.Namespace, camera: Any, pump: Any) -> Running | No
     """The MJPEG-over-HTTP server and its live page, when ``--http`` is given (or no transport at all)."""
     if args.http is None:
         return None
-    from rollcam.emu.http_mjpeg import MjpegServer, images_sent
-    from rollcam.emu.http_view import LiveView
-    from rollcam.emu.view_controls import CameraControls
+    from rollcam.emu.http.mjpeg import MjpegServer, images_sent
+    from rollcam.emu.http.view import LiveView
+    from rollcam.emu.http.view_controls import CameraControls
 
     host, port = args.http
     _warn_if_wide("HTTP", host, "the MJPEG stream has no authentication; the live view needs the token below")

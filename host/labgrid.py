@@ -27,7 +27,7 @@ from typing import Any, ClassVar
 
 import attr  # attrs: labgrid's own class toolkit (here already, through aiohttp)
 from rollcam.common.errors import ConfigError, SourceError, require
-from rollcam.emu.http_mjpeg import MjpegServer
+from rollcam.emu.http.mjpeg import MjpegServer
 from rollcam.firmware.camera import FirmwareCamera
 from rollcam.firmware.spec import CameraSpec
 from rollcam.sim.frame import Frame

@@ -154,7 +154,7 @@ class OpenCVControls:
 
 def controls_of(source: CameraSource) -> Any:
     """What the page may change on ``source``: the emulated camera's controls, a camera's, or none."""
-    from rollcam.emu.view_controls import CameraControls, NoControls
+    from rollcam.emu.http.view_controls import CameraControls, NoControls
 
     device = getattr(source, "device", None)
     if device is not None:
@@ -187,8 +187,8 @@ class ViewServer(Closeable):
 def open_view(source: CameraSource, host: str = "127.0.0.1", port: int = 0, *, quality: int | None = None,
               detector: Any = None, token: str | None = "auto", paced: bool = True) -> ViewServer:
     """Serve the live page of ``source`` (opened; it is closed with the server) on ``host:port``, started."""
-    from rollcam.emu.http_mjpeg import MjpegServer
-    from rollcam.emu.http_view import LiveView
+    from rollcam.emu.http.mjpeg import MjpegServer
+    from rollcam.emu.http.view import LiveView
 
     camera = SourceCamera(source)
     pump = SourcePump(source, camera, paced=paced)

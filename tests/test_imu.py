@@ -196,7 +196,7 @@ def test_serial_imu_query() -> None:
 
 
 def test_http_imu_jsonl() -> None:
-    from rollcam.emu.http_mjpeg import MjpegServer
+    from rollcam.emu.http.mjpeg import MjpegServer
 
     cam = FirmwareCamera(CameraSpec.create("imx219", scene={"scene": "street", "ego": "pan", "pedestrians": 0},
                                            size=(640, 480), imu_values={"imu_rate": 2000}))

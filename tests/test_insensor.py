@@ -178,7 +178,7 @@ def test_serial_insensor_and_ledger_queries() -> None:
 
 
 def test_http_jsonl_part_headers_and_metadata_only() -> None:
-    from rollcam.emu.http_mjpeg import MjpegServer
+    from rollcam.emu.http.mjpeg import MjpegServer
 
     spec = CameraSpec.from_options("letsroll", {"size": "320x180", "pedestrians": "10", "insensor": "personnet-raw"})
     cam = FirmwareCamera(spec)
@@ -276,7 +276,7 @@ def test_eval_scores_what_the_camera_sends_as_the_network_on_the_files(tmp_path)
 
 
 def test_part_header_caps_the_detections_and_results_round_trip() -> None:
-    from rollcam.emu.http_mjpeg import HEADER_DETECTIONS, Part
+    from rollcam.emu.http.mjpeg import HEADER_DETECTIONS, Part
     from rollcam.sim.frame import Frame
     from rollcam.sim.insensor import InSensorResult
     from rollcam.sim.timing import Readout
@@ -312,7 +312,7 @@ def test_tensors_option_reads_the_one_boolean_vocabulary(query: str, want: bool)
     from types import SimpleNamespace
 
     from aiohttp.test_utils import make_mocked_request
-    from rollcam.emu.http_insensor import InSensorStreams
+    from rollcam.emu.http.insensor import InSensorStreams
 
     cam = SimpleNamespace(spec=SimpleNamespace(insensor="personnet-raw"), clock_ns=lambda: 0,
                           insensor=SimpleNamespace(recent=lambda now, since=0: []))
@@ -325,7 +325,7 @@ def test_a_bad_tensors_value_is_a_400_naming_it() -> None:
 
     from aiohttp import web
     from aiohttp.test_utils import make_mocked_request
-    from rollcam.emu.http_insensor import InSensorStreams
+    from rollcam.emu.http.insensor import InSensorStreams
 
     cam = SimpleNamespace(spec=SimpleNamespace(insensor="personnet-raw"), clock_ns=lambda: 0,
                           insensor=SimpleNamespace(recent=lambda now, since=0: []))

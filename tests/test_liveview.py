@@ -20,9 +20,9 @@ import cv2
 import numpy as np
 import pytest
 from rollcam.common.errors import ConfigError
-from rollcam.emu.http_mjpeg import MjpegServer
-from rollcam.emu.http_view import LiveView, host_names_server, is_loopback
-from rollcam.emu.view_controls import EGO_PRESETS, CameraControls, NoControls
+from rollcam.emu.http.mjpeg import MjpegServer
+from rollcam.emu.http.view import LiveView, host_names_server, is_loopback
+from rollcam.emu.http.view_controls import EGO_PRESETS, CameraControls, NoControls
 from rollcam.firmware.camera import FirmwareCamera
 from rollcam.sim.scenegen import ego_preset
 

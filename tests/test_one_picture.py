@@ -42,7 +42,7 @@ import cv2
 import numpy as np
 import pytest
 from programs import need
-from rollcam.emu.http_mjpeg import MjpegServer
+from rollcam.emu.http.mjpeg import MjpegServer
 from rollcam.emu.preload import LIBRARY_NAME
 from rollcam.emu.preload import __file__ as preload_init
 from rollcam.emu.usbip import USBIPServer

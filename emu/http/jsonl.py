@@ -1,10 +1,10 @@
 """One bounded JSON-lines endpoint of the emulated camera, streamed as the device clock makes its items.
 
-``JsonLinesStreams`` is the mechanism ``/imu.jsonl`` (emu/http_imu.py) and ``/insensor.jsonl``
-(emu/http_insensor.py) share: a first line saying what the stream is, then one JSON object per item as the device
+``JsonLinesStreams`` is the mechanism ``/imu.jsonl`` (emu/http/imu.py) and ``/insensor.jsonl``
+(emu/http/insensor.py) share: a first line saying what the stream is, then one JSON object per item as the device
 makes it, polled every ``poll_s``; ``?N`` items at most when the client asks (the subclass names the option), and
 a source that stops (an IMU or network turned off, a reader fallen behind the device's buffer) ending the stream
-with an ``{"error": ...}`` line. Readers hold slots as MJPEG streams do (emu/http_slots.py, one ``StreamSlots`` per
+with an ``{"error": ...}`` line. Readers hold slots as MJPEG streams do (emu/http/slots.py, one ``StreamSlots`` per
 endpoint, its limits from ``jsonl_limits``): at most ``MAX_STREAMS`` per endpoint and ``MAX_STREAMS_PER_PEER`` from
 one address; a reader that has been sent nothing for ``stall_s`` (one that does not read, or one waiting for a
 device time far in the future) yields its slot to a newcomer, and one that has been sent nothing for
@@ -24,8 +24,8 @@ from aiohttp import web
 from rollcam.common.errors import RollcamError
 from rollcam.common.values import non_negative_int
 
-from .http_server import Connection, HttpLimits
-from .http_slots import StreamClient, StreamSlots
+from .server import Connection, HttpLimits
+from .slots import StreamClient, StreamSlots
 
 MAX_STREAMS = 8
 MAX_STREAMS_PER_PEER = 4

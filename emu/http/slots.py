@@ -21,7 +21,7 @@ import asyncio
 from collections.abc import Awaitable, Callable
 from typing import Any
 
-from .http_server import Connection, HttpLimits
+from .server import Connection, HttpLimits
 
 ADMIT_POLL_S = 0.1  # how often a waiting newcomer looks for a stalled or freed slot
 

@@ -2,7 +2,7 @@
 
 ``LiveView`` adds to an ``MjpegServer``'s aiohttp application (before it starts): the page (``GET /`` from a
 browser, that is with ``text/html`` in ``Accept``; programs asking ``/`` still get the MJPEG stream, and every
-stream route stays as it was), its script and style (``/view/...``, package data in ``emu/web/``), a WebSocket
+stream route stays as it was), its script and style (``/view/...``, package data in ``emu/http/web/``), a WebSocket
 ``/view/ws``, ``/view/state.json`` and ``/view/snapshot.json``.
 
 One WebSocket carries everything, so picture and truth never disagree: each frame is one binary message,
@@ -48,9 +48,9 @@ from rollcam.common.lifecycle import Closeable, Stats
 from rollcam.sim.codecs import encode_image, preview_frame
 from rollcam.sim.frame import Frame
 
-from .http_mjpeg import MjpegServer, Part
-from .http_server import Connection
-from .http_slots import StreamClient
+from .mjpeg import MjpegServer, Part
+from .server import Connection
+from .slots import StreamClient
 from .view_controls import ViewControls
 from .view_truth import Annotate, FrameTap
 
@@ -122,7 +122,7 @@ class LiveView(Closeable):
         self._info = info or (lambda: {})
         self.stats = ViewStats()
         self.tap = FrameTap(lambda: self.stats.pages_open > 0, annotate)
-        self._files = {name: (resources.files("rollcam.emu") / "web" / name).read_bytes() for name in WEB_FILES}
+        self._files = {name: (resources.files("rollcam.emu.http") / "web" / name).read_bytes() for name in WEB_FILES}
         self._controls_pool = ThreadPoolExecutor(1, thread_name_prefix="rollcam-view-controls")
         self._snapshot_pool = ThreadPoolExecutor(MAX_SNAPSHOTS, thread_name_prefix="rollcam-view-png")
         self._snapshots = 0

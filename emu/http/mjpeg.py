@@ -7,14 +7,14 @@ part carries the frame's ``X-Sequence``, ``X-Timestamp-Ns`` (start of exposure, 
 each names its own source frame in ``seq``; at most ``HEADER_DETECTIONS`` detections each, ``truncated`` counting
 the rest, which ``/insensor.jsonl`` has). The body is not chunked: it ends when the connection does.
 ``GET /snapshot.jpg`` returns the next frame, ``GET /status.json`` the server's counters (and the stream's
-ledger), ``GET /imu.jsonl`` the IMU's samples as JSON lines (emu/http_imu.py), ``GET /insensor.jsonl`` the
-in-sensor results as JSON lines (emu/http_insensor.py). In metadata-only mode (``insensor_output=meta``) no
+ledger), ``GET /imu.jsonl`` the IMU's samples as JSON lines (emu/http/imu.py), ``GET /insensor.jsonl`` the
+in-sensor results as JSON lines (emu/http/insensor.py). In metadata-only mode (``insensor_output=meta``) no
 image leaves the camera: the stream and snapshot answer 404 and ``/insensor.jsonl`` is what there is.
-One thread encodes each frame once; the event loop (emu/http_server.py, aiohttp) writes
-the same bytes to every client. Slots are fair (emu/http_slots.py): a client reading slower than the frame
+One thread encodes each frame once; the event loop (emu/http/server.py, aiohttp) writes
+the same bytes to every client. Slots are fair (emu/http/slots.py): a client reading slower than the frame
 rate skips frames (counted) and never grows memory, and one that does not read at all yields its slot to a
 newcomer. Bad requests get an HTTP error; the server keeps serving the others. A fault plan (``faults``)
-drops, holds and cuts stream parts (emu/http_faults.py); ``fault_stats`` counts what it injected.
+drops, holds and cuts stream parts (emu/http/faults.py); ``fault_stats`` counts what it injected.
 """
 
 from __future__ import annotations
@@ -38,13 +38,13 @@ from rollcam.firmware.labfaults import FrameFaults
 from rollcam.sim.codecs import JPEG_QUALITY, Levels, jpeg_quality, transcode
 from rollcam.sim.frame import Frame
 
-from .http_faults import StreamFaults
-from .http_imu import ImuStreams
-from .http_insensor import InSensorStreams
-from .http_jsonl import jsonl_limits
-from .http_server import Connection, HttpHost, HttpLimits
-from .http_slots import StreamSlots
-from .pump import FramePump
+from ..pump import FramePump
+from .faults import StreamFaults
+from .imu import ImuStreams
+from .insensor import InSensorStreams
+from .jsonl import jsonl_limits
+from .server import Connection, HttpHost, HttpLimits
+from .slots import StreamSlots
 
 BOUNDARY = "rollcamframe"
 STREAM_PATHS = ("/", "/stream", "/stream.mjpg", "/video", "/video.mjpg")

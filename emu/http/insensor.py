@@ -7,7 +7,7 @@ with the stream's energy and bandwidth ledger (``rollcam.firmware.ledger``). A r
 device clock has passed its ``done_ns``. ``?from_seq=N`` starts at frame N if it is still among the last
 frames kept (default: the next result), ``?results=N`` ends the response after N results (default: endless).
 It works in both output modes; in metadata-only mode (``insensor_output=meta``) it is the only thing the
-camera sends. Bounded as every JSON-lines endpoint is (emu/http_jsonl.py).
+camera sends. Bounded as every JSON-lines endpoint is (emu/http/jsonl.py).
 """
 
 from __future__ import annotations
@@ -19,7 +19,7 @@ from rollcam.common.errors import DeviceError
 from rollcam.common.values import non_negative_int, parse_bool
 from rollcam.firmware.camera import FirmwareCamera
 
-from .http_jsonl import JsonLinesStreams, query_option
+from .jsonl import JsonLinesStreams, query_option
 
 INSENSOR_PATH = "/insensor.jsonl"
 
@@ -32,7 +32,7 @@ def programming(camera: FirmwareCamera) -> dict[str, Any]:
 
 
 class InSensorStreams(JsonLinesStreams):
-    """The ``/insensor.jsonl`` handler of one camera, its readers held in fair slots (emu/http_jsonl.py)."""
+    """The ``/insensor.jsonl`` handler of one camera, its readers held in fair slots (emu/http/jsonl.py)."""
 
     path: ClassVar[str] = INSENSOR_PATH
     what: ClassVar[str] = "in-sensor"

@@ -4,7 +4,7 @@ Each line is ``{"t_ns": T, "gyro": [wx, wy, wz], "accel": [ax, ay, az]}`` (devic
 IMU axes); the first line is ``{"imu": {...}}``, the IMU's calibration (rate, Kalibr noise terms, ``T_cam_imu``,
 ``time_offset_ns``). ``?from_ns=T`` starts at a device time still in the IMU buffer (default: now), ``?samples=N``
 ends the response after N samples (default: endless). The stream follows the device clock, polled every
-20 ms, and is bounded as every JSON-lines endpoint is (emu/http_jsonl.py): fair slots as for the MJPEG streams
+20 ms, and is bounded as every JSON-lines endpoint is (emu/http/jsonl.py): fair slots as for the MJPEG streams
 (a per-address cap, an idle or non-reading reader evicted for a newcomer and closed after a deadline), so no
 reader can grow the server's memory, stall it or lock the others out.
 """
@@ -18,7 +18,7 @@ from rollcam.common.values import non_negative_int
 from rollcam.firmware.camera import FirmwareCamera
 from rollcam.firmware.imu import device_samples
 
-from .http_jsonl import JsonLinesStreams, query_option
+from .jsonl import JsonLinesStreams, query_option
 
 IMU_PATH = "/imu.jsonl"
 MAX_BATCH = 4096
@@ -35,7 +35,7 @@ def _calibration(camera: FirmwareCamera) -> dict[str, Any]:
 
 
 class ImuStreams(JsonLinesStreams):
-    """The ``/imu.jsonl`` handler of one camera, its readers held in fair slots (emu/http_jsonl.py)."""
+    """The ``/imu.jsonl`` handler of one camera, its readers held in fair slots (emu/http/jsonl.py)."""
 
     path: ClassVar[str] = IMU_PATH
     what: ClassVar[str] = "IMU"
