@@ -14,7 +14,7 @@ from rollcam.common.errors import (
 from rollcam.firmware.insensor import set_network_loader as _set_network_loader
 
 # The emulated camera's in-sensor networks are host detectors: registered by name, imported on first use.
-_set_network_loader("rollcam.host.insensor:load_network", replace=False)
+_set_network_loader("rollcam.host.detectors.onchip:load_network", replace=False)
 
 
 def __getattr__(name: str) -> object:
@@ -29,7 +29,7 @@ def __getattr__(name: str) -> object:
 
         return VideoCapture
     if name in ("shims_path", "standin_env"):
-        from . import standins
+        from .servers import standins
 
         return getattr(standins, name)
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

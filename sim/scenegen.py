@@ -419,7 +419,7 @@ def ego_preset(name: str) -> EgoMotion:
     'calib' is what a calibration engineer does by hand, waving the rig in front of a target: its angular
     velocity swings through zero (up to ~30 deg/s, ~12 rad/s^2), which makes the camera-IMU time offset
     observable (a constant pan shifts every image by the same amount whatever the offset), and it does not
-    translate, so a pure-rotation model explains every feature track (``rollcam.host.calibrate``).
+    translate, so a pure-rotation model explains every feature track (``rollcam.host.correction.calibrate``).
     """
     presets = {
         "none": EgoMotion(),

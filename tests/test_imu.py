@@ -214,7 +214,7 @@ def test_http_imu_jsonl() -> None:
 
 def test_capture_writes_euroc_and_kalibr_files(tmp_path) -> None:
     import yaml
-    from rollcam.host.capture import capture
+    from rollcam.host.recording.capture import capture
 
     out = tmp_path / "cap"
     with open_camera("emu:imx219?size=640x480&ego=pan&imu_rate=400&imu_offset_us=120&frames=3") as src:
@@ -235,7 +235,7 @@ def test_capture_writes_euroc_and_kalibr_files(tmp_path) -> None:
 def test_gyro_correction_brings_rs_to_gs() -> None:
     """Device-side and host-side correction agree, and bring an RS frame of a panning camera to within a
     fraction of the RS error of the GS frame of the same instant."""
-    from rollcam.host.correct import GyroCorrector
+    from rollcam.host.correction.gyro import GyroCorrector
 
     base = "emu:imx219?size=640x480&ego=pan&pedestrians=0&imu=on"
     gs, rs = open_camera(base).read_pair()

@@ -19,7 +19,7 @@ from rollcam.firmware.ledger import ledger
 from rollcam.firmware.protocol import handle_line
 from rollcam.firmware.spec import CameraSpec
 from rollcam.host import open_camera
-from rollcam.host.insensor import onnx_macs
+from rollcam.host.detectors.onchip import onnx_macs
 
 pytest.importorskip("onnx")  # the in-sensor stage counts a network's operations from its graph
 
@@ -226,7 +226,7 @@ def test_http_jsonl_part_headers_and_metadata_only() -> None:
 def test_emulate_names_the_results_endpoint_not_a_stream_in_metadata_only_mode() -> None:
     import argparse
 
-    from rollcam.host.emulate import start_http
+    from rollcam.host.servers.emulate import start_http
 
     args = argparse.Namespace(http=("127.0.0.1", 0), detector=None, quality=80, faults=None)
     for output, want, absent in (("frame", "MJPEG stream:", "in-sensor:"), ("meta", "in-sensor:", "MJPEG")):
@@ -240,8 +240,8 @@ def test_emulate_names_the_results_endpoint_not_a_stream_in_metadata_only_mode()
         assert want in text and absent not in text, text
 
 def test_detect_scores_the_results_against_their_own_frames(tmp_path) -> None:
-    from rollcam.host.detect import run_detect
     from rollcam.host.detectors import load_detector
+    from rollcam.host.detectors.live import run_detect
 
     reader = load_detector("insensor")
     with open_camera(f"{URI}&frames=5") as cam:

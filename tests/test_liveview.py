@@ -283,8 +283,8 @@ def test_detections_come_from_the_newest_frame_and_a_failing_detector_is_reporte
 
 
 def test_rollcam_view_serves_a_host_source_with_the_controls_it_has(tmp_path):
+    from rollcam.host.servers.view import open_view
     from rollcam.host.sources import open_camera
-    from rollcam.host.view import open_view
 
     with open_view(open_camera("emu:imx219?size=320x240&scene=chart"), paced=True) as running:
         srv = running.server

@@ -51,7 +51,7 @@ from rollcam.firmware.camera import FirmwareCamera, FramePlan
 from rollcam.firmware.imaging import encode
 from rollcam.firmware.spec import CameraSpec
 from rollcam.host import open_camera, standin_env
-from rollcam.host.preload import build_camera, program_environment, serving
+from rollcam.host.servers.devnodes import build_camera, program_environment, serving
 from rollcam.sim.codecs import JPEG_QUALITY, Levels, codec, preview_frame
 from rollcam.sim.frame import Frame
 

@@ -104,7 +104,7 @@ def rollcam_picamera2(monkeypatch: pytest.MonkeyPatch) -> Iterator[Callable[...,
     ``picamera2 = rollcam_picamera2("imx477", "emu:imx708?scene=flat")`` (camera N is the N-th source; none
     given: one imx219). Code under test imports it as usual. A real picamera2 already imported is put back
     afterwards."""
-    from rollcam.host.standins import PICAMERA2_ENV, shims_path
+    from rollcam.host.servers.standins import PICAMERA2_ENV, shims_path
 
     saved = {k: sys.modules.pop(k) for k in [k for k in sys.modules if _is_standin(k)]}
     monkeypatch.syspath_prepend(str(shims_path()))

@@ -22,8 +22,8 @@ from rollcam.firmware import controls as ctl
 from rollcam.firmware.camera import FirmwareCamera
 from rollcam.firmware.pixfmt import raw_formats
 from rollcam.firmware.spec import CameraSpec
+from rollcam.host.servers.standins import PICAMERA2_ENV
 from rollcam.host.sources.emu import device_spec
-from rollcam.host.standins import PICAMERA2_ENV
 from rollcam.sim import formats as sf
 from rollcam.sim.frame import Frame
 from rollcam.sim.hwconfig import SensorMode

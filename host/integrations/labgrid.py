@@ -2,7 +2,7 @@
 and its tests capture from it, set its controls and run it under injected faults.
 
 Registered through labgrid's public extension points (``target_factory.reg_resource``/``reg_driver``); an
-environment file loads them with ``imports: [rollcam.host.labgrid]`` (docs/labs.md has an example):
+environment file loads them with ``imports: [rollcam.host.integrations.labgrid]`` (docs/labs.md has an example):
 
 - ``RollcamCamera`` (resource): ``source`` (a sensor name or an ``emu:`` URI), ``options`` (more ``emu:`` options:
   ``scene``, ``seed``, ``size``, ...), ``faults`` (a ``rollcam.common.faults`` plan, docs/faults.md) and
@@ -32,10 +32,10 @@ from rollcam.firmware.camera import FirmwareCamera
 from rollcam.firmware.spec import CameraSpec
 from rollcam.sim.frame import Frame
 
-from .sources import CameraSource, open_camera
-from .sources.emu import device_spec
+from ..sources import CameraSource, open_camera
+from ..sources.emu import device_spec
 
-_FEATURE = "rollcam's labgrid resource and driver (rollcam.host.labgrid)"
+_FEATURE = "rollcam's labgrid resource and driver (rollcam.host.integrations.labgrid)"
 _factory = require("labgrid.factory", "labgrid", "labgrid", _FEATURE)
 _resource = require("labgrid.resource.common", "labgrid", "labgrid", _FEATURE)
 _driver = require("labgrid.driver.common", "labgrid", "labgrid", _FEATURE)

@@ -112,7 +112,7 @@ class FlowCorrector:
 
     def correct(self, frame: Frame) -> Frame:
         """``frame`` moved to its first line's instant (BGR), or unchanged (see the class docstring)."""
-        from .preview import frame_bgr
+        from ..preview import frame_bgr
 
         if frame.row_times_ns is None:
             raise ConfigError(f"flow correction needs line times; frame {frame.sequence} has none")

@@ -33,7 +33,7 @@ def v4l2_devices(dev: Path = Path("/dev"), sysfs: Path = Path("/sys/class/video4
 def oak_devices(dai: Any = None) -> tuple[Rows, str]:
     """OAK cameras depthai can see."""
     if dai is None:
-        from .sources.oak import import_depthai
+        from .oak import import_depthai
 
         try:
             dai = import_depthai()

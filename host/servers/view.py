@@ -23,7 +23,7 @@ from rollcam.common.values import finite_float
 from rollcam.firmware.stream import CameraStats
 from rollcam.sim.frame import Frame
 
-from .sources.base import CameraSource
+from ..sources.base import CameraSource
 
 REANCHOR_NS = 1_000_000_000  # further behind its timestamps than this, a paced source starts its clock anew
 # What the MJPEG encoder reads of a sensor when a source names none: its frames are pictures (no black level).
@@ -32,7 +32,7 @@ PICTURE_SENSOR = SimpleNamespace(name="picture", bit_depth=8, noise=SimpleNamesp
 
 def detector_annotator(detector: Any) -> Callable[[Frame], list[dict[str, Any]]]:
     """The live view's ``annotate``: ``detector`` on a frame's preview (or raw data), boxes as plain dicts."""
-    from .preview import frame_bgr
+    from ..preview import frame_bgr
 
     names = getattr(detector, "class_names", {})
 

@@ -55,7 +55,7 @@ def start_http(args: argparse.Namespace, camera: Any, pump: Any) -> Running | No
     stack = contextlib.ExitStack()  # closed last-in first: the view, then the server, then the detector
     annotate = None
     if getattr(args, "detector", None):
-        from .detectors import load_detector
+        from ..detectors import load_detector
         from .view import detector_annotator
 
         detector = load_detector(args.detector)

@@ -32,7 +32,7 @@ from rollcam.emu.v4l2.node import DeviceNode
 from rollcam.emu.v4l2.server import PreloadServer
 from rollcam.firmware.camera import FirmwareCamera
 from rollcam.firmware.rig import LiveRig
-from rollcam.host.standins import standin_env
+from rollcam.host.servers.standins import standin_env
 
 DEFAULT_DEVICE = "/dev/video0"
 DEFAULT_SOURCE = "emu:imx219?size=640x480"
@@ -167,7 +167,7 @@ def serving(devices: Sequence[tuple[str, str]], *, realtime: bool = True) -> Ite
 def program_environment(server: PreloadServer, base: dict[str, str] | None = None,
                         sources: Sequence[str] = ()) -> dict[str, str]:
     """The environment a program under ``rollcam run`` gets: the preload library and its socket, and the
-    stand-in modules (``picamera2``) first on ``PYTHONPATH`` (``rollcam.host.standins``), their cameras the
+    stand-in modules (``picamera2``) first on ``PYTHONPATH`` (``rollcam.host.servers.standins``), their cameras the
     same ``sources`` as the devices (``Picamera2(0)`` is the first ``--device``)."""
     env = environment(server.socket_path, list(server.nodes), base, Path(server.socket_path).with_name("sys"))
     return standin_env(sources, env=env)

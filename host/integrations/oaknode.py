@@ -4,7 +4,7 @@ depthai v3 runs host-only pipelines without a device (``dai.Pipeline(False)``), 
 an OAK's camera can take its frames from any rollcam source instead::
 
     import depthai as dai
-    from rollcam.host.oaknode import EmulatedCamera
+    from rollcam.host.integrations.oaknode import EmulatedCamera
 
     with dai.Pipeline(False) as pipeline:
         cam = pipeline.create(EmulatedCamera).build("emu:imx378?size=640x360&scene=street", frames=10)
@@ -43,7 +43,7 @@ from typing import Any
 
 from rollcam.common.errors import SourceError
 
-from .sources.oak import import_depthai
+from ..sources.oak import import_depthai
 
 _CLASS: dict[int, type] = {}
 TRUTH_KEPT = 1024
@@ -117,7 +117,7 @@ def _make_class(dai: Any) -> type:
 
         def build(self, uri: str, frames: int | None = None, realtime: bool = False) -> EmulatedCamera:
             """Configure the source URI, the frame limit and pacing; returns the node (depthai's convention)."""
-            from .sources import open_camera
+            from ..sources import open_camera
 
             open_camera(uri).close()  # a bad URI fails here, in the caller's thread, not in the node's
             self.uri, self.frames, self.realtime = uri, frames, realtime
@@ -153,8 +153,8 @@ def _make_class(dai: Any) -> type:
                     self.stopPipeline()
 
         def _stream(self) -> None:
-            from .preview import frame_bgr
-            from .sources import open_camera
+            from ..preview import frame_bgr
+            from ..sources import open_camera
 
             with open_camera(self.uri) as source:
                 t_first: int | None = None

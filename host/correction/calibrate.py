@@ -34,8 +34,8 @@ import numpy as np
 from rollcam.common.errors import ConfigError, SourceError
 from rollcam.sim.pose import rotation_vector_to_matrix
 
-from .capture import read_capture
-from .imu_export import CAMERA_YAML, IMU_CSV
+from ..recording.capture import read_capture
+from ..recording.imu_export import CAMERA_YAML, IMU_CSV
 
 RESULT_YAML = "camchain-imucam.yaml"
 """The result file, named as Kalibr names its camera-IMU result (``camchain-imucam-<bag>.yaml``)."""
@@ -314,7 +314,7 @@ def calibrate(capture_dir: str | os.PathLike[str], *, max_offset_s: float = 0.02
 def result_yaml(capture_dir: str | os.PathLike[str], cal: Calibration) -> str:
     """Kalibr's camera-IMU result (``camchain-imucam``): the capture's ``camchain.yaml`` with the estimated
     ``line_delay`` and ``timeshift_cam_imu`` (their standard errors as comments)."""
-    from .imu_export import CAMCHAIN_YAML
+    from ..recording.imu_export import CAMCHAIN_YAML
 
     src = Path(capture_dir) / CAMCHAIN_YAML
     lines = src.read_text(encoding="utf-8").splitlines() if src.is_file() else ["cam0:"]

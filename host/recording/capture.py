@@ -40,12 +40,12 @@ from rollcam.common.errors import ConfigError, SourceError, is_interrupt
 from rollcam.common.files import OS_FS, AppendLog, FileSystem, output_dir, part_target, read_jsonl, write_atomic
 from rollcam.sim.frame import Frame
 
+from ..progress import Progress
+from ..robotics import bags, gcsv
+from ..robotics.bags import BAG_FORMATS
+from ..sources import CameraSource
 from .imagefiles import encode_image, image_array
 from .imu_export import ImuLog
-from .progress import Progress
-from .robotics import bags, gcsv
-from .robotics.bags import BAG_FORMATS
-from .sources import CameraSource
 
 FRAMES_LOG = "frames.jsonl"
 CAPTURE_INFO = "capture.json"

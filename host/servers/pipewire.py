@@ -1,7 +1,7 @@
 """The emulated camera as a PipeWire ``Video/Source`` node, read by any PipeWire client (GStreamer's pipewiresrc,
 ``pw-cat``, ``pw-dump``; browsers and desktop apps through the camera portal).
 
-How: a PipeWire daemon runs under ``rollcam run``'s preload (``rollcam.host.preload``), so PipeWire's own V4L2
+How: a PipeWire daemon runs under ``rollcam run``'s preload (``rollcam.host.servers.devnodes``), so PipeWire's own V4L2
 source (``api.v4l2.source``, the node WirePlumber makes for a real webcam) opens rollcam's emulated ``/dev/video0``
 and streams it: the node's formats, sizes and frame rate are what the emulated V4L2 device offers, and the frames
 are its frames, byte for byte. The daemon is private and headless: its own runtime folder (``XDG_RUNTIME_DIR``),
@@ -27,8 +27,8 @@ from typing import Any
 from rollcam.common.errors import ConfigError, DeviceError
 from rollcam.common.lifecycle import Closeable, Deadline
 
-from .preload import program_environment, serving
-from .sources.emu import device_spec
+from ..sources.emu import device_spec
+from .devnodes import program_environment, serving
 
 PROGRAMS = ("pipewire", "wireplumber", "dbus-run-session", "pw-cli", "pw-dump")
 """The programs a PipeWire camera runs (Debian: pipewire, pipewire-bin, wireplumber, dbus-daemon)."""

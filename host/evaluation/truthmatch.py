@@ -16,8 +16,8 @@ from typing import Any
 import numpy as np
 from rollcam.sim.frame import Frame
 
-from .detectors import PERSON, Detections
-from .detectors.ops import iou_matrix
+from ..detectors import PERSON, Detections
+from ..detectors.ops import iou_matrix
 
 KINDS = {"rs": "box_rs", "gs": "box_gs"}
 """Truth kind -> ObjectTruth attribute holding its box."""

@@ -29,8 +29,8 @@ from rollcam.sim.codecs import encode_image
 from rollcam.sim.frame import Frame
 from rollcam.sim.hwconfig import load_sensor
 
-from .progress import Progress
-from .sources import open_camera
+from ..progress import Progress
+from ..sources import open_camera
 from .video import VideoWriter
 
 DEFAULT_OUT = Path("rollcam_out") / "demo"

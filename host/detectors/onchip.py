@@ -113,7 +113,7 @@ class HostNetwork:
 
 def load_network(spec: str) -> HostNetwork:
     """The in-sensor network of a detector spec (the loader ``rollcam.host`` registers with the firmware)."""
-    from .detectors import load_detector
+    from . import load_detector
 
     det = load_detector(spec)
     path = getattr(det, "path", None)

@@ -40,7 +40,7 @@ class GyroCorrector:
 
     def correct(self, frame: Frame) -> Frame:
         """``frame`` unwarped to its first line's orientation (BGR), or unchanged for a global shutter."""
-        from .preview import frame_bgr
+        from ..preview import frame_bgr
 
         if frame.imu is None or "intrinsics" not in frame.meta or frame.row_times_ns is None:
             raise SourceError(f"gyro correction needs frames with IMU samples and intrinsics (emu:...&imu=on); "
@@ -79,7 +79,7 @@ def correcting_reader(read: Callable[[], Frame | None], method: str) -> Callable
     """``read`` behind the named correction (``CORRECTIONS``)."""
     if method not in CORRECTIONS:
         raise SourceError(f"correction {method!r} is not one of {list(CORRECTIONS)}")
-    from .flowcorrect import FlowCorrector
+    from .flow import FlowCorrector
 
     corrector = FlowCorrector() if method == "flow" else GyroCorrector()
 

@@ -16,7 +16,7 @@ and detector latency on one status line. With ``--out DIR`` it writes:
 - ``detect.json``: the run's summary (source, detector, frames, latency statistics, precision/recall).
 
 For synthetic sources, detections are matched to the GS and RS ground truth and running precision and
-recall are printed (``rollcam.host.truthmatch``). Ctrl-C stops cleanly: what was written stays valid and the
+recall are printed (``rollcam.host.evaluation.truthmatch``). Ctrl-C stops cleanly: what was written stays valid and the
 command exits with status 130. The command line is ``rollcam.host.commands.detect``.
 """
 
@@ -37,10 +37,10 @@ from rollcam.common.files import AppendLog, output_dir
 from rollcam.common.lifecycle import Worker
 from rollcam.sim.frame import Frame
 
-from .detectors import Detections, Detector
-from .sources import CameraSource
-from .truthmatch import RunningPR
-from .video import VideoWriter
+from ..evaluation.truthmatch import RunningPR
+from ..recording.video import VideoWriter
+from ..sources import CameraSource
+from . import Detections, Detector
 
 LOG, VIDEO, SUMMARY = "detections.jsonl", "detections.mp4", "detect.json"
 COLORS = {"det": (0, 255, 0), "rs": (0, 0, 255), "gs": (255, 128, 0)}
@@ -185,13 +185,13 @@ def run_detect(source: CameraSource, detector: Detector, *, frames: int | None =
                correct: str | None = None) -> DetectResult:
     """Detect on up to ``frames`` frames of ``source`` (all when None), logging to ``out_dir`` if given;
     ``correct="gyro"`` unwarps each rolling-shutter frame from its IMU samples first, ``"flow"`` from its flow
-    to the previous frame (``rollcam.host.correct``)."""
-    from .preview import frame_bgr
+    to the previous frame (``rollcam.host.correction.gyro``)."""
+    from ..preview import frame_bgr
 
     result = DetectResult(truth=truth if truth is not None else RunningPR(), out_dir=out_dir)
     read = _reader(source, shutter)
     if correct is not None:
-        from .correct import correcting_reader
+        from ..correction.gyro import correcting_reader
 
         read = correcting_reader(read, correct)
     log = sink = None
@@ -283,7 +283,7 @@ class StatusLine:
     the last 30), detections, and running P/R with truth. Off when stderr is not a terminal unless ``enabled``."""
 
     def __init__(self, total: int | None = None, *, enabled: bool | None = None, stream: TextIO | None = None) -> None:
-        from .progress import Progress
+        from ..progress import Progress
 
         self.bar = Progress(total, label="detect", stream=stream, enabled=enabled, unit="frame")
 
