@@ -23,12 +23,12 @@ $(BIN)/python:
 	$(PY) -m venv $(VENV)
 	$(PIP) install -q --upgrade pip
 
-$(VENV)/.installed: pyproject.toml setup.py sim/rollcam_shade.c emu/preload/rollcam_preload.c | $(BIN)/python
+$(VENV)/.installed: pyproject.toml setup.py sim/render/rollcam_shade.c emu/preload/rollcam_preload.c | $(BIN)/python
 	$(PIP) install -q -e .
 	$(one_opencv)
 	touch $@
 
-$(VENV)/.installed-dev: pyproject.toml setup.py sim/rollcam_shade.c emu/preload/rollcam_preload.c | $(BIN)/python
+$(VENV)/.installed-dev: pyproject.toml setup.py sim/render/rollcam_shade.c emu/preload/rollcam_preload.c | $(BIN)/python
 	$(PIP) install -q -e ".[dev]"
 	$(one_opencv)
 	touch $@ $(VENV)/.installed

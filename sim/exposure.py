@@ -29,11 +29,11 @@ import numpy as np
 from numba import njit, prange
 from rollcam.common.errors import ConfigError
 
-from ._egoblur import blur_margin
 from ._jitcache import guard
-from .flicker_render import FlickerRenderer
-from .render import Renderer
-from .render_result import LinearFrame
+from .render.egoblur import blur_margin
+from .render.flicker_renderer import FlickerRenderer
+from .render.renderer import Renderer
+from .render.result import LinearFrame
 
 DEFAULT_BOUND_PX = 0.5
 MAX_SAMPLES = 512
@@ -297,7 +297,7 @@ def _accumulate(renderer: Renderer, plan: SamplePlan, by_column: bool, acc: np.n
 def _integrate_lights(renderer: FlickerRenderer, plan: SamplePlan, by_column: bool, out: np.ndarray | None,
                       batch_samples: int) -> Integrated:
     """Each light's render integrated with the plan, weighted per line by the light's mean over the line's
-    whole window [start, start + exposure] (``rollcam.sim.flicker_render``), summed into ``out``."""
+    whole window [start, start + exposure] (``rollcam.sim.render.flicker_renderer``), summed into ``out``."""
     n_lines, n_along = renderer.render_shape(by_column)
     parts = [integrate(p, plan, by_column=by_column, out=renderer.scratch(k, by_column), batch_samples=batch_samples)
              for k, p in enumerate(renderer.parts)]

@@ -16,7 +16,7 @@ from rollcam.firmware.spec import CameraSpec
 from rollcam.host import open_camera
 from rollcam.sim.imu import Imu, ImuParams
 from rollcam.sim.pose import Trajectory, rotation_vector_to_matrix
-from rollcam.sim.render import Renderer
+from rollcam.sim.render.renderer import Renderer
 from rollcam.sim.scene import Camera
 from rollcam.sim.scenegen import ego_preset, make_street_scene
 

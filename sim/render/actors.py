@@ -1,11 +1,11 @@
 """Numba kernels of the renderer's actors: render-space bounds, parts and image speeds of walkers, chart bars and
 street props.
 
-The walker model is ``rollcam.sim._body``, the props' ``rollcam.sim._props``, camera poses and the street's
-shading ``rollcam.sim._world``; the line kernels of ``rollcam.sim._kernels`` intersect and paint the parts these
-functions produce, whose table (one actor at one time) is laid out in ``rollcam.sim._parts``. Every function is
+The walker model is ``body``, the props' ``props``, camera poses and the street's
+shading ``world``; the line kernels of ``lines`` intersect and paint the parts these
+functions produce, whose table (one actor at one time) is laid out in ``parts``. Every function is
 pure, so every render path draws identical parts.
-Render space as in ``rollcam.sim._kernels``: a transposed camera (column readout) swaps x and y.
+Render space as in ``lines``: a transposed camera (column readout) swaps x and y.
 """
 
 from __future__ import annotations
@@ -15,7 +15,8 @@ import math
 import numpy as np
 from numba import njit, prange
 
-from ._body import (
+from .._jitcache import guard
+from .body import (
     A_ID,
     A_TYPE,
     COL_BAG,
@@ -39,8 +40,7 @@ from ._body import (
     pedestrian_root,
     pedestrian_skeleton,
 )
-from ._jitcache import guard
-from ._parts import (
+from .parts import (
     MAX_PARTS,
     N_VERTS,
     NEAR_M,
@@ -66,8 +66,8 @@ from ._parts import (
     ground_shadow,
     sun_in_view,
 )
-from ._props import PROP_BOX, prop_box, prop_parts, prop_ref_y
-from ._world import (
+from .props import PROP_BOX, prop_box, prop_parts, prop_ref_y
+from .world import (
     C_CX,
     C_CY,
     C_FX,
@@ -105,7 +105,7 @@ def _face_dir(parts, fx, fy, fz, vx, vy, vz):
     n = math.sqrt(c * c + s * s)
     parts[0, Q_FACE], parts[0, Q_FACE + 1] = (c / n, s / n) if n > 0.0 else (0.0, 1.0)
 BODY_LATERAL, BODY_FORWARD, BODY_TOP = 0.25, 0.40, 1.02  # walker bounds, fractions of height (see actor_bounds)
-PART_RADIUS_MAX = 0.1  # walker part radii, fraction of height x build (the largest in _body: a skirt's 0.095)
+PART_RADIUS_MAX = 0.1  # walker part radii, fraction of height x build (the largest in body: a skirt's 0.095)
 N_CHUNKS = 16  # parallel work units; scratch buffers are allocated once per unit, not per item
 
 
@@ -240,7 +240,7 @@ def _set_quad(parts, p, x0, y0, x1, y1, x2, y2, x3, y3):
     g = Q_GEO
     parts[p, g], parts[p, g + 1], parts[p, g + 2], parts[p, g + 3] = x0, y0, x1, y1
     parts[p, g + 4], parts[p, g + 5], parts[p, g + 6], parts[p, g + 7] = x2, y2, x3, y3
-    parts[p, g + 8], parts[p, g + 9] = x0, y0  # a quad's fifth vertex is its first (see rollcam.sim._parts)
+    parts[p, g + 8], parts[p, g + 9] = x0, y0  # a quad's fifth vertex is its first (see rollcam.sim.render.parts)
     parts[p, Q_YMIN] = min(min(y0, y1), min(y2, y3))
     parts[p, Q_YMAX] = max(max(y0, y1), max(y2, y3))
 

@@ -1,6 +1,6 @@
 """Numba kernel that joins a modulated-light render: per-line weighted sums of light renders, then 8-bit encoding.
 
-Part of ``rollcam.sim.flicker_render``: a frame under modulated light is the steady light's render plus each
+Part of ``flicker_renderer``: a frame under modulated light is the steady light's render plus each
 modulated light's render scaled, line by line, by that light's mean over the line's exposure window. Each
 render arrives as the renderer's ``LinearFrame`` parts (a shared static composite and the lines painted over
 it), stacked part by part. Every path (frame, sensor radiance, exposure integration, brute-force reference) joins
@@ -12,15 +12,15 @@ from __future__ import annotations
 import numpy as np
 from numba import njit, prange
 
-from ._jitcache import guard
-from ._kernels import encode_line
+from .._jitcache import guard
+from .lines import encode_line
 
 
 @njit(cache=True, parallel=True)
 def join_lines(dst, statics, lines, painted, weight, which, gain, lut, out_u8):
     """``dst[l] = sum_k weight[k, l] * render_k[l]`` for each line ``l`` in ``which`` (render k's line is
     ``lines[k, l]`` if ``painted[k, l]`` else ``statics[k, l]``), in float32 and part order; then, when
-    ``out_u8`` is not empty, that line through the renderer's own output curve (``_kernels.encode_line``)
+    ``out_u8`` is not empty, that line through the renderer's own output curve (``lines.encode_line``)
     while it is still in cache. One pass over the frame, whatever the part count. Every array is C-contiguous:
     a line is one flat run the compiler vectorises."""
     n_parts = lines.shape[0]

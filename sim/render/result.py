@@ -14,7 +14,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .frame import Box, ObjectTruth
+from ..frame import Box, ObjectTruth
 
 
 @dataclass

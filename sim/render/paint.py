@@ -1,6 +1,6 @@
 """Render passes of the per-line renderer: poses, touched lines, shared actor parts, and the one kernel call.
 
-``rollcam.sim.render.Renderer`` decides what a render needs (which lines, over which layer, into which
+``renderer.Renderer`` decides what a render needs (which lines, over which layer, into which
 buffers); ``Painter.prepare`` does the work every render shares (camera poses at the distinct times, which
 actor touches which line at which time, the parts several lines share) into a ``Pass``, and
 ``Painter.paint`` is the only caller of the line kernel, so every render goes through the same code.
@@ -14,14 +14,14 @@ from dataclasses import dataclass
 import numba
 import numpy as np
 
-from . import _actors as A
-from . import _body as B
-from . import _egoblur as E
-from . import _kernels as K
-from . import _world as Wd
-from .compile import compile_camera, compile_scene
-from .render_result import LineTruth
-from .scene import Camera, Scene
+from ..scene import Camera, Scene
+from . import actors as A
+from . import body as B
+from . import egoblur as E
+from . import lines as K
+from . import world as Wd
+from .result import LineTruth
+from .tables import compile_camera, compile_scene
 
 BOUND_GROUPS = 32
 """Time groups per render for the conservative actor bounds that decide which lines an actor touches."""
@@ -216,7 +216,7 @@ class Painter:
                   n_actor: np.ndarray, margin: int, acc: np.ndarray, hits: np.ndarray) -> None:
         """A moving camera's exposure-integrated lines into ``acc``: each line's background integrated along its
         pixels' image paths (``n_path[l]`` midpoint samples of the window ``starts_ns[l] + [0, exposure_ns]``;
-        ``rollcam.sim._egoblur``) plus, on lines with ``hits``, the actors' accumulated samples in ``acc`` over
+        ``egoblur``) plus, on lines with ``hits``, the actors' accumulated samples in ``acc`` over
         ``n_actor[l]`` (see ``K._add_over``). ``margin``: render pixels of background beyond each image edge."""
         t, cam = self.tables, self.cams[by_column]
         n_lines, n_along = self.shape(by_column)

@@ -1,4 +1,4 @@
-"""Scene data to the flat float64 tables the render kernels read (layouts in ``rollcam.sim._world`` and ``._body``)."""
+"""Scene data to the flat float64 tables the render kernels read (layouts in ``world`` and ``body``)."""
 
 from __future__ import annotations
 
@@ -8,16 +8,16 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from . import _body as B
-from . import _props as Pr
-from . import _world as Wd
-from .scene import BAGS, FACADES, Camera, Lighting, Prop, Scene
+from ..scene import BAGS, FACADES, Camera, Lighting, Prop, Scene
+from . import body as B
+from . import props as Pr
+from . import world as Wd
 
 BUILDING_BIN_M = 0.5
 PROP_ID_BASE = 1_000_000
 """Props' actor ids start here (walkers and bars count from 1), so no prop shares an id with an object."""
 CAR_SLICE_M = 1.2
-"""Longest slice of a parked car: each is its own actor row, drawn at its own depth (see ``rollcam.sim._props``)."""
+"""Longest slice of a parked car: each is its own actor row, drawn at its own depth (see ``props``)."""
 
 
 @dataclass(frozen=True)
@@ -26,7 +26,7 @@ class CompiledScene:
 
     ``building_lut`` (2 sides x (bins + 1), int64) gives the row of ``buildings`` standing in each street bin;
     its last entry on each side and its empty bins name the table's last row, a sentinel no ray hits and no
-    shadow comes from (``_world.NO_BUILDING_HEIGHT``), so the C shader reads no table under a condition.
+    shadow comes from (``world.NO_BUILDING_HEIGHT``), so the C shader reads no table under a condition.
     """
 
     world: np.ndarray
@@ -204,7 +204,7 @@ def _compile_actors(scene: Scene) -> tuple[np.ndarray, tuple[int, ...], tuple[st
 
 
 def _prop_rows(prop: Prop, actor_id: int) -> list[np.ndarray]:
-    """The actor rows of one prop (``rollcam.sim._props``' columns): one, or a parked car's slices."""
+    """The actor rows of one prop (``props``' columns): one, or a parked car's slices."""
     a = np.zeros(B.ACTOR_COLS)
     a[B.A_TYPE], a[B.A_STATIC], a[B.A_SPEED], a[B.A_ID] = B.TYPE_PROP, 1.0, 0.0, actor_id
     a[Pr.G_KIND] = Pr.PROP_CODES[prop.kind]

@@ -1,8 +1,8 @@
 """The part table the render kernels share: one actor's render-space primitives at one time, and the capsule
 writer every kind of actor uses.
 
-``rollcam.sim._actors`` fills it for walkers and chart bars and ``rollcam.sim._props`` for street props; the line
-kernels of ``rollcam.sim._kernels`` intersect and paint it. A row is a capsule (end points and a radius from
+``actors`` fills it for walkers and chart bars and ``props`` for street props; the line
+kernels of ``lines`` intersect and paint it. A row is a capsule (end points and a radius from
 ``Q_GEO``, shaded as a cylinder across its span by ``Q_LX``/``Q_LZ``) or a convex polygon of up to ``N_VERTS``
 vertices (flat: with ``Q_LX = Q_LZ = 0`` its colour is ``Q_AMB``); a quad repeats its first vertex as the fifth,
 which a near-plane clip of a quad may need. A shadow (``shadow_part``, ``ground_shadow``) is an ellipse on the
@@ -17,14 +17,14 @@ import math
 
 from numba import njit
 
-from ._jitcache import guard
-from ._world import C_CX, C_CY, C_FX, C_FY, C_TRANSPOSED, L_SUN
+from .._jitcache import guard
+from .world import C_CX, C_CY, C_FX, C_FY, C_TRANSPOSED, L_SUN
 
 Q_KIND, Q_DEPTH, Q_AMB, Q_DIR, Q_LX, Q_LZ, Q_GEO = 0, 1, 2, 5, 8, 9, 10
 N_VERTS = 5
 Q_YMIN, Q_YMAX = Q_GEO + 2 * N_VERTS, Q_GEO + 2 * N_VERTS + 1
 Q_TEX, Q_TEXK, Q_TSEED = Q_YMAX + 1, Q_YMAX + 2, Q_YMAX + 3
-"""Surface texture of a capsule (``rollcam.sim._kernels._texture``): contrast (0: none), lattice cells per pixel,
+"""Surface texture of a capsule (``lines._texture``): contrast (0: none), lattice cells per pixel,
 seed."""
 Q_FACE, Q_HAIR = Q_TSEED + 1, Q_TSEED + 3
 """A head's face: the direction it looks, (cos, sin) of its angle from the camera (cos < -1: no face), and the

@@ -3,7 +3,7 @@ callable from the numba kernels.
 
 The shader is C so that gcc vectorises its pixel loop (numba gives LLVM no ``noalias`` on arrays, so LLVM would
 not: issue 13 round 3); it is the one copy of the background's materials, which every render path reaches
-through ``rollcam.sim._world``. Loading it here, before any kernel compiles, lets numba resolve the library's
+through ``world``. Loading it here, before any kernel compiles, lets numba resolve the library's
 symbols by name, in a fresh compile or from its on-disk cache alike. The kernels pass arrays as addresses
 (``a.ctypes.data``: an integer in the same register class as a pointer on every 64-bit ABI).
 """
@@ -36,7 +36,7 @@ path_reads_c = types.ExternalFunction(
     types.void(_ADDR, types.int64, types.int64, _ADDR, _ADDR, types.int64, types.int64, types.float64,
                types.float64, types.float64, types.int64, types.int64, types.int64, _ADDR, _ADDR))
 """(bg, n_rows, n_cols, surface, coef, n, u_slot, line, lt, dt_u, transposed, margin, n_along, scratch, acc): one
-line's background path reads summed into ``acc`` (``rollcam.sim._egoblur``)."""
+line's background path reads summed into ``acc`` (``egoblur``)."""
 SURF_SKY, SURF_GROUND, SURF_WEST, SURF_EAST = 0, 1, 2, 3
 """The surfaces ``background_span_c`` reports (``rollcam_shade.c``): sky, ground plane z = 0, facade planes
 x = -W_FACADE and x = +W_FACADE."""
@@ -81,7 +81,7 @@ def _load() -> ctypes.CDLL:
 
 
 def check_layout(lib: ctypes.CDLL, expected: tuple[int, ...]) -> None:
-    """Fail unless the library reads the table columns ``expected`` (``rollcam.sim._world.SHADE_LAYOUT``)."""
+    """Fail unless the library reads the table columns ``expected`` (``world.SHADE_LAYOUT``)."""
     buf = (ctypes.c_int64 * len(expected))()
     n = lib.rollcam_shade_layout(buf, len(expected))
     got = tuple(buf[: min(n, len(expected))])

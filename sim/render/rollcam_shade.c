@@ -1,4 +1,4 @@
-/* The street's background shader: ground, facades and sky along one render-space line (rollcam.sim._cshade).
+/* The street's background shader: ground, facades and sky along one render-space line (rollcam.sim.render.shader).
  *
  * The one copy of the background's materials: every render path (the fast path, the brute-force reference,
  * the static layer) shades through rollcam_background_line, and the walkers' sun test is rollcam_sun_blocked.
@@ -11,8 +11,8 @@
  * -ffp-contract=off, so every clone performs the same IEEE operations in the same order: the image does not
  * depend on which one runs.
  *
- * Tables: rollcam/sim/_world.py's layouts (rollcam_shade_layout reports the columns read here, and the loader
- * checks them), with the building lookup and table as rollcam.sim.compile pads them: `lut` holds n_bins + 1
+ * Tables: rollcam/sim/render/world.py's layouts (rollcam_shade_layout reports the columns read here, and the loader
+ * checks them), with the building lookup and table as rollcam.sim.render.tables pads them: `lut` holds n_bins + 1
  * entries per side, the last one and every empty bin naming row n_bld of `bld`, a sentinel building of height
  * -1e300 that no ray hits and no shadow comes from (so no table read depends on a condition).
  */
@@ -20,7 +20,7 @@
 #include <stddef.h>
 #include <stdint.h>
 
-/* ---- table columns (rollcam/sim/_world.py) ---- */
+/* ---- table columns (rollcam/sim/render/world.py) ---- */
 enum { C_FX = 0, C_FY = 1, C_CX = 2, C_CY = 3, C_TRANSPOSED = 6 };
 enum { L_SUN = 0, L_SUN_RGB = 3, L_AMB = 6, L_HORIZON = 9, L_ZENITH = 12, L_HAZE = 15, L_FOG = 18, L_GLOW = 19 };
 enum { W_KIND = 0, W_ROAD = 1, W_CURB = 2, W_FACADE = 4, W_YHALF = 5, W_ASPHALT = 6, W_SIDEWALK = 9,
@@ -453,7 +453,7 @@ static inline __attribute__((always_inline)) void shade_facade(const struct line
 /* Surfaces a background pixel's ray can hit, for rollcam_background_span's `surface` output: the sky (at
  * infinity), the ground plane z = 0 (asphalt, curb and sidewalk) and the west (x = -W_FACADE) and east
  * (x = +W_FACADE) facade planes. A moving camera's background blur maps each pixel through its surface's plane
- * (rollcam.sim._egoblur). A flat or chart scene has no geometry: its pixels say SURF_SKY. */
+ * (rollcam.sim.render.egoblur). A flat or chart scene has no geometry: its pixels say SURF_SKY. */
 enum { SURF_SKY = 0, SURF_GROUND = 1, SURF_WEST = 2, SURF_EAST = 3 };
 
 /* Pixels a_begin..a_end - 1 of one render-space line of the background from pose (rot, pos), linear RGB into
@@ -559,7 +559,7 @@ void rollcam_background_span(const double *restrict world, const int64_t *restri
     background_range(world, lut, n_bins64, bld, light, cam, rot, pos, line, (int32_t)a_begin, (int32_t)a_end, o, s);
 }
 
-/* A moving camera's background blur for one render line (rollcam.sim._egoblur): acc[a] (n_along x 3 doubles) gets
+/* A moving camera's background blur for one render line (rollcam.sim.render.egoblur): acc[a] (n_along x 3 doubles) gets
  * the sum over the line's n time samples of the bilinear read of `bg` (a float32 frame of n_rows x n_cols x 3,
  * the background with margins) at where the mid-exposure pose sees pixel a's ray at sample j through its
  * surface's plane. coef[(j * 4 + s) * 6 ..] = (x0, x1, y0, y1, z0, z1): image position ((x0 + a x1) / z,
@@ -617,7 +617,7 @@ void rollcam_path_reads(const float *restrict bg, int64_t n_rows, int64_t n_cols
 
 /* Linear RGB pixels (n x 3 float32) to 8-bit BGR through the output curve `lut` (lut_size + 1 entries): scaled by
  * gain, clipped to [0, 1] (NaN to 0), and looked up at the nearest of its lut_size steps. The renderer's one
- * encoder (rollcam.sim._kernels.encode_line): gcc vectorises it (the per-pixel loop in numba was scalar and cost
+ * encoder (rollcam.sim.render.lines.encode_line): gcc vectorises it (the per-pixel loop in numba was scalar and cost
  * about a fifth of a moving-camera frame). */
 CLONES
 void rollcam_encode_line(const float *restrict lin, double gain, const uint8_t *restrict lut, int64_t lut_size,
@@ -648,7 +648,7 @@ double rollcam_value_noise(double x, double y, int64_t seed) { return value_nois
 
 double rollcam_pulse_cover(double x, double h, double p, double w) { return pulse_cover(x, h, p, w); }
 
-/* The table columns this library reads, for the loader to check against rollcam/sim/_world.py. */
+/* The table columns this library reads, for the loader to check against rollcam/sim/render/world.py. */
 int64_t rollcam_shade_layout(int64_t *out, int64_t n) {
     static const int64_t cols[] = {C_FX, C_FY, C_CX, C_CY, C_TRANSPOSED, L_SUN, L_SUN_RGB, L_AMB, L_HORIZON,
                                    L_ZENITH, L_HAZE, L_FOG, L_GLOW, W_KIND, W_ROAD, W_CURB, W_FACADE, W_YHALF,

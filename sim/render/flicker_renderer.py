@@ -6,7 +6,7 @@ scene lit by light c alone at its mean output, and ``w_c(l)`` the exact mean of 
 l's exposure window (``rollcam.sim.flicker``). Each ``R`` is an ordinary ``Renderer`` over a derived scene
 (``light_scene``), with its own static caches, touched-line culling and exact per-line times, so the hot kernels
 do nothing new and a scene without modulated lights renders exactly as before. The weights are computed once
-per line and light, outside any per-pixel code; ``rollcam.sim._flicker_mix`` joins the renders.
+per line and light, outside any per-pixel code; ``flicker_mix`` joins the renders.
 
 The window of a line rendered at time t is ``[t - w/2, t - w/2 + w]`` with w the renderer's
 ``light_window_ns`` (the exposure: a ``SyntheticCamera`` samples each line mid-exposure); exposure integration
@@ -21,10 +21,10 @@ from dataclasses import replace
 import numpy as np
 from rollcam.common.errors import ConfigError
 
-from . import _flicker_mix as M
-from .render import _SRGB, Renderer, _check_buffers, _check_times, _line_mask
-from .render_result import LinearFrame, RenderResult
-from .scene import Camera, Lighting, ModulatedLight, Scene
+from ..scene import Camera, Lighting, ModulatedLight, Scene
+from . import flicker_mix as M
+from .renderer import _SRGB, Renderer, _check_buffers, _check_times, _line_mask
+from .result import LinearFrame, RenderResult
 
 
 def light_scene(scene: Scene, light: ModulatedLight | None) -> Scene:

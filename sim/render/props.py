@@ -1,7 +1,7 @@
 """Numba kernels of the street props (parked cars, trees, lamp poles, signs, benches, bins): world boxes and parts.
 
-A prop is a static actor (``TYPE_PROP`` in ``rollcam.sim._body``'s table) whose row holds its kind, footprint,
-size and colours (columns below, filled by ``rollcam.sim.compile``); ``rollcam.sim._actors`` bounds and draws it
+A prop is a static actor (``TYPE_PROP`` in ``body``'s table) whose row holds its kind, footprint,
+size and colours (columns below, filled by ``tables``); ``actors`` bounds and draws it
 through the walkers' pipeline, so props hide walkers and the visibility truth counts it. Parts are capsules
 (poles, trunks, bins, legs; spheres for canopies and wheels) and flat faces of axis-aligned boxes, clipped at the
 camera's near plane (a camera driving past a parked car). Only the faces turned to the camera are drawn, so a
@@ -16,8 +16,8 @@ import math
 
 from numba import njit
 
-from ._jitcache import guard
-from ._parts import (
+from .._jitcache import guard
+from .parts import (
     MAX_PARTS,
     N_VERTS,
     NEAR_M,
@@ -34,7 +34,7 @@ from ._parts import (
     capsule_part,
     sun_in_view,
 )
-from ._world import C_CX, C_CY, C_FX, C_FY, C_TRANSPOSED, L_AMB, L_SUN, L_SUN_RGB, sun_blocked
+from .world import C_CX, C_CY, C_FX, C_FY, C_TRANSPOSED, L_AMB, L_SUN, L_SUN_RGB, sun_blocked
 
 # ---- prop rows of the actor table (after A_TYPE, A_STATIC, A_SPEED, A_ID) ----------------------------------
 G_KIND, G_X, G_Y, G_L, G_W, G_H, G_DIR, G_RGB, G_RGB2, G_S0, G_S1, G_A, G_B, G_C = (

@@ -21,12 +21,12 @@ from __future__ import annotations
 import numpy as np
 from rollcam.common.errors import ConfigError
 
-from . import _kernels as K
-from ._composite import Compositor
-from ._paint import Painter
-from .frame import ObjectTruth
-from .render_result import LinearFrame, LineTruth, RenderResult, object_truths
-from .scene import Camera, Scene
+from ..frame import ObjectTruth
+from ..scene import Camera, Scene
+from . import lines as K
+from .composite import Compositor
+from .paint import Painter
+from .result import LinearFrame, LineTruth, RenderResult, object_truths
 
 __all__ = ["LineTruth", "LinearFrame", "RenderResult", "Renderer", "encode_linear", "srgb_lut"]
 
@@ -56,7 +56,7 @@ def encode_linear(linear: np.ndarray, gain: float) -> np.ndarray:
 class Renderer:
     """Renders one camera of a scene at arbitrary per-line times, with exact per-actor ground truth.
 
-    Four operations, one kernel (``_paint.Painter``), over the static layers ``_composite.Compositor`` caches:
+    Four operations, one kernel (``paint.Painter``), over the static layers ``composite.Compositor`` caches:
     a frame of lines (8-bit, optionally linear), its ground truth only, linear radiance of chosen lines into a
     buffer (or accumulated, for exposure integration), and the brute-force reference. The sensor path's
     planning reads the scene through ``poses``, ``actor_bounds`` and ``actor_image_speeds``.
@@ -65,7 +65,7 @@ class Renderer:
     """
 
     def __new__(cls, scene: Scene | None = None, *args, **kwargs) -> Renderer:  # (no scene: copy/pickle)
-        from .flicker_render import FlickerRenderer  # modulated lights: a sum of renders (lazy: it imports us)
+        from .flicker_renderer import FlickerRenderer  # modulated lights: a sum of renders (lazy: it imports us)
         return super().__new__(FlickerRenderer if cls is Renderer and getattr(scene, "lights", ()) else cls)
 
     def __init__(self, scene: Scene, camera: Camera | int | str = 0, *, gain: float = 1.0,
@@ -128,7 +128,7 @@ class Renderer:
     def actor_image_speeds(self, times_s: np.ndarray, *, by_column: bool = False) -> np.ndarray:
         """Per actor, the fastest render-space displacement rate (px/s) of its parts between consecutive times.
 
-        Parts wholly off the image by more than half its size are ignored (see ``_actors.actor_speeds``);
+        Parts wholly off the image by more than half its size are ignored (see ``actors.actor_speeds``);
         a chart bar's rate is its speed.
         """
         return self._painter.speeds(by_column, np.asarray(times_s, np.float64))
@@ -136,7 +136,7 @@ class Renderer:
     def actor_parts(self, times_s: np.ndarray, *, by_column: bool = False) -> np.ndarray:
         """The render-space primitives the kernels draw: ``(actors, times, MAX_PARTS, PART_COLS)`` float64.
 
-        Row layout in ``rollcam.sim._actors`` (``Q_KIND`` capsule, quad or none; geometry from ``Q_GEO``;
+        Row layout in ``actors`` (``Q_KIND`` capsule, quad or none; geometry from ``Q_GEO``;
         line range ``Q_YMIN``..``Q_YMAX``). For checks and studies; a render computes only the parts it needs.
         """
         return self._painter.parts(by_column, np.asarray(times_s, np.float64))
@@ -223,7 +223,7 @@ class Renderer:
         """A moving camera's exposure integral into ``out`` (render orientation): each line's static background
         integrated along its pixels' image paths (``n_path[l]`` midpoint samples of the window
         ``starts_ns[l] + [0, exposure_ns]``, each a bilinear read of one render of the background, mapped
-        through the plane the pixel's ray hits: ``rollcam.sim._egoblur``), plus on lines with ``hits`` the
+        through the plane the pixel's ray hits: ``egoblur``), plus on lines with ``hits`` the
         actors' samples that ``accumulate_samples(actors_only=True)`` left in ``out``, over ``n_actor[l]``.
         ``margin`` render pixels of background are rendered beyond each image edge for reads that leave it."""
         if not self.camera_moving:

@@ -15,7 +15,7 @@ The render is a rolling-shutter one (each line at its own time), so a read from 
 ``(L - l) * lt`` later than line l's mid-exposure: ``path_blur`` moves the read along the pixel's image velocity
 by that much (first order in the line time; exact for a global shutter, whose lt is 0).
 
-Used by ``rollcam.sim._paint.Painter.path_blur``; render space as in ``rollcam.sim._kernels`` (lines are rows of
+Used by ``paint.Painter.path_blur``; render space as in ``lines`` (lines are rows of
 the render buffer; a column readout renders the camera transposed).
 """
 
@@ -26,9 +26,9 @@ import math
 import numpy as np
 from numba import njit, prange
 
-from ._cshade import SURF_EAST, SURF_GROUND, SURF_SKY, SURF_WEST, path_reads_c
-from ._jitcache import guard
-from ._world import C_CX, C_CY, C_FX, C_FY, C_TRANSPOSED, W_FACADE, background_span
+from .._jitcache import guard
+from .shader import SURF_EAST, SURF_GROUND, SURF_SKY, SURF_WEST, path_reads_c
+from .world import C_CX, C_CY, C_FX, C_FY, C_TRANSPOSED, W_FACADE, background_span
 
 N_SURFACES = 4
 """Planes a background pixel's ray can hit (``SURF_*``: sky, ground, west facade, east facade)."""

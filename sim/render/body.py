@@ -1,6 +1,6 @@
 """Articulated walker model (numba): where a pedestrian is and how its body parts are posed at time t.
 
-Also defines the actor table layout shared by the render kernels (``rollcam.sim._actors``). Proportions
+Also defines the actor table layout shared by the render kernels (``actors``). Proportions
 follow standard anthropometric ratios of body height; the gait is a sinusoidal hip/knee/shoulder/elbow
 model whose phase follows distance walked (so stride frequency follows speed).
 """
@@ -11,7 +11,7 @@ import math
 
 from numba import njit
 
-from ._jitcache import guard
+from .._jitcache import guard
 
 # ---- actor table ------------------------------------------------------------------------------------------
 A_TYPE, A_STATIC, A_SPEED, A_ID = 0, 1, 2, 3
@@ -25,11 +25,11 @@ P_BAG_KIND, P_BAG, P_SKIRT = 37, 38, 41  # what the walker carries (BAG_*), its 
 R_X0, R_WIDTH, R_VX, R_PERIOD, R_RGB = 4, 5, 6, 7, 8
 ACTOR_COLS = 42
 TYPE_PEDESTRIAN, TYPE_BAR = 0, 1
-TYPE_PROP = 2  # street props: their columns in rollcam.sim._props
+TYPE_PROP = 2  # street props: their columns in rollcam.sim.render.props
 BAG_NONE, BAG_BACKPACK, BAG_SHOULDER = 0, 1, 2
 COL_SKIN, COL_HAIR, COL_SHIRT, COL_PANTS, COL_SHOES, COL_BAG = 0, 1, 2, 3, 4, 5
 """A part's material (``col_idx``): its colour column (``P_SKIN + 3 * c`` for the first five, ``P_BAG``) and its
-surface texture (``rollcam.sim._actors.TEX_CONTRAST``)."""
+surface texture (``actors.TEX_CONTRAST``)."""
 
 
 
@@ -62,7 +62,7 @@ def _limb(px, py, pz, fwd_x, fwd_y, ang, length, out, i):
 def pedestrian_skeleton(act, t, seg, rad, col_idx, root, joints):
     """World-space capsules of a walker at time ``t``: seg[p] = (ax, ay, az, bx, by, bz), rad[p] metres.
 
-    Part 0 is the head (its face is drawn on it: ``rollcam.sim._kernels``). ``col_idx[p]`` selects the material
+    Part 0 is the head (its face is drawn on it: ``lines``). ``col_idx[p]`` selects the material
     (``COL_*``); ``root`` (4) receives the root state (see ``pedestrian_root``) and ``joints`` (5 x 3) is
     scratch. Returns the part count: 18 capsules, and a 19th for a bag. A skirt replaces the pelvis (the shins
     below it are bare).

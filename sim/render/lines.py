@@ -1,7 +1,7 @@
 """Numba kernels of the per-line renderer's lines: part spans on a line, span painting, the per-line render loop.
 
-The static world (camera poses, background shading) is in ``rollcam.sim._world``, the actors' bounds and parts
-in ``rollcam.sim._actors`` (over the walker model of ``rollcam.sim._body``); ``rollcam.sim.compile`` fills
+The static world (camera poses, background shading) is in ``world``, the actors' bounds and parts
+in ``actors`` (over the walker model of ``body``); ``tables`` fills
 the tables all of them read. Every function is pure: the same inputs give bit-identical outputs whichever path
 (exact per-line, banded, brute-force reference) calls it, which is what lets the fast path equal the reference.
 
@@ -16,7 +16,8 @@ import math
 import numpy as np
 from numba import njit, prange
 
-from ._actors import (
+from .._jitcache import guard
+from .actors import (
     MAX_PARTS,
     N_CHUNKS,
     N_VERTS,
@@ -39,11 +40,10 @@ from ._actors import (
     actor_parts,
     parts_scratch,
 )
-from ._cshade import encode_line_c
-from ._jitcache import guard
-from ._parts import PART_SHADOW
-from ._texture import NO_CELL, SH_FACE, SH_GEO, SH_TEX, SHADE_COLS, SHADOW_MARK, _darken, texture_at, texture_span
-from ._world import C_MOVING, C_TRANSPOSED, background_line, background_span
+from .parts import PART_SHADOW
+from .shader import encode_line_c
+from .texture import NO_CELL, SH_FACE, SH_GEO, SH_TEX, SHADE_COLS, SHADOW_MARK, _darken, texture_at, texture_span
+from .world import C_MOVING, C_TRANSPOSED, background_line, background_span
 
 # slots[o, k]: >= 0 row of the shared parts table; SLOT_NONE not needed; SLOT_LOCAL needed by a single line,
 # so its parts are computed on that line (no table round trip through memory).

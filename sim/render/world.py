@@ -1,9 +1,9 @@
 """Numba kernels of the static world: camera poses, and the background (street, facades, sky) and sun shadows
 through the C shader.
 
-Part of the per-line renderer (``rollcam.sim._actors`` holds the actors, ``rollcam.sim._kernels`` the line
-painting, ``rollcam.sim._cshade`` loads the C shader, ``sim/rollcam_shade.c``, that casts each pixel's ray and
-shades what it hits); table layouts are filled by ``rollcam.sim.compile``. Every function is pure, so every
+Part of the per-line renderer (``actors`` holds the actors, ``lines`` the line
+painting, ``shader`` loads the C shader, ``sim/render/rollcam_shade.c``, that casts each pixel's ray and
+shades what it hits); table layouts are filled by ``tables``. Every function is pure, so every
 render path shades identically.
 """
 
@@ -14,8 +14,8 @@ import math
 import numpy as np
 from numba import njit, prange
 
-from ._cshade import background_line_c, background_span_c, check_layout, library, sun_blocked_c
-from ._jitcache import guard
+from .._jitcache import guard
+from .shader import background_line_c, background_span_c, check_layout, library, sun_blocked_c
 
 # ---- camera table columns -------------------------------------------------------------------------------
 C_FX, C_FY, C_CX, C_CY, C_W, C_H, C_TRANSPOSED = 0, 1, 2, 3, 4, 5, 6

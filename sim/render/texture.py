@@ -1,4 +1,4 @@
-"""Walker surface texture, faces and shadows for the span painter of ``rollcam.sim._kernels``: value noise
+"""Walker surface texture, faces and shadows for the span painter of ``lines``: value noise
 fixed to a part's axis, the features of a head seen from the camera, and the ground shadows' darkening."""
 
 from __future__ import annotations
@@ -7,7 +7,7 @@ import math
 
 from numba import njit
 
-from ._jitcache import guard
+from .._jitcache import guard
 
 SH_GEO, SH_TEX, SH_FACE, SHADE_COLS = 8, 13, 16, 21
 """Columns of a span's shading record after the eight of Q_LX, Q_LZ, ambient and direct RGB: the capsule's axis
@@ -147,7 +147,7 @@ def texture_at(ts, x, yc, cell):
 @njit(cache=True)
 def _darken(lin, line, shade, e, xl, xr, i0, i1):
     """A shadow's span: what is painted under it keeps ``1 - s min(1, edge (1 - r^2))^2`` of its light per
-    channel (see ``rollcam.sim._parts.shadow_part``). Its shade row: SHADOW_MARK at 0, the strengths at 2..4,
+    channel (see ``parts.shadow_part``). Its shade row: SHADOW_MARK at 0, the strengths at 2..4,
     the edge at 5, the centre at SH_GEO and the inverse shape matrix at SH_GEO + 2.. and 1."""
     cx, cy = shade[e, SH_GEO], shade[e, SH_GEO + 1]
     n00, n01, n10, n11 = shade[e, SH_GEO + 2], shade[e, SH_GEO + 3], shade[e, SH_GEO + 4], shade[e, 1]

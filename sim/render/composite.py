@@ -4,15 +4,15 @@ A static camera's world, and every actor that does not move, is rendered once pe
 ``StaticLayer`` (the cached composite); a frame is that composite with the lines a moving actor touches
 repainted, and linear-only renders and exposure integration paint just those lines over it. A moving camera has
 nothing to cache, so every line is painted whole. ``Compositor`` does this for the passes that
-``rollcam.sim._paint.Painter`` prepares; ``rollcam.sim.render.Renderer`` decides which pass a call needs.
+``paint.Painter`` prepares; ``renderer.Renderer`` decides which pass a call needs.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-from ._paint import Painter, Pass
-from .render_result import LinearFrame, LineTruth, RenderResult
+from .paint import Painter, Pass
+from .result import LinearFrame, LineTruth, RenderResult
 
 
 class StaticLayer:
