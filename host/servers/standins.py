@@ -20,7 +20,7 @@ PICAMERA2_ENV = "ROLLCAM_PICAMERA2"
 
 def shims_path() -> Path:
     """The folder of rollcam's stand-in modules (``picamera2``, ``libcamera``), installed with rollcam."""
-    return Path(__file__).resolve().parent / "shims"
+    return Path(__file__).resolve().parents[1] / "shims"  # host/shims, beside this package
 
 
 def standin_env(sources: Sequence[str] = (), env: Mapping[str, str] | None = None) -> dict[str, str]:
