@@ -15,6 +15,7 @@ Every fenced block in the documentation says what it is in its info string:
 
 from __future__ import annotations
 
+import importlib
 import os
 import re
 import shlex
@@ -322,6 +323,18 @@ def _api_docs():
     sys.modules.setdefault("api_docs", module)  # dataclasses look their module up there
     spec.loader.exec_module(module)
     return module
+
+
+def test_public_names_of_rollcam_host_are_their_modules_own() -> None:
+    # The documented import path of each entry point stays `rollcam.host.NAME` wherever its module lives.
+    import rollcam.host as host
+
+    for name, where in host.PUBLIC.items():
+        module = importlib.import_module(f"rollcam.host.{where}")
+        assert getattr(host, name) is getattr(module, name), name
+        assert getattr(module, name).__module__ == module.__name__, f"{name} is not defined in {module.__name__}"
+    with pytest.raises(AttributeError, match="no attribute 'capture'"):
+        host.capture  # noqa: B018  (modules are not public names)
 
 
 def test_api_reference_is_the_docstrings_of_today() -> None:
