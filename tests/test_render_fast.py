@@ -177,7 +177,7 @@ def test_part_slots_share_a_time_used_by_several_entries_and_leave_single_uses_l
 
 
 def test_encoder_scales_clips_and_rounds_to_the_nearest_curve_entry() -> None:
-    from rollcam.sim.render.renderer import _SRGB, encode_linear
+    from rollcam.sim.render.renderer import SRGB, encode_linear
 
     rng = np.random.default_rng(9)
     edges = np.array([-1.0, -0.0, 0.0, 1e-9, 0.5 / lines.LUT_SIZE, 0.5, 1.0, 1.0 + 1e-7, 7.0, np.inf, -np.inf,
@@ -186,7 +186,7 @@ def test_encoder_scales_clips_and_rounds_to_the_nearest_curve_entry() -> None:
     lin = np.concatenate([np.resize(edges, (4, 3)), rng.uniform(-0.2, 1.4, (996, 3))]).astype(np.float32)
     for gain in (1.0, 0.37, 2.5):
         v = np.nan_to_num(lin.astype(np.float64) * gain, nan=0.0)
-        want = _SRGB[(np.clip(v, 0.0, 1.0) * lines.LUT_SIZE + 0.5).astype(np.int64)][:, ::-1]
+        want = SRGB[(np.clip(v, 0.0, 1.0) * lines.LUT_SIZE + 0.5).astype(np.int64)][:, ::-1]
         got = encode_linear(lin.reshape(1, -1, 3), gain)[0]
         assert np.array_equal(got, want)
 

@@ -7,6 +7,7 @@ the numba kernels read (``lines``, ``actors``, ``body``, ``props``, ``parts``, `
 background shader (``rollcam_shade.c``, built into ``librollcam_shade.so`` beside it).
 """
 
+from .flicker_renderer import FlickerRenderer  # registers itself as the renderer of modulated lights
 from .renderer import LinearFrame, LineTruth, Renderer, RenderResult, encode_linear, srgb_lut
 
-__all__ = ["LineTruth", "LinearFrame", "RenderResult", "Renderer", "encode_linear", "srgb_lut"]
+__all__ = ["FlickerRenderer", "LineTruth", "LinearFrame", "RenderResult", "Renderer", "encode_linear", "srgb_lut"]

@@ -23,7 +23,7 @@ from rollcam.common.errors import ConfigError
 
 from ..scene import Camera, Lighting, ModulatedLight, Scene
 from . import flicker_mix as M
-from .renderer import _SRGB, Renderer, _check_buffers, _check_times, _line_mask
+from .renderer import SRGB, Renderer, check_buffers, check_times, line_mask, register_lit_renderer
 from .result import LinearFrame, RenderResult
 
 
@@ -87,7 +87,7 @@ class FlickerRenderer(Renderer):
         statics = lines if frames[0].static is None else self._statics(frames, by_column)
         painted = np.stack([f.painted for f in frames])
         u8 = np.empty((0, 1, 3), np.uint8) if out_u8 is None else out_u8
-        M.join_lines(out, statics, lines, painted, weights, np.asarray(which, np.int64), self.gain, _SRGB, u8)
+        M.join_lines(out, statics, lines, painted, weights, np.asarray(which, np.int64), self.gain, SRGB, u8)
 
     def _statics(self, frames: list[LinearFrame], by_column: bool) -> np.ndarray:
         """The parts' static composites as one ``(parts, lines, along, 3)`` array, copied once per orientation."""
@@ -101,7 +101,7 @@ class FlickerRenderer(Renderer):
     def render_lines(self, times_ns: np.ndarray, *, by_column: bool = False, linear: bool = False,
                      truth_only: bool = False) -> RenderResult:
         """``Renderer.render_lines`` under the modulated lights (each line's light over its own window)."""
-        times_ns = _check_times(times_ns, self.render_shape(by_column)[0])
+        times_ns = check_times(times_ns, self.render_shape(by_column)[0])
         if truth_only:
             return self.parts[0].render_lines(times_ns, by_column=by_column, truth_only=True)
         res = [p.render_linear(times_ns, by_column=by_column, out=self.scratch(k, by_column))
@@ -119,12 +119,12 @@ class FlickerRenderer(Renderer):
         if hits is not None:
             raise ConfigError("under modulated lights, accumulate exposures with rollcam.sim.exposure.integrate")
         n_lines, n_along = self.render_shape(by_column)
-        times_ns = _check_times(times_ns, n_lines)
-        subset = _line_mask(lines, n_lines)
+        times_ns = check_times(times_ns, n_lines)
+        subset = line_mask(lines, n_lines)
         res = [p.render_linear(times_ns, by_column=by_column, lines=subset, out=self.scratch(k, by_column))
                for k, p in enumerate(self.parts)]
         out = np.empty((n_lines, n_along, 3), np.float32) if out is None else out
-        _check_buffers(out, None, (n_lines, n_along))
+        check_buffers(out, None, (n_lines, n_along))
         self.join([r.radiance for r in res], self.window_weights(times_ns), np.flatnonzero(subset), out)
         frame = LinearFrame(None, out, subset.copy(), by_column)
         return RenderResult(np.empty((0, 0, 3), np.uint8), None, res[0].truth, res[0].lines_painted, frame)
@@ -150,7 +150,9 @@ def _oriented(a: np.ndarray, by_column: bool, contiguous: bool) -> np.ndarray:
     a = a.transpose(1, 0, 2) if by_column else a
     return np.ascontiguousarray(a) if contiguous else a
 
-
 def _render_side(a: np.ndarray, by_column: bool) -> np.ndarray:
     """An image-orientation array back in render orientation (C-contiguous)."""
     return np.ascontiguousarray(a.transpose(1, 0, 2) if by_column else a)
+
+
+register_lit_renderer(FlickerRenderer)  # Renderer(scene) of a scene with modulated lights is one

@@ -42,7 +42,7 @@ from .actors import (
 )
 from .parts import PART_SHADOW
 from .shader import encode_line_c
-from .texture import NO_CELL, SH_FACE, SH_GEO, SH_TEX, SHADE_COLS, SHADOW_MARK, _darken, texture_at, texture_span
+from .texture import NO_CELL, SH_FACE, SH_GEO, SH_TEX, SHADE_COLS, SHADOW_MARK, darken, texture_at, texture_span
 from .world import C_MOVING, C_TRANSPOSED, background_line, background_span
 
 # slots[o, k]: >= 0 row of the shared parts table; SLOT_NONE not needed; SLOT_LOCAL needed by a single line,
@@ -247,7 +247,7 @@ def _paint_spans(lin, line, m, gt_vis, depth, idx_o, shade, span_l, span_r, owne
         i1 = min(int(math.ceil(xr)), w)
         if shade[e, 0] == SHADOW_MARK:
             if not gt_only:
-                _darken(lin, line, shade, e, xl, xr, i0, i1)
+                darken(lin, line, shade, e, xl, xr, i0, i1)
             continue
         mid, half = 0.5 * (xl + xr), 0.5 * (xr - xl)
         lx, lz = shade[e, 0], shade[e, 1]

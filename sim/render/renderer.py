@@ -38,7 +38,8 @@ def srgb_lut() -> np.ndarray:
     return np.clip(np.round(s * 255.0), 0, 255).astype(np.uint8)
 
 
-_SRGB = srgb_lut()
+SRGB = srgb_lut()
+"""The renderer's linear -> 8-bit sRGB table (``srgb_lut``), shared by every renderer of the package."""
 
 
 def encode_linear(linear: np.ndarray, gain: float) -> np.ndarray:
@@ -49,8 +50,19 @@ def encode_linear(linear: np.ndarray, gain: float) -> np.ndarray:
     if lin.ndim != 3 or lin.shape[2] != 3:
         raise ConfigError(f"a linear image is (H, W, 3), got shape {lin.shape}")
     out = np.empty(lin.shape, np.uint8)
-    K.encode_line(lin.reshape(-1, 3), float(gain), _SRGB, out.reshape(-1, 3))
+    K.encode_line(lin.reshape(-1, 3), float(gain), SRGB, out.reshape(-1, 3))
     return out
+
+
+LIT_RENDERER: list[type[Renderer]] = []
+"""The renderer ``Renderer(scene)`` is for a scene with modulated lights: ``FlickerRenderer``, registered by its
+module (``register_lit_renderer``), which the package imports with this one, so this module needs no import of
+it."""
+
+
+def register_lit_renderer(cls: type[Renderer]) -> None:
+    """Make ``Renderer(scene)`` of a scene with modulated lights a ``cls``."""
+    LIT_RENDERER[:] = [cls]
 
 
 class Renderer:
@@ -65,8 +77,8 @@ class Renderer:
     """
 
     def __new__(cls, scene: Scene | None = None, *args, **kwargs) -> Renderer:  # (no scene: copy/pickle)
-        from .flicker_renderer import FlickerRenderer  # modulated lights: a sum of renders (lazy: it imports us)
-        return super().__new__(FlickerRenderer if cls is Renderer and getattr(scene, "lights", ()) else cls)
+        lit = cls is Renderer and bool(getattr(scene, "lights", ()))
+        return super().__new__(LIT_RENDERER[0] if lit else cls)  # modulated lights: a sum of renders
 
     def __init__(self, scene: Scene, camera: Camera | int | str = 0, *, gain: float = 1.0,
                  threads: int | None = None, light_window_ns: int = 0) -> None:
@@ -76,7 +88,7 @@ class Renderer:
             raise ConfigError(f"camera size must be positive, got {self.camera.width}x{self.camera.height}")
         if threads is not None and (not isinstance(threads, int) or threads < 1):
             raise ConfigError(f"threads must be an integer >= 1 or None, got {threads!r}")
-        self._painter = Painter(scene, self.camera, float(gain), _SRGB, threads)
+        self._painter = Painter(scene, self.camera, float(gain), SRGB, threads)
         self._composite = Compositor(self._painter)
         self.camera_moving = self.camera.ego.moving
         t = self._painter.tables  # actor_labelled: False for props (scenery, no truth record)
@@ -150,7 +162,7 @@ class Renderer:
         and the per-line ground truth. ``truth_only`` skips pixels (for boxes at another instant).
         """
         n_lines, n_along = self.render_shape(by_column)
-        times_ns = _check_times(times_ns, n_lines)
+        times_ns = check_times(times_ns, n_lines)
         ut_ns, line_k = np.unique(times_ns, return_inverse=True)
         times_s = ut_ns.astype(np.float64) * 1e-9
         layer = self._composite.layers.get(by_column, times_s[0])
@@ -175,11 +187,11 @@ class Renderer:
         moving camera (``radiance.static`` None) the sum of the painted lines.
         """
         n_lines, n_along = self.render_shape(by_column)
-        times_ns = _check_times(times_ns, n_lines)
-        subset = _line_mask(lines, n_lines)
+        times_ns = check_times(times_ns, n_lines)
+        subset = line_mask(lines, n_lines)
         if out is None:
             out = np.empty((n_lines, n_along, 3), np.float32)
-        _check_buffers(out, hits, (n_lines, n_along))
+        check_buffers(out, hits, (n_lines, n_along))
         # Only the asked-for lines' times are posed and bounded (a pass of an exposure needs few lines).
         sub_idx = np.flatnonzero(subset)
         ut_ns, sub_k = np.unique(times_ns[sub_idx] if sub_idx.size else times_ns[:1], return_inverse=True)
@@ -208,7 +220,7 @@ class Renderer:
         n_lines, n_along = self.render_shape(by_column)
         times_ns = np.asarray(times_ns, np.int64)
         line_of = _check_line_of(line_of, times_ns.shape[0], n_lines)
-        _check_buffers(out, hits, (n_lines, n_along), need_hits=True)
+        check_buffers(out, hits, (n_lines, n_along), need_hits=True)
         n_ent = times_ns.shape[0]
         layer = self._composite.layers.get(by_column, float(times_ns.min()) * 1e-9 if n_ent else 0.0)
         if n_ent == 0:
@@ -229,8 +241,8 @@ class Renderer:
         if not self.camera_moving:
             raise ConfigError("path_blur integrates a moving camera's background; a static one's is its composite")
         n_lines, n_along = self.render_shape(by_column)
-        starts_ns = _check_times(starts_ns, n_lines)
-        _check_buffers(out, hits, (n_lines, n_along), need_hits=True)
+        starts_ns = check_times(starts_ns, n_lines)
+        check_buffers(out, hits, (n_lines, n_along), need_hits=True)
         n_path, n_actor = np.asarray(n_path, np.int64), np.asarray(n_actor, np.int64)
         if n_path.shape != (n_lines,) or n_actor.shape != (n_lines,) or (n_path < 1).any() or (n_actor < 1).any():
             raise ConfigError(f"n_path and n_actor must be {n_lines} sample counts >= 1")
@@ -253,7 +265,7 @@ class Renderer:
         Each full render is ``reference_frame``, which shares only the bare background with the fast path,
         so the fast path's caches and culling are checked against it, not assumed.
         """
-        times_ns = _check_times(times_ns, self.render_shape(by_column)[0])
+        times_ns = check_times(times_ns, self.render_shape(by_column)[0])
         n_lines = times_ns.shape[0]
         out: RenderResult | None = None
         for r in range(n_lines):
@@ -279,7 +291,7 @@ class Renderer:
                              self.actor_labelled)
 
 
-def _check_times(times_ns: np.ndarray, n_lines: int) -> np.ndarray:
+def check_times(times_ns: np.ndarray, n_lines: int) -> np.ndarray:
     """``times_ns`` as int64, one per line, or a ConfigError."""
     times_ns = np.asarray(times_ns, dtype=np.int64)
     if times_ns.shape != (n_lines,):
@@ -287,7 +299,7 @@ def _check_times(times_ns: np.ndarray, n_lines: int) -> np.ndarray:
     return times_ns
 
 
-def _line_mask(lines: np.ndarray | None, n_lines: int) -> np.ndarray:
+def line_mask(lines: np.ndarray | None, n_lines: int) -> np.ndarray:
     """A bool mask of the asked-for lines (a mask, indices, or None for all)."""
     if lines is None:
         return np.ones(n_lines, np.bool_)
@@ -312,7 +324,7 @@ def _check_line_of(line_of: np.ndarray, n_ent: int, n_lines: int) -> np.ndarray:
     return line_of
 
 
-def _check_buffers(out: np.ndarray, hits: np.ndarray | None, shape: tuple[int, int], need_hits: bool = False) -> None:
+def check_buffers(out: np.ndarray, hits: np.ndarray | None, shape: tuple[int, int], need_hits: bool = False) -> None:
     """``out`` must be a C-contiguous float32 render-orientation buffer, ``hits`` (when given or needed) int64."""
     n_lines, n_along = shape
     if out.shape != (n_lines, n_along, 3) or out.dtype != np.float32 or not out.flags.c_contiguous:

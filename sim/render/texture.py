@@ -14,7 +14,7 @@ SH_GEO, SH_TEX, SH_FACE, SHADE_COLS = 8, 13, 16, 21
 and radius (Q_GEO..Q_GEO+4), texture contrast, cells per pixel and seed, then a head's face (Q_FACE: cos, sin;
 Q_HAIR: hair over skin albedo, RGB)."""
 SHADOW_MARK = -9.0
-"""shade[m, 0] of a shadow's span (a body part's there, its Q_LX, lies in [-1, 1]; see ``_darken``)."""
+"""shade[m, 0] of a shadow's span (a body part's there, its Q_LX, lies in [-1, 1]; see ``darken``)."""
 EYE_X, EYE_Y, EYE_RX, EYE_RY = 0.34, 0.12, 0.13, 0.075
 BROW_Y, BROW_RX, BROW_RY = 0.29, 0.18, 0.04
 MOUTH_Y, MOUTH_RX, MOUTH_RY = -0.43, 0.2, 0.05
@@ -145,7 +145,7 @@ def texture_at(ts, x, yc, cell):
 
 
 @njit(cache=True)
-def _darken(lin, line, shade, e, xl, xr, i0, i1):
+def darken(lin, line, shade, e, xl, xr, i0, i1):
     """A shadow's span: what is painted under it keeps ``1 - s min(1, edge (1 - r^2))^2`` of its light per
     channel (see ``parts.shadow_part``). Its shade row: SHADOW_MARK at 0, the strengths at 2..4,
     the edge at 5, the centre at SH_GEO and the inverse shape matrix at SH_GEO + 2.. and 1."""
