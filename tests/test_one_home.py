@@ -24,6 +24,7 @@ CAMERA_SPEC = ("fold pending: built through CameraSpec these cameras get the emu
 ALLOWED: dict[tuple[str, str], str] = {
     # threads
     ("threads", "benchmarks/http_attacks.py"): "fold pending: attacker threads of a benchmark; Worker fits",
+    ("threads", "benchmarks/mjpeg.py"): "fold pending: the MJPEG benchmark's client readers; Worker fits",
     ("threads", "benchmarks/soak.py"): "fold pending: the soak's stream reader; Worker fits",
     ("threads", "benchmarks/view.py"): "fold pending: the view benchmark's page driver; Worker fits",
     ("threads", "emu/usbip/server.py"): EDITED.format("emu/usbip"),
@@ -159,6 +160,11 @@ def test_the_checker_finds_a_copy_of_each_concept(tool: ModuleType, concept: str
 
 def test_every_concept_has_a_made_up_copy(tool: ModuleType) -> None:
     assert {c.name for c in tool.CONCEPTS} == set(COPIES)
+
+
+def test_the_checker_finds_a_thread_subclass(tool: ModuleType) -> None:
+    source = "import threading\n\n\nclass Reader(threading.Thread):\n    pass\n"
+    assert [(f.concept, f.line) for f in tool.scan_text("benchmarks/x.py", source)] == [("threads", 4)]
 
 
 def test_prose_and_comments_are_not_copies(tool: ModuleType) -> None:
