@@ -31,6 +31,7 @@ from typing import Any
 
 import numpy as np
 from rollcam.common.errors import ConfigError
+from rollcam.common.values import parse_size
 
 COLORS = ("RGB", "BGR")
 """Channel orders a network's input tensor can have."""
@@ -203,8 +204,8 @@ def parse_tensor_format(text: str) -> InputTensorFormat | None:
         return None
     parts = [p.strip() for p in word.split(",") if p.strip()]
     try:
-        w, h = (int(v) for v in parts[0].lower().split("x"))
-    except ValueError:
+        w, h = parse_size(parts[0])
+    except ConfigError:
         raise ValueError(f"expected WxH first, as 224x224, not {parts[0]!r}") from None
     kw: dict[str, Any] = {}
     for p in parts[1:]:

@@ -111,9 +111,85 @@ class HostNetwork:
         self.detector.close()
 
 
-def load_network(spec: str) -> HostNetwork:
-    """The in-sensor network of a detector spec (the loader ``rollcam.host`` registers with the firmware)."""
+COLOURNET = "colournet"
+"""The spec of ``ColourNet``."""
+COLOURNET_CLASSES = 1000
+COLOURNET_SEED = 500
+
+
+class ColourNet:
+    """A generated classifier, built in code (no trained weights, nothing downloaded): the picture's mean colour
+    (global average pooling of the 8-bit RGB planes, scaled to 0..1) times a seeded 3 x 1000 matrix plus a seeded
+    bias gives 1000 logits (ImageNet's class count). What it says is a fixed function of its input, which is what
+    a test of a classification pipeline needs (picamera2's classification example on the emulated AI Camera); it
+    recognises nothing. Output: the tensor ``logits``, shape (1000,), float32; no boxes."""
+
+    name = COLOURNET
+    input = "isp"
+
+    def __init__(self) -> None:
+        rng = np.random.default_rng(COLOURNET_SEED)
+        self.weights = rng.standard_normal((3, COLOURNET_CLASSES)).astype(np.float32) * 4
+        self.bias = rng.standard_normal(COLOURNET_CLASSES).astype(np.float32)
+
+    def macs(self, width: int, height: int) -> int:
+        """The pooling's adds (one a sample) and the 3 x 1000 matrix."""
+        return width * height * 3 + 3 * COLOURNET_CLASSES
+
+    def logits(self, image_bgr: np.ndarray) -> np.ndarray:
+        """The 1000 logits of an 8-bit BGR picture."""
+        mean_rgb = np.asarray(image_bgr, np.float64).reshape(-1, 3).mean(axis=0)[::-1] / 255.0
+        return (mean_rgb.astype(np.float32) @ self.weights + self.bias).astype(np.float32)
+
+    def run(self, image: np.ndarray, bits: int) -> NetworkOutput:
+        """One inference: no detections, the logits as the output tensor."""
+        empty = np.zeros((0,), np.float32)
+        return NetworkOutput(empty.reshape(0, 4), empty, empty.astype(np.int32), (("logits", self.logits(image)),))
+
+
+COLOURSEG = "colourseg"
+"""The spec of ``ColourSeg``."""
+COLOURSEG_CLASSES = 21
+COLOURSEG_MIN_SATURATION = 64
+
+
+class ColourSeg:
+    """A generated semantic segmentation network, built in code (no trained weights): a pixel whose saturation
+    (HSV, 0..255) is below 64 is class 0 (background), any other one of 20 hue bins (classes 1..20; 21 classes, as
+    Pascal VOC's DeepLabv3+ on the AI Camera). It segments coloured things from grey ones, not objects; what it
+    says is a fixed function of its input. Output: the tensor ``mask``, shape (height, width) of the input, class
+    ids as float32; no boxes."""
+
+    name = COLOURSEG
+    input = "isp"
+
+    def macs(self, width: int, height: int) -> int:
+        """The colour conversion and the binning, counted as 3 per pixel."""
+        return width * height * 3
+
+    def mask(self, image_bgr: np.ndarray) -> np.ndarray:
+        """The class of every pixel of an 8-bit BGR picture, (H, W) float32."""
+        from rollcam.sim.codecs import bgr_to_hsv
+
+        hsv = bgr_to_hsv(image_bgr)
+        bins = 1 + hsv[:, :, 0].astype(np.int32) * (COLOURSEG_CLASSES - 1) // 180
+        return np.where(hsv[:, :, 1] < COLOURSEG_MIN_SATURATION, 0, bins).astype(np.float32)
+
+    def run(self, image: np.ndarray, bits: int) -> NetworkOutput:
+        """One inference: no detections, the mask as the output tensor."""
+        empty = np.zeros((0,), np.float32)
+        return NetworkOutput(empty.reshape(0, 4), empty, empty.astype(np.int32), (("mask", self.mask(image)),))
+
+
+def load_network(spec: str) -> HostNetwork | ColourNet | ColourSeg:
+    """The in-sensor network of a detector spec, or ``colournet`` or ``colourseg`` (the loader ``rollcam.host``
+    registers with the firmware)."""
     from .detectors import load_detector
+
+    if spec == COLOURNET:
+        return ColourNet()
+    if spec == COLOURSEG:
+        return ColourSeg()
 
     det = load_detector(spec)
     path = getattr(det, "path", None)

@@ -5,7 +5,9 @@ Raspberry Pi IMX500 helper gives them to picamera2.
 ``CnnProgram`` is one camera's network: the in-sensor options of ``rollcam.firmware`` it sets
 (``insensor=SPEC``, ``insensor_size`` = the network's input tensor), and the layout of a post-processed
 ("_pp") detection network's outputs: four tensors, boxes ``(slots, 4)``, scores ``(slots,)``, classes
-``(slots,)`` and the count ``(1,)``, float32, each flattened in column-major order (picamera2's
+``(slots,)`` and the count ``(1,)``, float32, each flattened in column-major order (a classifier's program
+sends its network's own output tensors instead: ``colournet``'s 1000 logits; a segmenter's, ``colourseg``'s
+class of every input pixel) (picamera2's
 ``get_outputs`` reshapes with ``order='F'``). Boxes are normalised to the sensor's full pixel array (what
 ``IMX500.convert_inference_coords`` takes), in ``yx`` (y0, x0, y1, x1) or ``xy`` order, and, for a network
 whose boxes are in input-tensor pixels (``bbox_normalization``), times the input size. Unused slots are zero.
@@ -51,6 +53,9 @@ class CnnProgram:
     roi: tuple[int, int, int, int] | None = None
     tensor: str = "none"
     """The ``insensor_tensor`` option: the network's input tensor (set for data injection)."""
+    task: str = "object detection"
+    """``object detection``: the post-processed four tensors; any other task (``classification``,
+    ``segmentation``): the network's own output tensors."""
 
     def options(self) -> dict[str, str]:
         """The in-sensor options of ``rollcam.firmware`` that run this network."""
@@ -166,7 +171,10 @@ def cnn_metadata(program: CnnProgram, frame: Any, array_crop: tuple[int, int, in
     if not carried:
         return {}
     result = carried[-1]
-    tensors = output_tensors(program, result, array_crop, (frame.width, frame.height), array_size)
+    if program.task == "object detection":
+        tensors = output_tensors(program, result, array_crop, (frame.width, frame.height), array_size)
+    else:  # the network's own output tensors, as the sensor sends a network without on-chip post-processing
+        tensors = [np.asarray(t, np.float32) for _, t in result.tensors]
     flat = np.concatenate([t.ravel(order="F") for t in tensors])
     return {
         # A tuple, as libcamera's float span arrives (picamera2 tests it with `if not tensor`).

@@ -52,13 +52,18 @@ class IMX500:
         zoo = resolve(network_file)
         self.__injection = bool(tensor_injection)
         self.__cmp_frm = 0
-        tensor = zoo.tensor() if tensor_injection else "none"
-        self.__program = _cnn.CnnProgram(zoo.stem, zoo.picture_detector if tensor_injection else zoo.detector,
-                                         zoo.input_size, zoo.bbox_normalization, zoo.bbox_order, tensor=tensor)
-        intrinsics = NetworkIntrinsics({"task": "object detection", "inference_rate": 30.0,
-                                        "cpu": {"bbox_normalization": zoo.bbox_normalization,
-                                                "bbox_order": zoo.bbox_order},
-                                        "classes": {"labels": list(COCO_LABELS)}})
+        # A classifier reads the input tensor always (a picture network); a detector only with injection.
+        tensor = zoo.tensor() if tensor_injection or zoo.task != "object detection" else "none"
+        self.__program = _cnn.CnnProgram(zoo.stem, zoo.picture_detector if tensor != "none" else zoo.detector,
+                                         zoo.input_size, zoo.bbox_normalization, zoo.bbox_order, tensor=tensor,
+                                         task=zoo.task)
+        if zoo.task == "object detection":
+            intrinsics = NetworkIntrinsics({"task": zoo.task, "inference_rate": 30.0,
+                                            "cpu": {"bbox_normalization": zoo.bbox_normalization,
+                                                    "bbox_order": zoo.bbox_order},
+                                            "classes": {"labels": list(COCO_LABELS)}})
+        else:  # the script brings its labels (picamera2's examples read their assets' ImageNet list)
+            intrinsics = NetworkIntrinsics({"task": zoo.task, "inference_rate": 30.0})
         w, h = zoo.input_size
         self.__cfg: dict[str, Any] = {"network_file": network_file, "intrinsics": intrinsics,
                                       "input_tensor": {"width": w, "height": h, "input_format": "RGB"},

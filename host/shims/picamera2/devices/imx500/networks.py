@@ -35,6 +35,9 @@ class ZooNetwork:
     bbox_order: str = "yx"
     picture_detector: str = "personnet"
     """What runs with data injection: the input tensor is the ISP's picture, so the picture-trained twin."""
+    task: str = "object detection"
+    """``object detection`` (post-processed boxes, scores, classes, count), ``classification`` (the logits) or
+    ``segmentation`` (the class of every input pixel)."""
 
     def tensor(self) -> str:
         """The network's input tensor (``insensor_tensor``): RGB, int8, centred (picamera2's default norm)."""
@@ -48,6 +51,10 @@ ZOO = {z.stem: z for z in (
     ZooNetwork("imx500_network_nanodet_plus_416x416_pp", "personnet-raw", (416, 416)),
     ZooNetwork("imx500_network_yolov8n_pp", "personnet-raw", (640, 640), bbox_normalization=True, bbox_order="xy"),
     ZooNetwork("imx500_network_yolo11n_pp", "personnet-raw", (640, 640), bbox_normalization=True, bbox_order="xy"),
+    ZooNetwork("imx500_network_mobilenet_v2", "colournet", (224, 224), picture_detector="colournet",
+               task="classification"),
+    ZooNetwork("imx500_network_deeplabv3plus", "colourseg", (513, 513), picture_detector="colourseg",
+               task="segmentation"),
 )}
 """Model-zoo object detectors (post-processed on chip) -> the rollcam detector run in their place: the
 study's raw-trained ``personnet-raw`` (it reads the mosaic, as an in-sensor network does), within the named
