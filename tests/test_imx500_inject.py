@@ -293,3 +293,18 @@ def test_v4l2_and_serial_see_the_loader_failure_and_the_skips():
     runs = (failing + 1) // 2
     assert stats["loader_failures"] == "1" and stats["frontend_timeouts"] == "0"
     assert (int(stats["insensor_runs"]), int(stats["insensor_skipped"])) == (runs, failing - runs)
+
+
+def test_a_result_rides_on_the_next_frame_made_however_many_were_skipped():
+    """A slow consumer makes the device skip frames; the result of the last frame made rides on the next one made,
+    even 40 frames on (more than the 32 frames' runs the stage keeps)."""
+    from rollcam.firmware.spec import CameraSpec
+    from rollcam.firmware.stream import FramePlan
+
+    spec = CameraSpec.from_options("imx500", {"size": "506x380", "insensor": "personnet",
+                                              "insensor_tensor": "64x64"})
+    cam = FirmwareCamera(spec)
+    sched = cam.schedule(0)
+    first = cam.render(FramePlan(0, sched))
+    later = cam.render(FramePlan(40, sched))
+    assert first.insensor == () and [r.seq for r in later.insensor] == [0]
