@@ -8,6 +8,7 @@ it does a missed frame. The network's input on every frame is the IMX500 input t
 from __future__ import annotations
 
 import contextlib
+import itertools
 import os
 import threading
 from types import SimpleNamespace
@@ -308,3 +309,27 @@ def test_a_result_rides_on_the_next_frame_made_however_many_were_skipped():
     first = cam.render(FramePlan(0, sched))
     later = cam.render(FramePlan(40, sched))
     assert first.insensor == () and [r.seq for r in later.insensor] == [0]
+
+
+def test_http_insensor_jsonl_shows_the_slow_networks_latency():
+    """/insensor.jsonl under faults=dnn_us=58800: every result 58.8 ms after its input, and never two frames in a
+    row inferred (the frame after an inferred one comes while the accelerator is busy)."""
+    import json
+    import urllib.request
+
+    from rollcam.emu.http_mjpeg import MjpegServer
+    from rollcam.firmware.spec import CameraSpec
+
+    spec = CameraSpec.from_options("imx500", {"size": "506x380", "insensor": "personnet",
+                                              "insensor_tensor": "64x64"})
+    cam = FirmwareCamera(spec)
+    with MjpegServer(cam, faults="dnn_us=58800") as srv:
+        base = srv.url.rsplit("/", 1)[0]
+        with urllib.request.urlopen(f"{base}/insensor.jsonl?results=4", timeout=120) as r:
+            lines = [json.loads(x) for x in r.read().decode().splitlines()]
+    assert lines[0]["insensor"]["insensor_tensor"] == "64x64,rgb,uint8"
+    results = lines[1:]
+    seqs = [x["seq"] for x in results]
+    assert len(seqs) == 4 and all(b - a >= 2 for a, b in itertools.pairwise(seqs))
+    assert all(x["done_ns"] - x["input_ns"] == 58_800_000 and x["input_size"] == [64, 64] for x in results)
+    assert cam.stats.insensor_runs >= 4
