@@ -181,15 +181,65 @@ class ColourSeg:
         return NetworkOutput(empty.reshape(0, 4), empty, empty.astype(np.int32), (("mask", self.mask(image)),))
 
 
-def load_network(spec: str) -> HostNetwork | ColourNet | ColourSeg:
-    """The in-sensor network of a detector spec, or ``colournet`` or ``colourseg`` (the loader ``rollcam.host``
-    registers with the firmware)."""
+POSENET = "posenet"
+"""The spec of ``PoseNet``."""
+POSE_TEMPLATE = np.array([  # COCO's 17 keypoints as fractions (x, y) of a standing person's box
+    (0.50, 0.07), (0.55, 0.05), (0.45, 0.05), (0.60, 0.07), (0.40, 0.07),  # nose, eyes, ears
+    (0.70, 0.20), (0.30, 0.20), (0.78, 0.36), (0.22, 0.36), (0.80, 0.50), (0.20, 0.50),  # shoulders, elbows, wrists
+    (0.62, 0.52), (0.38, 0.52), (0.60, 0.74), (0.40, 0.74), (0.60, 0.95), (0.40, 0.95),  # hips, knees, ankles
+], np.float64)
+POSE_PEOPLE = 30
+POSE_STRIDE = 2
+
+
+class PoseNet:
+    """A generated pose network (no trained weights of its own): rollcam's ``personnet`` finds the people in the
+    picture and COCO's 17 keypoints are placed in each box by a fixed standing-person template (``POSE_TEMPLATE``),
+    each scored with the detection's score. Its outputs are HigherHRNet's with the top-k grouping done on chip (as
+    the AI Camera's ``imx500_higherhrnet_coco`` sends them): ``tag_k``, ``ind_k`` and ``val_k``, each (30, 17) for up
+    to 30 people: the person's tag (its rank + 1), the keypoint's index on the output grid (half the input's size:
+    ``y * (W / 2) + x``) and its score (0: no person in that slot). It knows where people are, not how they stand."""
+
+    name = POSENET
+    input = "isp"
+
+    def __init__(self) -> None:
+        self.detector = load_network("personnet")
+
+    def macs(self, width: int, height: int) -> int:
+        """The person detector's, at this input (the template costs nothing to speak of)."""
+        return self.detector.macs(width, height)
+
+    def run(self, image: np.ndarray, bits: int) -> NetworkOutput:
+        """One inference: the people found, and their keypoints in the post-processed layout."""
+        found = self.detector.run(image, bits)
+        boxes = np.asarray(found.boxes, np.float64).reshape(-1, 4)
+        scores = np.asarray(found.scores, np.float32)
+        order = np.argsort(-scores, kind="stable")[:POSE_PEOPLE]
+        gw, gh = image.shape[1] // POSE_STRIDE, image.shape[0] // POSE_STRIDE
+        tag = np.zeros((POSE_PEOPLE, 17), np.float32)
+        ind = np.zeros((POSE_PEOPLE, 17), np.float32)
+        val = np.zeros((POSE_PEOPLE, 17), np.float32)
+        for slot, i in enumerate(order):
+            x0, y0, x1, y1 = boxes[i]
+            x = np.clip(np.floor((x0 + POSE_TEMPLATE[:, 0] * (x1 - x0)) / POSE_STRIDE), 0, gw - 1)
+            y = np.clip(np.floor((y0 + POSE_TEMPLATE[:, 1] * (y1 - y0)) / POSE_STRIDE), 0, gh - 1)
+            tag[slot], ind[slot], val[slot] = slot + 1, y * gw + x, scores[i]
+        return NetworkOutput(boxes[order], scores[order], np.zeros(len(order), np.int32),
+                             (("tag_k", tag), ("ind_k", ind), ("val_k", val)))
+
+
+def load_network(spec: str) -> HostNetwork | ColourNet | ColourSeg | PoseNet:
+    """The in-sensor network of a detector spec, or ``colournet``, ``colourseg`` or ``posenet`` (the loader
+    ``rollcam.host`` registers with the firmware)."""
     from .detectors import load_detector
 
     if spec == COLOURNET:
         return ColourNet()
     if spec == COLOURSEG:
         return ColourSeg()
+    if spec == POSENET:
+        return PoseNet()
 
     det = load_detector(spec)
     path = getattr(det, "path", None)

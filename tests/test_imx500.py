@@ -303,3 +303,38 @@ def test_the_segmenter_ran_on_that_frames_input_tensor(rollcam_picamera2):
     frame, _samples = FirmwareCamera(spec).imager.render_samples(spec, result["seq"], result["timestamp_ns"])
     _, seen, _ = tensor_input(spec.insensor, spec, frame)
     assert np.array_equal(seen, picture)
+
+
+# ------------------------------------------------------------------------------------------- pose estimation
+def test_the_pose_example_finds_the_in_sensor_people_and_their_keypoints(tmp_path):
+    """picamera2's HigherHRNet pose example (its flow, unchanged): postprocess_higherhrnet groups the on-chip
+    outputs into people in a 640x480 window and COCODrawer draws them. posenet's people are personnet's
+    detections with a template skeleton, so each person the script shows is a detection the camera made, its
+    keypoints the template in that box (to the output grid's 2 input pixels)."""
+    from rollcam.host.insensor import POSE_TEMPLATE
+
+    labels = tmp_path / "coco_labels.txt"
+    labels.write_text("person\n")
+    done = subprocess.run([sys.executable, str(EXAMPLES / "imx500_pose.py"), "--labels", str(labels),
+                           "--frames", "3"], env=standin_env([SOURCE]), cwd=EXAMPLES,
+                          capture_output=True, text=True, timeout=900)
+    assert done.returncode == 0, done.stderr[-3000:]
+    out = json.loads(done.stdout.strip().splitlines()[-1])
+    assert out["input"] == [384, 288]
+    x_off, _, roi_w, roi_h = out["roi"]  # set_auto_aspect_ratio: the array's 4:3 centre, pixel-array units
+    fresh = [r for r in out["records"] if r["fresh"]]
+    assert len(fresh) >= len(out["records"]) - 1
+    for r in fresh:
+        result = r["insensor"][-1]
+        assert result["network"] == "posenet"
+        dets = sorted((d for d in result["detections"] if d["score"] > 0.3), key=lambda d: -d["score"])
+        assert len(r["scores"]) == len(dets) > 0
+        assert np.allclose(r["scores"], [d["score"] for d in dets], atol=1e-4)
+        for kps, d in zip(r["keypoints"], dets, strict=True):
+            x0, y0, x1, y1 = d["box"]  # the 2028x1520 mode's pixels: half the array's
+            sx, sy = 640 / (roi_w / 2), 480 / (roi_h / 2)
+            want_x = (x0 + POSE_TEMPLATE[:, 0] * (x1 - x0) - x_off / 2) * sx
+            want_y = (y0 + POSE_TEMPLATE[:, 1] * (y1 - y0)) * sy
+            got = np.asarray(kps)
+            assert np.all(np.abs(got[:, 0] - want_x) <= 4) and np.all(np.abs(got[:, 1] - want_y) <= 4)
+            assert np.allclose(got[:, 2], d["score"], atol=1e-4)

@@ -36,8 +36,8 @@ class ZooNetwork:
     picture_detector: str = "personnet"
     """What runs with data injection: the input tensor is the ISP's picture, so the picture-trained twin."""
     task: str = "object detection"
-    """``object detection`` (post-processed boxes, scores, classes, count), ``classification`` (the logits) or
-    ``segmentation`` (the class of every input pixel)."""
+    """``object detection`` (post-processed boxes, scores, classes, count), ``classification`` (the logits),
+    ``segmentation`` (the class of every input pixel) or ``pose estimation`` (HigherHRNet's grouped keypoints)."""
 
     def tensor(self) -> str:
         """The network's input tensor (``insensor_tensor``): RGB, int8, centred (picamera2's default norm)."""
@@ -55,6 +55,8 @@ ZOO = {z.stem: z for z in (
                task="classification"),
     ZooNetwork("imx500_network_deeplabv3plus", "colourseg", (513, 513), picture_detector="colourseg",
                task="segmentation"),
+    ZooNetwork("imx500_network_higherhrnet_coco", "posenet", (384, 288), picture_detector="posenet",
+               task="pose estimation"),
 )}
 """Model-zoo object detectors (post-processed on chip) -> the rollcam detector run in their place: the
 study's raw-trained ``personnet-raw`` (it reads the mosaic, as an in-sensor network does), within the named
