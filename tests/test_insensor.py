@@ -174,7 +174,9 @@ def test_serial_insensor_and_ledger_queries() -> None:
     assert handle_line(cam, "INSENSOR? 2") == "n=0 next=2"
     reply = handle_line(cam, "LEDGER?")
     assert reply.startswith(f"raw={180 * (320 + 6) + 8} ") and "insensor_uj=" in reply
-    assert handle_line(cam, "STATS?").endswith("insensor_runs=3 insensor_skipped=0 register_resets=0")
+    assert handle_line(cam, "STATS?").endswith("insensor_runs=3 insensor_skipped=0 insensor_injected=0 "
+                                               "insensor_injections_missed=0 loader_failures=0 frontend_timeouts=0 "
+                                               "register_resets=0")
 
 
 def test_http_jsonl_part_headers_and_metadata_only() -> None:
