@@ -226,7 +226,7 @@ def test_the_classifier_ran_on_that_frames_input_tensor(rollcam_picamera2):
     """The logits a request carries are colournet's on the picture of its CnnInputTensor, and that tensor is the
     IMX500 input tensor of the frame the result names (made again from its sequence number and start)."""
     from rollcam.firmware.insensor_stage import tensor_input
-    from rollcam.host.insensor import ColourNet
+    from rollcam.host.detectors.onchip import ColourNet
 
     picamera2 = rollcam_picamera2(SOURCE)
     from picamera2.devices import IMX500
@@ -280,7 +280,7 @@ def test_the_segmentation_example_draws_a_mask_per_class(tmp_path):
 
 def test_the_segmenter_ran_on_that_frames_input_tensor(rollcam_picamera2):
     from rollcam.firmware.insensor_stage import tensor_input
-    from rollcam.host.insensor import ColourSeg
+    from rollcam.host.detectors.onchip import ColourSeg
 
     picamera2 = rollcam_picamera2(SOURCE)
     from picamera2.devices import IMX500
@@ -311,7 +311,7 @@ def test_the_pose_example_finds_the_in_sensor_people_and_their_keypoints(tmp_pat
     outputs into people in a 640x480 window and COCODrawer draws them. posenet's people are personnet's
     detections with a template skeleton, so each person the script shows is a detection the camera made, its
     keypoints the template in that box (to the output grid's 2 input pixels)."""
-    from rollcam.host.insensor import POSE_TEMPLATE
+    from rollcam.host.detectors.onchip import POSE_TEMPLATE
 
     labels = tmp_path / "coco_labels.txt"
     labels.write_text("person\n")

@@ -317,7 +317,7 @@ def test_http_insensor_jsonl_shows_the_slow_networks_latency():
     import json
     import urllib.request
 
-    from rollcam.emu.http_mjpeg import MjpegServer
+    from rollcam.emu.http.mjpeg import MjpegServer
     from rollcam.firmware.spec import CameraSpec
 
     spec = CameraSpec.from_options("imx500", {"size": "506x380", "insensor": "personnet",
