@@ -335,13 +335,31 @@ def _clamped(v, lo, hi):
 
 
 @njit(cache=True, nogil=True)
-def actor_speeds(actors, world, lut, bld, light, cam, rot_tab, pos_tab, times, out):
-    """out[o] = fastest render-space displacement rate (px/s) of any part end point of actor o.
+def actor_speeds(actors, world, lut, bld, light, cam, rot_tab, pos_tab, times, need, out):
+    """out[o] = fastest render-space displacement rate (px/s) of any part end point of actor o, where
+    ``need[o]`` (0 elsewhere: an actor no line of the frame can see needs no speed).
 
     Parts wholly off the image (beyond half its size) at both times cannot move a pixel and are skipped;
     end points are clamped to that margin, so a part clipped at the camera's near plane (whose clipped end
     point races across image space far outside the frame) counts only its motion near the image.
     """
+    _speeds_chunk(0, 1, actors, world, lut, bld, light, cam, rot_tab, pos_tab, times, need, out)
+
+
+@njit(cache=True, parallel=True, nogil=True)
+def actor_speeds_par(actors, world, lut, bld, light, cam, rot_tab, pos_tab, times, need, out):
+    """``actor_speeds`` over the numba threads, an actor a work unit (worth their start-up for many actors
+    and times)."""
+    idx = np.flatnonzero(need)
+    for j in prange(idx.shape[0]):  # unit idx[j] of n_obj: that actor alone
+        _speeds_chunk(idx[j], actors.shape[0], actors, world, lut, bld, light, cam, rot_tab, pos_tab, times, need,
+                      out)
+
+
+@njit(cache=True)
+def _speeds_chunk(ch, n_chunks, actors, world, lut, bld, light, cam, rot_tab, pos_tab, times, need, out):
+    """Work unit ``ch`` of ``n_chunks`` of ``actor_speeds``: the needed actors ch, ch + n_chunks, ...; others'
+    entries are left alone."""
     w, h = cam[C_W], cam[C_H]
     if cam[C_TRANSPOSED] != 0.0:
         w, h = h, w
@@ -349,8 +367,11 @@ def actor_speeds(actors, world, lut, bld, light, cam, rot_tab, pos_tab, times, o
     scratch = parts_scratch()
     pa = np.empty((MAX_PARTS, PART_COLS))
     pb = np.empty((MAX_PARTS, PART_COLS))
+    c = np.empty(8)  # (one buffer: an allocation per part and time cost as much as the part's test)
     g = Q_GEO
-    for o in range(actors.shape[0]):
+    for o in range(ch, actors.shape[0], n_chunks):
+        if not need[o]:
+            continue
         best = 0.0
         if int(actors[o, A_TYPE]) == TYPE_BAR:
             out[o] = abs(actors[o, R_VX])
@@ -377,7 +398,6 @@ def actor_speeds(actors, world, lut, bld, light, cam, rot_tab, pos_tab, times, o
                         off = False
                 if off:
                     continue
-                c = np.empty(8)
                 for i in range(2):
                     c[4 * i] = _clamped(pa[p, g + 2 * i], x_lo, x_hi)
                     c[4 * i + 1] = _clamped(pa[p, g + 2 * i + 1], y_lo, y_hi)
