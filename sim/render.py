@@ -133,6 +133,14 @@ class Renderer:
         a chart bar's rate is its speed. ``actors`` (bool mask or indices) limits the work to those actors;
         the others read 0.
         """
+        return self.actor_part_motion(times_s, by_column=by_column, actors=actors)[0]
+
+    def actor_part_motion(self, times_s: np.ndarray, *, by_column: bool = False, actors: np.ndarray | None = None
+                          ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """``actor_image_speeds`` and, per actor and part (``(actors, MAX_PARTS)``), the part's own fastest rate
+        (px/s; -1 where it is not measured: a shadow, a chart bar, a part that appears or changes kind between two
+        times, whose motion is then the actor's) and ``(actors, MAX_PARTS, 2)`` the lowest and highest render
+        line it reaches at any of the times ((inf, -inf) if it never shows). The exposure plan's per-line speed."""
         need = None
         if actors is not None:
             actors = np.asarray(actors)
