@@ -195,7 +195,7 @@ def _part_speeds(actor_px_s: float, part_rate: np.ndarray, part_y: np.ndarray, s
 def plan_samples(renderer: Renderer, starts_ns: np.ndarray, exposure_ns: int, *, by_column: bool = False,
                  bound_px: float = DEFAULT_BOUND_PX, max_samples: int = MAX_SAMPLES,
                  ego_samples: int = EGO_SAMPLES, ego_path: bool = False,
-                 path_samples: int = EGO_PATH_SAMPLES, part_speeds: bool = False) -> SamplePlan:
+                 path_samples: int = EGO_PATH_SAMPLES, part_speeds: bool = True) -> SamplePlan:
     """The adaptive plan: per line, ceil(speed * exposure / bound) samples (1 where nothing moves), at most
     ``max_samples``, and at most ``ego_samples`` when the camera moves (where that cuts a line's count, the
     bound no longer holds and the plan is ``capped``).
@@ -204,16 +204,17 @@ def plan_samples(renderer: Renderer, starts_ns: np.ndarray, exposure_ns: int, *,
     the bound's count of samples, at most ``path_samples`` (``Renderer.path_blur``), and only the actors are
     rendered at the ``n`` samples; ``capped`` then says either count was cut.
 
-    ``part_speeds`` (a static camera; what the sensor path uses): a line's speed is that of the fastest actor
-    part that can reach it (``_part_speeds``), not of the fastest part of every actor touching it: about 2.5x
-    fewer samples on a street of walkers, at the error stated in docs/sensor-model.md. The default keeps the
-    per-actor rule, whose counts vary less from line to line, so small frames share more of the grid's instants.
+    ``part_speeds`` (a static camera): a line's speed is that of the fastest actor part that can reach it
+    (``_part_speeds``), not of the fastest part of every actor touching it (False: that per-actor rule), and
+    where that changes a line's speed its count is rounded up to a power of two: about 2x fewer samples on a
+    street of walkers, at the error stated in docs/sensor-model.md.
     """
     starts = np.asarray(starts_ns, np.int64)
     n_lines = starts.shape[0]
     if not bound_px > 0 or not math.isfinite(bound_px):
         raise ConfigError(f"blur bound must be a finite number of pixels > 0, got {bound_px!r}")
     speed = np.zeros(n_lines)
+    refined = np.zeros(n_lines, np.bool_)  # lines whose part speed differs from the per-actor rule's
     exp_s = exposure_ns * 1e-9
     ego_px_s = 0.0
     if exposure_ns > 0:
@@ -229,6 +230,7 @@ def plan_samples(renderer: Renderer, starts_ns: np.ndarray, exposure_ns: int, *,
             act_speed, part_rate, part_y = renderer.actor_part_motion(
                 np.linspace(t0 * 1e-9, t1 * 1e-9, n_t), by_column=by_column, actors=seen)
             step_s = (t1 - t0) * 1e-9 / (n_t - 1)
+            actor_rule = np.zeros(n_lines)
             for o in np.flatnonzero(seen):
                 # A moving camera moves every line anyway (and is capped): the actor's speed will do.
                 if renderer.camera_moving or not part_speeds:
@@ -236,9 +238,14 @@ def plan_samples(renderer: Renderer, starts_ns: np.ndarray, exposure_ns: int, *,
                     continue
                 own = _part_speeds(act_speed[o], part_rate[o], part_y[o], step_s, n_lines)
                 speed[touch[o]] = np.maximum(speed[touch[o]], own[touch[o]])
+                actor_rule[touch[o]] = np.maximum(actor_rule[touch[o]], act_speed[o])
+            refined = speed != actor_rule
     want = np.ceil(speed * exp_s / bound_px)
     cap = min(max_samples, max(int(ego_samples), 1)) if renderer.camera_moving else max_samples
     n = np.clip(np.nan_to_num(want, nan=cap, posinf=cap), 1, cap).astype(np.int64)
+    # A part speed's count goes up to a power of two: few distinct counts, so neighbouring lines keep sharing the
+    # grid's instants (exact counts left a small frame's instants half as shared as the per-actor rule's).
+    n = np.where(refined & (n > 1), np.minimum(2 ** np.ceil(np.log2(np.maximum(n, 1))).astype(np.int64), cap), n)
     # Snapping moves a sample by at most half the grid: at the fastest speed, GRID_FRACTION of the bound.
     fastest = float(speed.max()) if speed.size else 0.0
     grid = int(GRID_FRACTION * 2 * bound_px / fastest * 1e9) if fastest > 0 and math.isfinite(fastest) else 0

@@ -336,7 +336,7 @@ class SyntheticCamera:
             # ego_path: a moving camera's background integrated along each pixel's path (one render, cheap
             # reads; its error per preset is in docs/sensor-model.md), else whole-line samples.
             plan = plan_samples(self.renderer, starts, s.exposure_ns, by_column=by_col, bound_px=self.blur_px,
-                                ego_path=self.ego_path, part_speeds=True)
+                                ego_path=self.ego_path)
             radiance = integrate(self.renderer, plan, by_column=by_col, out=self._radiance(by_col)).radiance
             res = self.renderer.render_lines(mid_times, by_column=by_col, truth_only=True)
             extra.update(blur_bound_px=self.blur_px, blur_samples_max=int(plan.n.max()),

@@ -81,13 +81,15 @@ def test_part_speeds_cut_the_samples_and_keep_the_error_near_the_actor_rule() ->
     cam = SyntheticCamera(load_sensor("imx219"), scene, size=(480, 270))
     r, exposure = cam.renderer, cam.settings.exposure_ns
     starts = cam.line_times_ns(2) - exposure // 2
-    plan = plan_samples(r, starts, exposure, part_speeds=True)
+    plan = plan_samples(r, starts, exposure)
     speed = _actor_rule_speeds(r, starts, exposure)
-    np.testing.assert_array_equal(plan_samples(r, starts, exposure).speed_px_s, speed)  # the default: per actor
+    np.testing.assert_array_equal(plan_samples(r, starts, exposure, part_speeds=False).speed_px_s, speed)
     actor_rule = SamplePlan(plan.starts_ns, exposure, np.clip(np.ceil(speed * exposure * 1e-9 / 0.5), 1, 512
                                                                ).astype(np.int64), speed, False, plan.grid_ns)
-    assert (plan.n > actor_rule.n).mean() < 0.1  # a turning texture may ask more than its ends on a few lines
-    assert plan.evaluations <= 0.75 * actor_rule.evaluations, (plan.evaluations, actor_rule.evaluations)
+    assert (plan.n > actor_rule.n).mean() < 0.1  # a turning texture or the power of two may ask more on a few lines
+    assert plan.evaluations <= 0.9 * actor_rule.evaluations, (plan.evaluations, actor_rule.evaluations)
+    more = plan.n[plan.n > actor_rule.n]
+    assert ((more & (more - 1)) == 0).all()  # a part speed's count is a power of two
     ref = _srgb(r, integrate(r, dense_plan(actor_rule, 0.05)).linear)
     err = np.abs(_srgb(r, integrate(r, plan).linear) - ref)
     err_actor = np.abs(_srgb(r, integrate(r, actor_rule).linear) - ref)
