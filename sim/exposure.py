@@ -232,19 +232,20 @@ def plan_samples(renderer: Renderer, starts_ns: np.ndarray, exposure_ns: int, *,
             step_s = (t1 - t0) * 1e-9 / (n_t - 1)
             actor_rule = np.zeros(n_lines)
             for o in np.flatnonzero(seen):
+                actor_rule[touch[o]] = np.maximum(actor_rule[touch[o]], act_speed[o])
                 # A moving camera moves every line anyway (and is capped): the actor's speed will do.
                 if renderer.camera_moving or not part_speeds:
                     speed[touch[o]] = np.maximum(speed[touch[o]], act_speed[o])
                     continue
                 own = _part_speeds(act_speed[o], part_rate[o], part_y[o], step_s, n_lines)
                 speed[touch[o]] = np.maximum(speed[touch[o]], own[touch[o]])
-                actor_rule[touch[o]] = np.maximum(actor_rule[touch[o]], act_speed[o])
-            refined = speed != actor_rule
+            if part_speeds and not renderer.camera_moving:
+                refined = speed != actor_rule
     want = np.ceil(speed * exp_s / bound_px)
     cap = min(max_samples, max(int(ego_samples), 1)) if renderer.camera_moving else max_samples
     n = np.clip(np.nan_to_num(want, nan=cap, posinf=cap), 1, cap).astype(np.int64)
     # A part speed's count goes up to a power of two: few distinct counts, so neighbouring lines keep sharing the
-    # grid's instants (exact counts left a small frame's instants half as shared as the per-actor rule's).
+    # grid's instants (with exact counts a small frame's lines shared fewer of them than the per-actor rule's).
     n = np.where(refined & (n > 1), np.minimum(2 ** np.ceil(np.log2(np.maximum(n, 1))).astype(np.int64), cap), n)
     # Snapping moves a sample by at most half the grid: at the fastest speed, GRID_FRACTION of the bound.
     fastest = float(speed.max()) if speed.size else 0.0

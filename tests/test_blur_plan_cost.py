@@ -5,10 +5,18 @@ from __future__ import annotations
 import numpy as np
 import pytest
 from rollcam.common.errors import ConfigError
-from rollcam.sim.exposure import BOUND_LINES, SamplePlan, dense_plan, integrate, plan_samples, touching_lines
+from rollcam.sim.exposure import (
+    BOUND_LINES,
+    EGO_SAMPLES,
+    SamplePlan,
+    dense_plan,
+    integrate,
+    plan_samples,
+    touching_lines,
+)
 from rollcam.sim.hwconfig import load_sensor
 from rollcam.sim.render import Renderer, srgb_lut
-from rollcam.sim.scenegen import make_street_scene
+from rollcam.sim.scenegen import ego_preset, make_street_scene
 from rollcam.sim.synthetic import SyntheticCamera
 
 
@@ -95,3 +103,21 @@ def test_part_speeds_cut_the_samples_and_keep_the_error_near_the_actor_rule() ->
     err_actor = np.abs(_srgb(r, integrate(r, actor_rule).linear) - ref)
     assert err.mean() <= max(3.0 * err_actor.mean(), 0.005), (err.mean(), err_actor.mean())
     assert np.percentile(err, 99.9) <= 1.0
+
+
+@pytest.mark.parametrize("ego", ["walk", "drone"])
+def test_a_moving_camera_keeps_the_per_actor_rule(ego: str) -> None:
+    # Every line of a moving camera moves (and is capped): part speeds would change nothing worth their cost.
+    scene = make_street_scene(1, speed="fast", width=320, height=180, n_pedestrians=12, ego=ego_preset(ego))
+    r = Renderer(scene)
+    starts = 1_000_000_000 + np.arange(180, dtype=np.int64) * 75_000
+    odd = False  # some count that a power of two would change
+    for bound in (0.5, 1.0, 2.0, 5.0):
+        parts = plan_samples(r, starts, 10_000_000, bound_px=bound)
+        actors = plan_samples(r, starts, 10_000_000, bound_px=bound, part_speeds=False)
+        np.testing.assert_array_equal(parts.n, actors.n)
+        np.testing.assert_array_equal(parts.speed_px_s, actors.speed_px_s)
+        rule = np.clip(np.ceil(parts.speed_px_s * 10_000_000e-9 / bound), 1, EGO_SAMPLES)
+        np.testing.assert_array_equal(parts.n, rule)  # the bound's own counts, no power of two
+        odd |= bool(np.isin(rule, (3, 5, 6, 7)).any())
+    assert odd
