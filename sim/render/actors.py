@@ -335,13 +335,37 @@ def _clamped(v, lo, hi):
 
 
 @njit(cache=True, nogil=True)
-def actor_speeds(actors, world, lut, bld, light, cam, rot_tab, pos_tab, times, out):
-    """out[o] = fastest render-space displacement rate (px/s) of any part end point of actor o.
+def actor_speeds(actors, world, lut, bld, light, cam, rot_tab, pos_tab, times, need, out, part_rate, part_y):
+    """out[o] = fastest render-space displacement rate (px/s) of any part end point of actor o, where
+    ``need[o]`` (0 elsewhere: an actor no line of the frame can see needs no speed).
+
+    Per part p the same over the times: ``part_rate[o, p]`` its own fastest rate (-1 where the part changes kind
+    between two times, so its motion is not measured: use the actor's), ``part_y[o, p]`` the lowest
+    ``Q_YMIN`` and highest ``Q_YMAX`` it has at any of them (the render lines it reaches; (inf, -inf) when it
+    never shows). Only needed actors' rows are written.
 
     Parts wholly off the image (beyond half its size) at both times cannot move a pixel and are skipped;
     end points are clamped to that margin, so a part clipped at the camera's near plane (whose clipped end
     point races across image space far outside the frame) counts only its motion near the image.
     """
+    _speeds_chunk(0, 1, actors, world, lut, bld, light, cam, rot_tab, pos_tab, times, need, out, part_rate, part_y)
+
+
+@njit(cache=True, parallel=True, nogil=True)
+def actor_speeds_par(actors, world, lut, bld, light, cam, rot_tab, pos_tab, times, need, out, part_rate, part_y):
+    """``actor_speeds`` over the numba threads, an actor a work unit (worth their start-up for many actors
+    and times)."""
+    idx = np.flatnonzero(need)
+    for j in prange(idx.shape[0]):  # unit idx[j] of n_obj: that actor alone
+        _speeds_chunk(idx[j], actors.shape[0], actors, world, lut, bld, light, cam, rot_tab, pos_tab, times, need,
+                      out, part_rate, part_y)
+
+
+@njit(cache=True)
+def _speeds_chunk(ch, n_chunks, actors, world, lut, bld, light, cam, rot_tab, pos_tab, times, need, out, part_rate,
+                  part_y):
+    """Work unit ``ch`` of ``n_chunks`` of ``actor_speeds``: the needed actors ch, ch + n_chunks, ...; others'
+    entries are left alone."""
     w, h = cam[C_W], cam[C_H]
     if cam[C_TRANSPOSED] != 0.0:
         w, h = h, w
@@ -349,25 +373,43 @@ def actor_speeds(actors, world, lut, bld, light, cam, rot_tab, pos_tab, times, o
     scratch = parts_scratch()
     pa = np.empty((MAX_PARTS, PART_COLS))
     pb = np.empty((MAX_PARTS, PART_COLS))
+    c = np.empty(8)  # (one buffer: an allocation per part and time cost as much as the part's test)
     g = Q_GEO
-    for o in range(actors.shape[0]):
+    for o in range(ch, actors.shape[0], n_chunks):
+        if not need[o]:
+            continue
+        for p in range(MAX_PARTS):
+            part_rate[o, p] = 0.0
+            part_y[o, p, 0], part_y[o, p, 1] = np.inf, -np.inf
         best = 0.0
         if int(actors[o, A_TYPE]) == TYPE_BAR:
             out[o] = abs(actors[o, R_VX])
+            for p in range(MAX_PARTS):
+                part_rate[o, p] = -1.0
+                part_y[o, p, 0], part_y[o, p, 1] = -np.inf, np.inf
             continue
         if int(actors[o, A_TYPE]) != TYPE_PROP and not actors[o, P_H] > 0.0:
             # a zero-size walker shows no pixel (and has no stride to walk by)
             out[o] = 0.0
             continue
         actor_parts(actors[o], world, lut, bld, light, cam, rot_tab[0], pos_tab[0], times[0], pa, scratch)
+        _part_lines(pa, part_y[o])
         for k in range(1, times.shape[0]):
             actor_parts(actors[o], world, lut, bld, light, cam, rot_tab[k], pos_tab[k], times[k], pb, scratch)
+            _part_lines(pb, part_y[o])
             dt = times[k] - times[k - 1]
             for p in range(MAX_PARTS):
+                if pa[p, Q_KIND] != pb[p, Q_KIND]:
+                    part_rate[o, p] = -1.0
                 if pa[p, Q_KIND] == PART_QUAD and pb[p, Q_KIND] == PART_QUAD:
-                    best = max(best, _polygon_shift(pa, pb, p, x_lo, x_hi, y_lo, y_hi) / dt)
+                    v = _polygon_shift(pa, pb, p, x_lo, x_hi, y_lo, y_hi) / dt
+                    best = max(best, v)
+                    if part_rate[o, p] >= 0.0:
+                        part_rate[o, p] = max(part_rate[o, p], v)
                     continue
                 if pa[p, Q_KIND] != PART_CAPSULE or pb[p, Q_KIND] != PART_CAPSULE:
+                    if pa[p, Q_KIND] != PART_NONE or pb[p, Q_KIND] != PART_NONE:
+                        part_rate[o, p] = -1.0  # a shadow, or a change of kind: not measured here
                     continue
                 off = True
                 for q in (pa, pb):
@@ -377,7 +419,6 @@ def actor_speeds(actors, world, lut, bld, light, cam, rot_tab, pos_tab, times, o
                         off = False
                 if off:
                     continue
-                c = np.empty(8)
                 for i in range(2):
                     c[4 * i] = _clamped(pa[p, g + 2 * i], x_lo, x_hi)
                     c[4 * i + 1] = _clamped(pa[p, g + 2 * i + 1], y_lo, y_hi)
@@ -387,8 +428,50 @@ def actor_speeds(actors, world, lut, bld, light, cam, rot_tab, pos_tab, times, o
                 db = math.hypot(c[6] - c[4], c[7] - c[5])
                 d = max(da, db) + abs(pb[p, g + 4] - pa[p, g + 4])
                 best = max(best, d / dt)
+                if part_rate[o, p] >= 0.0:
+                    part_rate[o, p] = max(part_rate[o, p], max(d, _texture_shift(pa, pb, p, c)) / dt)
             pa, pb = pb, pa
         out[o] = best
+
+
+@njit(cache=True)
+def _texture_shift(pa, pb, p, c):
+    """Largest move of a point of capsule ``p``'s texture from ``pa`` to ``pb`` (``c``: its end points clamped as
+    ``actor_speeds`` clamps them), which its end points' move does not bound when the axis turns.
+
+    The texture is laid out from the first end a along the unit axis u, in pixels scaled by the radius
+    (``rollcam.sim._texture.texture_at``). The point s along the axis and t across it moves by
+    da + s du + t du', linear in s: over the part (-r <= s <= length + r, |t| <= r) at most the larger of its
+    moves at the two ends of that range plus r |du|; a change of radius rescales the texture about a by
+    (length + r) |dr| / r; and a head's face turns with its record. (A short axis, a head seen end on, turns fast
+    for a small move of its ends.)"""
+    g = Q_GEO
+    axa, aya, axb, ayb = c[4] - c[0], c[5] - c[1], c[6] - c[2], c[7] - c[3]
+    la, lb = math.hypot(axa, aya), math.hypot(axb, ayb)
+    if la > 0.0 and lb > 0.0:
+        dux, duy = axb / lb - axa / la, ayb / lb - aya / la
+    elif la > 0.0 or lb > 0.0:
+        dux, duy = 2.0, 0.0  # from the default direction to any: a bound on the turn's size
+    else:
+        dux, duy = 0.0, 0.0
+    ra, rb = pa[p, g + 4], pb[p, g + 4]
+    r = max(ra, rb)
+    dax, day = c[2] - c[0], c[3] - c[1]
+    far = max(la, lb) + r
+    shift = max(math.hypot(dax - r * dux, day - r * duy), math.hypot(dax + far * dux, day + far * duy))
+    shift += r * math.hypot(dux, duy) + far * abs(rb - ra) / max(min(ra, rb), 0.5)
+    if pa[p, Q_FACE] >= -1.0 and pb[p, Q_FACE] >= -1.0:  # a head's face (-2: none)
+        shift += r * math.hypot(pb[p, Q_FACE] - pa[p, Q_FACE], pb[p, Q_FACE + 1] - pa[p, Q_FACE + 1])
+    return shift
+
+
+@njit(cache=True)
+def _part_lines(pt, ys):
+    """Widen each shown part's line range ``ys[p]`` (lo, hi) to hold its ``Q_YMIN``..``Q_YMAX`` in ``pt``."""
+    for p in range(MAX_PARTS):
+        if pt[p, Q_KIND] != PART_NONE:
+            ys[p, 0] = min(ys[p, 0], pt[p, Q_YMIN])
+            ys[p, 1] = max(ys[p, 1], pt[p, Q_YMAX])
 
 
 @njit(cache=True)

@@ -130,12 +130,13 @@ def _covered_pixels(span_l, span_r, m0, m, w, pa, pb):
 
 @njit(cache=True)
 def _collect_line(line, w, actors, obj_k, slots, parts_tab, local, include, gt_l, gt_r, gt_tot,
-                  depth, idx_o, shade, span_l, span_r, pa, pb, lohi):
+                  depth, idx_o, shade, span_l, span_r, pa, pb, lohi, want_gt):
     """Spans of every included actor on ``line`` (``obj_k[o]``: its time slot, -1 when not touching).
 
     Each span keeps its part's shading (``shade[m]``: Q_LX, Q_LZ, ambient RGB, direct RGB) so painting reads no
     part table: a view of one per span was reference-counted, which cost more than copying eight numbers.
-    Fills the per-actor extent and area ground truth. Returns the number of spans.
+    Fills the per-actor extent and area ground truth when ``want_gt`` (exposure integration needs none). Returns
+    the number of spans.
     """
     yc = line + 0.5
     m = 0
@@ -174,9 +175,9 @@ def _collect_line(line, w, actors, obj_k, slots, parts_tab, local, include, gt_l
             span_l[m], span_r[m] = lohi[0], lohi[1]
             m += 1
             olo, ohi = min(olo, lohi[0]), max(ohi, lohi[1])
-        if m > m0:
+        if m > m0 and want_gt:
             gt_tot[o, line] += _covered_pixels(span_l, span_r, m0, m, w, pa, pb)
-        if ohi > olo:
+        if ohi > olo and want_gt:
             gt_l[o, line] = max(olo, 0.0)
             gt_r[o, line] = min(ohi, float(w))
         for p in range(MAX_PARTS if shadows else 0):
@@ -227,9 +228,10 @@ def _span_runs(span_l, span_r, m, w, ia, ib):
 
 @njit(cache=True)
 def _paint_spans(lin, line, m, gt_vis, depth, idx_o, shade, span_l, span_r, owner, ia, ib, n_runs, order, flip,
-                 gt_only):
-    """Paint the collected spans over ``lin`` far to near (anti-aliased along the line); count visibility.
-    ``gt_only`` counts visibility alone (which actor is nearest at each pixel centre needs no shading)."""
+                 gt_only, want_gt):
+    """Paint the collected spans over ``lin`` far to near (anti-aliased along the line); count visibility when
+    ``want_gt``. ``gt_only`` counts visibility alone (which actor is nearest at each pixel centre needs no
+    shading)."""
     w = lin.shape[0]
     # Insertion sort, far first; ties keep actor/part order so every path paints identically.
     for i in range(m):
@@ -271,9 +273,9 @@ def _paint_spans(lin, line, m, gt_vis, depth, idx_o, shade, span_l, span_r, owne
             for c in range(3):
                 v = (shade[e, 2 + c] + shade[e, 5 + c] * sh) * (f0 if c == 0 else f1 if c == 1 else f2)
                 lin[i, c] = lin[i, c] * (1.0 - cov) + v * cov
-        for i in range(max(int(math.ceil(xl - 0.5)), 0), min(int(math.ceil(xr - 0.5)), w)):
+        for i in range(max(int(math.ceil(xl - 0.5)), 0), min(int(math.ceil(xr - 0.5)), w) if want_gt else 0):
             owner[i] = o
-    for j in range(n_runs):
+    for j in range(n_runs if want_gt else 0):
         for i in range(ia[j], ib[j]):
             if owner[i] >= 0:
                 gt_vis[owner[i], line] += 1
@@ -397,7 +399,8 @@ def render_lines_kernel(world, lut_b, bld, light, cam, rot_tab, pos_tab, actors,
     An empty ``out_u8`` skips the sRGB encoding (linear-only renders). A non-empty ``seed_lin`` (the cached
     linear composite) is copied into each painted line of ``out_lin`` first, so ``out_lin`` may be a scratch
     buffer whose other lines are never touched. A non-empty ``acc_hits`` (int64 per line) turns ``out_lin`` into
-    an accumulator of painted lines (see ``_add_line``), and each painted line's count goes up. In both modes
+    an accumulator of painted lines (see ``_add_line``), and each painted line's count goes up; it writes no ground
+    truth (the per-entry extents, areas and visibility an integration would throw away). In both modes
     a line on which no actor has a span equals the composite and is left alone; ``line_hit`` (bool per line,
     when non-empty) records which lines were written.
     """
@@ -430,6 +433,7 @@ def _render_chunk(ch, n_chunks, world, lut_b, bld, light, cam, rot_tab, pos_tab,
     seed = seed_lin.shape[0] > 0 and want_lin and not full_lines
     accumulate = acc_hits.shape[0] > 0
     spans_moving = moving_cam and not full_lines and not gt_only  # actors over the background at their pose
+    want_gt = not accumulate  # an accumulator's truth is scratch: nobody reads it
     cap = max(n_obj * MAX_PARTS, 1)
     n = lines.shape[0]
     depth = np.empty(cap)
@@ -456,13 +460,14 @@ def _render_chunk(ch, n_chunks, world, lut_b, bld, light, cam, rot_tab, pos_tab,
             e = ents[q]
             ok = obj_line_k[:, e]
             for o in range(n_obj):
-                gt_l[o, line], gt_r[o, line], gt_tot[o, line], gt_vis[o, line] = np.nan, np.nan, 0, 0
+                if want_gt:
+                    gt_l[o, line], gt_r[o, line], gt_tot[o, line], gt_vis[o, line] = np.nan, np.nan, 0, 0
                 if include[o] and ok[o] >= 0 and slots[o, ok[o]] == SLOT_LOCAL:
                     k = ok[o]
                     actor_parts(actors[o], world, lut_b, bld, light, cam, rot_tab[k], pos_tab[k], times[k],
                                 local[o], scratch)
             m = _collect_line(line, w, actors, ok, slots, parts_tab, local, include, gt_l, gt_r, gt_tot,
-                              depth, idx_o, shade, span_l, span_r, pa, pb, lohi)
+                              depth, idx_o, shade, span_l, span_r, pa, pb, lohi, want_gt)
             if full_lines and not gt_only:
                 if moving_cam:
                     k = line_k[e]
@@ -483,7 +488,7 @@ def _render_chunk(ch, n_chunks, world, lut_b, bld, light, cam, rot_tab, pos_tab,
                         lin[ia[r]:ib[r]] = bg_lin[line, ia[r]:ib[r]]
             if m > 0:
                 _paint_spans(lin, line, m, gt_vis, depth, idx_o, shade, span_l, span_r, owner, ia, ib, n_runs, order,
-                             flip, gt_only)
+                             flip, gt_only, want_gt)
             if (seed or spans_moving) and m == 0:
                 continue  # no actor pixel on this line: it is the composite (or bare background), nothing to write
             if line_hit.shape[0] > 0:

@@ -124,14 +124,22 @@ class Painter:
                   t.actors, t.world, cam, rot, pos, t_first, k_first, span_s, need, out)
         return out
 
-    def speeds(self, by_column: bool, times_s: np.ndarray) -> np.ndarray:
-        """Fastest render-space displacement rate (px/s) of each actor's parts over ``times_s``."""
+    def speeds(self, by_column: bool, times_s: np.ndarray, need: np.ndarray | None = None
+               ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Fastest render-space displacement rate (px/s) of each actor's parts over ``times_s``, of the actors
+        ``need`` (bool per actor; all when None) selects (0 for the others), and per part its own rate and line
+        range (``A.actor_speeds``'s ``part_rate``, ``part_y``)."""
         rot, pos = self.poses(by_column, times_s)
         t = self.tables
         out = np.zeros(self.n_actors)
-        A.actor_speeds(t.actors, t.world, t.building_lut, t.buildings, t.light, self.cams[by_column], rot, pos,
-                       times_s, out)
-        return out
+        part_rate = np.zeros((self.n_actors, A.MAX_PARTS))
+        part_y = np.empty((self.n_actors, A.MAX_PARTS, 2))
+        part_y[..., 0], part_y[..., 1] = np.inf, -np.inf
+        need = np.ones(self.n_actors, np.bool_) if need is None else need
+        self._run(A.actor_speeds, A.actor_speeds_par, int(need.sum()) * times_s.shape[0], PARALLEL_MIN_ITEMS,
+                  t.actors, t.world, t.building_lut, t.buildings, t.light, self.cams[by_column], rot, pos, times_s,
+                  need, out, part_rate, part_y)
+        return out, part_rate, part_y
 
     def parts(self, by_column: bool, times_s: np.ndarray) -> np.ndarray:
         """Render-space parts ``(actors, times, A.MAX_PARTS, A.PART_COLS)`` of every actor at every time."""

@@ -137,13 +137,31 @@ class Renderer:
         return self._painter.bounds(self._painter.cams[by_column], rot, pos, times_s,
                                     np.arange(times_s.shape[0]), span_s, need)
 
-    def actor_image_speeds(self, times_s: np.ndarray, *, by_column: bool = False) -> np.ndarray:
+    def actor_image_speeds(self, times_s: np.ndarray, *, by_column: bool = False,
+                           actors: np.ndarray | None = None) -> np.ndarray:
         """Per actor, the fastest render-space displacement rate (px/s) of its parts between consecutive times.
 
         Parts wholly off the image by more than half its size are ignored (see ``actors.actor_speeds``);
-        a chart bar's rate is its speed.
+        a chart bar's rate is its speed. ``actors`` (bool mask or indices) limits the work to those actors;
+        the others read 0.
         """
-        return self._painter.speeds(by_column, np.asarray(times_s, np.float64))
+        return self.actor_part_motion(times_s, by_column=by_column, actors=actors)[0]
+
+    def actor_part_motion(self, times_s: np.ndarray, *, by_column: bool = False, actors: np.ndarray | None = None
+                          ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """``actor_image_speeds`` and, per actor and part (``(actors, MAX_PARTS)``), the part's own fastest rate
+        (px/s; -1 where it is not measured: a shadow, a chart bar, a part that appears or changes kind between two
+        times, whose motion is then the actor's) and ``(actors, MAX_PARTS, 2)`` the lowest and highest render
+        line it reaches at any of the times ((inf, -inf) if it never shows). The exposure plan's per-line speed."""
+        need = None
+        if actors is not None:
+            actors = np.asarray(actors)
+            if actors.dtype == np.bool_ and actors.shape != (self.n_actors,):
+                raise ConfigError(f"actor mask must have {self.n_actors} entries, got shape {actors.shape}")
+            if actors.dtype != np.bool_ and actors.size and (actors.min() < 0 or actors.max() >= self.n_actors):
+                raise ConfigError(f"actor indices must be in 0..{self.n_actors - 1}, got {actors!r}")
+            need = actors if actors.dtype == np.bool_ else np.isin(np.arange(self.n_actors), actors)
+        return self._painter.speeds(by_column, np.asarray(times_s, np.float64), need)
 
     def actor_parts(self, times_s: np.ndarray, *, by_column: bool = False) -> np.ndarray:
         """The render-space primitives the kernels draw: ``(actors, times, MAX_PARTS, PART_COLS)`` float64.
