@@ -32,11 +32,12 @@ import math
 import threading
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Any, Protocol
+from typing import TYPE_CHECKING, Any, Protocol
 
 from rollcam.common.errors import ConfigError
 
-from .input_tensor import InputTensorFormat
+if TYPE_CHECKING:  # numpy's import stays out of `rollcam --help` (rollcam.host imports this module)
+    from .input_tensor import InputTensorFormat
 
 OUTPUTS = ("frame", "meta")
 """``frame``: image and results; ``meta``: results only (metadata-only mode)."""
