@@ -19,6 +19,13 @@ from rollcam.sim.timing import Readout
 from . import raw
 from .queue import V4L2Error
 
+CID_TO_CONTROL = {raw.CID.EXPOSURE: "exposure", raw.CID.ANALOGUE_GAIN: "analogue_gain",
+                  raw.CID.DIGITAL_GAIN: "digital_gain", raw.CID.VBLANK: "vblank", raw.CID.HBLANK: "hblank",
+                  raw.CID.PIXEL_RATE: "pixel_rate", raw.CID.TEST_PATTERN: "test_pattern", raw.CID.HFLIP: "hflip",
+                  raw.CID.VFLIP: "vflip"}
+"""The V4L2 control IDs of the sensor controls (``rollcam.firmware.controls`` names), as Linux sensor drivers
+register them."""
+
 _T = raw.CtrlType
 _F = raw.CtrlFlag
 _NEXT = int(_F.NEXT_CTRL | _F.NEXT_COMPOUND)
@@ -52,8 +59,6 @@ class Ctrl:
 
 
 def _control_names() -> dict[int, str]:
-    from .driver import CID_TO_CONTROL  # the driver's CID table; imported late (driver imports this module)
-
     return {int(cid): name for cid, name in CID_TO_CONTROL.items()}
 
 

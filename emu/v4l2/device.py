@@ -25,7 +25,8 @@ from rollcam.sim.codecs import Levels, codec
 
 from . import functions as fn
 from . import raw
-from .driver import CID_TO_CONTROL, EmuDriver
+from .ctrls import CID_TO_CONTROL
+from .driver import EmuDriver
 
 
 @dataclass(frozen=True)

@@ -34,12 +34,9 @@ from rollcam.sim.formats import YUV_PACKINGS
 from rollcam.sim.frame import Frame
 
 from . import ctrls, raw
+from .ctrls import CID_TO_CONTROL
 from .queue import BufferQueue, Slot, V4L2Error
 
-CID_TO_CONTROL = {raw.CID.EXPOSURE: "exposure", raw.CID.ANALOGUE_GAIN: "analogue_gain",
-                  raw.CID.DIGITAL_GAIN: "digital_gain", raw.CID.VBLANK: "vblank", raw.CID.HBLANK: "hblank",
-                  raw.CID.PIXEL_RATE: "pixel_rate", raw.CID.TEST_PATTERN: "test_pattern", raw.CID.HFLIP: "hflip",
-                  raw.CID.VFLIP: "vflip"}
 CTRL_NAMES = {"exposure": "Exposure", "analogue_gain": "Analogue Gain", "digital_gain": "Digital Gain",
               "vblank": "Vertical Blanking", "hblank": "Horizontal Blanking", "pixel_rate": "Pixel Rate",
               "test_pattern": "Test Pattern", "hflip": "Horizontal Flip", "vflip": "Vertical Flip"}

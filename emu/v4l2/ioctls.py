@@ -12,12 +12,12 @@ from __future__ import annotations
 import ctypes as C
 import errno
 from collections.abc import Callable
-from dataclasses import dataclass, field
 from typing import Any
 
 from . import abi, ctrls, raw
 from .events import EVENT_CTRL
-from .node import PRIO_BACKGROUND, PRIO_INTERACTIVE, PRIO_RECORD, READ_BUFFERS, DeviceNode, OpenFile
+from .ioctls_buffers import BUFFER_HANDLERS
+from .node import PRIO_BACKGROUND, PRIO_INTERACTIVE, PRIO_RECORD, READ_BUFFERS, Answer, DeviceNode, OpenFile
 from .queue import V4L2Error
 
 CAPTURE = raw.BufType.VIDEO_CAPTURE
@@ -26,16 +26,6 @@ _PRIO_CHECKED = {"S_PRIORITY", "S_FMT", "S_CTRL", "S_EXT_CTRLS", "REQBUFS", "STR
                  "S_INPUT"}
 _QUEUE_CHECKED = {"REQBUFS", "QBUF", "DQBUF", "STREAMON", "STREAMOFF", "EXPBUF"}
 _CONTROL_CHANGERS = {"S_CTRL", "S_EXT_CTRLS", "S_FMT", "S_PARM", "STREAMON", "STREAMOFF", "S_INPUT"}
-
-
-@dataclass
-class Answer:
-    """What goes back to the program: the return value, the argument's bytes (None: nothing copied back),
-    and file descriptors (EXPBUF)."""
-
-    result: int = 0
-    data: bytes | None = None
-    fds: list[int] = field(default_factory=list)
 
 
 def handle(node: DeviceNode, f: OpenFile, request: int, data: bytes) -> Answer:
@@ -321,8 +311,6 @@ def _dqevent(node: DeviceNode, f: OpenFile, a: abi.Event) -> None:
     if c.type != raw.CtrlType.INTEGER64:
         e.minimum, e.maximum, e.step, e.default_value = c.minimum, c.maximum, c.step, c.default
 
-
-from .ioctls_buffers import BUFFER_HANDLERS  # noqa: E402  (the buffer requests, in their own module)
 
 HANDLERS: dict[str, Callable[..., Any]] = {
     "QUERYCAP": _querycap, "ENUM_FMT": _enum_fmt, "G_FMT": _g_fmt, "S_FMT": _s_fmt, "TRY_FMT": _try_fmt,

@@ -9,7 +9,7 @@ import os
 from typing import Any
 
 from . import abi, raw
-from .node import DeviceNode, OpenFile
+from .node import Answer, DeviceNode, OpenFile
 from .queue import V4L2Error
 
 BUF_CAP_SUPPORTS_MMAP = 1
@@ -75,8 +75,6 @@ def _dqbuf(node: DeviceNode, _f: OpenFile, a: abi.Buffer) -> None:
 
 
 def _expbuf(node: DeviceNode, _f: OpenFile, a: abi.ExportBuffer) -> Any:
-    from .ioctls import Answer
-
     _check(node, a.type)
     if a.plane != 0 or a.flags & ~(os.O_CLOEXEC | os.O_ACCMODE):
         raise V4L2Error(errno.EINVAL, f"plane {a.plane} / flags {a.flags:#x} are not valid")

@@ -50,6 +50,16 @@ class Level:
             os.close(fd)
 
 
+@dataclass
+class Answer:
+    """What goes back to the program from one ioctl: the return value, the argument's bytes (None: nothing
+    copied back), and file descriptors (EXPBUF)."""
+
+    result: int = 0
+    data: bytes | None = None
+    fds: list[int] = field(default_factory=list)
+
+
 @dataclass(eq=False)
 class OpenFile:
     """One open() of the node: its priority, events and readiness pipes."""

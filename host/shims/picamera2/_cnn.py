@@ -29,6 +29,8 @@ from typing import Any
 
 import numpy as np
 
+from ._open import OPEN, OPEN_LOCK
+
 NETWORK_NAME_LEN = 64
 MAX_NUM_TENSORS = 16
 MAX_NUM_DIMENSIONS = 16
@@ -72,12 +74,10 @@ _LOCK = threading.Lock()
 
 def load(num: int, program: CnnProgram) -> None:
     """Program camera ``num``'s network (an open camera takes it at once, the next opened one on opening)."""
-    from .picamera2 import _OPEN, _OPEN_LOCK
-
     with _LOCK:
         _PROGRAMS[num] = program
-    with _OPEN_LOCK:
-        cam = _OPEN.get(num)
+    with OPEN_LOCK:
+        cam = OPEN.get(num)
     if cam is not None and cam._cam is not None:
         cam._cam.set_network(program)
 
@@ -85,10 +85,8 @@ def load(num: int, program: CnnProgram) -> None:
 def inject(num: int, tensor: bytes) -> int:
     """Inject an input tensor into open camera ``num``'s network; returns the comparison frame's sequence
     number (``InjectionBusy`` while an earlier tensor waits; RuntimeError when the camera is not open)."""
-    from .picamera2 import _OPEN, _OPEN_LOCK
-
-    with _OPEN_LOCK:
-        cam = _OPEN.get(num)
+    with OPEN_LOCK:
+        cam = OPEN.get(num)
     if cam is None or cam._cam is None:
         raise RuntimeError(f"IMX500: camera {num} is not open: open it with Picamera2 before injecting a tensor")
     return cam._cam.inject(tensor)

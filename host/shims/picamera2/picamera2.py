@@ -25,6 +25,7 @@ from ._configs import ConfigMixin
 from ._engine import Engine, RequestQueue
 from ._helpers import Helpers
 from ._isp import aspect_crop, crop_pixels, isp_picture, stream_arrays
+from ._open import OPEN, OPEN_LOCK
 from ._record import RecordMixin
 from .allocators import DmaAllocator
 from .configuration import CameraConfiguration
@@ -33,14 +34,12 @@ from .platform import Platform
 from .request import CompletedRequest
 
 _log = logging.getLogger("picamera2")
-_OPEN: dict[int, Any] = {}  # camera number -> the Picamera2 holding it (libcamera's acquire)
-_OPEN_LOCK = threading.Lock()
 
 
 def close_all() -> None:
     """Close every camera this process has open (rollcam's extra; the pytest fixture calls it)."""
-    with _OPEN_LOCK:
-        cams = list(_OPEN.values())
+    with OPEN_LOCK:
+        cams = list(OPEN.values())
     for cam in cams:
         cam.close()
 
@@ -94,16 +93,16 @@ class Picamera2(ConfigMixin, CaptureMixin, RecordMixin):
         found = sources()
         if not isinstance(camera_num, int) or not 0 <= camera_num < len(found):
             raise IndexError(f"list index out of range (camera {camera_num!r} of {len(found)} emulated)")
-        with _OPEN_LOCK:
-            if camera_num in _OPEN:
+        with OPEN_LOCK:
+            if camera_num in OPEN:
                 raise RuntimeError("Camera __init__ sequence did not complete.") from RuntimeError(
                     f"Failed to acquire camera {camera_num}: Device or resource busy")
-            _OPEN[camera_num] = self
+            OPEN[camera_num] = self
         try:
             self._cam = PiCamera(found[camera_num], camera_num)
         except Exception as exc:
-            with _OPEN_LOCK:
-                _OPEN.pop(camera_num, None)
+            with OPEN_LOCK:
+                OPEN.pop(camera_num, None)
             raise RuntimeError("Camera __init__ sequence did not complete.") from exc
         self.camera_idx, self.is_open = camera_num, True
         self.camera_config: dict[str, Any] = {}
@@ -283,9 +282,9 @@ class Picamera2(ConfigMixin, CaptureMixin, RecordMixin):
             with self._state:
                 self.is_open = False
                 self._state.notify_all()
-            with _OPEN_LOCK:
-                if _OPEN.get(self.camera_idx) is self:
-                    del _OPEN[self.camera_idx]
+            with OPEN_LOCK:
+                if OPEN.get(self.camera_idx) is self:
+                    del OPEN[self.camera_idx]
 
     def set_controls(self, controls: Any) -> None:
         """Set controls; they apply together from the next frame that starts exposing."""
