@@ -128,3 +128,43 @@ def test_bootstrap_se_is_zero_for_a_perfect_detector_and_grows_with_fewer_images
     many = bootstrap_se(truths, noisy, 40, np.random.default_rng(0))
     few = bootstrap_se(truths[:15], noisy[:15], 40, np.random.default_rng(0))
     assert 0 < many < few
+
+
+def test_study_device_cuda_without_a_gpu_is_one_line_exit_2(tmp_path, capsys):
+    torch = pytest.importorskip("torch")
+    if torch.cuda.is_available():
+        pytest.skip("this torch sees a GPU")
+    assert main(["study", "--quick", "--device", "cuda", "--out", str(tmp_path / "s")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "--device cuda" in err[0] and "CUDA" in err[0]
+
+
+@pytest.mark.slow
+def test_quick_label_arm_with_a_base_end_to_end(tmp_path):
+    """The label arm and Table 2 on the quick setting, every run fine-tuned from a base trained on GS images of
+    other scenes; then --report rebuilds the same tables from the finished runs."""
+    pytest.importorskip("torch")
+    import dataclasses
+    import json
+
+    from rollcam.host.training.study import run_study
+
+    s = dataclasses.replace(QUICK, base_frames=8, base_scenes=6, base_epochs=2, base_lr=4e-3)
+    out = tmp_path / "study"
+    doc = run_study(s, out, only=("labels", "coco"), progress=False)
+    keys = {r["job"]["key"] for r in doc["runs"]}
+    assert "base" in keys and {"fast_rs_gslabels_s0", "fast_rs_handlabels_s2", "fast_gs_s1", "fast_rs_s0"} <= keys
+    assert not any(k.startswith("normal") for k in keys)
+    card = json.loads((out / "runs" / "fast_rs_handlabels_s0" / "train.json").read_text())
+    assert card["config"]["labels"] == "hand" and card["config"]["init"].endswith("runs/base/last.pt")
+    base = json.loads((out / "data" / "base" / "dataset.json").read_text())
+    assert base["config"]["seed"] == 1 and list(base["subsets"]) == ["normal_gs", "normal_rs"]
+    run = json.loads((out / "runs" / "fast_rs_handlabels_s0" / "test.json").read_text())
+    assert {"gs", "rs", "gsrs", "rs_exact"} <= set(run["test"]) and "mAP50_95_se" in run["test"]["rs"]
+    boxes = doc["labels"]["boxes"]["fast"]
+    assert boxes["hand"]["mean_area_px2"] < boxes["exact"]["mean_area_px2"]
+    assert set(doc["coco"]) == {"ssdlite", "hog"} and "rs_handlabels" in doc["coco"]["ssdlite"]["fast"]
+    text = (out / "report.md").read_text()
+    assert "## The label arm" in text and "## Table 2 analogue" in text and "hand-like labels" in text
+    again = run_study(s, out, only=("labels", "coco"), report_only=True)
+    assert again["label_arm"] == doc["label_arm"] and again["timing"]["finished"] == len(doc["runs"])

@@ -270,7 +270,7 @@ def label_tables(s: StudySettings, root: Path) -> dict[str, Any]:
         ex = {x.name: x for x in test}
         for speed in s.speeds:
             rs, gs = subset(speed, "rs"), subset(speed, "gs")
-            boxes.setdefault(speed, {"gs": box_stats(tr[gs])})[arm] = box_stats(tr[rs])
+            boxes.setdefault(speed, {"gs_images": box_stats(tr[gs])})[arm] = box_stats(tr[rs])
             truths = [e.truth for e in te[rs].images]
             perfect = [Dets.of(e.truth.boxes[~e.truth.ignore], np.ones(int((~e.truth.ignore).sum())),
                                e.truth.classes[~e.truth.ignore]) for e in ex[rs].images]

@@ -222,7 +222,7 @@ def _label_sections(s: StudySettings, agg: dict[str, Any], extra: dict[str, Any]
                   + " | " + " | ".join(f"ceiling {a} mAP@0.5 / mAP@0.5:0.95" for a in LABEL_ARMS) + " |",
                   "|---|---:|---:|" + "---:|" * (2 * len(LABEL_ARMS))]
         for sp, b in tables["boxes"].items():
-            g = b["gs"]
+            g = b["gs_images"]
             cells = [f"{b[a]['mean_area_px2']:.0f} ({b[a]['mean_area_study_px2']:,.0f}), "
                      f"{b[a]['mean_area_px2'] / max(g['mean_area_px2'], 1e-9):.3f}" for a in LABEL_ARMS]
             ceil = [f"{tables['ceiling'][sp][a]['mAP50']:.3f} / {tables['ceiling'][sp][a]['mAP50_95']:.3f}"

@@ -77,7 +77,7 @@ MEDIUM = StudySettings(
     speeds=("normal", "fast"), model="nano", epochs=12, steps=None, batch=8, lr=2e-3, seeds=(0, 1, 2, 3, 4),
     t3_speeds=(), raw_speeds=(), fig4_subset="fast_rs", fig4_scenes=(), fig4_cameras=(),
     label_speeds=("normal", "fast"), coco_detectors=("ssdlite?conf=0.01", "hog?hit=-0.5&upscale=2"),
-    val_every=4, split=(0.6, 0.1, 0.3), base_frames=800, base_scenes=40, base_seed=1, base_epochs=24, base_lr=5e-3)
+    val_every=4, split=(0.5, 0.1, 0.4), base_frames=800, base_scenes=40, base_seed=1, base_epochs=24, base_lr=5e-3)
 SETTINGS = {s.name: s for s in (QUICK, REDUCED, MEDIUM, FULL)}
 """``--setting`` names. ``full`` is the study's design (1,000 pairs per speed; at half its 1080p, so the fitted
 images of a run fit in memory) for a GPU; ``medium`` the CPU setting sized to resolve a 5 % relative
