@@ -258,6 +258,8 @@ def _label_sections(s: StudySettings, agg: dict[str, Any], extra: dict[str, Any]
 
 def _time_line(timing: dict[str, Any]) -> str:
     train = f"{timing['train_s_sum'] / 3600:.2f} h of training summed over runs"
+    if not timing["workers"]:
+        return f"Report of the finished runs ({timing.get('finished', 0)} of {timing.get('planned', 0)}; {train})."
     if timing.get("finished", 0) < timing.get("planned", 0):
         return (f"Partial: {timing['finished']} of {timing['planned']} runs finished ({train}); a cell's n says "
                 "how many seeds it has.")
