@@ -163,6 +163,7 @@ def test_quick_label_arm_with_a_base_end_to_end(tmp_path):
     assert {"gs", "rs", "gsrs", "rs_exact"} <= set(run["test"]) and "mAP50_95_se" in run["test"]["rs"]
     boxes = doc["labels"]["boxes"]["fast"]
     assert boxes["hand"]["mean_area_px2"] < boxes["exact"]["mean_area_px2"]
+    assert set(doc["labels"]["ceiling"]["fast"]) == {"exact", "gs", "hand", "hand_inset"}
     assert set(doc["coco"]) == {"ssdlite", "hog"} and "rs_handlabels" in doc["coco"]["ssdlite"]["fast"]
     text = (out / "report.md").read_text()
     assert "## The label arm" in text and "## Table 2 analogue" in text and "hand-like labels" in text
