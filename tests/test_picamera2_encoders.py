@@ -10,6 +10,7 @@ import subprocess
 import time
 
 import pytest
+from helpers import wait_for
 
 pytestmark = pytest.mark.skipif(shutil.which("ffprobe") is None, reason="needs ffprobe (apt: ffmpeg)")
 
@@ -137,12 +138,16 @@ def test_circular_output2_into_a_pyav_output(rollcam_picamera2, tmp_path):
         cam.configure(cam.create_video_configuration(main=SMALL, controls={"FrameRate": 20}))
         ring = CircularOutput2(buffer_duration_ms=500)
         stamps = record(picamera2, cam, H264Encoder(iperiod=4), ring, seconds=0.1)  # nothing opened: dropped
+        made: list[int] = []
+        cam.post_callback = lambda request: made.append(request.get_metadata()["SensorTimestamp"])
         cam.start_recording(H264Encoder(iperiod=4), ring)
-        time.sleep(1)
+        wait_for(lambda: len(made) >= 12, what="12 frames into the ring (three keyframe periods)")
         ring.open_output(PyavOutput(str(tmp_path / "ring.mp4")))
-        time.sleep(0.5)
+        opened_at = len(made)
+        wait_for(lambda: len(made) >= opened_at + 6, what="6 frames after the output opened")
         ring.close_output()
         cam.stop_recording()
+        cam.post_callback = None
     stream, packets = probe_packets(tmp_path / "ring.mp4")
     assert stream["codec_name"] == "h264" and len(packets) >= 2 and stamps is not None
     assert float(packets[0]["pts_time"]) == 0 and "K" in packets[0]["flags"]  # from the ring's oldest keyframe
