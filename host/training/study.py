@@ -98,6 +98,11 @@ def _all_jobs(s: StudySettings) -> list[Job]:
     return jobs
 
 
+BASE_THREADS = 2
+"""torch threads of the base run, which runs alone before the others (fixed, not ``--workers``: a thread count is
+part of what a resumed run must match)."""
+
+
 def base_job(s: StudySettings) -> Job | None:
     """The run every other starts from in a setting with a base (``runs/base``), or None."""
     return Job("base", "base", "normal", (subset("normal", "gs"),), 0) if s.base_frames else None
@@ -318,7 +323,7 @@ def run_study(s: StudySettings, out: str | Path, *, workers: int = 1, executor: 
     results = []
     base = base_job(s)
     if base is not None:
-        results.append(run_job(base, s, str(root), device, threads=workers if device == "cpu" else 1))
+        results.append(run_job(base, s, str(root), device, threads=BASE_THREADS))
     if device == "cuda":
         workers, executor = 1, None
     ex = open_executor(executor, workers, 1)
