@@ -225,9 +225,11 @@ def report_finished(s: StudySettings, out: str | Path, command: str | None = Non
     results = [json.loads(p.read_text()) for j in ([base] if base else []) + jobs
                if (p := root / "runs" / j.key / "test.json").is_file()]
     extra: dict[str, Any] = {}
-    if (not only or "coco" in only) and all((root / "coco" / f"{d.split('?', 1)[0]}.json").is_file()
-                                            for d in s.coco_detectors):
-        extra["coco"] = coco_table(s, root)
+    coco = {d.split("?", 1)[0]: d for d in s.coco_detectors}
+    done = {name: json.loads(p.read_text()) | {"spec": spec} for name, spec in coco.items()
+            if (p := root / "coco" / f"{name}.json").is_file()}
+    if (not only or "coco" in only) and done:
+        extra["coco"] = done
     if not only or "labels" in only:
         extra["labels"] = label_tables(s, root)
     timing = {"datasets_s": 0.0, "total_s": 0.0, "workers": 0, "device": "cpu",
