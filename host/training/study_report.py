@@ -46,8 +46,12 @@ def difference(gs: dict[str, Any], rs: dict[str, Any]) -> dict[str, Any]:
     delta = rs["mean"] - gs["mean"]
     se = math.sqrt(gs["std"] ** 2 / max(gs["n"], 1) + rs["std"] ** 2 / max(rs["n"], 1))
     rel = delta / gs["mean"] if gs["mean"] else float("nan")
+    if min(gs["n"], rs["n"]) < 2:  # one seed has no spread to compare with
+        beyond = False
+    else:
+        beyond = bool(abs(delta) > 2 * se) if se > 0 else bool(delta != 0)
     return {"delta": round(delta, 6), "relative": round(rel, 6) if math.isfinite(rel) else None,
-            "se": round(se, 6), "beyond_spread": bool(abs(delta) > 2 * se) if se > 0 else bool(delta != 0)}
+            "se": round(se, 6), "beyond_spread": beyond}
 
 
 def _cell(results: list[dict[str, Any]], group: str, train: tuple[str, ...], test: str,
@@ -197,10 +201,14 @@ def _label_sections(s: StudySettings, agg: dict[str, Any], extra: dict[str, Any]
                   "on exact mAP@0.5 / mAP@0.5:0.95 |", "|---|---|---:|---:|---:|---:|---:|---:|"]
         for sp, row in arm.items():
             g = row["gs_model"]
+            if not g["mAP50"]["n"]:
+                continue
             lines.append(f"| {_speed_label(sp)} | GS model, GS images | {_ms(g['mAP50'])} | {_ms(g['mAP50_95'])} | "
                          "| | | |")
             for a in LABEL_ARMS:
                 c = row[a]
+                if not c["mAP50"]["n"]:
+                    continue
                 on = c.get("on_exact")
                 ex = f"{_ms(on['mAP50'])} / {_ms(on['mAP50_95'])}" if on else "(same)"
                 lines.append(f"| {_speed_label(sp)} | {ARM_NAMES[a]} | {_ms(c['mAP50'])} | {_ms(c['mAP50_95'])} | "
@@ -287,6 +295,8 @@ def report_markdown(s: StudySettings, agg: dict[str, Any], timing: dict[str, Any
               "| Validation | P | R | mAP@0.5 | mAP@0.5:0.95 |", "|---|---:|---:|---:|---:|"]
     for sp, row in agg["table1"].items():
         name = {"normal": "Normal", "fast": "Faster"}[sp]
+        if not (row["gs"]["mAP50"]["n"] and row["rs"]["mAP50"]["n"]):
+            continue  # not run (rollcam study --only)
         for sh in SHUTTERS:
             lines.append(f"| {name}_{sh.upper()} | " + " | ".join(_ms(row[sh][m]) for m in METRICS) + " |")
         lines.append("| GS->RS | " + " | ".join(_diff(row["gs_to_rs"][m]) for m in METRICS) + " |")
@@ -294,8 +304,12 @@ def report_markdown(s: StudySettings, agg: dict[str, Any], timing: dict[str, Any
               "Study (mAP@0.5): " + ", ".join(f"{k} {v}" for k, v in STUDY_REFERENCE["table3_mAP50"].items()) + ".",
               ""]
     for sp, rows in agg["table3"].items():
+        if not any(cells["gs"]["mAP50"]["n"] or cells["rs"]["mAP50"]["n"] for cells in rows.values()):
+            continue
         lines += [f"Walkers {_speed_label(sp)}:", "", "| train \\ test | GS | RS | GS+RS |", "|---|---:|---:|---:|"]
         for label, cells in rows.items():
+            if not cells["gs"]["mAP50"]["n"] and not cells["rs"]["mAP50"]["n"]:
+                continue
             lines.append(f"| {label} | " + " | ".join(f"{_ms(cells[t]['mAP50'])} / {_ms(cells[t]['mAP50_95'])}"
                                                        for t in ("gs", "rs", "gsrs")) + " |")
         lines.append("")
@@ -304,6 +318,8 @@ def report_markdown(s: StudySettings, agg: dict[str, Any], timing: dict[str, Any
               "|---|---|---:|---:|---:|---:|---:|---:|"]
     for name, table in (("RGB", agg["speed"]), ("raw", agg["raw"])):
         for sp, row in table.items():
+            if not (row["gs"]["mAP50"]["n"] and row["rs"]["mAP50"]["n"]):
+                continue
             lines.append(f"| {name} | {_speed_label(sp)} | " + " | ".join(
                 f"{_ms(row['gs'][m])} | {_ms(row['rs'][m])} | {_diff(row['gs_to_rs'][m])}"
                 for m in ("mAP50", "mAP50_95")) + " |")
