@@ -85,6 +85,17 @@ def test_plan_has_the_label_arm_for_its_speeds_and_only_selects_it_with_its_base
         plan_jobs(REDUCED, ("nope",))
 
 
+def test_every_setting_plans_datasets_its_scenes_can_hold():
+    """medium first asked for more instants per split than its scenes x cameras x times hold."""
+    from rollcam.host.datasets.plan import make_plan
+    from rollcam.host.training.study import dataset_configs
+    from rollcam.host.training.study_settings import SETTINGS
+
+    for s in SETTINGS.values():
+        for name, cfg in dataset_configs(s).items():
+            assert make_plan(cfg), (s.name, name)
+
+
 def test_study_only_names_a_bad_experiment_in_one_line_exit_2(tmp_path, capsys):
     assert main(["study", "--quick", "--only", "labels,t9", "--out", str(tmp_path / "s")]) == 2
     err = capsys.readouterr().err.strip().splitlines()

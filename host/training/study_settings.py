@@ -73,7 +73,8 @@ FULL = StudySettings(
     raw_speeds=("normal", "fast"), fig4_subset="fast_rs", fig4_scenes=(4, 8, 16), fig4_cameras=(1, 2, 3),
     label_speeds=("normal", "5", "fast", "20"), coco_detectors=("ssdlite?conf=0.01", "hog?hit=-0.5"))
 MEDIUM = StudySettings(
-    name="medium", size=(640, 360), frames_per_speed=800, scenes=40, cameras=5, times=("morning", "noon", "dusk"),
+    name="medium", size=(640, 360), frames_per_speed=800, scenes=40, cameras=5,
+    times=("dawn", "morning", "noon", "afternoon", "dusk"),
     speeds=("normal", "fast"), model="nano", epochs=12, steps=None, batch=8, lr=2e-3, seeds=(0, 1, 2, 3, 4),
     t3_speeds=(), raw_speeds=(), fig4_subset="fast_rs", fig4_scenes=(), fig4_cameras=(),
     label_speeds=("normal", "fast"), coco_detectors=("ssdlite?conf=0.01", "hog?hit=-0.5&upscale=2"),
