@@ -85,7 +85,7 @@ def run(args: argparse.Namespace) -> int:
         return 0
     for line in doc["answers"]:
         print(line)
-    if doc["timing"]["finished"] < doc["timing"]["planned"]:
+    if args.report or doc["timing"]["finished"] < doc["timing"]["planned"]:
         print(f"study {settings.name}: {doc['timing']['finished']} of {doc['timing']['planned']} runs finished; "
               f"report {args.out}/report.md")
         return 0

@@ -332,6 +332,28 @@ def report_markdown(s: StudySettings, agg: dict[str, Any], timing: dict[str, Any
     return "\n".join(lines)
 
 
+def _plot_label_arm(ax: Any, arms: dict[str, Any]) -> None:
+    """The label arm's GS->RS change of mAP@0.5 and mAP@0.5:0.95 per arm and speed, with its standard error."""
+    x = 0
+    ticks, names = [], []
+    for sp, row in arms.items():
+        for arm in LABEL_ARMS:
+            for j, m in enumerate(("mAP50", "mAP50_95")):
+                d = row[arm]["gs_to_rs"][m]
+                base = max(row["gs_model"][m]["mean"], 1e-9)
+                ax.bar(x + 0.4 * j, 100 * (d["relative"] or 0.0), 0.4, yerr=100 * d["se"] / base, capsize=3,
+                       color=("C0", "C1")[j], label=("mAP@0.5", "mAP@0.5:0.95")[j] if x == 0 else None)
+            ticks.append(x + 0.2)
+            names.append(f"{sp}\n{arm}")
+            x += 1
+        x += 0.5
+    ax.axhline(0, color="grey", lw=0.8)
+    ax.set_xticks(ticks, names, fontsize=7)
+    ax.set_ylabel("RS - GS (% of GS)")
+    ax.set_title("Label arm: RS labels exact / gs / hand")
+    ax.legend(fontsize=7)
+
+
 def plot_report(s: StudySettings, agg: dict[str, Any], path: Path) -> None:
     """Three panels: Table 1 bars, the RS penalty against speed (RGB and raw), Fig. 4; written atomically."""
     import matplotlib
@@ -354,6 +376,9 @@ def plot_report(s: StudySettings, agg: dict[str, Any], path: Path) -> None:
     a.set_title("Table 1: train = test subset")
     a.legend(fontsize=8)
     for name, table, style in (("RGB", agg["speed"], "o-"), ("raw", agg["raw"], "s--")):
+        table = {sp: row for sp, row in table.items() if row["gs"]["mAP50"]["n"] and row["rs"]["mAP50"]["n"]}
+        if not table:
+            continue
         xs = [SPEED_X.get(sp) or float(sp) for sp in table]
         for m in ("mAP50", "mAP50_95"):
             ys = [100 * (row["gs_to_rs"][m]["relative"] or 0.0) for row in table.values()]
@@ -366,14 +391,18 @@ def plot_report(s: StudySettings, agg: dict[str, Any], path: Path) -> None:
     b.set_ylabel("RS - GS (% of GS)")
     b.set_title("RS penalty against speed")
     b.legend(fontsize=7)
-    for k, style in (("scenes", "o-"), ("cameras", "s--")):
-        pts = agg["fig4"][k]
-        for m in ("mAP50", "mAP50_95"):
-            c.plot([p["n"] for p in pts], [p[m] for p in pts], style, label=f"{m} vs {k}")
-    c.set_xlabel("training scenes / camera views")
-    c.set_ylim(0, 1)
-    c.set_title(f"Fig. 4: diversity ({s.fig4_subset})")
-    c.legend(fontsize=7)
+    arms = {sp: row for sp, row in agg.get("label_arm", {}).items() if row["gs_model"]["mAP50"]["n"]}
+    if arms and all(len(pts) <= 1 for pts in agg["fig4"].values()):
+        _plot_label_arm(c, arms)  # a study without Fig. 4's reduced runs shows the label arm there instead
+    else:
+        for k, style in (("scenes", "o-"), ("cameras", "s--")):
+            pts = agg["fig4"][k]
+            for m in ("mAP50", "mAP50_95"):
+                c.plot([p["n"] for p in pts], [p[m] for p in pts], style, label=f"{m} vs {k}")
+        c.set_xlabel("training scenes / camera views")
+        c.set_ylim(0, 1)
+        c.set_title(f"Fig. 4: diversity ({s.fig4_subset})")
+        c.legend(fontsize=7)
     for ax in (a, b, c):
         ax.grid(alpha=0.3)
     fig.tight_layout()
