@@ -17,18 +17,18 @@ define one_opencv
 	fi
 endef
 
-.PHONY: demo test test-kernel lint bench venv venv-dev clean
+.PHONY: demo test test-kernel lint bench venv venv-dev modlib-ref clean
 
 $(BIN)/python:
 	$(PY) -m venv $(VENV)
 	$(PIP) install -q --upgrade pip
 
-$(VENV)/.installed: pyproject.toml setup.py sim/rollcam_shade.c emu/preload/rollcam_preload.c | $(BIN)/python
+$(VENV)/.installed: pyproject.toml setup.py sim/render/rollcam_shade.c emu/preload/rollcam_preload.c | $(BIN)/python
 	$(PIP) install -q -e .
 	$(one_opencv)
 	touch $@
 
-$(VENV)/.installed-dev: pyproject.toml setup.py sim/rollcam_shade.c emu/preload/rollcam_preload.c | $(BIN)/python
+$(VENV)/.installed-dev: pyproject.toml setup.py sim/render/rollcam_shade.c emu/preload/rollcam_preload.c | $(BIN)/python
 	$(PIP) install -q -e ".[dev]"
 	$(one_opencv)
 	touch $@ $(VENV)/.installed
@@ -40,7 +40,22 @@ venv-dev: $(VENV)/.installed-dev
 demo: venv
 	$(BIN)/rollcam demo
 
-test: venv-dev
+# Sony's modlib, the reference for the IMX500's input tensor path (tests/test_input_tensor.py): its wheel pins older
+# numpy and OpenCV than rollcam's, so it is not installed; its pure-Python modules are unpacked beside the venv and
+# the test imports them from there (they run on the venv's numpy and OpenCV). Without it (no registry) those tests
+# skip, saying so; the download is tried again on the next run.
+MODLIB := modlib==1.5.0
+MODLIB_DIR := .modlib
+
+$(MODLIB_DIR)/.unpacked: | $(BIN)/python
+	rm -rf $(MODLIB_DIR) && mkdir -p $(MODLIB_DIR)/wheel
+	($(PIP) download -q --no-deps -d $(MODLIB_DIR)/wheel "$(MODLIB)" \
+	  && $(BIN)/python -m zipfile -e $(MODLIB_DIR)/wheel/*.whl $(MODLIB_DIR)/site && touch $@) \
+	  || echo "$(MODLIB) could not be downloaded: the tests that compare with it will skip"
+
+modlib-ref: $(MODLIB_DIR)/.unpacked
+
+test: venv-dev modlib-ref
 	$(BIN)/ruff check .
 	$(BIN)/python -m pytest -q
 
@@ -57,4 +72,4 @@ bench: venv
 	$(BIN)/rollcam bench render --quick
 
 clean:
-	rm -rf $(VENV) build *.egg-info rollcam_out
+	rm -rf $(VENV) $(MODLIB_DIR) build *.egg-info rollcam_out

@@ -8,7 +8,7 @@ from setuptools.command.build_ext import build_ext
 from setuptools.errors import CompileError
 
 LIBRARY = "rollcam.emu.preload.librollcam_preload"
-SHADER = "rollcam.sim.librollcam_shade"
+SHADER = "rollcam.sim.render.librollcam_shade"
 PLAIN = (LIBRARY, SHADER)
 """Libraries built as plain shared objects (no Python ABI tag or init function): loaded by path, not imported."""
 
@@ -41,7 +41,7 @@ setup(
                            extra_link_args=["-ldl", "-lpthread"]),
                  # -O3 and -fopenmp-simd (the pragma only, no OpenMP runtime) vectorise the pixel loop; no
                  # -ffast-math and no FMA contraction, so every CPU clone computes the same image (see the source).
-                 Extension(SHADER, sources=["sim/rollcam_shade.c"],
+                 Extension(SHADER, sources=["sim/render/rollcam_shade.c"],
                            extra_compile_args=["-O3", "-fopenmp-simd", "-ffp-contract=off", "-fno-math-errno",
                                                "-fno-trapping-math"],
                            extra_link_args=["-lm"])],

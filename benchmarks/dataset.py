@@ -29,7 +29,7 @@ from typing import Any
 import numpy as np
 from rollcam.host.datasets import DatasetConfig, build_dataset, make_plan, sample_uri
 from rollcam.host.evaluation.metrics import Dets, Truth, evaluate
-from rollcam.host.imagefiles import encode_image
+from rollcam.host.recording.imagefiles import encode_image
 from rollcam.host.sources import open_camera
 
 

@@ -21,8 +21,8 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from rollcam.host.detect import run_detect
 from rollcam.host.detectors import PERSON, Detections, load_detector
+from rollcam.host.detectors.live import run_detect
 from rollcam.host.sources import open_camera
 
 OVERHEAD_URI = "emu:imx219?size=1920x1080&seed=0"

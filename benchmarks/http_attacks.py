@@ -37,7 +37,7 @@ CLK_TCK = os.sysconf("SC_CLK_TCK")
 
 SERVER = """
 import json, signal, threading
-from rollcam.emu.http_mjpeg import MjpegServer
+from rollcam.emu.http.mjpeg import MjpegServer
 from rollcam.firmware.camera import FirmwareCamera
 cam = FirmwareCamera("imx219", scene={"scene": "chart"}, size=(640, 480))
 with MjpegServer(cam, "127.0.0.1", 0) as srv:

@@ -80,8 +80,8 @@ def calibration_study(frames: int, size: tuple[int, int] = (320, 240)) -> dict[s
     import time
     from pathlib import Path
 
-    from rollcam.host.calibrate import calibrate
-    from rollcam.host.capture import capture
+    from rollcam.host.correction.calibrate import calibrate
+    from rollcam.host.recording.capture import capture
     from rollcam.host.sources import open_camera
 
     uri = (f"emu:imx219?size={size[0]}x{size[1]}&ego=calib&pedestrians=0&exposure_us=2000"

@@ -3,7 +3,7 @@
 For ego-motion cases (camera panning, a drone's rotation and vibration, a vehicle) and one of object motion
 only (a static camera, fast walkers), consecutive frame pairs of the same instants are rendered under both
 shutters; each RS frame is corrected from the device's gyro (``rollcam.sim.rscorrect``) and, the optional
-method, from its dense optical flow to the previous RS frame (``rollcam.host.flowcorrect``), and compared
+method, from its dense optical flow to the previous RS frame (``rollcam.host.correction.flow``), and compared
 with the GS frame: mean absolute error (8-bit, over pixels whose source lies inside the frame for both
 corrections), box error (mean absolute edge offset from the GS box, px: the RS box as rendered, and as each
 correction maps it; objects whose GS or RS box meets the frame's edge are left out and counted, since a clipped
@@ -71,8 +71,8 @@ def _flow_box(left: np.ndarray, right: np.ndarray, shift: np.ndarray, w: int, h:
 def correction_case(options: str, size: tuple[int, int], frames: int, detector: Any = None) -> dict[str, Any]:
     """One case of the correction study (see the module docstring): ``frames`` corrected frames."""
     from rollcam.host import open_camera
-    from rollcam.host.flowcorrect import dense_flow, image_velocity, unwarp_flow
-    from rollcam.host.truthmatch import RunningPR
+    from rollcam.host.correction.flow import dense_flow, image_velocity, unwarp_flow
+    from rollcam.host.evaluation.truthmatch import RunningPR
     from rollcam.sim.rscorrect import gyro_line_rotations, unwarp
 
     w, h = size

@@ -56,8 +56,8 @@ def run_insensor_bench(*, scenes: int = 4, frames: int = 8, host: str = "personn
     from rollcam.firmware.insensor import load_network
     from rollcam.firmware.ledger import ledger
     from rollcam.host.detectors import load_detector
+    from rollcam.host.detectors.onchip import load_network as host_network
     from rollcam.host.evaluation.metrics import Dets, evaluate
-    from rollcam.host.insensor import load_network as host_network
     from rollcam.host.sources import open_camera
     from rollcam.sim.codecs import preview_frame
 

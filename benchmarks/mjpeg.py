@@ -37,7 +37,7 @@ TARGET_ENCODE_MS = 10.0
 
 SERVER = """
 import json, signal, sys, threading
-from rollcam.emu.http_mjpeg import MjpegServer
+from rollcam.emu.http.mjpeg import MjpegServer
 from rollcam.firmware.camera import FirmwareCamera
 w, h, fps = (int(a) for a in sys.argv[1:4])
 cam = FirmwareCamera("imx219", scene={"scene": "street"}, size=(w, h), fps=fps)

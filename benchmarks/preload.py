@@ -52,7 +52,7 @@ print(json.dumps({"times_ns": times, "bytesused": b.bytesused}))
 def _round(frames: int) -> tuple[list[int], list[int]]:
     """One stream of ``frames``: the program's DQBUF+QBUF time of each frame, and the time the server spent
     making that frame (render, encode, fill: ``EmuDriver.produce_now``, which each DQBUF runs once)."""
-    from rollcam.host.preload import program_environment, serving
+    from rollcam.host.servers.devnodes import program_environment, serving
 
     made: list[int] = []
     with serving([("/dev/video0", SOURCE)], realtime=False) as server:

@@ -30,7 +30,7 @@ from rollcam.host.detectors.ops import ioa_matrix, iou_matrix
 from rollcam.sim.codecs import encode_image
 from rollcam.sim.optics import LensOptics
 from rollcam.sim.picture import PictureSteps
-from rollcam.sim.render import Renderer, encode_linear
+from rollcam.sim.render.renderer import Renderer, encode_linear
 from rollcam.sim.scenegen import DAYLIGHT, TIMES_OF_DAY, make_street_scene
 
 HEIGHT_BINS_PX = (128, 160, 200, 256, 384)

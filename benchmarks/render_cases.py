@@ -20,8 +20,8 @@ from rollcam.common.errors import ConfigError
 from rollcam.sim.compose import METHODS, compose_rs, composition_error
 from rollcam.sim.footage import Footage
 from rollcam.sim.hwconfig import load_sensor
-from rollcam.sim.render import Renderer
-from rollcam.sim.render_result import LineTruth
+from rollcam.sim.render.renderer import Renderer
+from rollcam.sim.render.result import LineTruth
 from rollcam.sim.scenegen import ego_preset, make_street_scene
 from rollcam.sim.synthetic import SyntheticCamera
 

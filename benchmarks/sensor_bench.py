@@ -37,7 +37,7 @@ from rollcam.sim.hwconfig import load_sensor
 from rollcam.sim.isp import preview
 from rollcam.sim.optics import LensOptics
 from rollcam.sim.picture import PictureSteps
-from rollcam.sim.render import srgb_lut
+from rollcam.sim.render.renderer import srgb_lut
 from rollcam.sim.scenegen import make_street_scene
 from rollcam.sim.synthetic import SyntheticCamera
 

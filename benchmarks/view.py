@@ -113,10 +113,10 @@ def chromium_available() -> bool:
 def run_view_bench(seconds: float = 10.0, size: tuple[int, int] = (1920, 1080), fps: float = 30.0,
                    browser: bool | None = None, out_dir: str | Path = ".", say: Any = print) -> dict[str, Any]:
     """Both phases; the document with the figures and the targets."""
-    from rollcam.emu.http_mjpeg import MjpegServer
-    from rollcam.emu.http_view import LiveView
+    from rollcam.emu.http.mjpeg import MjpegServer
+    from rollcam.emu.http.view import LiveView
+    from rollcam.emu.http.view_controls import CameraControls
     from rollcam.emu.pump import FramePump
-    from rollcam.emu.view_controls import CameraControls
     from rollcam.firmware.camera import FirmwareCamera
 
     use_browser = chromium_available() if browser is None else browser

@@ -31,6 +31,16 @@ Lab faults, after what camera HIL rigs inject (docs/faults.md):
 - sensor defects, made by the sensor model (``rollcam.sim.defects``): ``stuck=N``, ``dead=N``, ``hot=N``
   pixels and ``soiling=N`` blobs, at seeded places; ``burst`` (rate): a run of ``burst_px`` (default 64)
   corrupted pixels on a frame; ``hot_dn_per_ms`` (default 40) how fast a hot pixel fills.
+
+The AI Camera's own failures, in its in-sensor stage (``rollcam.firmware.insensor_stage``; a camera without an
+in-sensor network has none of them):
+
+- ``loaderfail=MS``: MS ms of device time after the stream starts, the IMX500's firmware loader fails ("failed
+  to load loader firmware", raspberrypi/libcamera issue 355): no frame is made from then on;
+- ``fetimeout`` (rate): the share of frames at which the front end stops ("Camera frontend has timed out!",
+  raspberrypi/rpicam-apps issue 927); the first hit ends the stream;
+- ``dnn_us=N``: each inference takes N us whatever the network's MACs (a network slower than the frame rate:
+  Ultralytics measure YOLO11n at 58.8 ms a frame on the AI Camera); the frames it has no time for are skipped.
 """
 
 from __future__ import annotations
@@ -48,7 +58,7 @@ COUNTER_FAULTS = ("seqrewrite", "seqfreeze", "seqskip")
 IMAGE_FAULTS = ("grey", "black", "frozen")
 """Faults that replace a frame's image, in the order they take precedence."""
 RATES = ("drop", "error", "corrupt", "delay", "stall", "babble", "short", "cut", *COUNTER_FAULTS, *IMAGE_FAULTS,
-         "regreset", "burst")
+         "regreset", "burst", "fetimeout")
 """Fault kinds given as a percentage of the events they apply to."""
 DEFECTS = ("stuck", "dead", "hot", "soiling")
 """Sensor defects given as a count (of pixels; of blobs for ``soiling``) placed by the seed."""
@@ -63,6 +73,10 @@ S64 = 1 << 63
 MAX_DELAY_MS = 60_000
 DEFAULT_BURST_PX = 64
 DEFAULT_HOT_DN_PER_MS = 40
+MAX_LOADERFAIL_MS = 1 << 40
+MAX_DNN_US = 60_000_000
+INSENSOR_FAULTS = ("loaderfail", "fetimeout", "dnn_us")
+"""The AI Camera's faults, applied by its in-sensor stage."""
 PARAMS = {"delay_ms": (DEFAULT_DELAY_MS, 0, MAX_DELAY_MS), "seqrewrite_to": (0, 0, U32 - 1),
           "seqskip_by": (1, 1, U32 - 1), "burst_px": (DEFAULT_BURST_PX, 1, 1 << 24),
           "hot_dn_per_ms": (DEFAULT_HOT_DN_PER_MS, 1, 1 << 20)}
@@ -113,6 +127,8 @@ class FaultPlan:
     burst_px: int = DEFAULT_BURST_PX
     hot_dn_per_ms: int = DEFAULT_HOT_DN_PER_MS
     defects: tuple[tuple[str, int], ...] = ()  # (kind, count) for the defects given, in DEFECTS order
+    loaderfail_ms: int | None = None
+    dnn_us: int | None = None
 
     def __post_init__(self) -> None:
         for kind, pct in self.rates:
@@ -173,6 +189,10 @@ class FaultPlan:
             items.append(f"seqwrap={self.seqwrap}")
         if self.tswrap_s is not None:
             items.append(f"tswrap={self.tswrap_s}")
+        if self.loaderfail_ms is not None:
+            items.append(f"loaderfail={self.loaderfail_ms}")
+        if self.dnn_us is not None:
+            items.append(f"dnn_us={self.dnn_us}")
         if items and self.seed:
             items.append(f"seed={self.seed}")
         return ",".join(items)
@@ -183,7 +203,12 @@ class FaultPlan:
     def __bool__(self) -> bool:
         """True when the plan injects anything."""
         return bool(self.rates or self.disconnect is not None or self.requests or self.seqwrap or self.tswrap_s
-                    or self.defects)
+                    or self.defects or self.insensor_faults)
+
+    @property
+    def insensor_faults(self) -> bool:
+        """True when the plan has an AI Camera fault (``INSENSOR_FAULTS``) for the in-sensor stage."""
+        return self.loaderfail_ms is not None or self.dnn_us is not None or bool(self.rate("fetimeout"))
 
     # ------------------------------------------------------------------------------------------ decisions
     def rate(self, kind: str) -> float:
@@ -367,6 +392,10 @@ def _take(key: str, value: str | None, kw: dict[str, Any], rates: dict[str, floa
         kw["seqwrap"] = DEFAULT_SEQWRAP if value is None else _int(value, 1, U32 - 1)
     elif key == "tswrap":
         kw["tswrap_s"] = DEFAULT_TSWRAP_S if value is None else _int(value, 1, 1 << 32)
+    elif key == "loaderfail":
+        kw["loaderfail_ms"] = _int(_needs(value), 0, MAX_LOADERFAIL_MS)
+    elif key == "dnn_us":
+        kw["dnn_us"] = _int(_needs(value), 1, MAX_DNN_US)
     elif key in REQUESTS:
         requests.append(_request(key, value))
     else:
@@ -419,7 +448,7 @@ def _num(x: float) -> str:
 
 
 def _known() -> list[str]:
-    return ["seed", *RATES, *PARAMS, "disconnect", *REQUESTS, "seqwrap", "tswrap", *DEFECTS]
+    return ["seed", *RATES, *PARAMS, "disconnect", *REQUESTS, "seqwrap", "tswrap", *DEFECTS, "loaderfail", "dnn_us"]
 
 
 FAULT_COUNTERS = tuple(f.name for f in fields(FaultStats))

@@ -246,6 +246,13 @@ class FirmwareCamera(DeviceStream):
         plan = self.plan_next(now_ns)
         return None if plan is None else self.render(plan)
 
+    def inject(self, tensor: Any) -> int:
+        """Put an input tensor in the place of the next frame's on the in-sensor network (``InSensorStage.inject``);
+        that frame is made even if the consumer is late for it. Returns its sequence number."""
+        seq = self.insensor.inject(self.spec, tensor, self.next_seq)
+        self.hold(seq)
+        return seq
+
     def render(self, plan: FramePlan, shutter: str | None = None) -> Frame:
         """Frame ``plan.seq`` from the current spec (optionally under the other shutter): ``make``'s frame."""
         return self.make(plan, shutter)[1]

@@ -11,6 +11,9 @@ its output beside the image, or instead of it. The emulated camera does the same
   first (colour sites kept: a Bayer mosaic is binned site by site), as a sensor's input-tensor path scales;
 - ``insensor_roi=X,Y,W,H``: the part of the frame the network sees (frame pixels; default the whole frame),
   as the IMX500's inference region of interest; boxes still come back in the frame's pixels;
+- ``insensor_tensor=WxH,...``: the network takes an IMX500 input tensor (``rollcam.firmware.input_tensor``): the
+  ISP's picture of the region cropped and scaled to it, its channel order and fixed-point normalisation; the
+  network runs on the picture the tensor shows, and a tensor can be injected in place of the frame's;
 - ``insensor_accel=NAME|GMACS``: the accelerator profile (``ACCELERATORS``) or a throughput in GMAC/s; the
   latency of a frame is the network's multiply-accumulates at its input size over the throughput;
 - ``insensor_output=frame|meta``: the image and the results, or the results only (metadata-only mode: the
@@ -32,6 +35,8 @@ from dataclasses import dataclass
 from typing import Any, Protocol
 
 from rollcam.common.errors import ConfigError
+
+from .input_tensor import InputTensorFormat
 
 OUTPUTS = ("frame", "meta")
 """``frame``: image and results; ``meta``: results only (metadata-only mode)."""
@@ -143,6 +148,7 @@ class InSensorConfig:
     accel: Accelerator = ACCELERATORS["imx500"]
     output: str = "frame"
     roi: tuple[int, int, int, int] | None = None
+    tensor: InputTensorFormat | None = None
 
     def __post_init__(self) -> None:
         if self.input not in (None, "raw", "isp"):
@@ -152,6 +158,9 @@ class InSensorConfig:
         w, h = self.max_size
         if not (isinstance(w, int) and isinstance(h, int) and 2 <= w <= 8192 and 2 <= h <= 8192):
             raise ConfigError(f"insensor_size {self.max_size!r} must be 2..8192 a side")
+        if self.tensor is not None and self.input == "raw":
+            raise ConfigError("insensor_tensor is made by the sensor's ISP from its picture: it needs "
+                              "insensor_input=isp and a network that takes a picture, not insensor_input=raw")
 
     @property
     def image_sent(self) -> bool:
@@ -161,6 +170,9 @@ class InSensorConfig:
     def resolved_input(self, net: Network) -> str:
         """``raw`` or ``isp``: the configured input, checked against what the network takes."""
         want = self.input or net.input
+        if self.tensor is not None and net.input == "raw":
+            raise ConfigError(f"insensor={self.network!r} takes raw input; insensor_tensor needs a network that "
+                              "takes a picture (insensor_input=isp)")
         if want != net.input:
             raise ConfigError(f"insensor={self.network!r} takes {net.input} input (a model trained with "
                               f"--input {'raw' if net.input == 'raw' else 'rgb'}), not insensor_input={want}")
@@ -168,7 +180,7 @@ class InSensorConfig:
 
 
 INSENSOR_FIELDS = {"insensor_input": "input", "insensor_size": "max_size", "insensor_accel": "accel",
-                   "insensor_output": "output", "insensor_roi": "roi"}
+                   "insensor_output": "output", "insensor_roi": "roi", "insensor_tensor": "tensor"}
 """Option name -> ``InSensorConfig`` field."""
 INSENSOR_OPTIONS = {"insensor", *INSENSOR_FIELDS}
 
@@ -199,7 +211,8 @@ def insensor_option_values(cfg: InSensorConfig | None) -> dict[str, Any]:
     c = cfg or InSensorConfig("none")
     return {"insensor": "none" if cfg is None else c.network, "insensor_input": c.input or "auto",
             "insensor_size": c.max_size, "insensor_accel": c.accel.name, "insensor_output": c.output,
-            "insensor_roi": "none" if c.roi is None else ",".join(str(v) for v in c.roi)}
+            "insensor_roi": "none" if c.roi is None else ",".join(str(v) for v in c.roi),
+            "insensor_tensor": "none" if c.tensor is None else c.tensor.to_text()}
 
 
 # ----------------------------------------------------------------------------------------------- networks

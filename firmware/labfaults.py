@@ -5,7 +5,8 @@ sensor's registers under a running stream; ``FrameFaults`` does both for one tra
 frame number through the transport's ``FaultInjector`` (``rollcam.common.faults``), so every run with the same
 plan hits the same frames. The frame-counter faults are the injector's ``sequence``; the sensor defects are
 made by the sensor model itself (``rollcam.sim.defects``): ``FrameFaults`` programs the plan's into the camera's
-spec (``CameraSpec.defects``) and counts the bursts the frames' truth reports.
+spec (``CameraSpec.defects``) and counts the bursts the frames' truth reports; the AI Camera's faults
+(``loaderfail``, ``fetimeout``, ``dnn_us``) go to the camera's in-sensor stage (``InSensorStage.set_faults``).
 
 - ``grey``: the frame's image is mid-grey (half the format's full scale: BGR 128, raw samples at half their
   range), as a rig's "grey pattern" frame.
@@ -43,6 +44,8 @@ class FrameFaults:
         defects = SensorDefects.of(plan)
         if firmware is not None and defects is not None and firmware.spec.defects != defects:
             firmware.reprogram(dataclasses.replace(firmware.spec, defects=defects))
+        if firmware is not None and plan.insensor_faults:  # the AI Camera's faults are its in-sensor stage's
+            firmware.insensor.set_faults(plan)
         self.camera = firmware if plan.rate("regreset") else None
         self.defaults = self.camera.resettable_controls() if self.camera is not None else {}
         """The controls a register reset restores: the camera's when the transport opened it."""

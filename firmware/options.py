@@ -204,6 +204,12 @@ def _roi(text: str) -> Any:
     return parse_roi(text)
 
 
+def _tensor(text: str) -> Any:
+    from .input_tensor import parse_tensor_format
+
+    return parse_tensor_format(text)
+
+
 def _insensor_output(text: str) -> str:
     from .insensor import output_mode
 
@@ -321,6 +327,9 @@ OPTIONS: dict[str, Option] = {o.name: o for o in (
                                          "factor (default: 640x640)"),
     Option("insensor_roi", _roi, None, "in-sensor network input region x,y,w,h in frame pixels (default: the whole "
                                        "frame); boxes still come back in frame pixels"),
+    Option("insensor_tensor", _tensor, None, "in-sensor network input tensor, made by the IMX500's ISP from the "
+                                             "picture: none | WxH[,rgb|bgr][,uint8|int8][,crop][,norm=A/B/C]"
+                                             "[,div=A/B/C] (docs/insensor.md)"),
     Option("insensor_accel", _accel, "imx500", "in-sensor accelerator: imx500 | a throughput in GMAC/s (latency = "
                                                "the network's MACs / throughput)"),
     Option("insensor_output", _insensor_output, "frame", "what leaves the chip: frame (image and results, also "

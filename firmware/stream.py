@@ -33,7 +33,9 @@ Clock = Callable[[], int]
 @dataclass
 class CameraStats(Stats):
     """What a device has done: frames made, frames skipped because they were late, external triggers,
-    in-sensor inferences run and frames the in-sensor accelerator was too busy for, and register resets (an
+    in-sensor inferences run and frames the in-sensor accelerator was too busy for, injected tensors run and missed
+    (their comparison frame skipped), the AI Camera's firmware loader failures and front-end timeouts (injected
+    faults, ``rollcam.firmware.insensor_stage``), and register resets (an
     injected fault, ``rollcam.firmware.labfaults``)."""
 
     frames: int = 0
@@ -42,6 +44,10 @@ class CameraStats(Stats):
     triggers_ignored: int = 0
     insensor_runs: int = 0
     insensor_skipped: int = 0
+    insensor_injected: int = 0
+    insensor_injections_missed: int = 0
+    loader_failures: int = 0
+    frontend_timeouts: int = 0
     register_resets: int = 0
 
 
@@ -87,6 +93,7 @@ class DeviceStream:
         self._latched_start_ns = -1  # start of the latched frame, while one is latched
         self._schedule: FrameSchedule | None = None
         self._next_seq = 0
+        self._hold_seq: int | None = None  # a frame that is made even when late (a tensor was injected for it)
         self.spec_changed_ns = -1  # device time the spec last changed (frames exposed from then on follow it)
 
     def _spec_for_frame(self) -> CameraSpec:
@@ -206,10 +213,23 @@ class DeviceStream:
                 assert sched is not None
                 if now_ns is not None:
                     late = sched.first_due_from(seq, now_ns)
+                    if self._hold_seq is not None and seq <= self._hold_seq:
+                        late = min(late, self._hold_seq)
                     self.stats.skipped += late - seq
                     seq = late
+            if self._hold_seq is not None and seq >= self._hold_seq:
+                self._hold_seq = None
             self._next_seq = seq + 1
             return FramePlan(seq, sched)
+
+    def hold(self, seq: int | None = None) -> int:
+        """Make frame ``seq`` (default: the next one planned) even if it is late when it is planned: a free-running
+        stream skips no further than it (a tensor was injected for it, and a real sensor makes every frame).
+        Returns the frame's sequence number."""
+        with self.lock:
+            held = self._next_seq if seq is None else max(seq, self._next_seq)
+            self._hold_seq = held
+            return held
 
     def rewind(self, seq: int) -> None:
         """Plan frame ``seq`` again next (a free-running consumer that planned ahead and threw the frames from

@@ -1,7 +1,7 @@
 """Numba's on-disk kernel cache, made to notice edits to the kernels a cached function compiles in from elsewhere.
 
 Numba keys a ``cache=True`` function on its own source file only, but a kernel that calls a kernel of another
-module compiles that one into itself: after an edit of ``_body.py`` the renderer's line kernel would keep
+module compiles that one into itself: after an edit of ``render/body.py`` the renderer's line kernel would keep
 running the old walker from cache. So every module that defines cached kernels ends with ``guard(__name__)``.
 The guard finds the kernel modules it uses (numba functions and kernel modules among its globals), adds the
 ones those use in turn, and deletes this module's cache files older than the newest of those sources; numba

@@ -236,6 +236,11 @@ class _Jpeg(Codec):
         return img
 
 
+def bgr_to_hsv(bgr: np.ndarray) -> np.ndarray:
+    """An 8-bit BGR picture in OpenCV's 8-bit HSV (hue 0..179, saturation and value 0..255)."""
+    return _cv2().cvtColor(np.ascontiguousarray(bgr, np.uint8), _cv2().COLOR_BGR2HSV)
+
+
 def _cvt(code: str) -> Callable[[np.ndarray], np.ndarray]:
     """OpenCV's colour conversion ``code`` (imported on first use: cv2 is slow to import)."""
     def run(a: np.ndarray) -> np.ndarray:

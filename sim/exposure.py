@@ -29,11 +29,11 @@ import numpy as np
 from numba import njit, prange
 from rollcam.common.errors import ConfigError
 
-from ._egoblur import blur_margin
 from ._jitcache import guard
-from .flicker_render import FlickerRenderer
-from .render import Renderer
-from .render_result import LinearFrame
+from .render.egoblur import blur_margin
+from .render.flicker_renderer import FlickerRenderer
+from .render.renderer import Renderer
+from .render.result import LinearFrame
 
 DEFAULT_BOUND_PX = 0.5
 MAX_SAMPLES = 512
@@ -55,6 +55,8 @@ EGO_MARGIN_PX = 64
 BATCH_SAMPLES = 32_768  # (line, sample) pairs per render call: bounds the per-call tables (actors x pairs)
 GRID_FRACTION = 0.125
 """Largest shift of a sample by snapping to the shared time grid, in blur bounds (at the fastest image speed)."""
+BOUND_LINES = 16
+"""Lines per group of the plan's screen of (actor, line) pairs before their own swept bounds (``touching_lines``)."""
 _SPEED_STEP_NS = 250_000  # actor speed sampling step; gait changes little within a quarter millisecond
 
 
@@ -137,10 +139,63 @@ def _swept_bounds(renderer: Renderer, by_column: bool, start_s: np.ndarray, exp_
     return out
 
 
+def touching_lines(renderer: Renderer, starts_ns: np.ndarray, exposure_ns: int, *, by_column: bool = False
+                   ) -> np.ndarray:
+    """Which moving actor can touch which line during the line's window (``starts_ns[l]`` + [0, exposure_ns]):
+    ``(actors, lines)`` bool, from the conservative swept bounds of each (actor, line) pair.
+
+    A static camera's pairs are first screened by group: the box of an actor over a group of ``BOUND_LINES``
+    consecutive lines' windows holds its box over each line's (a walker's box is its reach around the root at the
+    window's start plus its speed times the window's length, so a sub-window's box lies inside), and the lines
+    whose centres it misses by more than a pixel need no box of their own. The pairs left get the same per-line
+    boxes as without the screen, so the result is the same; a frame of 20 walkers bounds ~1/4 of its pairs.
+    """
+    starts = np.asarray(starts_ns, np.int64)
+    n_lines, n_along = renderer.render_shape(by_column)
+    if starts.shape != (n_lines,):
+        raise ConfigError(f"need one window start per line: {n_lines} lines, got shape {starts.shape}")
+    start_s, exp_s, moving = starts.astype(np.float64) * 1e-9, int(exposure_ns) * 1e-9, renderer.moving_actors
+    need = np.zeros((renderer.n_actors, n_lines), np.bool_)
+    need[moving] = True
+    if not renderer.camera_moving and n_lines > BOUND_LINES:
+        first = np.arange(0, n_lines, BOUND_LINES)
+        lo, hi = np.minimum.reduceat(start_s, first), np.maximum.reduceat(start_s, first)
+        g_need = np.zeros((renderer.n_actors, first.size), np.bool_)
+        g_need[moving] = True
+        gb = renderer.actor_bounds(lo, hi - lo + exp_s, g_need, by_column=by_column)
+        last = np.minimum(first + BOUND_LINES, n_lines)
+        near = ((gb[..., 0] <= last + 1.0) & (gb[..., 1] >= first - 1.0) & (gb[..., 2] < n_along + 1.0)
+                & (gb[..., 3] > -1.0) & g_need)
+        need = np.repeat(near, last - first, axis=1)
+    bounds = _swept_bounds(renderer, by_column, start_s, exp_s, need)
+    centre = np.arange(n_lines) + 0.5
+    return (need & (bounds[..., 0] <= centre) & (centre <= bounds[..., 1]) & (bounds[..., 2] < n_along)
+            & (bounds[..., 3] > 0))
+
+
+def _part_speeds(actor_px_s: float, part_rate: np.ndarray, part_y: np.ndarray, step_s: float, n_lines: int
+                 ) -> np.ndarray:
+    """One actor's image speed on each line (px/s): the fastest of its parts that reach the line at some time
+    (``Renderer.actor_part_motion``; a part whose motion was not measured moves at the actor's speed).
+
+    A line's blur only needs the motion of what can be on it: a walker's head and torso move at its walking speed,
+    its feet and hands at two or three times that. Each part's line range is widened by one step of its motion
+    (it was measured at the speed steps only) and a pixel, so the speed stays an upper bound on every line."""
+    rate = np.where(part_rate < 0.0, actor_px_s, part_rate)
+    shown = (part_y[:, 0] <= part_y[:, 1]) & (rate > 0.0)
+    if not shown.any():
+        return np.zeros(n_lines)
+    rate, pad = rate[shown], rate[shown] * step_s + 1.0
+    lo, hi = part_y[shown, 0] - pad, part_y[shown, 1] + pad
+    centre = np.arange(n_lines) + 0.5
+    on = (lo[:, None] <= centre[None, :]) & (centre[None, :] <= hi[:, None])
+    return np.where(on, rate[:, None], 0.0).max(axis=0)
+
+
 def plan_samples(renderer: Renderer, starts_ns: np.ndarray, exposure_ns: int, *, by_column: bool = False,
                  bound_px: float = DEFAULT_BOUND_PX, max_samples: int = MAX_SAMPLES,
                  ego_samples: int = EGO_SAMPLES, ego_path: bool = False,
-                 path_samples: int = EGO_PATH_SAMPLES) -> SamplePlan:
+                 path_samples: int = EGO_PATH_SAMPLES, part_speeds: bool = True) -> SamplePlan:
     """The adaptive plan: per line, ceil(speed * exposure / bound) samples (1 where nothing moves), at most
     ``max_samples``, and at most ``ego_samples`` when the camera moves (where that cuts a line's count, the
     bound no longer holds and the plan is ``capped``).
@@ -148,12 +203,18 @@ def plan_samples(renderer: Renderer, starts_ns: np.ndarray, exposure_ns: int, *,
     ``ego_path`` (a moving camera): the static background is integrated along each pixel's image path with
     the bound's count of samples, at most ``path_samples`` (``Renderer.path_blur``), and only the actors are
     rendered at the ``n`` samples; ``capped`` then says either count was cut.
+
+    ``part_speeds`` (a static camera): a line's speed is that of the fastest actor part that can reach it
+    (``_part_speeds``), not of the fastest part of every actor touching it (False: that per-actor rule), and
+    where that changes a line's speed its count is rounded up to a power of two: about 2x fewer samples on a
+    street of walkers, at the error stated in docs/sensor-model.md.
     """
     starts = np.asarray(starts_ns, np.int64)
     n_lines = starts.shape[0]
     if not bound_px > 0 or not math.isfinite(bound_px):
         raise ConfigError(f"blur bound must be a finite number of pixels > 0, got {bound_px!r}")
     speed = np.zeros(n_lines)
+    refined = np.zeros(n_lines, np.bool_)  # lines whose part speed differs from the per-actor rule's
     exp_s = exposure_ns * 1e-9
     ego_px_s = 0.0
     if exposure_ns > 0:
@@ -163,22 +224,29 @@ def plan_samples(renderer: Renderer, starts_ns: np.ndarray, exposure_ns: int, *,
             speed[:] = ego_px_s
         moving = renderer.moving_actors
         if moving.size:
+            touch = touching_lines(renderer, starts, exposure_ns, by_column=by_column)
+            seen = touch.any(axis=1)  # only the actors some line can see need a speed
             n_t = max(2, -(-(t1 - t0) // _SPEED_STEP_NS) + 1)
-            act_speed = renderer.actor_image_speeds(np.linspace(t0 * 1e-9, t1 * 1e-9, n_t), by_column=by_column)
-            # Lines each actor can touch during each line's window (conservative swept bounds).
-            start_s = starts.astype(np.float64) * 1e-9
-            need = np.zeros((renderer.n_actors, n_lines), np.bool_)
-            need[moving] = True
-            bounds = _swept_bounds(renderer, by_column, start_s, exp_s, need)
-            n_along = renderer.render_shape(by_column)[1]
-            centre = np.arange(n_lines) + 0.5
-            for o in moving:
-                b = bounds[o]
-                touch = (b[:, 0] <= centre) & (centre <= b[:, 1]) & (b[:, 2] < n_along) & (b[:, 3] > 0)
-                speed[touch] = np.maximum(speed[touch], act_speed[o])
+            act_speed, part_rate, part_y = renderer.actor_part_motion(
+                np.linspace(t0 * 1e-9, t1 * 1e-9, n_t), by_column=by_column, actors=seen)
+            step_s = (t1 - t0) * 1e-9 / (n_t - 1)
+            actor_rule = np.zeros(n_lines)
+            for o in np.flatnonzero(seen):
+                actor_rule[touch[o]] = np.maximum(actor_rule[touch[o]], act_speed[o])
+                # A moving camera moves every line anyway (and is capped): the actor's speed will do.
+                if renderer.camera_moving or not part_speeds:
+                    speed[touch[o]] = np.maximum(speed[touch[o]], act_speed[o])
+                    continue
+                own = _part_speeds(act_speed[o], part_rate[o], part_y[o], step_s, n_lines)
+                speed[touch[o]] = np.maximum(speed[touch[o]], own[touch[o]])
+            if part_speeds and not renderer.camera_moving:
+                refined = speed != actor_rule
     want = np.ceil(speed * exp_s / bound_px)
     cap = min(max_samples, max(int(ego_samples), 1)) if renderer.camera_moving else max_samples
     n = np.clip(np.nan_to_num(want, nan=cap, posinf=cap), 1, cap).astype(np.int64)
+    # A part speed's count goes up to a power of two: few distinct counts, so neighbouring lines keep sharing the
+    # grid's instants (with exact counts a small frame's lines shared fewer of them than the per-actor rule's).
+    n = np.where(refined & (n > 1), np.minimum(2 ** np.ceil(np.log2(np.maximum(n, 1))).astype(np.int64), cap), n)
     # Snapping moves a sample by at most half the grid: at the fastest speed, GRID_FRACTION of the bound.
     fastest = float(speed.max()) if speed.size else 0.0
     grid = int(GRID_FRACTION * 2 * bound_px / fastest * 1e9) if fastest > 0 and math.isfinite(fastest) else 0
@@ -297,7 +365,7 @@ def _accumulate(renderer: Renderer, plan: SamplePlan, by_column: bool, acc: np.n
 def _integrate_lights(renderer: FlickerRenderer, plan: SamplePlan, by_column: bool, out: np.ndarray | None,
                       batch_samples: int) -> Integrated:
     """Each light's render integrated with the plan, weighted per line by the light's mean over the line's
-    whole window [start, start + exposure] (``rollcam.sim.flicker_render``), summed into ``out``."""
+    whole window [start, start + exposure] (``rollcam.sim.render.flicker_renderer``), summed into ``out``."""
     n_lines, n_along = renderer.render_shape(by_column)
     parts = [integrate(p, plan, by_column=by_column, out=renderer.scratch(k, by_column), batch_samples=batch_samples)
              for k, p in enumerate(renderer.parts)]

@@ -33,7 +33,7 @@ from rollcam.common.errors import ConfigError, SourceError
 
 from .compose import LineSources
 from .frame import ObjectTruth
-from .render_result import LineTruth, object_truths
+from .render.result import LineTruth, object_truths
 
 
 @dataclass(frozen=True)

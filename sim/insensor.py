@@ -3,11 +3,12 @@
 ``InSensorResult`` is the one result type of the in-sensor inference stage (``rollcam.firmware.insensor``):
 the detections (boxes in the source frame's pixels, scores, class ids), the network's raw output tensors, and
 when it was made, all in integer ns of the device clock: the source frame's sequence number and row timing
-(start of exposure of its first line, line time, readout, exposure), ``input_ns`` (the frame was whole on the
-chip: its last line's end of exposure) and ``done_ns`` (the modelled accelerator latency later). A frame
-carries (``Frame.insensor``) the results that completed since the previous frame was delivered, so a result
-usually rides on a later frame than the one it came from; ``seq`` says which. Plain data (numpy arrays), so
-every layer and transport can hold it; ``to_json``/``from_json`` are its wire form.
+(start of exposure of its first line, line time, readout, exposure), the IMX500 input tensor the network ran
+on when it takes one (``input_tensor``; ``injected``: a tensor put in the frame's place), ``input_ns`` (the
+frame was whole on the chip: its last line's end of exposure) and ``done_ns`` (the modelled accelerator latency
+later). A frame carries (``Frame.insensor``) the results that completed since the previous frame was
+delivered, so a result usually rides on a later frame than the one it came from; ``seq`` says which. Plain data
+(numpy arrays), so every layer and transport can hold it; ``to_json``/``from_json`` are its wire form.
 """
 
 from __future__ import annotations
@@ -41,6 +42,8 @@ class InSensorResult:
     macs: int = 0
     network: str = ""
     tensors: tuple[tuple[str, np.ndarray], ...] = field(default=(), repr=False)
+    input_tensor: np.ndarray | None = field(default=None, repr=False)
+    injected: bool = False
 
     def __post_init__(self) -> None:
         fix = object.__setattr__
@@ -82,11 +85,13 @@ class InSensorResult:
             "input_ns": int(self.input_ns), "done_ns": int(self.done_ns),
             "detections": [{"box": [round(float(v), 2) for v in b], "score": round(float(s), 5), "cls": int(c)}
                            for b, s, c in zip(self.boxes, self.scores, self.classes, strict=True)],
-            "tensor_shapes": {n: list(t.shape) for n, t in self.tensors},
+            "tensor_shapes": {n: list(t.shape) for n, t in self.tensors}, "injected": self.injected,
         }
         if tensors:
             doc["tensors"] = {n: {"shape": list(t.shape), "dtype": str(t.dtype), "data": t.ravel().tolist()}
                               for n, t in self.tensors}
+            if self.input_tensor is not None:
+                doc["input_tensor"] = {"dtype": str(self.input_tensor.dtype), "data": self.input_tensor.tolist()}
         return doc
 
     @classmethod
@@ -95,9 +100,12 @@ class InSensorResult:
         dets = doc.get("detections", [])
         tensors = tuple((n, np.asarray(t["data"], dtype=t["dtype"]).reshape(t["shape"]))
                         for n, t in (doc.get("tensors") or {}).items())
+        given = doc.get("input_tensor")
+        input_tensor = None if given is None else np.asarray(given["data"], dtype=given["dtype"])
         return cls(seq=int(doc["seq"]), boxes=[d["box"] for d in dets], scores=[d["score"] for d in dets],
                    classes=[d["cls"] for d in dets], timestamp_ns=int(doc["timestamp_ns"]),
                    line_time_ns=int(doc["line_time_ns"]), readout=str(doc["readout"]),
                    exposure_ns=int(doc["exposure_ns"]), input_ns=int(doc["input_ns"]), done_ns=int(doc["done_ns"]),
                    input=str(doc.get("input", "raw")), input_size=tuple(doc.get("input_size", (0, 0))),
-                   macs=int(doc.get("macs", 0)), network=str(doc.get("network", "")), tensors=tensors)
+                   macs=int(doc.get("macs", 0)), network=str(doc.get("network", "")), tensors=tensors,
+                   input_tensor=input_tensor, injected=bool(doc.get("injected", False)))

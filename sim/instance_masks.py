@@ -17,12 +17,12 @@ from numba import njit
 from rollcam.common.errors import SourceError
 from rollcam.common.files import OS_FS, RENAME_ONLY_FS, FileSystem, write_atomic
 
-from . import _actors as A
 from ._jitcache import guard
-from ._kernels import part_span
-from ._parts import PART_SHADOW
 from .codecs import encode_image
-from .render import Renderer
+from .render import actors as A
+from .render.lines import part_span
+from .render.parts import PART_SHADOW
+from .render.renderer import Renderer
 
 
 @njit(cache=True)

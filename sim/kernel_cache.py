@@ -10,7 +10,7 @@ from __future__ import annotations
 def renderer_cache_cold() -> bool:
     """True when numba holds no cached machine code for the renderer's entry kernel (the next render compiles)."""
     from ._jitcache import cache_index  # numba and the kernels load only when asked, not with the module
-    from ._kernels import render_lines_kernel
+    from .render.lines import render_lines_kernel
 
     index = cache_index(render_lines_kernel)  # numba keeps one index file per cached function
     return index is not None and not index.exists()

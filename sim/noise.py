@@ -46,7 +46,7 @@ from . import _sensor_kernels as kern
 from ._jitcache import guard
 from ._sensor_kernels import POISSON_EXACT_BELOW_E
 from .hwconfig import NoiseParams
-from .render_result import LinearFrame
+from .render.result import LinearFrame
 
 STAGES = ("shot", "dark", "read", "dsnu", "prnu", "saturation", "quantization")
 """Switchable stages of the model (all on by default; ``NoiseParams.ideal`` turns the random ones off)."""

@@ -30,7 +30,7 @@ from dataclasses import dataclass
 import numpy as np
 from rollcam.common.errors import ConfigError
 
-from .render_result import LinearFrame
+from .render.result import LinearFrame
 
 MAX_VIGNETTE = 0.95
 """Largest light loss at the corner (5 % relative illumination; wide-angle phone lenses reach ~0.7)."""

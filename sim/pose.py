@@ -2,7 +2,7 @@
 
 ``Trajectory(camera)`` evaluates, in closed form, the motion the renderer poses a ``Camera`` with (its
 position, yaw/pitch/roll and ``EgoMotion``: constant rates plus a three-axis sinusoidal vibration; the kernel
-is ``rollcam.sim._world.camera_pose``), together with its time derivatives, so an IMU reads exactly the motion
+is ``rollcam.sim.render.world.camera_pose``), together with its time derivatives, so an IMU reads exactly the motion
 the images show. ``tests/test_imu.py`` keeps the two equal (``Renderer.poses``) for every ego-motion preset.
 Closed form rather than finite differences: an accelerometer's second derivative stays exact after 30 days
 of device time, where differencing float64 positions would not.
@@ -22,7 +22,7 @@ from .scene import Camera
 
 NS_PER_S = 1_000_000_000
 
-# The vibration's per-axis frequency multipliers and phases, as rollcam.sim._world.camera_pose has them.
+# The vibration's per-axis frequency multipliers and phases, as rollcam.sim.render.world.camera_pose has them.
 _POS_K, _POS_PHASE = (1.0, 1.31, 0.77), (0.0, 1.0, 2.0)
 _YAW_K, _PITCH_K, _ROLL_K = (1.13, 0.5), (0.91, 1.7), (1.07, 2.9)
 

@@ -327,7 +327,7 @@ def make_street_scene(
     ``props`` adds parked cars, trees, lamp poles, signs, benches and bins (``rollcam.sim.streetprops``, from
     their own generator: the rest of the scene is the same either way). ``shadows`` (on by default) darkens the
     ground under each walker's feet (``CONTACT_SHADOW`` at the centre: the sky and sun the body hides from the
-    ground there) and, in daylight, along its sun shadow (``rollcam.sim.compile``).
+    ground there) and, in daylight, along its sun shadow (``rollcam.sim.render.tables``).
     ``lamp_options`` are ``street_lights``' (street lamps and LED signs, on at dusk and night by default).
     """
     if time_of_day not in TIMES_OF_DAY:
@@ -419,7 +419,7 @@ def ego_preset(name: str) -> EgoMotion:
     'calib' is what a calibration engineer does by hand, waving the rig in front of a target: its angular
     velocity swings through zero (up to ~30 deg/s, ~12 rad/s^2), which makes the camera-IMU time offset
     observable (a constant pan shifts every image by the same amount whatever the offset), and it does not
-    translate, so a pure-rotation model explains every feature track (``rollcam.host.calibrate``).
+    translate, so a pure-rotation model explains every feature track (``rollcam.host.correction.calibrate``).
     """
     presets = {
         "none": EgoMotion(),

@@ -19,7 +19,7 @@ from .formats import FORMATS, PixelFormat, pixel_format
 from .hwconfig import SensorConfig
 from .isp import IspParams, preview
 from .noise import STAGES, SensorModel, split_gain
-from .render_result import LinearFrame
+from .render.result import LinearFrame
 
 
 @dataclass(frozen=True)

@@ -34,8 +34,8 @@ from .formats import pixel_format as fourcc_of
 from .frame import Box, Frame, ObjectTruth
 from .hwconfig import SensorConfig, SensorMode
 from .optics import LensOptics, LensStage, runs
-from .render import Renderer, encode_linear
-from .render_result import LinearFrame, LineTruth
+from .render.renderer import Renderer, encode_linear
+from .render.result import LinearFrame, LineTruth
 from .scene import Scene
 from .sensor import SensorPipeline, flip
 from .timing import LineTiming, Readout, line_sample_times_ns

@@ -7,7 +7,7 @@ import contextlib
 import pytest
 
 # depthai must be loaded before faster_coco_eval in one process (a pybind11 clash breaks depthai host-node
-# subclasses otherwise; see rollcam.host.oaknode). The evaluation tests import faster_coco_eval first.
+# subclasses otherwise; see rollcam.host.integrations.oaknode). The evaluation tests import faster_coco_eval first.
 with contextlib.suppress(Exception):
     from rollcam.host.sources.oak import import_depthai
 

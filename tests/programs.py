@@ -12,7 +12,7 @@ from pathlib import Path
 
 import pytest
 from rollcam.emu.v4l2.server import PreloadServer
-from rollcam.host.preload import program_environment
+from rollcam.host.servers.devnodes import program_environment
 
 PACKAGES = {"v4l2-ctl": "v4l-utils", "v4l2-compliance": "v4l-utils", "gst-launch-1.0": "gstreamer1.0-tools"}
 """Debian package of each program whose package is not named after it."""

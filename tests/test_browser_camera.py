@@ -26,7 +26,7 @@ from rollcam.emu.preload import LIBRARY_NAME
 from rollcam.emu.preload import __file__ as preload_init
 from rollcam.firmware.camera import FirmwareCamera, FramePlan
 from rollcam.firmware.imaging import encode
-from rollcam.host.preload import program_environment, serving
+from rollcam.host.servers.devnodes import program_environment, serving
 from rollcam.sim.codecs import preview_frame
 
 CHROMIUM, CHROMEDRIVER = "/usr/bin/chromium", "/usr/bin/chromedriver"

@@ -10,9 +10,9 @@ import numpy as np
 import pytest
 import yaml
 from rollcam.common.errors import ConfigError
-from rollcam.host.calibrate import RESULT_YAML, GyroOrientation, calibrate
-from rollcam.host.capture import capture
 from rollcam.host.cli import main
+from rollcam.host.correction.calibrate import RESULT_YAML, GyroOrientation, calibrate
+from rollcam.host.recording.capture import capture
 from rollcam.host.sources import open_camera
 from rollcam.sim.pose import rotation_vector_to_matrix
 

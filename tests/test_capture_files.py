@@ -17,7 +17,7 @@ import cv2
 import pytest
 from fs_fakes import FailingFS, FullDiskFS
 from rollcam.common.files import PART_SUFFIX
-from rollcam.host.capture import CAPTURE_INFO, FRAMES_LOG, capture, read_capture
+from rollcam.host.recording.capture import CAPTURE_INFO, FRAMES_LOG, capture, read_capture
 from rollcam.host.sources import CameraSource, open_camera
 
 URI = "emu:letsroll?size=64x36&scene=street&seed=1&speed=fast"

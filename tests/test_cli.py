@@ -21,10 +21,10 @@ import pytest
 from helpers import wait_for
 from interrupts import ctrl_c, interrupt
 from rollcam.host import SourceError, open_camera
-from rollcam.host.capture import FRAMES_LOG, CaptureInterrupted, capture
 from rollcam.host.cli import main
-from rollcam.host.demo import run_demo
 from rollcam.host.progress import Progress
+from rollcam.host.recording.capture import FRAMES_LOG, CaptureInterrupted, capture
+from rollcam.host.recording.demo import run_demo
 from rollcam.host.sources import CameraSource
 from rollcam.sim.frame import Frame
 from rollcam.sim.timing import Readout

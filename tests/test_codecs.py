@@ -181,9 +181,10 @@ def test_transcode_passes_a_frame_in_its_format_and_encodes_a_preview_otherwise(
 
 
 _CODEC_CALLS = re.compile(r"imdecode|imencode|COLOR_YUV2|COLOR_BGR2YUV|COLOR_Bayer|YUV_YUYV|IMWRITE_JPEG")
-_IMAGE_FILES = {"host/capture.py", "host/demo.py",  # PNG / JPEG files on disk, not pixel formats on a wire
+_IMAGE_FILES = {"host/recording/capture.py",  # PNG / JPEG files on disk, not pixel formats on a wire
+                "host/recording/demo.py",
                 "host/shims/picamera2/request.py",  # picamera2's capture_file: PNG, BMP, ... (JPEG: the codec)
-                "emu/http_view.py",  # the live view's snapshot download (PNG)
+                "emu/http/view.py",  # the live view's snapshot download (PNG)
                 "sim/instance_masks.py"}  # rollcam renders exported as labelled footage (PNG frames and masks)
 
 

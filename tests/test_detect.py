@@ -15,9 +15,9 @@ import pytest
 from helpers import wait_for
 from interrupts import ctrl_c, interrupt
 from rollcam.host.cli import main
-from rollcam.host.detect import LOG, SUMMARY, VIDEO, DetectInterrupted, run_detect
 from rollcam.host.detectors import PERSON, Detections
-from rollcam.host.truthmatch import RunningPR, match
+from rollcam.host.detectors.live import LOG, SUMMARY, VIDEO, DetectInterrupted, run_detect
+from rollcam.host.evaluation.truthmatch import RunningPR, match
 
 URI = "emu:imx219?size=320x180&seed=2&pedestrians=8&speed=fast"
 
@@ -159,7 +159,7 @@ def test_out_that_is_a_file_is_one_line_exit_2(tmp_path, capsys, where):
 def test_video_sink_reports_a_failed_write_once_and_never_blocks_the_loop(tmp_path, monkeypatch):
     """The sink's writer thread is a Worker: a write that fails is raised by close() as an OSError naming the
     file, the frames put after it are drained (a full queue would block the loop), and no file is left."""
-    import rollcam.host.detect as detect
+    import rollcam.host.detectors.live as detect
 
     class Broken:
         def __init__(self, path, fps, size):

@@ -31,7 +31,7 @@ def test_detections_validate_and_sort():
 
 
 def test_hog_finds_a_rendered_walker():
-    from rollcam.sim.render import Renderer
+    from rollcam.sim.render.renderer import Renderer
     from rollcam.sim.scenegen import make_street_scene
 
     det = load_detector("hog")

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import types
 
-from rollcam.host.discover import oak_devices, usb_video_devices, v4l2_devices
+from rollcam.host.sources.discover import oak_devices, usb_video_devices, v4l2_devices
 
 
 def test_v4l2_lists_nodes_with_names(tmp_path):

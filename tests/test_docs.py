@@ -15,6 +15,7 @@ Every fenced block in the documentation says what it is in its info string:
 
 from __future__ import annotations
 
+import importlib
 import os
 import re
 import shlex
@@ -171,6 +172,51 @@ def test_architecture_module_table_lists_exactly_the_modules() -> None:
         f"docs/architecture.md's module tables are out of date.\n  not listed: {missing}\n  listed but absent: {extra}")
 
 
+FEATURES = ("In-sensor", "IMU", "Rolling-shutter correction", "Faults", "Flicker", "Footage")
+"""Features issue 38 asks the index to map, at the least (a row's name starts with one)."""
+
+
+def _feature_index(text: str) -> dict[str, tuple[str, set[str]]]:
+    """docs/architecture.md's feature index: feature -> (path pattern, modules listed)."""
+    section = text.split("## Features across subsystems", 1)[1].split("\n## ", 1)[0]
+    index = {}
+    for line in section.splitlines():
+        cells = [c.strip() for c in re.split(r"(?<!\\)\|", line)[1:-1]]
+        if len(cells) != 3 or cells[0] in ("Feature", "---"):
+            continue
+        pattern = cells[1].strip("`").replace("\\|", "|")
+        index[cells[0]] = (pattern, set(re.findall(r"`([\w/]+\.py)`", cells[2])))
+    return index
+
+
+def _feature_index_problems(text: str, tree: set[str]) -> list[str]:
+    index = _feature_index(text)
+    problems = [f"no row for {name!r}" for name in FEATURES if not any(f.startswith(name) for f in index)]
+    for feature, (pattern, listed) in index.items():
+        if absent := sorted(listed - tree):
+            problems.append(f"{feature}: listed but absent: {absent}")
+        if unlisted := sorted(m for m in tree - listed if re.search(pattern, m)):
+            problems.append(f"{feature}: its pattern {pattern!r} finds modules it does not list: {unlisted}")
+    return problems
+
+
+def test_feature_index_lists_each_features_modules() -> None:
+    text = (ROOT / "docs" / "architecture.md").read_text()
+    problems = _feature_index_problems(text, _tree_modules())
+    assert not problems, "docs/architecture.md's feature index is out of date:\n  " + "\n  ".join(problems)
+
+
+def test_feature_index_notices_a_new_module_and_a_gone_one() -> None:
+    text = (ROOT / "docs" / "architecture.md").read_text()
+    tree = _tree_modules()
+    assert _feature_index(text)["Flicker ([flicker.md](flicker.md))"][0] == "flicker"
+    new = _feature_index_problems(text, tree | {"emu/http/flicker_stats.py"})
+    assert new == ["Flicker ([flicker.md](flicker.md)): its pattern 'flicker' finds modules it does not list: "
+                   "['emu/http/flicker_stats.py']"]
+    gone = _feature_index_problems(text, tree - {"sim/rscorrect.py"})
+    assert any("listed but absent: ['sim/rscorrect.py']" in p for p in gone), gone
+
+
 MACHINE_PATH = re.compile(r"(?<![\w.~/-])/(?:work|root|home|Users)/[\w.-]+")
 """An absolute path of a developer's machine (``/work/x``, ``/root/x``, ``/home/me``): no file of the repository
 should hold one; a reader's machine has none of them."""
@@ -277,6 +323,18 @@ def _api_docs():
     sys.modules.setdefault("api_docs", module)  # dataclasses look their module up there
     spec.loader.exec_module(module)
     return module
+
+
+def test_public_names_of_rollcam_host_are_their_modules_own() -> None:
+    # The documented import path of each entry point stays `rollcam.host.NAME` wherever its module lives.
+    import rollcam.host as host
+
+    for name, where in host.PUBLIC.items():
+        module = importlib.import_module(f"rollcam.host.{where}")
+        assert getattr(host, name) is getattr(module, name), name
+        assert getattr(module, name).__module__ == module.__name__, f"{name} is not defined in {module.__name__}"
+    with pytest.raises(AttributeError, match="no attribute 'capture'"):
+        host.capture  # noqa: B018  (modules are not public names)
 
 
 def test_api_reference_is_the_docstrings_of_today() -> None:

@@ -20,8 +20,8 @@ import serial
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from interrupts import interrupt
-from rollcam.emu.http_mjpeg import MjpegServer
-from rollcam.emu.http_server import HttpLimits
+from rollcam.emu.http.mjpeg import MjpegServer
+from rollcam.emu.http.server import HttpLimits
 from rollcam.emu.protocol_rollcam import register_camera
 from rollcam.emu.serial_pty import PtySerialServer
 from rollcam.firmware.camera import FirmwareCamera

@@ -8,8 +8,9 @@ from dataclasses import replace
 import numpy as np
 import pytest
 from rollcam.common.errors import ConfigError
-from rollcam.sim import _cshade, scenegen
-from rollcam.sim.render import Renderer
+from rollcam.sim import scenegen
+from rollcam.sim.render import shader
+from rollcam.sim.render.renderer import Renderer
 from rollcam.sim.scene import FACADES, Building, Camera
 from rollcam.sim.scenegen import make_street_scene
 
@@ -30,7 +31,7 @@ def _linear(scene, width: int, height: int) -> np.ndarray:
 
 
 def test_pulse_cover_is_the_pulse_box_filtered_over_the_footprint() -> None:
-    cover = _cshade.library().rollcam_pulse_cover
+    cover = shader.library().rollcam_pulse_cover
     rng = np.random.default_rng(3)
     for _ in range(60):
         p = float(rng.uniform(0.05, 3.0))

@@ -9,9 +9,9 @@ import pytest
 from rollcam.common.errors import ConfigError
 from rollcam.firmware.options import parse_options
 from rollcam.sim.flicker import Waveform
-from rollcam.sim.flicker_render import FlickerRenderer
 from rollcam.sim.hwconfig import load_sensor
-from rollcam.sim.render import Renderer
+from rollcam.sim.render.flicker_renderer import FlickerRenderer
+from rollcam.sim.render.renderer import Renderer
 from rollcam.sim.scenegen import make_chart_scene, make_scene, make_street_scene
 from rollcam.sim.synthetic import SyntheticCamera
 

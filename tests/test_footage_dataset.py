@@ -12,7 +12,7 @@ from hostile_files import npy_header_only, png_header_only
 from rollcam.host import open_camera
 from rollcam.host.cli import main
 from rollcam.sim.instance_masks import render_masks, write_labelled_footage
-from rollcam.sim.render import Renderer
+from rollcam.sim.render.renderer import Renderer
 from rollcam.sim.scenegen import make_street_scene
 
 W, H = 96, 54

@@ -11,7 +11,7 @@ from rollcam.sim.compose import line_sources
 from rollcam.sim.footage import Footage
 from rollcam.sim.footage_labels import BoxLabels, LabelTrack, MaskLabels, TruthLabels, compose_truth
 from rollcam.sim.instance_masks import render_masks
-from rollcam.sim.render import Renderer
+from rollcam.sim.render.renderer import Renderer
 from rollcam.sim.scenegen import make_street_scene
 
 W, H = 160, 90

@@ -335,7 +335,7 @@ def test_serve_runs_a_transport_without_fault_stats_and_ends_when_its_loop_dies(
 
     from rollcam.common.errors import DeviceError
     from rollcam.common.faults import FaultPlan
-    from rollcam.host.emulate import Running, serve
+    from rollcam.host.servers.emulate import Running, serve
 
     def run(door: _Door) -> int:
         args = argparse.Namespace(sensor="imx219", json=False, duration=0.0, faults=FaultPlan())

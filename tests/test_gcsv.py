@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 from rollcam.common.errors import ConfigError
 from rollcam.host import open_camera
-from rollcam.host.capture import capture
+from rollcam.host.recording.capture import capture
 from rollcam.host.robotics.gcsv import STANDARD_GRAVITY
 
 URI = "emu:imx219?size=160x120&ego=pan&imu=on&imu_rate=400&seed=4"
@@ -152,7 +152,7 @@ def test_what_one_video_cannot_hold_is_refused_before_writing(tmp_path):
 
 def test_ctrl_c_keeps_the_video_and_its_log_whole(tmp_path):
     from interrupts import ctrl_c
-    from rollcam.host.capture import CaptureInterrupted
+    from rollcam.host.recording.capture import CaptureInterrupted
 
     with open_camera(URI) as cam:
         real, reads = cam.read, []

@@ -22,8 +22,8 @@ from collections.abc import Iterator
 import pytest
 import rollcam.host  # noqa: F401  (registers the in-sensor network loader the insensor= option needs)
 from helpers import wait_for
-from rollcam.emu.http_mjpeg import MjpegServer
-from rollcam.emu.http_server import HttpLimits
+from rollcam.emu.http.mjpeg import MjpegServer
+from rollcam.emu.http.server import HttpLimits
 from rollcam.firmware.camera import FirmwareCamera
 from rollcam.firmware.spec import CameraSpec
 
@@ -285,8 +285,8 @@ def test_ipv6_emulate_http():
 
 FD_SERVER = """
 import os, resource, sys, time
-from rollcam.emu.http_mjpeg import MjpegServer
-from rollcam.emu.http_server import HttpLimits
+from rollcam.emu.http.mjpeg import MjpegServer
+from rollcam.emu.http.server import HttpLimits
 from rollcam.firmware.camera import FirmwareCamera
 from rollcam.firmware.spec import CameraSpec
 cam = FirmwareCamera("imx219", scene={"scene": "flat"}, size=(640, 480), fps=10)

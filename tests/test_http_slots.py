@@ -5,7 +5,7 @@ from __future__ import annotations
 import asyncio
 from types import SimpleNamespace
 
-from rollcam.emu.http_slots import StreamClient
+from rollcam.emu.http.slots import StreamClient
 
 
 def _drain(c: StreamClient, n: int) -> list:

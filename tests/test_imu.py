@@ -16,7 +16,7 @@ from rollcam.firmware.spec import CameraSpec
 from rollcam.host import open_camera
 from rollcam.sim.imu import Imu, ImuParams
 from rollcam.sim.pose import Trajectory, rotation_vector_to_matrix
-from rollcam.sim.render import Renderer
+from rollcam.sim.render.renderer import Renderer
 from rollcam.sim.scene import Camera
 from rollcam.sim.scenegen import ego_preset, make_street_scene
 
@@ -196,7 +196,7 @@ def test_serial_imu_query() -> None:
 
 
 def test_http_imu_jsonl() -> None:
-    from rollcam.emu.http_mjpeg import MjpegServer
+    from rollcam.emu.http.mjpeg import MjpegServer
 
     cam = FirmwareCamera(CameraSpec.create("imx219", scene={"scene": "street", "ego": "pan", "pedestrians": 0},
                                            size=(640, 480), imu_values={"imu_rate": 2000}))
@@ -214,7 +214,7 @@ def test_http_imu_jsonl() -> None:
 
 def test_capture_writes_euroc_and_kalibr_files(tmp_path) -> None:
     import yaml
-    from rollcam.host.capture import capture
+    from rollcam.host.recording.capture import capture
 
     out = tmp_path / "cap"
     with open_camera("emu:imx219?size=640x480&ego=pan&imu_rate=400&imu_offset_us=120&frames=3") as src:
@@ -235,7 +235,7 @@ def test_capture_writes_euroc_and_kalibr_files(tmp_path) -> None:
 def test_gyro_correction_brings_rs_to_gs() -> None:
     """Device-side and host-side correction agree, and bring an RS frame of a panning camera to within a
     fraction of the RS error of the GS frame of the same instant."""
-    from rollcam.host.correct import GyroCorrector
+    from rollcam.host.correction.gyro import GyroCorrector
 
     base = "emu:imx219?size=640x480&ego=pan&pedestrians=0&imu=on"
     gs, rs = open_camera(base).read_pair()

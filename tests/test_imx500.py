@@ -13,6 +13,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from rollcam.firmware.camera import FirmwareCamera
 from rollcam.host import standin_env
 
 pytest.importorskip("onnx")  # the in-sensor stage counts a network's operations from its graph
@@ -194,3 +195,146 @@ def test_nanodet_decoder_recovers_a_box(rollcam_picamera2):
     boxes, scores, classes = postprocess_nanodet_detection(raw, conf=0.5)[0]
     assert classes.tolist() == [0] and scores[0] == pytest.approx(1 / (1 + np.exp(-10.0)))
     assert np.allclose(boxes[0], [160 - 16, 200 - 24, 160 + 40, 200 + 32], atol=1e-3)  # y0, x0, y1, x1
+
+
+# ------------------------------------------------------------------------------------------- classification
+MOBILENET = "/usr/share/imx500-models/imx500_network_mobilenet_v2.rpk"
+
+
+def test_the_classification_example_shows_the_networks_top_three(tmp_path):
+    """picamera2's classification example (its flow, unchanged): the 1000-class output tensor, softmax, the top 3
+    by score with their ImageNet-style labels (a 1001-line file: the background label is skipped)."""
+    labels = tmp_path / "labels.txt"
+    labels.write_text("\n".join(["background", *(f"class{i}" for i in range(1000))]))
+    done = subprocess.run([sys.executable, str(EXAMPLES / "imx500_classify.py"), "--labels", str(labels),
+                           "--softmax", "--frames", "4"], env=standin_env([SOURCE]), cwd=EXAMPLES,
+                          capture_output=True, text=True, timeout=900)
+    assert done.returncode == 0, done.stderr[-3000:]
+    out = json.loads(done.stdout.strip().splitlines()[-1])
+    assert out["input"] == [224, 224]
+    fresh = [r for r in out["records"] if r["fresh"]]
+    assert len(fresh) >= len(out["records"]) - 1 and all(r["input_tensor"] for r in fresh)
+    for r in fresh:
+        assert r["insensor"][-1]["network"] == "colournet" and r["insensor"][-1]["seq"] < r["seq"]
+        assert r["insensor"][-1]["tensor_shapes"] == {"logits": [1000]}
+        scores = [s for _, s, _ in r["top"]]
+        assert len(r["top"]) == 3 and scores == sorted(scores, reverse=True) and 0 < sum(scores) <= 1
+        assert all(label == f"class{idx}" for idx, _, label in r["top"])
+
+
+def test_the_classifier_ran_on_that_frames_input_tensor(rollcam_picamera2):
+    """The logits a request carries are colournet's on the picture of its CnnInputTensor, and that tensor is the
+    IMX500 input tensor of the frame the result names (made again from its sequence number and start)."""
+    from rollcam.firmware.insensor_stage import tensor_input
+    from rollcam.host.detectors.onchip import ColourNet
+
+    picamera2 = rollcam_picamera2(SOURCE)
+    from picamera2.devices import IMX500
+    from picamera2.devices.imx500.postprocess import softmax
+
+    imx500 = IMX500(MOBILENET)
+    assert imx500.network_intrinsics.task == "classification"
+    with picamera2.Picamera2(imx500.camera_num) as picam2:
+        picam2.start(picam2.create_preview_configuration(main={"size": (320, 240)}))
+        for _ in range(20):
+            metadata = picam2.capture_metadata()
+            if metadata.get("CnnOutputTensor"):
+                break
+        spec = picam2.rollcam_device.spec
+    outputs = imx500.get_outputs(metadata)
+    assert imx500.get_output_shapes(metadata) == [[1000]] and outputs[0].shape == (1000,)
+    tensor = np.asarray(metadata["CnnInputTensor"], np.uint8)
+    picture = imx500.input_tensor_image(tensor)
+    assert np.allclose(outputs[0], ColourNet().logits(picture), atol=1e-5)
+    result = metadata["RollcamInsensor"][-1]
+    frame, _samples = FirmwareCamera(spec).imager.render_samples(spec, result["seq"], result["timestamp_ns"])
+    made, seen, _ = tensor_input(spec.insensor, spec, frame)
+    assert np.array_equal(spec.insensor.tensor.planes(made).ravel(), tensor) and np.array_equal(seen, picture)
+    top = np.argsort(-softmax(outputs[0]))[:3]
+    assert np.allclose(softmax(outputs[0])[top].sum(), np.sort(softmax(ColourNet().logits(picture)))[-3:].sum())
+
+
+# ------------------------------------------------------------------------------------------- segmentation
+DEEPLAB = "/usr/share/imx500-models/imx500_network_deeplabv3plus.rpk"
+
+
+def test_the_segmentation_example_draws_a_mask_per_class(tmp_path):
+    """picamera2's segmentation example (its flow, unchanged): the (513, 513) class map, one RGBA mask per class
+    found, set as the preview overlay."""
+    colours = tmp_path / "colours.txt"
+    colours.write_text("\n".join(f"{(37 * i) % 256} {(91 * i) % 256} {(53 * i) % 256} 255" for i in range(21)))
+    done = subprocess.run([sys.executable, str(EXAMPLES / "imx500_segment.py"), "--colours", str(colours),
+                           "--frames", "3"], env=standin_env([SOURCE]), cwd=EXAMPLES,
+                          capture_output=True, text=True, timeout=900)
+    assert done.returncode == 0, done.stderr[-3000:]
+    out = json.loads(done.stdout.strip().splitlines()[-1])
+    assert out["input"] == [513, 513]
+    fresh = [r for r in out["records"] if r["insensor"]]
+    assert len(fresh) >= len(out["records"]) - 1
+    for r in fresh:
+        assert r["insensor"][-1]["network"] == "colourseg"
+        assert r["insensor"][-1]["tensor_shapes"] == {"mask": [513, 513]}
+        assert r["overlay"] == [513, 513, 4] and r["classes"]
+        assert all(1 <= int(c) <= 20 for c in r["classes"]) and sum(r["classes"].values()) < 513 * 513
+
+
+def test_the_segmenter_ran_on_that_frames_input_tensor(rollcam_picamera2):
+    from rollcam.firmware.insensor_stage import tensor_input
+    from rollcam.host.detectors.onchip import ColourSeg
+
+    picamera2 = rollcam_picamera2(SOURCE)
+    from picamera2.devices import IMX500
+
+    imx500 = IMX500(DEEPLAB)
+    assert imx500.network_intrinsics.task == "segmentation" and imx500.get_input_size() == (513, 513)
+    with picamera2.Picamera2(imx500.camera_num) as picam2:
+        picam2.start(picam2.create_preview_configuration(main={"size": (320, 240)}))
+        for _ in range(20):
+            metadata = picam2.capture_metadata()
+            if metadata.get("CnnOutputTensor"):
+                break
+        spec = picam2.rollcam_device.spec
+    mask = imx500.get_outputs(metadata)[0]
+    assert mask.shape == (513, 513) and imx500.get_output_shapes(metadata) == [[513, 513]]
+    picture = imx500.input_tensor_image(np.asarray(metadata["CnnInputTensor"], np.uint8))
+    assert np.array_equal(mask, ColourSeg().mask(picture))
+    assert 0 < np.count_nonzero(mask) < mask.size  # colourful people on a grey street
+    result = metadata["RollcamInsensor"][-1]
+    frame, _samples = FirmwareCamera(spec).imager.render_samples(spec, result["seq"], result["timestamp_ns"])
+    _, seen, _ = tensor_input(spec.insensor, spec, frame)
+    assert np.array_equal(seen, picture)
+
+
+# ------------------------------------------------------------------------------------------- pose estimation
+def test_the_pose_example_finds_the_in_sensor_people_and_their_keypoints(tmp_path):
+    """picamera2's HigherHRNet pose example (its flow, unchanged): postprocess_higherhrnet groups the on-chip
+    outputs into people in a 640x480 window and COCODrawer draws them. posenet's people are personnet's
+    detections with a template skeleton, so each person the script shows is a detection the camera made, its
+    keypoints the template in that box (to the output grid's 2 input pixels)."""
+    from rollcam.host.detectors.onchip import POSE_TEMPLATE
+
+    labels = tmp_path / "coco_labels.txt"
+    labels.write_text("person\n")
+    done = subprocess.run([sys.executable, str(EXAMPLES / "imx500_pose.py"), "--labels", str(labels),
+                           "--frames", "3"], env=standin_env([SOURCE]), cwd=EXAMPLES,
+                          capture_output=True, text=True, timeout=900)
+    assert done.returncode == 0, done.stderr[-3000:]
+    out = json.loads(done.stdout.strip().splitlines()[-1])
+    assert out["input"] == [384, 288]
+    x_off, _, roi_w, roi_h = out["roi"]  # set_auto_aspect_ratio: the array's 4:3 centre, pixel-array units
+    fresh = [r for r in out["records"] if r["fresh"]]
+    assert len(fresh) >= len(out["records"]) - 1
+    for r in fresh:
+        result = r["insensor"][-1]
+        assert result["network"] == "posenet"
+        dets = sorted((d for d in result["detections"] if d["score"] > 0.3), key=lambda d: -d["score"])
+        assert len(r["scores"]) == len(dets) > 0
+        assert np.allclose(r["scores"], [d["score"] for d in dets], atol=1e-4)
+        for kps, d in zip(r["keypoints"], dets, strict=True):
+            x0, y0, x1, y1 = d["box"]  # the 2028x1520 mode's pixels: half the array's
+            sx, sy = 640 / (roi_w / 2), 480 / (roi_h / 2)
+            want_x = (x0 + POSE_TEMPLATE[:, 0] * (x1 - x0) - x_off / 2) * sx
+            want_y = (y0 + POSE_TEMPLATE[:, 1] * (y1 - y0)) * sy
+            got = np.asarray(kps)
+            assert np.all(np.abs(got[:, 0] - want_x) <= 4) and np.all(np.abs(got[:, 1] - want_y) <= 4)
+            assert np.allclose(got[:, 2], d["score"], atol=1e-4)

@@ -19,7 +19,7 @@ from rollcam.firmware.ledger import ledger
 from rollcam.firmware.protocol import handle_line
 from rollcam.firmware.spec import CameraSpec
 from rollcam.host import open_camera
-from rollcam.host.insensor import onnx_macs
+from rollcam.host.detectors.onchip import onnx_macs
 
 pytest.importorskip("onnx")  # the in-sensor stage counts a network's operations from its graph
 
@@ -174,11 +174,13 @@ def test_serial_insensor_and_ledger_queries() -> None:
     assert handle_line(cam, "INSENSOR? 2") == "n=0 next=2"
     reply = handle_line(cam, "LEDGER?")
     assert reply.startswith(f"raw={180 * (320 + 6) + 8} ") and "insensor_uj=" in reply
-    assert handle_line(cam, "STATS?").endswith("insensor_runs=3 insensor_skipped=0 register_resets=0")
+    assert handle_line(cam, "STATS?").endswith("insensor_runs=3 insensor_skipped=0 insensor_injected=0 "
+                                               "insensor_injections_missed=0 loader_failures=0 frontend_timeouts=0 "
+                                               "register_resets=0")
 
 
 def test_http_jsonl_part_headers_and_metadata_only() -> None:
-    from rollcam.emu.http_mjpeg import MjpegServer
+    from rollcam.emu.http.mjpeg import MjpegServer
 
     spec = CameraSpec.from_options("letsroll", {"size": "320x180", "pedestrians": "10", "insensor": "personnet-raw"})
     cam = FirmwareCamera(spec)
@@ -226,7 +228,7 @@ def test_http_jsonl_part_headers_and_metadata_only() -> None:
 def test_emulate_names_the_results_endpoint_not_a_stream_in_metadata_only_mode() -> None:
     import argparse
 
-    from rollcam.host.emulate import start_http
+    from rollcam.host.servers.emulate import start_http
 
     args = argparse.Namespace(http=("127.0.0.1", 0), detector=None, quality=80, faults=None)
     for output, want, absent in (("frame", "MJPEG stream:", "in-sensor:"), ("meta", "in-sensor:", "MJPEG")):
@@ -240,8 +242,8 @@ def test_emulate_names_the_results_endpoint_not_a_stream_in_metadata_only_mode()
         assert want in text and absent not in text, text
 
 def test_detect_scores_the_results_against_their_own_frames(tmp_path) -> None:
-    from rollcam.host.detect import run_detect
     from rollcam.host.detectors import load_detector
+    from rollcam.host.detectors.live import run_detect
 
     reader = load_detector("insensor")
     with open_camera(f"{URI}&frames=5") as cam:
@@ -276,7 +278,7 @@ def test_eval_scores_what_the_camera_sends_as_the_network_on_the_files(tmp_path)
 
 
 def test_part_header_caps_the_detections_and_results_round_trip() -> None:
-    from rollcam.emu.http_mjpeg import HEADER_DETECTIONS, Part
+    from rollcam.emu.http.mjpeg import HEADER_DETECTIONS, Part
     from rollcam.sim.frame import Frame
     from rollcam.sim.insensor import InSensorResult
     from rollcam.sim.timing import Readout
@@ -312,7 +314,7 @@ def test_tensors_option_reads_the_one_boolean_vocabulary(query: str, want: bool)
     from types import SimpleNamespace
 
     from aiohttp.test_utils import make_mocked_request
-    from rollcam.emu.http_insensor import InSensorStreams
+    from rollcam.emu.http.insensor import InSensorStreams
 
     cam = SimpleNamespace(spec=SimpleNamespace(insensor="personnet-raw"), clock_ns=lambda: 0,
                           insensor=SimpleNamespace(recent=lambda now, since=0: []))
@@ -325,7 +327,7 @@ def test_a_bad_tensors_value_is_a_400_naming_it() -> None:
 
     from aiohttp import web
     from aiohttp.test_utils import make_mocked_request
-    from rollcam.emu.http_insensor import InSensorStreams
+    from rollcam.emu.http.insensor import InSensorStreams
 
     cam = SimpleNamespace(spec=SimpleNamespace(insensor="personnet-raw"), clock_ns=lambda: 0,
                           insensor=SimpleNamespace(recent=lambda now, since=0: []))

@@ -103,12 +103,12 @@ def test_every_module_with_cached_kernels_is_guarded():
     importlib.import_module("rollcam.host.detectors.ops")  # the one cached kernel outside the simulator: NMS
     with_kernels = {name for name, mod in list(sys.modules.items())
                     if name.startswith("rollcam.") and mod is not None and _jitcache.kernels(mod)}
-    assert {"rollcam.sim._kernels", "rollcam.host.detectors.ops"} <= with_kernels
+    assert {"rollcam.sim.render.lines", "rollcam.host.detectors.ops"} <= with_kernels
     assert with_kernels <= _jitcache.guarded(), with_kernels - _jitcache.guarded()
     # The line kernel compiles in the actors, which compile in the walker, the props, the part writer and the
     # world (whose materials are the C shader's, called by name, not compiled in).
-    actors = {"_body.py", "_parts.py", "_props.py", "_world.py"}
-    assert {p.name for p in _jitcache.compiled_in("rollcam.sim._kernels")} == actors | {"_actors.py", "_texture.py"}
-    assert {p.name for p in _jitcache.compiled_in("rollcam.sim._actors")} == actors
-    assert _jitcache.compiled_in("rollcam.sim._world") == frozenset()
-    assert _jitcache.compiled_in("rollcam.sim._body") == frozenset()
+    actors = {"body.py", "parts.py", "props.py", "world.py"}
+    assert {p.name for p in _jitcache.compiled_in("rollcam.sim.render.lines")} == actors | {"actors.py", "texture.py"}
+    assert {p.name for p in _jitcache.compiled_in("rollcam.sim.render.actors")} == actors
+    assert _jitcache.compiled_in("rollcam.sim.render.world") == frozenset()
+    assert _jitcache.compiled_in("rollcam.sim.render.body") == frozenset()

@@ -18,7 +18,7 @@ from rollcam.common.faults import COUNTER_FAULTS, IMAGE_FAULTS, U32, FaultInject
 from rollcam.emu.serial_pty import PtySerialServer
 from rollcam.emu.v4l2 import Device, EmuDriver, raw
 from rollcam.firmware.camera import FirmwareCamera
-from rollcam.host.preload import serving
+from rollcam.host.servers.devnodes import serving
 from rollcam.host.sources import open_camera
 from rollcam.sim.codecs import codec
 

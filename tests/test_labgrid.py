@@ -1,5 +1,5 @@
-"""rollcam's labgrid resource and driver (rollcam.host.labgrid) under labgrid itself: its pytest plugin runs the
-example environment and test of docs/labgrid, its Environment loads environment files, and the driver's frames
+"""rollcam's labgrid resource and driver (rollcam.host.integrations.labgrid) under labgrid itself: its pytest plugin
+runs the example environment and test of docs/labgrid, its Environment loads environment files, and the driver's frames
 are compared with the emulator's own, in process (exact), over HTTP (within JPEG's tolerance) and through a real
 gst-launch-1.0 (exact)."""
 
@@ -36,7 +36,7 @@ def environment(tmp_path: Path, resource: str) -> labgrid.Environment:
               RollcamCamera: {resource}
             drivers:
               RollcamCameraDriver: {{}}
-        imports: [rollcam.host.labgrid]
+        imports: [rollcam.host.integrations.labgrid]
         """))
     return labgrid.Environment(str(path))
 
@@ -150,6 +150,6 @@ def test_a_bad_stream_request_names_the_problem(env):
 
 
 def test_without_labgrid_the_module_names_the_extra():
-    code = "import sys; sys.modules['labgrid'] = None\nimport rollcam.host.labgrid"
+    code = "import sys; sys.modules['labgrid'] = None\nimport rollcam.host.integrations.labgrid"
     p = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
     assert p.returncode != 0 and "rollcam[labgrid]" in p.stderr, p.stderr[-2000:]

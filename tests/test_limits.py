@@ -145,7 +145,7 @@ def test_a_scene_change_is_built_without_holding_the_camera(monkeypatch):
 
 def test_emulate_ends_with_the_error_of_a_dead_pump():
     from rollcam.emu.pump import FramePump
-    from rollcam.host.emulate import wait_until_stopped
+    from rollcam.host.servers.emulate import wait_until_stopped
 
     class Broken:
         def on_band(self, *args):

@@ -20,9 +20,9 @@ import cv2
 import numpy as np
 import pytest
 from rollcam.common.errors import ConfigError
-from rollcam.emu.http_mjpeg import MjpegServer
-from rollcam.emu.http_view import LiveView, host_names_server, is_loopback
-from rollcam.emu.view_controls import EGO_PRESETS, CameraControls, NoControls
+from rollcam.emu.http.mjpeg import MjpegServer
+from rollcam.emu.http.view import LiveView, host_names_server, is_loopback
+from rollcam.emu.http.view_controls import EGO_PRESETS, CameraControls, NoControls
 from rollcam.firmware.camera import FirmwareCamera
 from rollcam.sim.scenegen import ego_preset
 
@@ -283,8 +283,8 @@ def test_detections_come_from_the_newest_frame_and_a_failing_detector_is_reporte
 
 
 def test_rollcam_view_serves_a_host_source_with_the_controls_it_has(tmp_path):
+    from rollcam.host.servers.view import open_view
     from rollcam.host.sources import open_camera
-    from rollcam.host.view import open_view
 
     with open_view(open_camera("emu:imx219?size=320x240&scene=chart"), paced=True) as running:
         srv = running.server

@@ -14,7 +14,7 @@ URI = "emu:imx378?size=320x180&seed=3&pedestrians=5"
 
 
 def test_host_pipeline_receives_emulated_imgframes():
-    from rollcam.host.oaknode import EmulatedCamera
+    from rollcam.host.integrations.oaknode import EmulatedCamera
 
     with open_camera(URI + "&frames=3") as src:
         expected = list(src)
@@ -40,7 +40,7 @@ def test_host_pipeline_receives_emulated_imgframes():
 
 
 def test_bad_uri_fails_in_build():
-    from rollcam.host.oaknode import EmulatedCamera
+    from rollcam.host.integrations.oaknode import EmulatedCamera
 
     with dai.Pipeline(False) as pipeline, pytest.raises(SourceError, match="nope"):
         pipeline.create(EmulatedCamera).build("emu:nope")
@@ -50,7 +50,7 @@ def test_bad_uri_fails_in_build():
 def test_readme_loop_ends_after_the_last_frame(limit):
     """The README's loop, as written: every frame arrives, then isRunning() is False (no 'MessageQueue was
     closed'), whether ``frames=`` or the end of a finite source ends the stream."""
-    from rollcam.host.oaknode import EmulatedCamera
+    from rollcam.host.integrations.oaknode import EmulatedCamera
 
     for uri, frames in ((URI, limit), (URI + f"&frames={limit}", None)):
         seqs = []
@@ -66,23 +66,24 @@ def test_readme_loop_ends_after_the_last_frame(limit):
 
 
 def test_the_module_docstring_example_runs_as_written():
-    """host/oaknode.py's example, taken from its docstring and run unchanged: every frame, then the loop ends."""
+    """host/integrations/oaknode.py's example, taken from its docstring and run unchanged: every frame, then the loop
+    ends."""
     import textwrap
 
-    import rollcam.host.oaknode as oaknode
+    import rollcam.host.integrations.oaknode as oaknode
 
     lines = oaknode.__doc__.split("::\n\n", 1)[1].splitlines()
     end = next(i for i, line in enumerate(lines) if line and not line.startswith(" "))  # the indented block
     block = "\n".join(lines[:end])
     assert "while pipeline.isRunning():" in block and "queue.get()" in block
     ns: dict = {}
-    exec(compile(textwrap.dedent(block), "host/oaknode.py docstring", "exec"), ns)
+    exec(compile(textwrap.dedent(block), "host/integrations/oaknode.py docstring", "exec"), ns)
     assert ns["cam"].error is None and len(ns["images"]) == 10
     assert all(img.shape == (360, 640, 3) for img in ns["images"])
 
 
 def test_a_failing_node_raises_its_error_from_get():
-    from rollcam.host.oaknode import EmulatedCamera
+    from rollcam.host.integrations.oaknode import EmulatedCamera
 
     with dai.Pipeline(False) as pipeline:
         cam = pipeline.create(EmulatedCamera).build(URI, frames=3)

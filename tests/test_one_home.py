@@ -24,6 +24,7 @@ CAMERA_SPEC = ("fold pending: built through CameraSpec these cameras get the emu
 ALLOWED: dict[tuple[str, str], str] = {
     # threads
     ("threads", "benchmarks/http_attacks.py"): "fold pending: attacker threads of a benchmark; Worker fits",
+    ("threads", "benchmarks/mjpeg.py"): "fold pending: the MJPEG benchmark's client readers; Worker fits",
     ("threads", "benchmarks/soak.py"): "fold pending: the soak's stream reader; Worker fits",
     ("threads", "benchmarks/view.py"): "fold pending: the view benchmark's page driver; Worker fits",
     ("threads", "emu/usbip/server.py"): EDITED.format("emu/usbip"),
@@ -41,16 +42,16 @@ ALLOWED: dict[tuple[str, str], str] = {
     ("context managers", "host/shims/picamera2/remote.py"): PICAMERA2.format("RemoteMappedArray and Pool"),
     ("context managers", "host/shims/picamera2/request.py"): PICAMERA2.format("CompletedRequest and MappedArray"),
     ("context managers", "host/testing/depthai_mock.py"): "API replica: depthai's Device and Pipeline",
-    ("context managers", "host/video.py"):
+    ("context managers", "host/recording/video.py"):
         "VideoWriter's with-block aborts the file on an exception and keeps it otherwise; Closeable's exit cannot tell",
     ("context managers", "host/videocapture.py"):
         "API replica: cv2.VideoCapture opens again after release(), which Closeable's one-way close does not allow",
     # image encoding and colour conversion
     ("image encoding", "benchmarks/mjpeg.py"):
         "what it times is OpenCV's JPEG encoder with each sampling option: the call itself is the subject",
-    ("colour conversion", "host/flowcorrect.py"): "fold pending: grey for optical flow (as sim/compose.py's): one "
+    ("colour conversion", "host/correction/flow.py"): "fold pending: grey for optical flow (as sim/compose.py's): one "
                                                    "grey-for-flow helper",
-    ("colour conversion", "sim/compose.py"): "fold pending: grey for optical flow (as host/flowcorrect.py's)",
+    ("colour conversion", "sim/compose.py"): "fold pending: grey for optical flow (as host/correction/flow.py's)",
     ("colour conversion", "sim/footage.py"): "fold pending: decoded footage BGR(A) -> RGB(A); a codecs row fits",
     ("colour conversion", "host/robotics/bags.py"): "fold pending: a mono8 message's grey picture; a codecs row fits",
     ("colour conversion", "host/robotics/gcsv.py"): "fold pending: a grey frame drawn on in colour; a codecs row fits",
@@ -159,6 +160,11 @@ def test_the_checker_finds_a_copy_of_each_concept(tool: ModuleType, concept: str
 
 def test_every_concept_has_a_made_up_copy(tool: ModuleType) -> None:
     assert {c.name for c in tool.CONCEPTS} == set(COPIES)
+
+
+def test_the_checker_finds_a_thread_subclass(tool: ModuleType) -> None:
+    source = "import threading\n\n\nclass Reader(threading.Thread):\n    pass\n"
+    assert [(f.concept, f.line) for f in tool.scan_text("benchmarks/x.py", source)] == [("threads", 4)]
 
 
 def test_prose_and_comments_are_not_copies(tool: ModuleType) -> None:

@@ -42,7 +42,7 @@ import cv2
 import numpy as np
 import pytest
 from programs import need
-from rollcam.emu.http_mjpeg import MjpegServer
+from rollcam.emu.http.mjpeg import MjpegServer
 from rollcam.emu.preload import LIBRARY_NAME
 from rollcam.emu.preload import __file__ as preload_init
 from rollcam.emu.usbip import USBIPServer
@@ -51,7 +51,7 @@ from rollcam.firmware.camera import FirmwareCamera, FramePlan
 from rollcam.firmware.imaging import encode
 from rollcam.firmware.spec import CameraSpec
 from rollcam.host import open_camera, standin_env
-from rollcam.host.preload import build_camera, program_environment, serving
+from rollcam.host.servers.devnodes import build_camera, program_environment, serving
 from rollcam.sim.codecs import JPEG_QUALITY, Levels, codec, preview_frame
 from rollcam.sim.frame import Frame
 

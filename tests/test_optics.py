@@ -20,7 +20,7 @@ from rollcam.sim.hwconfig import load_sensor
 from rollcam.sim.isp import sharpen
 from rollcam.sim.optics import LensOptics, gaussian_kernel, vignette_map
 from rollcam.sim.picture import PictureSteps
-from rollcam.sim.render import encode_linear
+from rollcam.sim.render.renderer import encode_linear
 from rollcam.sim.scenegen import make_chart_scene
 from rollcam.sim.synthetic import SyntheticCamera
 

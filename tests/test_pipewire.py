@@ -1,4 +1,4 @@
-"""rollcam's camera as a PipeWire Video/Source node (rollcam.host.pipewire), on Debian's pipewire 0.3 and
+"""rollcam's camera as a PipeWire Video/Source node (rollcam.host.servers.pipewire), on Debian's pipewire 0.3 and
 wireplumber started headless by the test in a private runtime folder, read by real PipeWire clients: pw-dump sees the
 node and its formats, GStreamer's pipewiresrc (gstreamer1.0-pipewire) receives frames byte for byte the emulator's."""
 
@@ -16,7 +16,7 @@ import pytest
 from interrupts import interrupt
 from rollcam.common.errors import ConfigError, DeviceError
 from rollcam.host import open_camera
-from rollcam.host.pipewire import PROGRAMS, PipeWireCamera, find_node, pw_objects
+from rollcam.host.servers.pipewire import PROGRAMS, PipeWireCamera, find_node, pw_objects
 
 STILL = "emu:imx219?size=320x240&scene=street&speed=static&lamps=off&noise=off&exposure_us=5000&format=YUYV"
 """A camera whose every frame is the same picture, so any frame PipeWire hands on compares with frame 0."""

@@ -19,7 +19,7 @@ from programs import run_under as run
 from rollcam.common.errors import RollcamError
 from rollcam.emu import preload as preload_package
 from rollcam.emu.preload import LIBRARY_NAME
-from rollcam.host.preload import program_environment, serving
+from rollcam.host.servers.devnodes import program_environment, serving
 
 LIB = Path(preload_package.__file__).with_name(LIBRARY_NAME)
 pytestmark = pytest.mark.skipif(not LIB.is_file(), reason=f"{LIB} not built (pip install -e . with a C compiler)")
@@ -247,7 +247,7 @@ def test_rollcam_run_returns_the_program_status_and_cleans_up(tmp_path):
 
 
 def test_the_child_environment_preloads_the_library_and_puts_the_shims_first(server):
-    from rollcam.host.standins import shims_path
+    from rollcam.host.servers.standins import shims_path
 
     base = {"PATH": "/usr/bin", "PYTHONPATH": "/elsewhere", "LD_PRELOAD": "/opt/other.so"}
     env = program_environment(server, base)
@@ -258,7 +258,7 @@ def test_the_child_environment_preloads_the_library_and_puts_the_shims_first(ser
 
 
 def test_a_device_uri_carries_its_fault_plan_to_the_driver():
-    import rollcam.host.preload as hp
+    import rollcam.host.servers.devnodes as hp
 
     camera, plan = hp.build_camera("emu:imx219?size=160x120&faults=drop=50%,seed=3")
     assert plan.to_text() and "drop" in plan.to_text() and camera.size == (160, 120)

@@ -20,7 +20,7 @@ from pathlib import Path
 import pytest
 from programs import compile_c, python_under, run_under
 from rollcam.emu.preload import LIBRARY_NAME, wire
-from rollcam.host.preload import FOLDER_PREFIX, program_environment, reclaim_stale_folders, serving
+from rollcam.host.servers.devnodes import FOLDER_PREFIX, program_environment, reclaim_stale_folders, serving
 
 LIB = Path(__file__).resolve().parents[1] / "emu" / "preload" / LIBRARY_NAME
 PRELOAD_SOURCE = LIB.with_name("rollcam_preload.c")

@@ -19,7 +19,7 @@ from pathlib import Path
 import pytest
 from programs import compile_c, need, run_under
 from rollcam.emu.preload import LIBRARY_NAME
-from rollcam.host.preload import program_environment, serving
+from rollcam.host.servers.devnodes import program_environment, serving
 
 ROOT = Path(__file__).resolve().parents[1]
 PRELOAD_SOURCE = ROOT / "emu" / "preload" / "rollcam_preload.c"

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from rollcam.emu.http_mjpeg import MjpegServer
+from rollcam.emu.http.mjpeg import MjpegServer
 from rollcam.emu.v4l2 import Device
 from rollcam.emu.v4l2.driver import EmuDriver
 from rollcam.firmware.camera import FirmwareCamera, FramePlan

@@ -8,10 +8,10 @@ import dataclasses
 
 import numpy as np
 import pytest
-from rollcam.sim import _actors as A
-from rollcam.sim.compile import compile_scene
 from rollcam.sim.instance_masks import render_masks
-from rollcam.sim.render import Renderer
+from rollcam.sim.render import actors as A
+from rollcam.sim.render.renderer import Renderer
+from rollcam.sim.render.tables import compile_scene
 from rollcam.sim.scene import PROP_KINDS, Camera, Prop
 from rollcam.sim.scenegen import ego_preset, make_street_scene
 from rollcam.sim.streetprops import CAMERA_CLEARANCE_M, _distance, _footprint, _lane_footprint, _overlaps

@@ -7,7 +7,7 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from rollcam.common.errors import ConfigError
-from rollcam.sim.render import Renderer, srgb_lut
+from rollcam.sim.render.renderer import Renderer, srgb_lut
 from rollcam.sim.scenegen import ego_preset, make_chart_scene, make_street_scene
 from rollcam.sim.timing import LineTiming, Readout, line_sample_times_ns
 
@@ -160,7 +160,7 @@ def test_times_must_match_lines():
 def _bounds_and_parts(cases, n_times):
     """(bounds box, parts table, live-part mask) of every walker of every camera of ``cases`` (seed, speed,
     ego) at ``n_times`` instants over 40 s: the actor bounds and the parts the kernels would draw."""
-    from rollcam.sim import _actors as A
+    from rollcam.sim.render import actors as A
 
     for seed, speed, ego in cases:
         scene = make_street_scene(seed, speed=speed, width=320, height=180, n_pedestrians=25, ego=ego_preset(ego))
@@ -175,8 +175,8 @@ def _bounds_and_parts(cases, n_times):
 
 
 def _assert_parts_inside(box, parts, live):
-    from rollcam.sim import _actors as A
-    from rollcam.sim._parts import PART_SHADOW
+    from rollcam.sim.render import actors as A
+    from rollcam.sim.render.parts import PART_SHADOW
 
     shadow = live & (parts[:, A.Q_KIND] == PART_SHADOW)
     body = live & ~shadow
@@ -210,7 +210,7 @@ def test_actor_bounds_contain_every_part():
 def test_bounds_of_walkers_straddling_the_camera_plane_are_finite_and_contain_every_part():
     """A walker partly behind the camera is bounded by its box cut at the near plane (plus the largest part
     radius there), not by the whole image; every part it draws must still lie inside."""
-    from rollcam.sim import _actors as A
+    from rollcam.sim.render import actors as A
 
     near_cases = 0
     for box, parts, live in _bounds_and_parts(((1, "fast", "none"), (3, "fast", "vehicle"), (6, "normal", "pan")), 81):

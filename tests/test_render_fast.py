@@ -12,9 +12,9 @@ from collections import Counter
 import numba
 import numpy as np
 import pytest
-from rollcam.sim import _actors, _cshade, _kernels, _world
-from rollcam.sim.flicker_render import light_scene
-from rollcam.sim.render import Renderer
+from rollcam.sim.render import actors, lines, shader, world
+from rollcam.sim.render.flicker_renderer import light_scene
+from rollcam.sim.render.renderer import Renderer
 from rollcam.sim.scenegen import ego_preset, make_street_scene
 
 
@@ -40,9 +40,9 @@ def test_exact_rs_equals_brute_force_for_every_ego_preset(ego: str, props: bool,
 
 @pytest.mark.parametrize("ego", ["none", "drone"])
 def test_threaded_kernels_paint_what_the_serial_ones_do(ego: str, monkeypatch: pytest.MonkeyPatch) -> None:
-    from rollcam.sim import _paint
+    from rollcam.sim.render import paint
 
-    monkeypatch.setattr(_paint, "TOUCH_WORK", 1 << 20)  # a static frame's touched lines go to the threads too
+    monkeypatch.setattr(paint, "TOUCH_WORK", 1 << 20)  # a static frame's touched lines go to the threads too
     scene = make_street_scene(5, speed="normal", width=640, height=360, n_pedestrians=20, ego=ego_preset(ego))
     times = _rs_times(Renderer(scene), 2_000_000_000)
     serial = Renderer(scene, threads=1).render_lines(times, linear=True)
@@ -51,10 +51,10 @@ def test_threaded_kernels_paint_what_the_serial_ones_do(ego: str, monkeypatch: p
     assert np.array_equal(serial.linear, threaded.linear)
 
 
-# Every kernel Python calls (sim/_paint.py): each releases the GIL while it runs.
-_ENTRY_KERNELS = (_kernels.render_lines_kernel, _kernels.render_lines_par, _kernels.touch_entries,
-                  _kernels.part_slots, _actors.actor_bounds_all, _actors.actor_bounds_par, _actors.actor_parts_all,
-                  _actors.actor_parts_par, _actors.actor_speeds, _world.pose_table, _world.background_image)
+# Every kernel Python calls (sim/render/paint.py): each releases the GIL while it runs.
+_ENTRY_KERNELS = (lines.render_lines_kernel, lines.render_lines_par, lines.touch_entries,
+                  lines.part_slots, actors.actor_bounds_all, actors.actor_bounds_par, actors.actor_parts_all,
+                  actors.actor_parts_par, actors.actor_speeds, world.pose_table, world.background_image)
 
 
 def test_kernels_called_from_python_release_the_gil() -> None:
@@ -129,14 +129,14 @@ def test_c_shader_under_a_lamp_alone_paints_its_reference_background() -> None:
 def test_a_shader_library_reading_other_table_columns_is_refused() -> None:
     from rollcam.common.errors import RollcamError
 
-    _cshade.check_layout(_cshade.library(), _world.SHADE_LAYOUT)
-    moved = (_world.SHADE_LAYOUT[0] + 1, *_world.SHADE_LAYOUT[1:])
+    shader.check_layout(shader.library(), world.SHADE_LAYOUT)
+    moved = (world.SHADE_LAYOUT[0] + 1, *world.SHADE_LAYOUT[1:])
     with pytest.raises(RollcamError, match="stale"):
-        _cshade.check_layout(_cshade.library(), moved)
+        shader.check_layout(shader.library(), moved)
 
 
 def test_fog_table_matches_exp() -> None:
-    fog = np.vectorize(_cshade.library().rollcam_fog_transmittance, otypes=[np.float64])
+    fog = np.vectorize(shader.library().rollcam_fog_transmittance, otypes=[np.float64])
     xs = np.concatenate([np.linspace(0.0, 70.0, 20_001), [63.999, 64.0, 1e6, 1e300]])
     got = fog(xs)
     want = np.exp(-xs)
@@ -145,7 +145,7 @@ def test_fog_table_matches_exp() -> None:
 
 
 def test_value_noise_is_smooth_and_in_the_unit_interval() -> None:
-    noise = np.vectorize(_cshade.library().rollcam_value_noise, otypes=[np.float64])
+    noise = np.vectorize(shader.library().rollcam_value_noise, otypes=[np.float64])
     rng = np.random.default_rng(0)
     x, y = rng.uniform(-50, 50, 2000), rng.uniform(-50, 50, 2000)
     for seed in (0, 11, 2**31 - 1):
@@ -157,7 +157,7 @@ def test_value_noise_is_smooth_and_in_the_unit_interval() -> None:
 
 
 def test_part_slots_share_a_time_used_by_several_entries_and_leave_single_uses_local() -> None:
-    from rollcam.sim import _kernels as K
+    from rollcam.sim.render import lines as K
 
     rng = np.random.default_rng(5)
     obj_k = rng.integers(-1, 6, (7, 40)).astype(np.int64)
@@ -177,16 +177,16 @@ def test_part_slots_share_a_time_used_by_several_entries_and_leave_single_uses_l
 
 
 def test_encoder_scales_clips_and_rounds_to_the_nearest_curve_entry() -> None:
-    from rollcam.sim.render import _SRGB, encode_linear
+    from rollcam.sim.render.renderer import SRGB, encode_linear
 
     rng = np.random.default_rng(9)
-    edges = np.array([-1.0, -0.0, 0.0, 1e-9, 0.5 / _kernels.LUT_SIZE, 0.5, 1.0, 1.0 + 1e-7, 7.0, np.inf, -np.inf,
+    edges = np.array([-1.0, -0.0, 0.0, 1e-9, 0.5 / lines.LUT_SIZE, 0.5, 1.0, 1.0 + 1e-7, 7.0, np.inf, -np.inf,
                       np.nan], np.float32)
     # 1000 pixels: not a whole number of the encoder's 256-pixel blocks
     lin = np.concatenate([np.resize(edges, (4, 3)), rng.uniform(-0.2, 1.4, (996, 3))]).astype(np.float32)
     for gain in (1.0, 0.37, 2.5):
         v = np.nan_to_num(lin.astype(np.float64) * gain, nan=0.0)
-        want = _SRGB[(np.clip(v, 0.0, 1.0) * _kernels.LUT_SIZE + 0.5).astype(np.int64)][:, ::-1]
+        want = SRGB[(np.clip(v, 0.0, 1.0) * lines.LUT_SIZE + 0.5).astype(np.int64)][:, ::-1]
         got = encode_linear(lin.reshape(1, -1, 3), gain)[0]
         assert np.array_equal(got, want)
 
@@ -205,7 +205,7 @@ def test_truth_only_renders_give_the_full_renders_truth(ego: str) -> None:
 
 
 def test_line_truth_boxes_span_each_actors_lines_and_extents() -> None:
-    from rollcam.sim.render_result import LineTruth
+    from rollcam.sim.render.result import LineTruth
 
     gt = LineTruth.empty(3, 6, False)
     gt.left[0, [1, 4]], gt.right[0, [1, 4]] = (2.5, 1.0), (7.0, 3.0)  # lines 1 and 4 (not those between)
@@ -225,7 +225,7 @@ def test_a_read_runs_the_threaded_line_kernel_once(ego: str, monkeypatch: pytest
 
     calls: Counter[tuple[str, bool]] = Counter()  # (kernel, truth only)
     def spy(name: str):
-        kernel = getattr(_kernels, name)
+        kernel = getattr(lines, name)
 
         def call(*args):
             calls[name, bool(args[27])] += 1  # (argument 27: gt_only)
@@ -233,7 +233,7 @@ def test_a_read_runs_the_threaded_line_kernel_once(ego: str, monkeypatch: pytest
         return call
 
     for name in ("render_lines_kernel", "render_lines_par"):
-        monkeypatch.setattr(_kernels, name, spy(name))
+        monkeypatch.setattr(lines, name, spy(name))
     with open_camera(f"emu:letsroll?size=1280x720&scene=street&ego={ego}") as cam:
         cam.read()
         calls.clear()

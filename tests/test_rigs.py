@@ -18,7 +18,7 @@ from rollcam.firmware.camera import FirmwareCamera
 from rollcam.firmware.rig import CameraClock, LiveRig, Rig, RigSpec, world_row_times_ns
 from rollcam.firmware.spec import CameraSpec
 from rollcam.host import open_camera
-from rollcam.host.preload import serving
+from rollcam.host.servers.devnodes import serving
 from rollcam.host.sources.emu import device_spec
 
 FLAT = {"scene": "flat", "size": "160x120"}  # cheap to render: these tests are about time

@@ -19,7 +19,7 @@ import pytest
 from interrupts import ctrl_c
 from rollcam.common.errors import ConfigError, MissingDependencyError
 from rollcam.host import open_camera
-from rollcam.host.capture import CaptureInterrupted, capture
+from rollcam.host.recording.capture import CaptureInterrupted, capture
 from rollcam.host.robotics import KALIBR_TOPICS, OUTPUT, BagWriter
 from rollcam.host.robotics.bags import require_libraries
 

@@ -10,8 +10,8 @@ import cv2
 import numpy as np
 import pytest
 from rollcam.host.cli import main
+from rollcam.host.correction.flow import FlowCorrector, dense_flow, flow_correct, image_velocity
 from rollcam.host.datasets import DatasetConfig, build_dataset
-from rollcam.host.flowcorrect import FlowCorrector, dense_flow, flow_correct, image_velocity
 from rollcam.host.sources import open_camera
 
 PERIOD_NS = 33_333_333
@@ -111,7 +111,7 @@ def test_dataset_records_keep_what_gyro_correction_needs(drone_dataset: Path) ->
     """Correcting a stored RS image from its record gives the device's own gyro-corrected frame (rs_correct=gyro
     on the record's URI): the record's samples cover every line, even a long exposure's first ones that a
     stream's first frame's own block does not reach (the drone's rate changes, so holding an edge would show)."""
-    from rollcam.host.correct import correct_stored, line_times
+    from rollcam.host.correction.gyro import correct_stored, line_times
 
     rec = json.loads(next((drone_dataset / "records" / "fast").glob("*.json")).read_text())
     img = rec["images"]["rs"]

@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 from rollcam.common.errors import ConfigError
 from rollcam.host import SourceError, open_camera
-from rollcam.host.capture import capture
+from rollcam.host.recording.capture import capture
 from rollcam.sim.codecs import codec
 from rollcam.sim.exposure import dense_plan, integrate, plan_samples
 from rollcam.sim.hwconfig import load_sensor

@@ -9,7 +9,7 @@ from rollcam.common.errors import ConfigError
 from rollcam.sim.exposure import SamplePlan, integrate, plan_samples
 from rollcam.sim.hwconfig import load_sensor
 from rollcam.sim.noise import SensorModel
-from rollcam.sim.render import LinearFrame, Renderer
+from rollcam.sim.render.renderer import LinearFrame, Renderer
 from rollcam.sim.scene import EgoMotion
 from rollcam.sim.scenegen import ego_preset, make_chart_scene, make_street_scene
 from rollcam.sim.synthetic import SyntheticCamera
@@ -214,7 +214,7 @@ quarter of a 1080p drone frame's at 10 ms); measured 0.2-2.0 DN, where point sam
 @pytest.mark.parametrize("ego", ["pan", "drone", "vehicle"])
 def test_moving_camera_blur_costs_at_most_its_cap_and_holds_its_stated_error(ego):
     from rollcam.sim.exposure import EGO_SAMPLES, dense_plan
-    from rollcam.sim.render import srgb_lut
+    from rollcam.sim.render.renderer import srgb_lut
 
     lut = srgb_lut()
 
@@ -240,7 +240,7 @@ def test_sample_times_snap_to_a_shared_grid_that_keeps_the_adaptive_error():
     import dataclasses
 
     from rollcam.sim.exposure import GRID_FRACTION, dense_plan
-    from rollcam.sim.render import srgb_lut
+    from rollcam.sim.render.renderer import srgb_lut
 
     lut = srgb_lut()
     scene = make_street_scene(3, speed="fast", width=160, height=90)
@@ -323,7 +323,7 @@ docs/sensor-model.md). A broken mapping misses by the point-sampling error or mo
 @pytest.mark.parametrize("ego", ["pan", "drone", "vehicle", "walk"])
 def test_moving_camera_path_blur_holds_its_stated_error(ego):
     from rollcam.sim.exposure import EGO_PATH_SAMPLES, EGO_SAMPLES, dense_plan
-    from rollcam.sim.render import srgb_lut
+    from rollcam.sim.render.renderer import srgb_lut
 
     lut = srgb_lut()
     cam = _ego_camera(ego, (320, 180))

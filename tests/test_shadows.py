@@ -7,7 +7,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 from rollcam.host import open_camera
-from rollcam.sim.render import Renderer
+from rollcam.sim.render.renderer import Renderer
 from rollcam.sim.scenegen import CONTACT_SHADOW, make_street_scene
 
 
@@ -39,7 +39,7 @@ def test_shadows_darken_the_ground_under_the_walkers_and_nothing_else():
 
 
 def test_the_suns_shadow_falls_away_from_the_sun_and_takes_its_share():
-    from rollcam.sim.compile import _cast_shadow
+    from rollcam.sim.render.tables import _cast_shadow
 
     off, on = _pair(time_of_day="noon")
     scene = make_street_scene(3, n_pedestrians=20, width=480, height=270, time_of_day="noon")

@@ -21,8 +21,6 @@ ROOT = Path(__file__).resolve().parents[1]
 FOLLOW_UP = "in a file another change of issue 38 is editing; left for that change to give it a public home"
 
 ALLOWED_CYCLES: dict[frozenset[str], str] = {
-    frozenset({"rollcam.sim.render", "rollcam.sim.flicker_render"}):
-        "Renderer.__new__ returns the flicker subclass; " + FOLLOW_UP + " (the renderer package)",
     frozenset({"rollcam.emu.v4l2.ctrls", "rollcam.emu.v4l2.driver"}): FOLLOW_UP + " (emu/v4l2)",
     frozenset({"rollcam.emu.v4l2.ioctls", "rollcam.emu.v4l2.ioctls_buffers"}): FOLLOW_UP + " (emu/v4l2)",
     frozenset({"picamera2.picamera2", "picamera2._camera", "picamera2._cnn"}):
@@ -31,11 +29,6 @@ ALLOWED_CYCLES: dict[frozenset[str], str] = {
 """Sets of modules that import each other, each with why it may stay for now."""
 
 ALLOWED_PRIVATE_IMPORTS: dict[tuple[str, str], str] = {
-    ("sim/flicker_render.py", "rollcam.sim.render._SRGB"): FOLLOW_UP + " (the renderer package)",
-    ("sim/flicker_render.py", "rollcam.sim.render._check_buffers"): FOLLOW_UP + " (the renderer package)",
-    ("sim/flicker_render.py", "rollcam.sim.render._check_times"): FOLLOW_UP + " (the renderer package)",
-    ("sim/flicker_render.py", "rollcam.sim.render._line_mask"): FOLLOW_UP + " (the renderer package)",
-    ("sim/_kernels.py", "rollcam.sim._texture._darken"): FOLLOW_UP + " (the renderer package)",
     ("host/shims/picamera2/_cnn.py", "picamera2.picamera2._OPEN"): FOLLOW_UP + " (the picamera2 stand-in)",
     ("host/shims/picamera2/_cnn.py", "picamera2.picamera2._OPEN_LOCK"): FOLLOW_UP + " (the picamera2 stand-in)",
 }

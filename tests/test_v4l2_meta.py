@@ -14,7 +14,7 @@ import pytest
 from programs import need
 from rollcam.emu import preload as preload_package
 from rollcam.emu.preload import LIBRARY_NAME
-from rollcam.host.preload import program_environment, serving
+from rollcam.host.servers.devnodes import program_environment, serving
 
 pytest.importorskip("onnx")  # the in-sensor stage counts a network's operations from its graph
 LIB = Path(preload_package.__file__).with_name(LIBRARY_NAME)

@@ -10,7 +10,7 @@ import cv2
 import numpy as np
 import pytest
 from rollcam.common.errors import ConfigError, DeviceError
-from rollcam.emu.http_mjpeg import MjpegServer
+from rollcam.emu.http.mjpeg import MjpegServer
 from rollcam.emu.v4l2 import Device, V4L2Error, raw
 from rollcam.emu.v4l2 import functions as fn
 from rollcam.firmware.camera import FirmwareCamera

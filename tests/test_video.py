@@ -1,4 +1,5 @@
-"""host/video.py: H.264 yuv420p MP4 that browsers play, checked by an independent demuxer (PyAV), written atomically."""
+"""host/recording/video.py: H.264 yuv420p MP4 that browsers play, checked by an independent demuxer (PyAV), written
+atomically."""
 
 from __future__ import annotations
 
@@ -11,10 +12,10 @@ import av
 import numpy as np
 import pytest
 from rollcam.common.errors import ConfigError
-from rollcam.host.demo import run_demo
-from rollcam.host.detect import VIDEO, run_detect
 from rollcam.host.detectors import PERSON, Detections
-from rollcam.host.video import VideoWriter
+from rollcam.host.detectors.live import VIDEO, run_detect
+from rollcam.host.recording.demo import run_demo
+from rollcam.host.recording.video import VideoWriter
 
 
 def probe(path: Path) -> dict:

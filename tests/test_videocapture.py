@@ -81,7 +81,7 @@ def test_http_mjpeg_through_the_drop_in(rollcam_camera, rollcam_mjpeg_server):
 def test_http_stream_reports_size_and_fps_before_the_first_read_like_opencv(tmp_path):
     """The usual recording script (a VideoWriter sized from the capture before any read) on the emulator's
     MJPEG stream: rollcam's drop-in knows what cv2.VideoCapture knows at open, and more (the device rate)."""
-    from rollcam.emu.http_mjpeg import MjpegServer
+    from rollcam.emu.http.mjpeg import MjpegServer
     from rollcam.firmware.camera import FirmwareCamera
 
     camera = FirmwareCamera("imx219", scene={"scene": "flat"}, size=(640, 480))

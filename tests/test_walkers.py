@@ -7,10 +7,10 @@ from dataclasses import replace
 import numpy as np
 import pytest
 from rollcam.common.errors import ConfigError
-from rollcam.sim import _actors as A
-from rollcam.sim import _body as B
 from rollcam.sim import scenegen
-from rollcam.sim.render import Renderer
+from rollcam.sim.render import actors as A
+from rollcam.sim.render import body as B
+from rollcam.sim.render.renderer import Renderer
 from rollcam.sim.scene import BAGS
 from rollcam.sim.scenegen import BACKPACK_P, SHOULDER_BAG_P, SKIRT_P, ego_preset, make_street_scene
 from test_render import _assert_parts_inside

@@ -40,12 +40,12 @@ SECTIONS: tuple[tuple[str, str, tuple[Entry, ...]], ...] = (
         Entry("rollcam.sim.frame.ObjectTruth", "sim/frame.py", "ObjectTruth"),
     )),
     ("Devices for other programs", "What `rollcam run` and `rollcam emulate` do, callable from Python.", (
-        Entry("rollcam.host.preload.run_program", "host/preload.py", "run_program"),
-        Entry("rollcam.host.preload.serving", "host/preload.py", "serving"),
-        Entry("rollcam.host.preload.program_environment", "host/preload.py", "program_environment"),
-        Entry("rollcam.host.emulate.serve", "host/emulate.py", "serve"),
-        Entry("rollcam.host.shims_path", "host/standins.py", "shims_path"),
-        Entry("rollcam.host.standin_env", "host/standins.py", "standin_env"),
+        Entry("rollcam.host.run_program", "host/servers/devnodes.py", "run_program"),
+        Entry("rollcam.host.serving", "host/servers/devnodes.py", "serving"),
+        Entry("rollcam.host.program_environment", "host/servers/devnodes.py", "program_environment"),
+        Entry("rollcam.host.serve", "host/servers/emulate.py", "serve"),
+        Entry("rollcam.host.shims_path", "host/servers/standins.py", "shims_path"),
+        Entry("rollcam.host.standin_env", "host/servers/standins.py", "standin_env"),
         Entry("rollcam.host.cli.main", "host/cli.py", "main"),
     )),
     ("Errors", "One tree: catch `RollcamError` for any of them (all importable from `rollcam.host`).", (

@@ -58,7 +58,7 @@ def test_images(paths: list[Path]) -> list:
     images = [rng.integers(0, 256, (SIZE, SIZE, 3), dtype=np.uint8)]
     images += [cv2.resize(cv2.imread(str(p)), (SIZE, SIZE))[..., ::-1].copy() for p in paths]
     try:
-        from rollcam.sim.render import Renderer
+        from rollcam.sim.render.renderer import Renderer
         from rollcam.sim.scenegen import make_street_scene
 
         scene = make_street_scene(2, n_pedestrians=30, width=960, height=540)

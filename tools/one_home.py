@@ -43,7 +43,8 @@ class Concept:
 
 
 CONCEPTS: tuple[Concept, ...] = (
-    Concept("threads", ("common/lifecycle.py",), r"\bthreading\.Thread\(|\bThread\(target=",
+    Concept("threads", ("common/lifecycle.py",),
+            r"\bthreading\.Thread\(|\bThread\(target=|^\s*class \w+\((threading\.)?Thread\)",
             home_api="rollcam.common.lifecycle.Worker (start, stop, re-raise on close)"),
     Concept("context managers", ("common/lifecycle.py",), r"\bdef __enter__\(",
             home_api="subclass rollcam.common.lifecycle.Closeable and write close()"),

@@ -31,7 +31,7 @@ import time
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
-from rollcam.host.standins import standin_env
+from rollcam.host.servers.standins import standin_env
 
 DISPLAY = re.compile(r"PyQt[56]|PySide[26]|QApplication|picamera2\.previews\.qt|cv2\.imshow|cv2\.namedWindow")
 """What needs a person to look at a window. Preview windows (``Preview.QTGL``, ``show_preview=True``) are not

@@ -28,8 +28,8 @@ def measure(run: Path, data: Path) -> dict[str, Any]:
     """The figures of the card (see the module docstring)."""
     import numpy as np
     from rollcam.host.detectors import load_detector
+    from rollcam.host.detectors.onchip import onnx_macs
     from rollcam.host.evaluation.run import evaluate_dataset
-    from rollcam.host.insensor import onnx_macs
 
     model = run / "model.onnx"
     spec = f"onnx:{model}?conf=0.01"

@@ -5,8 +5,8 @@ What a reader trips on is a cycle, a reach into another module's private names o
 root, `python tools/structure.py`, to print every finding (and exit 0: the test is the gate, this is the report).
 
 Every import statement counts, wherever it sits: at the top, inside a function, under `if TYPE_CHECKING:`. Module
-names follow pyproject.toml's package-dir (`sim/render.py` is `rollcam.sim.render`); the stand-in modules under
-host/shims/ are import roots of their own (`host/shims/picamera2/job.py` is `picamera2.job`).
+names follow pyproject.toml's package-dir (`sim/render/renderer.py` is `rollcam.sim.render.renderer`); the stand-in
+modules under host/shims/ are import roots of their own (`host/shims/picamera2/job.py` is `picamera2.job`).
 """
 
 from __future__ import annotations
@@ -184,7 +184,7 @@ def module_aliases(module: Module, modules: dict[str, Module]) -> dict[str, str]
 def private_imports(modules: dict[str, Module]) -> list[Finding]:
     """Each `from x import _name` and `x._name` read where `x` is another project module.
 
-    A private module (`sim/_kernels.py`) may be imported by the modules of its own package; from outside it, it is
+    A private module (`sim/render/lines.py`) may be imported by the modules of its own package; from outside it, it is
     a reach like any other private name.
     """
     found = []

@@ -1,4 +1,6 @@
-"""``rollcam calibrate``: line time and camera-IMU time offset of a capture (the work: ``rollcam.host.calibrate``)."""
+"""``rollcam calibrate``: line time and camera-IMU time offset of a capture.
+
+The work: ``rollcam.host.correction.calibrate``."""
 
 from __future__ import annotations
 
@@ -36,7 +38,7 @@ def run(args: argparse.Namespace) -> int:
     from rollcam.common.errors import ConfigError
     from rollcam.common.files import write_atomic
 
-    from ..calibrate import RESULT_YAML, calibrate, result_yaml
+    from ..correction.calibrate import RESULT_YAML, calibrate, result_yaml
 
     if not args.max_offset_ms > 0:
         raise ConfigError(f"--max-offset-ms must be > 0, got {args.max_offset_ms!r}")

@@ -1,4 +1,6 @@
-"""``rollcam capture``: frames of SOURCE to image files and frames.jsonl (the work is ``rollcam.host.capture``)."""
+"""``rollcam capture``: frames of SOURCE to image files and frames.jsonl.
+
+The work is ``rollcam.host.recording.capture``."""
 
 from __future__ import annotations
 
@@ -44,7 +46,7 @@ def add_parser(sub: Subparsers) -> argparse.ArgumentParser:
 
 def run(args: argparse.Namespace) -> int:
     """Capture; 130 after Ctrl-C with every complete frame kept."""
-    from ..capture import CaptureInterrupted, capture
+    from ..recording.capture import CaptureInterrupted, capture
     from ..sources import open_camera
     from .compile_notice import notify_if_cold, renders
 

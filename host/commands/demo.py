@@ -1,4 +1,6 @@
-"""``rollcam demo``: a short emulated street video and a GS/RS contact sheet (the work is ``rollcam.host.demo``)."""
+"""``rollcam demo``: a short emulated street video and a GS/RS contact sheet.
+
+The work is ``rollcam.host.recording.demo``."""
 
 from __future__ import annotations
 
@@ -28,7 +30,7 @@ def add_parser(sub: Subparsers) -> argparse.ArgumentParser:
 
 def run(args: argparse.Namespace) -> int:
     """Render the demo and print where its files are."""
-    from ..demo import default_size, run_demo
+    from ..recording.demo import default_size, run_demo
     from .compile_notice import notify_if_cold
 
     size = args.size or default_size(args.sensor)  # checks the sensor name before any notice

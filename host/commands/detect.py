@@ -1,4 +1,6 @@
-"""``rollcam detect SOURCE --detector NAME``: live detection, logged and annotated (loop: ``rollcam.host.detect``)."""
+"""``rollcam detect SOURCE --detector NAME``: live detection, logged and annotated.
+
+The loop: ``rollcam.host.detectors.live``."""
 
 from __future__ import annotations
 
@@ -53,10 +55,10 @@ def add_parser(sub: Subparsers) -> argparse.ArgumentParser:
 
 def run(args: argparse.Namespace) -> int:
     """Run the loop and print the summary; 130 after Ctrl-C with everything kept."""
-    from ..detect import LOG, DetectInterrupted, StatusLine, run_detect
     from ..detectors import load_detector
+    from ..detectors.live import LOG, DetectInterrupted, StatusLine, run_detect
+    from ..evaluation.truthmatch import RunningPR
     from ..sources import open_camera
-    from ..truthmatch import RunningPR
     from .compile_notice import notify_if_cold, renders
 
     out_dir = output_dir(args.out, make=False) if args.out else None  # a file there: exit 2 before any work
@@ -86,7 +88,7 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _print_summary(result: Any, args: argparse.Namespace, interrupted: bool = False) -> None:
-    from ..detect import LOG, SUMMARY, VIDEO, summary_stats
+    from ..detectors.live import LOG, SUMMARY, VIDEO, summary_stats
 
     if args.json:
         print(json.dumps(result.to_json()))

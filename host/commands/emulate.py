@@ -1,8 +1,8 @@
-"""``rollcam emulate SENSOR``: serve an emulated camera until Ctrl-C (the servers: ``rollcam.host.emulate``).
+"""``rollcam emulate SENSOR``: serve an emulated camera until Ctrl-C (the servers: ``rollcam.host.servers.emulate``).
 
 The camera flags are generated from ``rollcam.firmware.options.OPTIONS``, one per option of the ``emu:`` URI,
 checked by the table's own parser and handed to it as text, so a value means and is checked the same as in an
-``emu:`` URI. The transport flags name what ``rollcam.host.emulate.TRANSPORTS`` starts (a new transport is its
+``emu:`` URI. The transport flags name what ``rollcam.host.servers.emulate.TRANSPORTS`` starts (a new transport is its
 flags here and its starter there).
 """
 
@@ -97,7 +97,7 @@ def add_run_flags(p: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Serve until Ctrl-C, SIGTERM or ``--duration``."""
-    from ..emulate import serve
+    from ..servers.emulate import serve
 
     if not any(getattr(args, name) for name in TRANSPORT_FLAGS):
         args.http = parse_host_port(DEFAULT_HTTP)

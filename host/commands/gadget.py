@@ -41,7 +41,7 @@ def run(args: argparse.Namespace) -> int:
     """Serve the gadget (and the doors asked for) until Ctrl-C, SIGTERM or ``--duration``."""
     from rollcam.common.faults import FaultPlan
 
-    from ..emulate import GADGET_TRANSPORTS, serve
+    from ..servers.emulate import GADGET_TRANSPORTS, serve
 
     args.faults = FaultPlan()  # the gadget's stream is the kernel's: no faults to inject on it
     return serve(args, camera_options(args), GADGET_TRANSPORTS, "rollcam gadget")

@@ -36,7 +36,7 @@ def sensor_rows() -> list[dict[str, Any]]:
 
 def run(args: argparse.Namespace) -> int:
     """Print the sensors and the device sections as a table or one JSON document."""
-    from ..discover import SECTIONS, discover
+    from ..sources.discover import SECTIONS, discover
 
     rows = sensor_rows()
     devices = discover()

@@ -1,5 +1,5 @@
 """``rollcam pipewire [SOURCE]``: the emulated camera as a PipeWire ``Video/Source`` node in a private, headless
-PipeWire (``rollcam.host.pipewire``), until Ctrl-C."""
+PipeWire (``rollcam.host.servers.pipewire``), until Ctrl-C."""
 
 from __future__ import annotations
 
@@ -32,7 +32,7 @@ def add_parser(sub: Subparsers) -> argparse.ArgumentParser:
 
 def run(args: argparse.Namespace) -> int:
     """Publish the node and hold it until Ctrl-C (or ``--seconds``)."""
-    from ..pipewire import PipeWireCamera
+    from ..servers.pipewire import PipeWireCamera
 
     runtime = args.runtime_dir or tempfile.mkdtemp(prefix="rollcam-pw-")
     with PipeWireCamera(args.source, runtime, name=args.name) as camera:

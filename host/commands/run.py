@@ -1,5 +1,5 @@
 """``rollcam run [--device PATH=SOURCE ...] -- PROGRAM ARGS...``: a program sees emulated /dev/videoN nodes
-(no kernel module, no root: ``rollcam.host.preload``)."""
+(no kernel module, no root: ``rollcam.host.servers.devnodes``)."""
 
 from __future__ import annotations
 
@@ -24,7 +24,7 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
 
 def run(args: argparse.Namespace) -> int:
     """Serve the devices while PROGRAM runs; PROGRAM's exit status."""
-    from ..preload import DEFAULT_DEVICE, DEFAULT_SOURCE, parse_device, run_program
+    from ..servers.devnodes import DEFAULT_DEVICE, DEFAULT_SOURCE, parse_device, run_program
 
     argv = args.program[1:] if args.program[:1] == ["--"] else args.program
     devices = [parse_device(d, i) for i, d in enumerate(args.device)] or [(DEFAULT_DEVICE, DEFAULT_SOURCE)]

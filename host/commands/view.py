@@ -42,8 +42,8 @@ def run(args: argparse.Namespace) -> int:
     from rollcam.common.lifecycle import Deadline
 
     from ..detectors import load_detector
+    from ..servers.view import open_view
     from ..sources import open_camera
-    from ..view import open_view
 
     detector = load_detector(args.detector) if args.detector else None
     stop = threading.Event()

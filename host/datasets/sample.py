@@ -19,8 +19,8 @@ from rollcam.common.errors import SourceError
 from rollcam.common.files import file_digest, file_matches, write_atomic
 from rollcam.sim.frame import Frame
 
-from ..correct import imu_record
-from ..imagefiles import encode_image
+from ..correction.gyro import imu_record
+from ..recording.imagefiles import encode_image
 from ..sources import open_camera
 from .plan import DatasetConfig, LabelPolicy, Sample, Task, speed_tag, subset_name
 

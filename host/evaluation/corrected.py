@@ -4,7 +4,7 @@
 
 - ``<speed>_rs_gsbox``: the RS images judged against the GS labels (each person's box at the frame's
   reference instant, what a GS image shows and what a correction aims at), the fair baseline for
-- ``<speed>_rs_gyro``: the RS images corrected from the gyro (``rollcam.host.correct.correct_stored``: per-line
+- ``<speed>_rs_gyro``: the RS images corrected from the gyro (``rollcam.host.correction.gyro.correct_stored``: per-line
   rotational unwarp to the first line's orientation, from the IMU block the dataset keeps in each sample's
   record) and judged against the GS labels too.
 
@@ -42,7 +42,7 @@ def _record(root: Path, tag: str, stem: str) -> dict[str, Any]:
 
 
 def _gyro(rec: dict[str, Any], image: np.ndarray) -> np.ndarray:
-    from ..correct import correct_stored, line_times
+    from ..correction.gyro import correct_stored, line_times
 
     img = rec["images"]["rs"]
     by_column = img["readout"] in ("left_to_right", "right_to_left")

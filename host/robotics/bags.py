@@ -8,7 +8,7 @@ the topics and types ``kalibr_bagcreater`` writes, ``/cam0/image_raw`` mono8 ``s
 ``sensor_msgs/Imu``). The recording is built in a temporary folder beside its final name and renamed into place
 only when finished (``rollcam.common.files.commit_tree``); ``abort()`` removes it. So after a Ctrl-C the capture
 closes what it has and the file is there, whole; after an error in the middle of an instant, or a kill, it is
-absent. With an IMU, Kalibr's ``imu.yaml`` and ``camchain.yaml`` (``rollcam.host.imu_export``) go beside it,
+absent. With an IMU, Kalibr's ``imu.yaml`` and ``camchain.yaml`` (``rollcam.host.recording.imu_export``) go beside it,
 written atomically at the first instant. The messages and their fields are ``rollcam.host.robotics.messages``';
 docs/robotics.md documents them.
 
@@ -31,7 +31,7 @@ from rollcam.common.errors import ConfigError, require
 from rollcam.common.files import commit_tree, part_path, write_atomic
 from rollcam.sim.frame import Frame
 
-from ..imu_export import CAMCHAIN_YAML, IMU_YAML, camchain_yaml, imu_yaml
+from ..recording.imu_export import CAMCHAIN_YAML, IMU_YAML, camchain_yaml, imu_yaml
 from .messages import (
     IMU_TOPIC,
     ROLLCAM_MSGS,

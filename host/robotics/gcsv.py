@@ -40,8 +40,8 @@ from rollcam.sim.frame import Frame
 from rollcam.sim.imu import ImuSamples
 from rollcam.sim.timing import Readout
 
-from ..imagefiles import image_array
-from ..video import VideoWriter
+from ..recording.imagefiles import image_array
+from ..recording.video import VideoWriter
 from .messages import readout_lines
 
 GCSV_VERSION = "1.3"
@@ -102,7 +102,7 @@ def video_image(frame: Frame) -> np.ndarray:
     if frame.format not in ("BGR3", "RGB3", "GREY"):
         raise ConfigError(f"--format mp4 takes picture frames (BGR3, RGB3, GREY), not {frame.format.strip()!r}; "
                           "capture raw streams as png or npy")
-    import cv2  # lazily, as the image files do: importing rollcam.host.capture stays light
+    import cv2  # lazily, as the image files do: importing rollcam.host.recording.capture stays light
 
     img = image_array(frame, "png")
     return cv2.cvtColor(img, cv2.COLOR_GRAY2BGR) if img.ndim == 2 else img
@@ -119,7 +119,7 @@ def check_frames(frames: Sequence[Frame]) -> None:
 class VideoWithGyro:
     """``capture.mp4`` (H.264, ``fps``) and, when the frames carry IMU samples, ``capture.gcsv`` beside it.
 
-    The video is written as ``rollcam.host.video.VideoWriter`` writes it (temporary name, moved into place
+    The video is written as ``rollcam.host.recording.video.VideoWriter`` writes it (temporary name, moved into place
     when finished); the gcsv rows are kept and written atomically after the video is in place, so each file
     is whole or absent. The same interface as the capture's other writers: ``write``, ``close``, ``abort``.
     """

@@ -21,7 +21,7 @@ from rollcam.sim.formats import BAYER_ORDERS, FORMATS, bayer_fourcc
 from rollcam.sim.frame import Frame
 from rollcam.sim.imu import ImuSamples
 
-from ..imagefiles import image_array
+from ..recording.imagefiles import image_array
 
 NS_PER_S = 1_000_000_000
 CAMERA_FRAME, IMU_FRAME, WORLD_FRAME = "cam0", "imu0", "world"

@@ -104,7 +104,7 @@ def rollcam_picamera2(monkeypatch: pytest.MonkeyPatch) -> Iterator[Callable[...,
     ``picamera2 = rollcam_picamera2("imx477", "emu:imx708?scene=flat")`` (camera N is the N-th source; none
     given: one imx219). Code under test imports it as usual. A real picamera2 already imported is put back
     afterwards."""
-    from rollcam.host.standins import PICAMERA2_ENV, shims_path
+    from rollcam.host.servers.standins import PICAMERA2_ENV, shims_path
 
     saved = {k: sys.modules.pop(k) for k in [k for k in sys.modules if _is_standin(k)]}
     monkeypatch.syspath_prepend(str(shims_path()))
@@ -208,9 +208,9 @@ def rollcam_v4l2_device() -> Iterator[Callable[..., Any]]:
 @pytest.fixture
 def rollcam_http_camera() -> Iterator[Callable[..., Any]]:
     """Factory of the emulated camera's MJPEG servers: ``srv = rollcam_http_camera("imx219", faults="cut=5%",
-    size=(320, 240))`` returns a started ``rollcam.emu.http_mjpeg.MjpegServer`` on 127.0.0.1 (its ``url``
+    size=(320, 240))`` returns a started ``rollcam.emu.http.mjpeg.MjpegServer`` on 127.0.0.1 (its ``url``
     opens in ``cv2.VideoCapture`` or as a source; ``fault_stats`` counts the injected faults)."""
-    from rollcam.emu.http_mjpeg import MjpegServer
+    from rollcam.emu.http.mjpeg import MjpegServer
     from rollcam.firmware.camera import FirmwareCamera
 
     servers: list[Any] = []

@@ -22,8 +22,8 @@ from rollcam.firmware import controls as ctl
 from rollcam.firmware.camera import FirmwareCamera
 from rollcam.firmware.pixfmt import raw_formats
 from rollcam.firmware.spec import CameraSpec
+from rollcam.host.servers.standins import PICAMERA2_ENV
 from rollcam.host.sources.emu import device_spec
-from rollcam.host.standins import PICAMERA2_ENV
 from rollcam.sim import formats as sf
 from rollcam.sim.frame import Frame
 from rollcam.sim.hwconfig import SensorMode
@@ -61,7 +61,8 @@ def sources() -> list[str]:
 
 def spec_of(source: str) -> CameraSpec:
     """The camera spec of a sensor name or ``emu:`` URI; SourceError naming the source when it is bad. A
-    ``faults=`` plan there is the V4L2 device's (``rollcam run``); the stand-in injects none."""
+    ``faults=`` plan there is the V4L2 device's (``rollcam run``); the stand-in injects only the AI Camera's faults
+    of it (``loaderfail``, ``fetimeout``, ``dnn_us``: ``PiCamera``)."""
     return device_spec(source, SourceError)[0]
 
 
@@ -112,6 +113,7 @@ class PiCamera:
         if self.cnn is not None and self._own_network:
             self.base = self.base.with_options(self.cnn.options())
         self.device = FirmwareCamera(self.base)
+        self.device.insensor.set_faults(device_spec(source, SourceError)[1])  # the AI Camera's failures
         self.sensor = self.base.sensor
         self.modes = raw_modes(self.base)
         if not self.modes:
@@ -160,6 +162,8 @@ class PiCamera:
             **AUTO_CONTROLS}
         if self.sensor.name in FOCUS_SENSORS:
             out.update(FOCUS_CONTROLS)
+        if self.sensor.name == "imx500":  # the input tensor comes with every result that has one
+            out["CnnEnableInputTensor"] = (False, True, False)
         return out
 
     def mode_info(self, mode: RawMode) -> dict[str, Any]:
@@ -250,6 +254,10 @@ class PiCamera:
         """Run ``program``'s network (``IMX500``) from the next frame, with its inference region."""
         self.cnn = program
         self._sync_network()
+
+    def inject(self, tensor: bytes) -> int:
+        """Put an input tensor in the place of the next frame's (``InSensorStage.inject``): that frame's number."""
+        return self.device.inject(tensor)
 
     def _sync_network(self) -> None:
         if self.cnn is None:

@@ -5,7 +5,9 @@ Raspberry Pi IMX500 helper gives them to picamera2.
 ``CnnProgram`` is one camera's network: the in-sensor options of ``rollcam.firmware`` it sets
 (``insensor=SPEC``, ``insensor_size`` = the network's input tensor), and the layout of a post-processed
 ("_pp") detection network's outputs: four tensors, boxes ``(slots, 4)``, scores ``(slots,)``, classes
-``(slots,)`` and the count ``(1,)``, float32, each flattened in column-major order (picamera2's
+``(slots,)`` and the count ``(1,)``, float32, each flattened in column-major order (a classifier's program
+sends its network's own output tensors instead: ``colournet``'s 1000 logits; a segmenter's, ``colourseg``'s
+class of every input pixel) (picamera2's
 ``get_outputs`` reshapes with ``order='F'``). Boxes are normalised to the sensor's full pixel array (what
 ``IMX500.convert_inference_coords`` takes), in ``yx`` (y0, x0, y1, x1) or ``xy`` order, and, for a network
 whose boxes are in input-tensor pixels (``bbox_normalization``), times the input size. Unused slots are zero.
@@ -14,7 +16,8 @@ The tensors of a request are those of the newest in-sensor result the frame carr
 results done since the previous frame, so usually the frame before's); ``CnnOutputTensorInfo.frameCount`` is
 that result's source frame sequence number modulo 256, and ``RollcamInsensor`` lists every carried result in
 full (``InSensorResult.to_json``: device-clock ns, boxes in the raw frame's pixels). A frame that carries none
-has no ``Cnn*`` keys, as when a Pi's network runs slower than the frame rate.
+has no ``Cnn*`` keys, as when a Pi's network runs slower than the frame rate. A network with an input tensor
+(data injection) also gives ``CnnInputTensor``: the tensor it ran on, 3 x H x W unsigned bytes without padding.
 """
 
 from __future__ import annotations
@@ -48,11 +51,19 @@ class CnnProgram:
     bbox_order: str = "yx"
     slots: int = DEFAULT_SLOTS
     roi: tuple[int, int, int, int] | None = None
+    tensor: str = "none"
+    """The ``insensor_tensor`` option: the network's input tensor (set for data injection)."""
+    task: str = "object detection"
+    """``object detection``: the post-processed four tensors; any other task (``classification``,
+    ``segmentation``): the network's own output tensors."""
 
     def options(self) -> dict[str, str]:
         """The in-sensor options of ``rollcam.firmware`` that run this network."""
         w, h = self.input_size
-        return {"insensor": self.network, "insensor_size": f"{w}x{h}"}
+        options = {"insensor": self.network, "insensor_size": f"{w}x{h}", "insensor_tensor": self.tensor}
+        if self.tensor != "none":
+            options["insensor_input"] = "isp"
+        return options
 
 
 _PROGRAMS: dict[int, CnnProgram] = {}
@@ -69,6 +80,18 @@ def load(num: int, program: CnnProgram) -> None:
         cam = _OPEN.get(num)
     if cam is not None and cam._cam is not None:
         cam._cam.set_network(program)
+
+
+def inject(num: int, tensor: bytes) -> int:
+    """Inject an input tensor into open camera ``num``'s network; returns the comparison frame's sequence
+    number (``InjectionBusy`` while an earlier tensor waits; RuntimeError when the camera is not open)."""
+    from .picamera2 import _OPEN, _OPEN_LOCK
+
+    with _OPEN_LOCK:
+        cam = _OPEN.get(num)
+    if cam is None or cam._cam is None:
+        raise RuntimeError(f"IMX500: camera {num} is not open: open it with Picamera2 before injecting a tensor")
+    return cam._cam.inject(tensor)
 
 
 def set_roi(num: int, roi: tuple[int, int, int, int] | None) -> None:
@@ -148,7 +171,10 @@ def cnn_metadata(program: CnnProgram, frame: Any, array_crop: tuple[int, int, in
     if not carried:
         return {}
     result = carried[-1]
-    tensors = output_tensors(program, result, array_crop, (frame.width, frame.height), array_size)
+    if program.task == "object detection":
+        tensors = output_tensors(program, result, array_crop, (frame.width, frame.height), array_size)
+    else:  # the network's own output tensors, as the sensor sends a network without on-chip post-processing
+        tensors = [np.asarray(t, np.float32) for _, t in result.tensors]
     flat = np.concatenate([t.ravel(order="F") for t in tensors])
     return {
         # A tuple, as libcamera's float span arrives (picamera2 tests it with `if not tensor`).
@@ -156,4 +182,14 @@ def cnn_metadata(program: CnnProgram, frame: Any, array_crop: tuple[int, int, in
         "CnnOutputTensorInfo": tensor_info(program.name, [t.shape for t in tensors], result.seq),
         "CnnKpiInfo": (-(-result.latency_ns // 1000), 0),  # DNN and DSP runtimes, us (no DSP stage modelled)
         "RollcamInsensor": [r.to_json() for r in carried],
+        **({} if result.input_tensor is None else {"CnnInputTensor": input_tensor(program, result.input_tensor)}),
     }
+
+
+def input_tensor(program: CnnProgram, tensor: np.ndarray) -> tuple[int, ...]:
+    """``CnnInputTensor``: the tensor's planes without the DSP's padding, as unsigned bytes (3 x H x W)."""
+    from rollcam.firmware.input_tensor import parse_tensor_format
+
+    fmt = parse_tensor_format(program.tensor)
+    assert fmt is not None
+    return tuple(fmt.planes(tensor).ravel().tolist())

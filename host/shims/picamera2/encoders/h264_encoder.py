@@ -18,7 +18,7 @@ import subprocess
 import threading
 from typing import Any
 
-from rollcam.host.video import ffmpeg_exe, h264_encoder
+from rollcam.host.recording.video import ffmpeg_exe, h264_encoder
 
 from .encoder import FFMPEG_PIXEL_FORMATS, Encoder, Quality
 

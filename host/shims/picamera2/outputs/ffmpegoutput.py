@@ -17,7 +17,7 @@ import subprocess
 import threading
 from typing import Any
 
-from rollcam.host.video import ffmpeg_exe
+from rollcam.host.recording.video import ffmpeg_exe
 
 from .output import Output
 

@@ -12,10 +12,14 @@ docs/picamera2.md.
 
 from __future__ import annotations
 
+import errno
 import hashlib
+import os
 from typing import Any
 
 import numpy as np
+from rollcam.firmware.input_tensor import parse_tensor_format
+from rollcam.firmware.insensor_stage import InjectionBusy
 
 from ... import _cnn
 from ..._camera import sources, spec_of
@@ -44,20 +48,30 @@ class IMX500:
     """The emulated IMX500 and the network it runs (see the module docstring)."""
 
     def __init__(self, network_file: str, camera_id: str = "", tensor_injection: bool = False) -> None:
-        if tensor_injection:
-            raise RuntimeError("IMX500: input tensor injection is not emulated by rollcam")
         self.__num, self.__sensor = self.__find_camera(camera_id)
         zoo = resolve(network_file)
-        self.__program = _cnn.CnnProgram(zoo.stem, zoo.detector, zoo.input_size, zoo.bbox_normalization,
-                                         zoo.bbox_order)
-        intrinsics = NetworkIntrinsics({"task": "object detection", "inference_rate": 30.0,
-                                        "cpu": {"bbox_normalization": zoo.bbox_normalization,
-                                                "bbox_order": zoo.bbox_order},
-                                        "classes": {"labels": list(COCO_LABELS)}})
+        self.__injection = bool(tensor_injection)
+        self.__cmp_frm = 0
+        # A classifier reads the input tensor always (a picture network); a detector only with injection.
+        tensor = zoo.tensor() if tensor_injection or zoo.task != "object detection" else "none"
+        self.__program = _cnn.CnnProgram(zoo.stem, zoo.picture_detector if tensor != "none" else zoo.detector,
+                                         zoo.input_size, zoo.bbox_normalization, zoo.bbox_order, tensor=tensor,
+                                         task=zoo.task)
+        if zoo.task == "object detection":
+            intrinsics = NetworkIntrinsics({"task": zoo.task, "inference_rate": 30.0,
+                                            "cpu": {"bbox_normalization": zoo.bbox_normalization,
+                                                    "bbox_order": zoo.bbox_order},
+                                            "classes": {"labels": list(COCO_LABELS)}})
+        else:  # the script brings its labels (picamera2's examples read their assets' ImageNet list)
+            intrinsics = NetworkIntrinsics({"task": zoo.task, "inference_rate": 30.0})
         w, h = zoo.input_size
         self.__cfg: dict[str, Any] = {"network_file": network_file, "intrinsics": intrinsics,
                                       "input_tensor": {"width": w, "height": h, "input_format": "RGB"},
-                                      "input_tensor_size": (w, h), "rollcam_network": zoo.detector}
+                                      "input_tensor_size": (w, h), "rollcam_network": self.__program.network}
+        fmt = parse_tensor_format(zoo.tensor())
+        assert fmt is not None
+        self.__cfg["input_tensor"].update({"norm_val": list(fmt.norm_val), "norm_shift": list(fmt.norm_shift),
+                                           "div_val": list(fmt.div_val), "div_shift": fmt.div_shift})
         _cnn.load(self.__num, self.__program)
         self.set_inference_roi_abs(self.__full())
 
@@ -100,6 +114,35 @@ class IMX500:
         """The network upload's progress, (current, total): always finished here."""
         return (1, 1)
 
+    def __set_input_tensor(self, input_tensor_fd: int) -> None:
+        # Sony's modlib calls this by its mangled name (``_IMX500__set_input_tensor``) with a memfd holding the
+        # tensor, then reads the comparison frame (``get_injection_cmp_frm``); errno 121 it retries.
+        if not self.__injection:
+            raise RuntimeError("IMX500: Unable to set input tensor fd: [Errno 22] Invalid argument (tensor injection "
+                               "is off: IMX500(..., tensor_injection=True))")
+        size = os.fstat(input_tensor_fd).st_size
+        data = os.pread(input_tensor_fd, size, 0)
+        try:
+            self.__cmp_frm = _cnn.inject(self.__num, data)
+        except InjectionBusy:
+            e = RuntimeError(f"IMX500: Unable to set input tensor fd: [Errno {errno.EREMOTEIO}] Remote I/O error")
+            e.errno = errno.EREMOTEIO  # type: ignore[attr-defined]
+            raise e from None
+        except ValueError as exc:
+            raise RuntimeError(f"IMX500: Unable to set input tensor fd: {exc}") from None
+
+    def get_injection_cmp_frm(self) -> int:
+        """The frame counter (8 bits, ``CnnOutputTensorInfo.frameCount``) of the frame the last injected tensor
+        runs on."""
+        return self.__cmp_frm & 0xFF
+
+    def input_tensor_image(self, input_tensor: Any) -> np.ndarray:
+        """A request's ``CnnInputTensor`` as the 8-bit picture it shows, BGR (picamera2 reverses the planes)."""
+        fmt = parse_tensor_format(self.__program.tensor if self.__program.tensor != "none" else
+                                  resolve(self.__cfg["network_file"]).tensor())
+        assert fmt is not None
+        return fmt.picture_bgr(np.asarray(input_tensor, np.uint8))
+
     def get_device_id(self) -> str:
         """The sensor's unique id as 32 hex digits (derived from the camera number, stable)."""
         return hashlib.sha256(f"rollcam-imx500-{self.__num}".encode()).hexdigest()[:32].upper()
@@ -111,6 +154,15 @@ class IMX500:
         if kpi is None:
             return None
         return kpi[0] / 1000, kpi[1] / 1000
+
+    def __get_output_tensor_info(self, tensor_info: Any) -> dict[str, Any]:
+        # picamera2's injection demo calls this by its mangled name for the frame counter (``frameCount``).
+        fields = _cnn.TENSOR_INFO.unpack(bytes(tensor_info))
+        per = 2 + _cnn.MAX_NUM_DIMENSIONS
+        info = [{"tensor_data_num": fields[2 + i * per], "num_dimensions": fields[3 + i * per],
+                 "size": list(fields[4 + i * per: 4 + i * per + fields[3 + i * per]])} for i in range(fields[1])]
+        return {"network_name": fields[0].rstrip(b"\0").decode("utf-8"), "num_tensors": fields[1], "info": info,
+                "frameCount": fields[-1]}
 
     def get_output_shapes(self, metadata: dict[str, Any]) -> list[list[int]]:
         """The shapes of the output tensors in ``metadata`` ([] when it has none)."""

@@ -6,7 +6,10 @@ no firmware to load: the file's name (its stem; the file need not exist) picks a
 detector the in-sensor stage runs, its input tensor size (the accelerator's largest input) and the layout the
 real network's post-processed outputs have (box order, boxes normalised or in input pixels). In place of an
 ``.rpk``, an ``.onnx`` file runs as ``onnx:PATH`` and any rollcam detector spec (``personnet-raw``,
-``ssdlite?conf=0.2``) as itself, both with the ``_pp`` layout of the default row. Rollcam's detectors find
+``ssdlite?conf=0.2``) as itself, both with the ``_pp`` layout of the default row. With data injection
+(``IMX500(..., tensor_injection=True)``) the network takes an input tensor, which the sensor's ISP makes from its
+picture: a row then runs ``picture_detector`` (``personnet``) on the picture an RGB int8 tensor of its input size
+shows. Rollcam's detectors find
 people; their class 0 is COCO's "person".
 """
 
@@ -30,6 +33,16 @@ class ZooNetwork:
     input_size: tuple[int, int]
     bbox_normalization: bool = False
     bbox_order: str = "yx"
+    picture_detector: str = "personnet"
+    """What runs with data injection: the input tensor is the ISP's picture, so the picture-trained twin."""
+    task: str = "object detection"
+    """``object detection`` (post-processed boxes, scores, classes, count), ``classification`` (the logits),
+    ``segmentation`` (the class of every input pixel) or ``pose estimation`` (HigherHRNet's grouped keypoints)."""
+
+    def tensor(self) -> str:
+        """The network's input tensor (``insensor_tensor``): RGB, int8, centred (picamera2's default norm)."""
+        w, h = self.input_size
+        return f"{w}x{h},rgb,int8"
 
 
 ZOO = {z.stem: z for z in (
@@ -38,6 +51,12 @@ ZOO = {z.stem: z for z in (
     ZooNetwork("imx500_network_nanodet_plus_416x416_pp", "personnet-raw", (416, 416)),
     ZooNetwork("imx500_network_yolov8n_pp", "personnet-raw", (640, 640), bbox_normalization=True, bbox_order="xy"),
     ZooNetwork("imx500_network_yolo11n_pp", "personnet-raw", (640, 640), bbox_normalization=True, bbox_order="xy"),
+    ZooNetwork("imx500_network_mobilenet_v2", "colournet", (224, 224), picture_detector="colournet",
+               task="classification"),
+    ZooNetwork("imx500_network_deeplabv3plus", "colourseg", (513, 513), picture_detector="colourseg",
+               task="segmentation"),
+    ZooNetwork("imx500_network_higherhrnet_coco", "posenet", (384, 288), picture_detector="posenet",
+               task="pose estimation"),
 )}
 """Model-zoo object detectors (post-processed on chip) -> the rollcam detector run in their place: the
 study's raw-trained ``personnet-raw`` (it reads the mosaic, as an in-sensor network does), within the named
@@ -59,7 +78,8 @@ def resolve(network_file: str) -> ZooNetwork:
     if ext.lower() == ".onnx":
         if not os.path.isfile(text):
             raise RuntimeError(f"Firmware file {text} does not exist.")
-        return ZooNetwork(stem, f"onnx:{os.path.abspath(text)}", DEFAULT_INPUT)
+        spec = f"onnx:{os.path.abspath(text)}"
+        return ZooNetwork(stem, spec, DEFAULT_INPUT, picture_detector=spec)
     if not text:
         raise RuntimeError("IMX500: no network file given")
-    return ZooNetwork(text.split("?", 1)[0], text, DEFAULT_INPUT)
+    return ZooNetwork(text.split("?", 1)[0], text, DEFAULT_INPUT, picture_detector=text)

@@ -1,11 +1,13 @@
 """picamera2's post-processing helpers for IMX500 networks, as numpy functions of the same names and
 meanings: greedy NMS, NMS over a batch of class-score heads, box format changes, clipping and scaling to an
-image, softmax. Boxes are (y_min, x_min, y_max, x_max) unless a function says otherwise.
+image, softmax; and ``COCODrawer``, which draws people's boxes and COCO skeletons. Boxes are (y_min, x_min,
+y_max, x_max) unless a function says otherwise.
 """
 
 from __future__ import annotations
 
 from enum import Enum
+from typing import Any
 
 import numpy as np
 
@@ -101,3 +103,67 @@ def scale_boxes(boxes: np.ndarray, h_image: int, w_image: int, h_model: int, w_m
     boxes[..., [0, 2]] = (boxes[..., [0, 2]] * nw - dw) * sw
     boxes[..., [1, 3]] = (boxes[..., [1, 3]] * nh - dh) * sh
     return clip_boxes(boxes, h_image, w_image)
+
+
+COCO_SKELETON = ((0, 1), (0, 2), (1, 3), (2, 4), (5, 6), (5, 7), (7, 9), (6, 8), (8, 10), (5, 11), (6, 12),
+                 (11, 12), (11, 13), (12, 14), (13, 15), (14, 16))
+"""The limbs between COCO's 17 keypoints."""
+
+
+class COCODrawer:
+    """Draws pose results on an image as picamera2's does: each person's box with its category and score, and
+    its keypoints above a confidence joined by COCO's limbs. ``needs_rescale_coords``: boxes and keypoints are
+    normalised to the pixel array (``IMX500.convert_inference_coords`` maps them into the stream); else they are
+    in the image's pixels already (a box as y0, x0, y1, x1; keypoints as flat x, y, score triples)."""
+
+    def __init__(self, categories: list[str], imx500: Any, needs_rescale_coords: bool = True) -> None:
+        self.categories = categories
+        self.imx500 = imx500
+        self.needs_rescale_coords = needs_rescale_coords
+
+    def get_coords(self, annotation: Any, metadata: dict, picam2: Any, stream: str) -> tuple[int, int, int, int]:
+        """A box as (y0, x0, y1, x1) in the image's pixels."""
+        if self.needs_rescale_coords:
+            x, y, w, h = self.imx500.convert_inference_coords(annotation, metadata, picam2, stream)
+            return int(y), int(x), int(y + h), int(x + w)
+        y0, x0, y1, x1 = annotation
+        return int(max(0, y0)), int(max(0, x0)), int(y1), int(x1)
+
+    def draw_bounding_box(self, img: np.ndarray, annotation: Any, class_id: Any, score: float, metadata: dict,
+                          picam2: Any, stream: str) -> None:
+        """One person's box, labelled with its category and score."""
+        import cv2
+
+        y0, x0, y1, x1 = self.get_coords(annotation, metadata, picam2, stream)
+        cv2.rectangle(img, (x0, y0), (x1, y1), (0, 0, 255), 2)
+        cv2.putText(img, f"{self.categories[int(class_id)]}:{score:.3f}", (x0, y0), cv2.FONT_HERSHEY_SIMPLEX,
+                    0.5, (0, 255, 0), 1)
+
+    def draw_keypoints(self, img: np.ndarray, keypoints: Any, min_confidence: float, metadata: dict, picam2: Any,
+                       stream: str) -> None:
+        """One person's keypoints above ``min_confidence`` and the limbs between them."""
+        import cv2
+
+        pts = np.asarray(keypoints, np.float64).reshape(-1, 3)
+        points = {}
+        for i, (x, y, conf) in enumerate(pts):
+            if conf < min_confidence:
+                continue
+            if self.needs_rescale_coords:
+                px, py, _, _ = self.imx500.convert_inference_coords((y, x, y, x), metadata, picam2, stream)
+            else:
+                px, py = int(x), int(y)
+            points[i] = (int(px), int(py))
+            cv2.circle(img, points[i], 3, (0, 255, 0), -1)
+        for a, b in COCO_SKELETON:
+            if a in points and b in points:
+                cv2.line(img, points[a], points[b], (255, 255, 0), 2)
+
+    def annotate_image(self, img: np.ndarray, b: Any, s: Any, c: Any, k: Any, box_min_conf: float,
+                       kps_min_conf: float, metadata: dict, picam2: Any, stream: str) -> None:
+        """Boxes ``b`` with scores ``s`` and classes ``c`` above ``box_min_conf``, keypoints ``k`` (one flat list or
+        (17, 3) array a person) above ``kps_min_conf``."""
+        for index, row in enumerate(k):
+            if s[index] >= box_min_conf:
+                self.draw_bounding_box(img, b[index], c[index], s[index], metadata, picam2, stream)
+                self.draw_keypoints(img, row, kps_min_conf, metadata, picam2, stream)

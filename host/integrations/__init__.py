@@ -1,0 +1,2 @@
+"""rollcam inside other frameworks: a labgrid resource and driver (``labgrid``), a depthai host node
+(``oaknode``)."""
