@@ -8,6 +8,7 @@ import os
 
 from rollcam.common.values import fraction, parse_size, positive_float, positive_int
 
+from ..training.labels import LABEL_ARMS
 from . import Subparsers, value_type
 
 DESCRIPTION = """\
@@ -61,6 +62,10 @@ def add_parser(sub: Subparsers) -> argparse.ArgumentParser:
     p.add_argument("--ema", type=value_type(fraction, "a number in [0, 1)"), default=0.0, metavar="DECAY",
                    help="validate and export an exponential moving average of the weights with this decay, "
                         "e.g. 0.999 (default: 0, off)")
+    p.add_argument("--labels", choices=LABEL_ARMS, default="exact",
+                   help="boxes of the RS images: exact (rollcam's RS box), gs (the box at the reference instant, "
+                        "from the GS image of the pair) or hand (a modelled annotator's; docs/training.md) "
+                        "(default: %(default)s)")
     p.add_argument("--val-every", type=_COUNT, default=1, metavar="N", help="validate every N epochs (default: 1)")
     p.add_argument("--out", required=True, metavar="DIR", help="run folder (rerun to resume)")
     p.add_argument("--json", action="store_true", help="print the run card as JSON on stdout")
@@ -76,7 +81,8 @@ def config_from_args(args: argparse.Namespace):
                        model=args.model, epochs=args.epochs, imgsz=args.imgsz, batch=args.batch, lr=args.lr,
                        seed=args.seed, input=args.input, init=args.init,
                        threads=args.threads or min(8, os.cpu_count() or 1), steps=args.steps,
-                       val_every=args.val_every, scenes=args.scenes, cameras=args.cameras, ema=args.ema)
+                       val_every=args.val_every, scenes=args.scenes, cameras=args.cameras, ema=args.ema,
+                       labels=args.labels)
 
 
 def run(args: argparse.Namespace) -> int:

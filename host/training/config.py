@@ -7,6 +7,7 @@ from typing import Any
 
 from rollcam.common.errors import ConfigError
 
+from .labels import check_arm
 from .model import model_size
 
 INPUTS = ("rgb", "raw")
@@ -20,6 +21,8 @@ class TrainConfig:
     ``steps`` caps the optimiser steps of each epoch (None: the whole training split), for tiny runs and tests.
     ``scenes``/``cameras`` keep the training images of the first N training scenes / camera views only (the
     study's Fig. 4: accuracy against the diversity of the training set).
+    ``labels`` is the label arm of the RS images (``exact``, ``gs`` or ``hand``; ``rollcam.host.training.labels``),
+    for training and validation alike.
     ``ema`` > 0 keeps an exponential moving average of the weights with that decay, which validation and the
     export use instead of the raw weights (0: off).
     """
@@ -42,6 +45,7 @@ class TrainConfig:
     scenes: int | None = None
     cameras: int | None = None
     ema: float = 0.0
+    labels: str = "exact"
 
     def __post_init__(self) -> None:
         model_size(self.model)
@@ -61,12 +65,13 @@ class TrainConfig:
             raise ConfigError(f"--lr must be in (0, 1), got {self.lr!r}")
         if not (0 <= self.ema < 1):
             raise ConfigError(f"--ema must be in [0, 1), got {self.ema!r}")
+        check_arm(self.labels)
 
     @staticmethod
     def added_keys() -> dict[str, Any]:
         """Options added after the first release, with the value that reproduces runs made before them: a
         checkpoint whose config lacks one was trained with that value."""
-        return {"ema": 0.0}
+        return {"ema": 0.0, "labels": "exact"}
 
     def to_json(self) -> dict[str, Any]:
         """Plain-JSON form, stored in checkpoints and the run card."""

@@ -25,6 +25,7 @@ from rollcam.common.errors import ConfigError
 
 from ..detectors.onnx import fit_image, input_scale
 from ..evaluation.loaders import EvalSet, load_rollcam
+from .labels import relabel
 from .loss import build_targets
 from .model import STRIDE
 
@@ -74,10 +75,11 @@ def check_subsets(info: DatasetInfo, names: tuple[str, ...], flag: str) -> tuple
 
 
 def load_split(info: DatasetInfo, subsets: tuple[str, ...], split: str, *, scenes: int | None = None,
-               cameras: int | None = None) -> list[EvalSet]:
+               cameras: int | None = None, labels: str = "exact") -> list[EvalSet]:
     """The evaluation sets of ``subsets`` at ``split`` (in the order given), keeping only the images of the first
-    ``scenes`` scenes and ``cameras`` camera views of the split when given."""
-    sets = {s.name: s for s in load_rollcam(info.root, split)}
+    ``scenes`` scenes and ``cameras`` camera views of the split when given; RS images carry the boxes of the
+    label arm ``labels`` (``rollcam.host.training.labels``)."""
+    sets = {s.name: s for s in relabel(load_rollcam(info.root, split), labels)}
     chosen = [sets[n] for n in subsets]
     if scenes is None and cameras is None:
         return chosen

@@ -8,7 +8,14 @@ headline one:
 - ``t3``: models trained on GS and RS together, the missing cells of Table 3;
 - ``speed``: GS and RS models at more walker speeds (1x, 5x, 10x, 20x): the RS penalty against speed;
 - ``raw``: GS and RS models on the raw mosaic (ISP-less input), the same comparison without an ISP;
-- ``fig4``: one RS subset trained on fewer scenes and fewer camera views (the study's Fig. 4).
+- ``fig4``: one RS subset trained on fewer scenes and fewer camera views (the study's Fig. 4);
+- ``labels``: the label arm (``rollcam.host.training.labels``): RS models of ``label_speeds`` trained and tested
+  with GS labels and with hand-like labels, beside ``t1``'s RS models (exact labels) and GS models;
+- ``coco`` (no training): the COCO-trained detectors rollcam ships, not fine-tuned, on the four subsets (the
+  study's Table 2).
+
+A setting with a base (``base_frames``) first trains one model on GS images of scenes of another dataset seed
+(``runs/base/``) and starts every other run from it: the study fine-tuned COCO-pretrained models.
 
 Every run is an ordinary ``rollcam train`` folder under ``OUT/runs/`` with its test results beside it
 (``test.json``): a rerun of the study resumes an interrupted run and skips finished ones. Runs go to the
@@ -17,6 +24,7 @@ dataset builder's executors (``--workers N`` processes, one torch thread each, o
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 import json
 import time
@@ -24,11 +32,13 @@ from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 from rollcam.common.errors import ConfigError
 from rollcam.common.files import output_dir, write_atomic
 
+from .labels import ANNOTATOR, LABEL_ARMS, box_stats, relabel
 from .study_report import write_report
-from .study_settings import SHUTTERS, StudySettings, subset
+from .study_settings import EXPERIMENTS, SHUTTERS, StudySettings, subset
 
 
 @dataclass(frozen=True)
@@ -43,10 +53,27 @@ class Job:
     raw: bool = False
     scenes: int | None = None
     cameras: int | None = None
+    labels: str = "exact"
 
 
-def plan_jobs(s: StudySettings) -> list[Job]:
-    """Every training run of the study, each once (an experiment that needs a run another has made shares it)."""
+def plan_jobs(s: StudySettings, only: tuple[str, ...] = ()) -> list[Job]:
+    """Every training run of the study, each once (an experiment that needs a run another has made shares it);
+    ``only``: the runs of those experiments (the label arm brings the GS and exact-label RS runs of its speeds)."""
+    jobs = _all_jobs(s)
+    if not only:
+        return jobs
+    bad = [g for g in only if g not in EXPERIMENTS]
+    if bad:
+        raise ConfigError(f"--only {bad[0]!r} is not one of {list(EXPERIMENTS)}")
+    chosen = [j for j in jobs if j.group in only or ("labels" in only and j.group in ("t1", "speed")
+                                                      and j.speed in s.label_speeds)]
+    if "labels" in only:  # every arm of a speed and seed before the next: a run cut short leaves whole comparisons
+        rank = {sp: i for i, sp in enumerate(s.label_speeds)}
+        chosen.sort(key=lambda j: (rank.get(j.speed, len(rank)), j.seed))
+    return chosen
+
+
+def _all_jobs(s: StudySettings) -> list[Job]:
     jobs: list[Job] = []
     for speed in s.speeds:
         group = "t1" if speed in ("normal", "fast") else "speed"
@@ -64,7 +91,21 @@ def plan_jobs(s: StudySettings) -> list[Job]:
              for n in s.fig4_scenes]
     jobs += [Job(f"{s.fig4_subset}_cams{n}_s0", "fig4", f4_speed, (s.fig4_subset,), s.seeds[0], cameras=n)
              for n in s.fig4_cameras]
+    for speed in s.label_speeds:
+        for arm in LABEL_ARMS[1:]:
+            jobs += [Job(f"{subset(speed, 'rs')}_{arm}labels_s{seed}", "labels", speed, (subset(speed, "rs"),), seed,
+                         labels=arm) for seed in s.seeds]
     return jobs
+
+
+BASE_THREADS = 2
+"""torch threads of the base run, which runs alone before the others (fixed, not ``--workers``: a thread count is
+part of what a resumed run must match)."""
+
+
+def base_job(s: StudySettings) -> Job | None:
+    """The run every other starts from in a setting with a base (``runs/base``), or None."""
+    return Job("base", "base", "normal", (subset("normal", "gs"),), 0) if s.base_frames else None
 
 
 def dataset_configs(s: StudySettings) -> dict[str, Any]:
@@ -72,15 +113,19 @@ def dataset_configs(s: StudySettings) -> dict[str, Any]:
     from ..datasets.plan import DatasetConfig
 
     rgb = DatasetConfig(size=s.size, scenes=s.scenes, cameras=s.cameras, times=s.times, speeds=s.speeds,
-                        frames=s.frames_per_speed * len(s.speeds), pedestrians=s.pedestrians, seed=0)
+                        frames=s.frames_per_speed * len(s.speeds), pedestrians=s.pedestrians, seed=0,
+                        split_fractions=s.split)
     out = {"rgb": rgb}
     if s.raw_speeds:
         out["raw"] = replace(rgb, speeds=s.raw_speeds, frames=s.frames_per_speed * len(s.raw_speeds),
                              raw_format="RGGB")
+    if s.base_frames:
+        out["base"] = replace(rgb, speeds=("normal",), frames=s.base_frames, scenes=s.base_scenes, seed=s.base_seed,
+                              split_fractions=(0.8, 0.1, 0.1))
     return out
 
 
-def run_job(job: Job, s: StudySettings, root: str) -> dict[str, Any]:
+def run_job(job: Job, s: StudySettings, root: str, device: str = "auto", threads: int = 1) -> dict[str, Any]:
     """Train (or resume, or find finished) one run and test it; the result is also ``runs/KEY/test.json``."""
     from .config import TrainConfig
     from .trainer import train
@@ -90,67 +135,212 @@ def run_job(job: Job, s: StudySettings, root: str) -> dict[str, Any]:
     if done.is_file():
         return json.loads(done.read_text())
     data = Path(root) / "data" / ("raw" if job.raw else "rgb")
-    cfg = TrainConfig(dataset=str(data), subsets=job.train, model=s.model, epochs=s.epochs, imgsz=s.size,
-                      batch=s.batch, lr=s.lr, seed=job.seed, input="raw" if job.raw else "rgb", threads=1,
-                      steps=s.steps, val_every=s.val_every, scenes=job.scenes, cameras=job.cameras)
+    is_base = job.group == "base"
+    init = str(Path(root) / "runs" / "base" / "last.pt") if s.base_frames and not is_base else None
+    cfg = TrainConfig(dataset=str(Path(root) / "data" / "base") if is_base else str(data), subsets=job.train,
+                      model=s.model, epochs=s.base_epochs if is_base else s.epochs, imgsz=s.size, batch=s.batch,
+                      lr=s.base_lr if is_base else s.lr, seed=job.seed, input="raw" if job.raw else "rgb",
+                      threads=threads, steps=s.steps, val_every=s.val_every, scenes=job.scenes,
+                      cameras=job.cameras, labels=job.labels, init=init)
     t0 = time.monotonic()
-    result = train(cfg, run_dir, device="auto", progress=False)
+    result = train(cfg, run_dir, device=device, progress=False)
     t1 = time.monotonic()
-    tests = test_model(result.model_path, data, job.speed)
+    tests = test_model(result.model_path, data, job.speed, job.labels)
     doc = {"job": asdict(job), "test": tests, "train_s": round(t1 - t0, 3), "test_s": round(time.monotonic() - t1, 3),
            "val": result.card.get("final")}
     write_atomic(done, (json.dumps(doc, indent=1) + "\n").encode())
     return doc
 
 
-def test_model(model: Path, dataset: Path, speed: str) -> dict[str, Any]:
-    """The model on the test splits of ``speed``: GS, RS, and GS and RS pooled (``gsrs``)."""
+def test_model(model: Path | str, dataset: Path, speed: str, labels: str = "exact",
+               also: tuple[str, ...] = ()) -> dict[str, Any]:
+    """The model (a ``model.onnx``, or a detector spec) on the test splits of ``speed``: GS, RS, and GS and RS
+    pooled (``gsrs``), the RS images labelled by the arm ``labels``; with another arm than ``exact``, also the RS
+    images against exact labels (``rs_exact``), and against each arm of ``also`` (``rs_ARMlabels``). Each GS and
+    RS cell carries ``mAP50_95_se``, the standard error of its mAP@0.5:0.95 over the test images
+    (``bootstrap_se``)."""
     from ..detectors import load_detector
     from ..evaluation.loaders import load_rollcam, run_detector
-    from ..evaluation.metrics import evaluate
 
-    sets = {s.name: s for s in load_rollcam(dataset, "test")}
-    det = load_detector(f"onnx:{model}?conf=0.01&threads=1")
+    exact = load_rollcam(dataset, "test")
+    sets = {s.name: s for s in relabel(exact, labels)}
+    spec = f"onnx:{model}?conf=0.01&threads=1" if str(model).endswith(".onnx") else str(model)
+    det = load_detector(spec)
     try:
         dets = {sh: run_detector(det, sets[subset(speed, sh)]) for sh in SHUTTERS}
     finally:
         det.close()
-    keep = ("P", "R", "mAP50", "mAP50_95")
     out = {}
     for sh in SHUTTERS:
-        m = evaluate([e.truth for e in sets[subset(speed, sh)].images], dets[sh])
-        out[sh] = {k: round(float(m[k]), 6) for k in keep}
-    m = evaluate([e.truth for sh in SHUTTERS for e in sets[subset(speed, sh)].images], dets["gs"] + dets["rs"])
-    out["gsrs"] = {k: round(float(m[k]), 6) for k in keep}
+        out[sh] = scores([e.truth for e in sets[subset(speed, sh)].images], dets[sh])
+    out["gsrs"] = scores([e.truth for sh in SHUTTERS for e in sets[subset(speed, sh)].images],
+                         dets["gs"] + dets["rs"], se=False)
+    other = {arm: f"rs_{arm}labels" for arm in also if arm != labels}
+    if labels != "exact":
+        other["exact"] = "rs_exact"
+    for arm, key in other.items():
+        rs = {s.name: s for s in relabel(exact, arm)}[subset(speed, "rs")]
+        out[key] = scores([e.truth for e in rs.images], dets["rs"])
     return out
 
 
+BOOTSTRAP = 100
+"""Resamples of the test images behind each ``mAP50_95_se``."""
+
+
+def scores(truths: list[Any], dets: list[Any], se: bool = True) -> dict[str, Any]:
+    """P, R, mAP50 and mAP50_95 (and its bootstrap standard error over the images when ``se``)."""
+    from ..evaluation.metrics import evaluate
+
+    m = evaluate(truths, dets)
+    out = {k: round(float(m[k]), 6) for k in ("P", "R", "mAP50", "mAP50_95")}
+    if se:
+        out["mAP50_95_se"] = round(bootstrap_se(truths, dets, BOOTSTRAP, np.random.default_rng(0)), 6)
+    return out
+
+
+def bootstrap_se(truths: list[Any], dets: list[Any], n: int, rng: np.random.Generator) -> float:
+    """The standard error of mAP@0.5:0.95 from sampling the test images: its spread over ``n`` resamples of the
+    images with replacement (one model, one set of detections)."""
+    from ..evaluation.metrics import evaluate
+
+    k = len(truths)
+    if k < 2:
+        return 0.0
+    vals = []
+    for _ in range(n):
+        idx = rng.integers(0, k, k)
+        vals.append(float(evaluate([truths[i] for i in idx], [dets[i] for i in idx])["mAP50_95"]))
+    return float(np.std(vals, ddof=1))
+
+
+def report_finished(s: StudySettings, out: str | Path, command: str | None = None,
+                    only: tuple[str, ...] = ()) -> dict[str, Any]:
+    """The report of the runs of ``OUT`` that have finished (``runs/KEY/test.json``), with how many are."""
+    root = Path(out).resolve()
+    if not (root / "data" / "rgb" / "dataset.json").is_file():
+        raise ConfigError(f"--report: {str(out)!r} holds no study of this setting yet (no data/rgb)")
+    jobs = plan_jobs(s, only)
+    base = base_job(s)
+    results = [json.loads(p.read_text()) for j in ([base] if base else []) + jobs
+               if (p := root / "runs" / j.key / "test.json").is_file()]
+    extra: dict[str, Any] = {}
+    coco = {d.split("?", 1)[0]: d for d in s.coco_detectors}
+    done = {name: json.loads(p.read_text()) | {"spec": spec} for name, spec in coco.items()
+            if (p := root / "coco" / f"{name}.json").is_file()}
+    if (not only or "coco" in only) and done:
+        extra["coco"] = done
+    if not only or "labels" in only:
+        extra["labels"] = label_tables(s, root)
+    timing = {"datasets_s": 0.0, "total_s": 0.0, "workers": 0, "device": "cpu",
+              "train_s_sum": round(sum(r["train_s"] for r in results), 1),
+              "finished": len(results), "planned": len(jobs) + (base is not None)}
+    return write_report(root, s, results, timing, command, extra)
+
+
+def coco_table(s: StudySettings, root: Path) -> dict[str, Any]:
+    """The study's Table 2 analogue: each of ``s.coco_detectors`` (COCO-trained, not fine-tuned) on the GS and RS
+    test splits of normal and fast walkers, RS scored against every label arm; kept in ``coco/DETECTOR.json``."""
+    data = root / "data" / "rgb"
+    out = {}
+    for spec in s.coco_detectors:
+        name = spec.split("?", 1)[0]
+        path = root / "coco" / f"{name}.json"
+        if path.is_file():
+            out[name] = json.loads(path.read_text()) | {"spec": spec}
+            continue
+        doc: dict[str, Any] = {}
+        for speed in ("normal", "fast"):
+            if speed not in s.speeds:
+                continue
+            doc[speed] = test_model(spec, data, speed, also=LABEL_ARMS[1:])
+        path.parent.mkdir(parents=True, exist_ok=True)
+        write_atomic(path, (json.dumps(doc, indent=1) + "\n").encode())
+        out[name] = doc | {"spec": spec}
+    return out
+
+
+def label_tables(s: StudySettings, root: Path) -> dict[str, Any]:
+    """Per label arm and speed: box statistics of the RS train split (and of the GS one) beside the study's, and
+    the *label ceiling*: the exact RS boxes, as if a perfect detector had drawn them, scored against the arm's
+    test labels (what the labels alone cost in mAP); for the hand arm also ``hand_inset``, the exact boxes with
+    the annotator's inset (a detector that learnt the bias, left with the scatter)."""
+    from ..evaluation.loaders import load_rollcam
+    from ..evaluation.metrics import Dets, evaluate
+
+    data = root / "data" / "rgb"
+    no_scatter = dataclasses.replace(ANNOTATOR, edge_sd=0.0)
+    train = load_rollcam(data, "train")
+    test = load_rollcam(data, "test")
+    boxes: dict[str, Any] = {}
+    ceiling: dict[str, Any] = {}
+    for arm in LABEL_ARMS:
+        tr = {x.name: x for x in relabel(train, arm)}
+        te = {x.name: x for x in relabel(test, arm)}
+        ex = {x.name: x for x in test}
+        for speed in s.speeds:
+            rs, gs = subset(speed, "rs"), subset(speed, "gs")
+            boxes.setdefault(speed, {"gs_images": box_stats(tr[gs])})[arm] = box_stats(tr[rs])
+            truths = [e.truth for e in te[rs].images]
+            perfect = [Dets.of(e.truth.boxes[~e.truth.ignore], np.ones(int((~e.truth.ignore).sum())),
+                               e.truth.classes[~e.truth.ignore]) for e in ex[rs].images]
+            m = evaluate(truths, perfect)
+            ceiling.setdefault(speed, {})[arm] = {k: round(float(m[k]), 6) for k in ("mAP50", "mAP50_95")}
+            if arm == "hand":  # a detector that learnt the annotator's inset, and only its scatter is left
+                mean = [Dets.of(no_scatter.draw(d.boxes, np.random.default_rng(0)), d.scores, d.classes)
+                        for d in perfect]
+                m = evaluate(truths, mean)
+                ceiling[speed]["hand_inset"] = {k: round(float(m[k]), 6) for k in ("mAP50", "mAP50_95")}
+    return {"boxes": boxes, "ceiling": ceiling}
+
+
 def run_study(s: StudySettings, out: str | Path, *, workers: int = 1, executor: str | None = None,
-              progress: bool | None = None, command: str | None = None) -> dict[str, Any]:
-    """Build the datasets, run every job, write ``OUT/report.md``, ``report.json`` and the charts."""
+              progress: bool | None = None, command: str | None = None, only: tuple[str, ...] = (),
+              device: str = "auto", report_only: bool = False) -> dict[str, Any]:
+    """Build the datasets, run every job (of the experiments ``only`` names, when given), write
+    ``OUT/report.md``, ``report.json`` and the charts. ``device`` ``auto`` trains on a CUDA GPU when torch sees
+    one (runs then go one at a time), else on the CPU. ``report_only``: train nothing, write the report of the
+    runs already finished (where a long study stands)."""
+    if report_only:
+        return report_finished(s, out, command, only)
     from ..datasets.build import build_dataset
     from ..datasets.executors import open_executor
     from ..progress import Progress
+    from .trainer import resolve_device
 
     root = output_dir(Path(out).resolve())  # a file there: one line, exit 2
+    jobs = plan_jobs(s, only)
+    device = resolve_device(device)
     t0 = time.monotonic()
     for name, cfg in dataset_configs(s).items():
+        if name == "raw" and not any(j.raw for j in jobs):
+            continue
         build_dataset(cfg, root / "data" / name, workers=workers, progress=progress)
     t_data = time.monotonic() - t0
-    jobs = plan_jobs(s)
+    extra: dict[str, Any] = {"device": device}
+    if not only or "coco" in only:
+        extra["coco"] = coco_table(s, root)
+    if not only or "labels" in only:
+        extra["labels"] = label_tables(s, root)
+    results = []
+    base = base_job(s)
+    if base is not None:
+        results.append(run_job(base, s, str(root), device, threads=BASE_THREADS))
+    if device == "cuda":
+        workers, executor = 1, None
     ex = open_executor(executor, workers, 1)
     bar = Progress(len(jobs), label=f"study {s.name}", enabled=progress, unit="run")
-    results = []
     try:
-        for doc in ex.map_unordered(functools.partial(run_job, s=s, root=str(root)), jobs):
+        for doc in ex.map_unordered(functools.partial(run_job, s=s, root=str(root), device=device), jobs):
             results.append(doc)
-            bar.update(len(results))
+            bar.update(len(results) - (base is not None))
             bar.status(f"last {doc['job']['key']}")
     finally:
         bar.close()
         ex.close()
-    if len(results) != len(jobs):
-        raise ConfigError(f"study: {len(jobs) - len(results)} run(s) gave no result")
+    if len(results) != len(jobs) + (base is not None):
+        raise ConfigError(f"study: {len(jobs) + (base is not None) - len(results)} run(s) gave no result")
     timing = {"datasets_s": round(t_data, 1), "total_s": round(time.monotonic() - t0, 1), "workers": workers,
-              "train_s_sum": round(sum(r["train_s"] for r in results), 1)}
-    return write_report(root, s, results, timing, command)
+              "train_s_sum": round(sum(r["train_s"] for r in results), 1), "device": device,
+              "finished": len(results), "planned": len(results)}
+    return write_report(root, s, results, timing, command, extra)

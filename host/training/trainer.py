@@ -308,7 +308,8 @@ def _train(cfg: TrainConfig, out: Path, info: DatasetInfo, subsets: tuple[str, .
 
     torch.manual_seed(cfg.seed)
     net = PersonNet(model_size(cfg.model), in_channels=1 if cfg.input == "raw" else 3)
-    images = FittedImages(load_split(info, subsets, "train", scenes=cfg.scenes, cameras=cfg.cameras), *cfg.imgsz,
+    images = FittedImages(load_split(info, subsets, "train", scenes=cfg.scenes, cameras=cfg.cameras,
+                                     labels=cfg.labels), *cfg.imgsz,
                           cfg.detector_input)
     if not len(images):
         raise ConfigError(f"the train split of {list(subsets)} in {cfg.dataset!r} holds no images")
@@ -326,8 +327,8 @@ def _train(cfg: TrainConfig, out: Path, info: DatasetInfo, subsets: tuple[str, .
         average.load(state["ema"])
     steps = max(1, math.ceil(len(images) / cfg.batch))
     steps = min(steps, cfg.steps) if cfg.steps else steps
-    run = _Run(cfg, out, info, net, opt, device, images, load_split(info, val_subsets, "val"), history, steps,
-               average)
+    val_sets = load_split(info, val_subsets, "val", labels=cfg.labels)
+    run = _Run(cfg, out, info, net, opt, device, images, val_sets, history, steps, average)
     out.mkdir(parents=True, exist_ok=True)
     done = len(history)
     t_start = clock()
