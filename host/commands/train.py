@@ -8,7 +8,7 @@ import os
 
 from rollcam.common.values import fraction, parse_size, positive_float, positive_int
 
-from ..training.labels import LABEL_ARMS
+from ..training.study_settings import LABEL_ARMS
 from . import Subparsers, value_type
 
 DESCRIPTION = """\

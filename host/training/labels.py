@@ -25,8 +25,8 @@ from rollcam.common.errors import ConfigError
 
 from ..evaluation.loaders import EvalSet, ImageEntry
 from ..evaluation.metrics import Truth
+from .study_settings import LABEL_ARMS
 
-LABEL_ARMS = ("exact", "gs", "hand")
 STUDY_BOX_AREA_PX2 = {"normal_rs": 7725.0, "normal_gs": 10847.0, "fast_rs": 11465.0, "fast_gs": 11932.0}
 """The study's mean training box areas at 1920x1080 (its Section IV): hand-drawn RS, renderer-drawn GS."""
 STUDY_SIZE = (1920, 1080)

@@ -36,9 +36,9 @@ import numpy as np
 from rollcam.common.errors import ConfigError
 from rollcam.common.files import output_dir, write_atomic
 
-from .labels import ANNOTATOR, LABEL_ARMS, box_stats, relabel
+from .labels import ANNOTATOR, box_stats, relabel
 from .study_report import write_report
-from .study_settings import EXPERIMENTS, SHUTTERS, StudySettings, subset
+from .study_settings import EXPERIMENTS, LABEL_ARMS, SHUTTERS, StudySettings, subset
 
 
 @dataclass(frozen=True)

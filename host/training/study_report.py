@@ -16,8 +16,8 @@ from typing import Any
 
 from rollcam.common.files import write_atomic, write_figure
 
-from .labels import LABEL_ARMS, STUDY_BOX_AREA_PX2
-from .study_settings import SHUTTERS, StudySettings, subset
+from .labels import STUDY_BOX_AREA_PX2
+from .study_settings import LABEL_ARMS, SHUTTERS, StudySettings, subset
 
 METRICS = ("P", "R", "mAP50", "mAP50_95")
 STUDY_REFERENCE = {

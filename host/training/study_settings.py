@@ -10,6 +10,9 @@ from dataclasses import asdict, dataclass
 from typing import Any
 
 SHUTTERS = ("gs", "rs")
+LABEL_ARMS = ("exact", "gs", "hand")
+"""The labels an RS image can be trained and tested with (``rollcam.host.training.labels``; ``rollcam train
+--labels``), here so the CLI names them without importing numpy."""
 EXPERIMENTS = ("t1", "t3", "speed", "raw", "fig4", "labels", "coco")
 """``rollcam study --only`` names (``rollcam.host.training.study`` says what each is)."""
 
