@@ -39,3 +39,13 @@ class FakeClock:
 
     def __call__(self) -> Any:
         return self.t
+
+
+def metadata_with(picam2: Any, key: str, frames: int = 20) -> dict:
+    """The metadata of the first of a started picamera2 camera's next ``frames`` frames that carries ``key`` (an
+    in-sensor result or tensor rides on a later frame than its input); fails naming ``key`` if none does."""
+    for _ in range(frames):
+        metadata = picam2.capture_metadata()
+        if metadata.get(key):
+            return metadata
+    raise AssertionError(f"none of {frames} frames carried {key!r} in its metadata")

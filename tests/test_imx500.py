@@ -13,6 +13,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from helpers import metadata_with
 from rollcam.firmware.camera import FirmwareCamera
 from rollcam.host import standin_env
 
@@ -79,10 +80,7 @@ def test_the_detections_are_the_network_run_on_that_frame(rollcam_picamera2):
     assert imx500.network_intrinsics.bbox_order == "xy" and imx500.network_intrinsics.bbox_normalization
     with picamera2.Picamera2(imx500.camera_num) as picam2:
         picam2.start(picam2.create_preview_configuration(main={"size": (320, 240)}))
-        for _ in range(20):
-            metadata = picam2.capture_metadata()
-            if metadata.get("RollcamInsensor"):
-                break
+        metadata = metadata_with(picam2, "RollcamInsensor")
         spec = picam2.rollcam_device.spec
     result = metadata["RollcamInsensor"][-1]
     assert spec.insensor.network == "personnet-raw" and spec.insensor.max_size == (640, 640)
@@ -172,10 +170,7 @@ def test_inference_roi_programs_the_in_sensor_stage(rollcam_picamera2):
             assert imx500.get_roi_scaled(request) == (80, 0, 480, 480)
         finally:
             request.release()
-        for _ in range(20):
-            metadata = picam2.capture_metadata()
-            if metadata.get("RollcamInsensor"):
-                break
+        metadata = metadata_with(picam2, "RollcamInsensor")
     result = metadata["RollcamInsensor"][-1]
     assert result["input_size"][0] <= 320 and result["input_size"][1] <= 320
     assert all(d["box"][0] >= 254 and d["box"][2] <= 254 + 1520 for d in result["detections"])
@@ -236,10 +231,7 @@ def test_the_classifier_ran_on_that_frames_input_tensor(rollcam_picamera2):
     assert imx500.network_intrinsics.task == "classification"
     with picamera2.Picamera2(imx500.camera_num) as picam2:
         picam2.start(picam2.create_preview_configuration(main={"size": (320, 240)}))
-        for _ in range(20):
-            metadata = picam2.capture_metadata()
-            if metadata.get("CnnOutputTensor"):
-                break
+        metadata = metadata_with(picam2, "CnnOutputTensor")
         spec = picam2.rollcam_device.spec
     outputs = imx500.get_outputs(metadata)
     assert imx500.get_output_shapes(metadata) == [[1000]] and outputs[0].shape == (1000,)
@@ -289,10 +281,7 @@ def test_the_segmenter_ran_on_that_frames_input_tensor(rollcam_picamera2):
     assert imx500.network_intrinsics.task == "segmentation" and imx500.get_input_size() == (513, 513)
     with picamera2.Picamera2(imx500.camera_num) as picam2:
         picam2.start(picam2.create_preview_configuration(main={"size": (320, 240)}))
-        for _ in range(20):
-            metadata = picam2.capture_metadata()
-            if metadata.get("CnnOutputTensor"):
-                break
+        metadata = metadata_with(picam2, "CnnOutputTensor")
         spec = picam2.rollcam_device.spec
     mask = imx500.get_outputs(metadata)[0]
     assert mask.shape == (513, 513) and imx500.get_output_shapes(metadata) == [[513, 513]]

@@ -15,6 +15,7 @@ from types import SimpleNamespace
 
 import numpy as np
 import pytest
+from helpers import metadata_with
 from rollcam.firmware.camera import FirmwareCamera
 from rollcam.firmware.input_tensor import parse_tensor_format
 from rollcam.firmware.insensor import load_network
@@ -62,10 +63,7 @@ def test_each_frame_carries_its_input_tensor(rollcam_picamera2):
     assert imx500.config["input_tensor"]["norm_val"] == [-2048] * 3
     with picamera2.Picamera2(imx500.camera_num) as picam2:
         picam2.start(picam2.create_preview_configuration(main={"size": (320, 240)}))
-        for _ in range(20):
-            metadata = picam2.capture_metadata()
-            if metadata.get("CnnInputTensor"):
-                break
+        metadata = metadata_with(picam2, "CnnInputTensor")
         spec = picam2.rollcam_device.spec
     assert spec.insensor.network == "personnet" and spec.insensor.tensor == FMT
     result = metadata["RollcamInsensor"][-1]
