@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import ctypes
 import errno
+import json
 import logging
 import os
 import struct
@@ -14,6 +15,7 @@ from pathlib import Path
 from typing import ClassVar
 
 import pytest
+from helpers import wait_for
 from rollcam.emu.gadget import Gadget, GadgetError, SetupHandler, Tree, find_udc, layout, uapi
 from rollcam.emu.gadget.server import CLOCK_HZ
 from rollcam.emu.uvc import (
@@ -401,3 +403,68 @@ def test_the_functions_node_is_found_under_its_controller_without_opening_any(tm
     assert udc_nodes("usbip-vudc.0", video) == ["/dev/video2"]
     assert udc_nodes("fe980000.usb", video) == ["/dev/video3"]
     assert udc_nodes("dwc2", video) == []
+
+
+# ------------------------------------------------------------------------------------------ the stream loop
+class FakeFunction:
+    """Linux 6.1's UVC function node as ``GadgetStream`` uses it, in ioctls over a plain file (``path``) that
+    stands in for the buffers' memory. ``host_left()`` does what a host's SET_INTERFACE 0 does: the function
+    gives its requests back with -ESHUTDOWN, after which QBUF fails with ENODEV until the queue is stopped
+    (``uvcg_queue_enable(0)`` clears UVC_QUEUE_DISCONNECTED)."""
+
+    def __init__(self, path: Path, buffer_bytes: int) -> None:
+        self.path, self.size = path, -(-buffer_bytes // 4096) * 4096
+        self.disconnected = False
+        self.calls: list[str] = []
+        self.queued: list[int] = []
+
+    def host_left(self) -> None:
+        self.disconnected = True
+
+    def __call__(self, fd: int, name: str, arg):
+        self.calls.append(name)
+        if name == "REQBUFS" and arg.count:
+            arg.count = 4
+            os.truncate(self.path, 4 * self.size)
+        elif name == "QUERYBUF":
+            arg.length, arg.m.offset = self.size, arg.index * self.size
+        elif name == "QBUF":
+            if self.disconnected:
+                raise OSError(errno.ENODEV, os.strerror(errno.ENODEV))
+            self.queued.append(arg.bytesused)
+        elif name == "DQBUF":
+            raise OSError(errno.EAGAIN, os.strerror(errno.EAGAIN))
+        elif name == "STREAMOFF":
+            self.disconnected = False
+        return arg
+
+
+def test_a_host_that_leaves_the_stream_before_its_streamoff_event_stops_it_and_the_next_stream_runs(
+        tmp_path, producer):
+    """In the kernel suite the gadget died with OSError(19) at a stream-off: the host's SET_INTERFACE 0 made the
+    function refuse QBUF (ENODEV) before the STREAMOFF event reached the loop, which queued the next frame."""
+    from rollcam.emu.gadget.device import GadgetStream
+
+    node = tmp_path / "video0"
+    node.write_bytes(b"")
+    fake = FakeFunction(node, 640 * 480 * 2)
+    log = tmp_path / "frames.jsonl"
+    stream = GadgetStream(str(node), producer, _controls(producer), frame_log=log, ioctl=fake)
+    try:
+        stream._event(Event(type=uapi.UVC_EVENT_STREAMON))
+        assert stream.queue is not None
+        producer.clock.t_ns += 10**9  # frames are due: the renderer makes the newest
+        fake.host_left()
+        wait_for(lambda: stream.queue is None or (stream._feed() and stream.queue is None),
+                 what="the loop to stop the stream the host left")
+        assert fake.calls[-2:] == ["STREAMOFF", "REQBUFS"] and fake.queued == []
+        assert not log.read_text()  # a frame the function refused is no frame sent
+        stream._event(Event(type=uapi.UVC_EVENT_STREAMOFF))  # the event arrives late: nothing more to stop
+        stream._event(Event(type=uapi.UVC_EVENT_STREAMON))
+        producer.clock.t_ns += 10**9
+        wait_for(lambda: stream._feed() and fake.queued, what="the next stream's first frame")
+        assert fake.queued[0] == 640 * 480 * 2 and stream.stats.streams == 2
+    finally:
+        stream.run(lambda: True)  # stops the stream and closes the node
+    assert fake.calls[-2:] == ["STREAMOFF", "REQBUFS"]
+    assert [json.loads(line)["bytes"] for line in log.read_text().splitlines()] == fake.queued

@@ -98,11 +98,15 @@ class FrameLog:
             self.file = None
 
 
+Ioctl = Callable[[int, str, Any], Any]
+"""How the gadget talks to its node: ``ioctl`` above, or a test's stand-in for the kernel's UVC function."""
+
+
 class OutputQueue:
     """The node's MMAP output buffers while a stream runs: format set, buffers mapped, started, stopped."""
 
-    def __init__(self, fd: int, committed: Committed) -> None:
-        self.fd, self.committed = fd, committed
+    def __init__(self, fd: int, committed: Committed, ioctl: Ioctl = ioctl) -> None:
+        self.fd, self.committed, self.ioctl = fd, committed, ioctl
         layout = wire_layout(committed.fourcc)
         fmt = Format(type=uapi.BUF_TYPE_VIDEO_OUTPUT)
         pix = fmt.fmt.pix
@@ -110,19 +114,19 @@ class OutputQueue:
         pix.sizeimage = committed.probe.dwMaxVideoFrameSize
         pix.pixelformat = fourcc_code(committed.fourcc)
         try:
-            ioctl(fd, "S_FMT", fmt)
+            self.ioctl(fd, "S_FMT", fmt)
         except OSError as exc:
             if exc.errno != errno.EINVAL or layout is None:
                 raise
             # 6.1's node knows YUYV and MJPEG only: a YUYV buffer of the size holds any 8-16 bit frame.
             pix.pixelformat = uapi.V4L2_PIX_FMT_YUYV
-            ioctl(fd, "S_FMT", fmt)
-        req = ioctl(fd, "REQBUFS", RequestBuffers(count=N_BUFFERS, type=uapi.BUF_TYPE_VIDEO_OUTPUT,
+            self.ioctl(fd, "S_FMT", fmt)
+        req = self.ioctl(fd, "REQBUFS", RequestBuffers(count=N_BUFFERS, type=uapi.BUF_TYPE_VIDEO_OUTPUT,
                                                   memory=MEMORY_MMAP))
         self.maps: list[mmap.mmap] = []
         try:
             for i in range(req.count):
-                b = ioctl(fd, "QUERYBUF", Buffer(index=i, type=uapi.BUF_TYPE_VIDEO_OUTPUT, memory=MEMORY_MMAP))
+                b = self.ioctl(fd, "QUERYBUF", Buffer(index=i, type=uapi.BUF_TYPE_VIDEO_OUTPUT, memory=MEMORY_MMAP))
                 self.maps.append(mmap.mmap(fd, b.length, mmap.MAP_SHARED, mmap.PROT_READ | mmap.PROT_WRITE,
                                            offset=b.m.offset))
         except BaseException:
@@ -131,7 +135,7 @@ class OutputQueue:
         self.free = list(range(len(self.maps)))
         # Started at once, with no buffer queued: the host's SET_INTERFACE waits for it (the kernel completes
         # its status stage at STREAMON), and the first frame may take longer than that to render.
-        ioctl(fd, "STREAMON", _output_type())
+        self.ioctl(fd, "STREAMON", _output_type())
 
     def queue(self, data: bytes, timestamp_ns: int) -> None:
         """Put ``data`` in a free buffer and queue it (starting the stream with the first)."""
@@ -142,14 +146,14 @@ class OutputQueue:
         m[:len(data)] = data
         b = Buffer(index=index, type=uapi.BUF_TYPE_VIDEO_OUTPUT, memory=MEMORY_MMAP, bytesused=len(data))
         b.timestamp.tv_sec, b.timestamp.tv_usec = divmod(timestamp_ns // 1000, 1_000_000)
-        ioctl(self.fd, "QBUF", b)
+        self.ioctl(self.fd, "QBUF", b)
 
     def reclaim(self) -> None:
         """Take back every buffer the kernel has sent."""
         while True:
             b = Buffer(type=uapi.BUF_TYPE_VIDEO_OUTPUT, memory=MEMORY_MMAP)
             try:
-                ioctl(self.fd, "DQBUF", b)
+                self.ioctl(self.fd, "DQBUF", b)
             except OSError as exc:
                 if exc.errno in (errno.EAGAIN, errno.EINVAL, errno.EPIPE, errno.ENODEV):
                     return
@@ -163,13 +167,13 @@ class OutputQueue:
         self.maps = []
         for name, arg in (("STREAMOFF", _output_type()),
                           ("REQBUFS", RequestBuffers(count=0, type=uapi.BUF_TYPE_VIDEO_OUTPUT, memory=MEMORY_MMAP))):
-            _ioctl_logged(self.fd, name, arg)
+            _ioctl_logged(self.ioctl, self.fd, name, arg)
 
 
-def _ioctl_logged(fd: int, name: str, arg: Any) -> None:
+def _ioctl_logged(io: Ioctl, fd: int, name: str, arg: Any) -> None:
     """An ioctl whose failure is only logged (stopping a stream the host already left must still work)."""
     try:
-        ioctl(fd, name, arg)
+        io(fd, name, arg)
     except OSError as exc:
         log.info("UVC gadget: %s: %s", name, exc.strerror)
 
@@ -183,8 +187,9 @@ class GadgetStream:
     """The event loop of one UVC function node: ``run(stopping)`` until ``stopping()`` is true."""
 
     def __init__(self, node: str, producer: FrameProducer, controls: VideoControls,
-                 interfaces: tuple[int, int] = (0, 1), frame_log: Path | None = None) -> None:
-        self.node, self.producer, self.controls = node, producer, controls
+                 interfaces: tuple[int, int] = (0, 1), frame_log: Path | None = None,
+                 ioctl: Ioctl = ioctl) -> None:
+        self.node, self.producer, self.controls, self.ioctl = node, producer, controls, ioctl
         self.handler = SetupHandler(controls, interfaces)
         self.stats = GadgetStats()
         self.frame_log = FrameLog(frame_log)
@@ -194,7 +199,7 @@ class GadgetStream:
         self.fd = os.open(node, os.O_RDWR | os.O_NONBLOCK)
         try:
             for event_type in uapi.UVC_EVENTS:
-                ioctl(self.fd, "SUBSCRIBE_EVENT", uapi.subscription(event_type))
+                self.ioctl(self.fd, "SUBSCRIBE_EVENT", uapi.subscription(event_type))
         except BaseException:
             os.close(self.fd)
             raise
@@ -225,7 +230,7 @@ class GadgetStream:
         while True:
             event = Event()
             try:
-                ioctl(self.fd, "DQEVENT", event)
+                self.ioctl(self.fd, "DQEVENT", event)
             except OSError as exc:
                 if exc.errno == errno.ENOENT:  # no more events
                     return
@@ -254,7 +259,7 @@ class GadgetStream:
 
     def _respond(self, data: bytes | None) -> None:
         try:
-            ioctl(self.fd, "SEND_RESPONSE", uapi.response(data))
+            self.ioctl(self.fd, "SEND_RESPONSE", uapi.response(data))
         except OSError as exc:  # the host gave up on the request (a timeout, a reset): nothing to answer
             log.info("UVC gadget: response not sent: %s", exc.strerror)
 
@@ -267,7 +272,7 @@ class GadgetStream:
             committed = self.controls.committed
         assert committed is not None
         try:
-            self.queue = OutputQueue(self.fd, committed)
+            self.queue = OutputQueue(self.fd, committed, self.ioctl)
         except OSError as exc:  # the host left, or the node refused the format: wait for the next stream
             log.warning("UVC gadget: cannot start %s %dx%d on %s: %s", committed.fourcc, committed.width,
                         committed.height, self.node, exc.strerror or exc)
@@ -288,7 +293,17 @@ class GadgetStream:
                 return max(1, min(POLL_MS, got // 1_000_000))
             _index, frame, data = got
             raw = data.tobytes()
-            queue.queue(raw, frame.timestamp_ns)
+            try:
+                queue.queue(raw, frame.timestamp_ns)
+            except OSError as exc:
+                if exc.errno != errno.ENODEV:
+                    raise
+                # The host left the stream (SET_INTERFACE 0, a reset): the function gave its requests back with
+                # -ESHUTDOWN and refuses buffers until the queue is stopped. Its STREAMOFF event may still be on
+                # the way; stopping now (STREAMOFF clears the refusal) readies the next stream.
+                log.info("UVC gadget: the host left the stream; frame %d not sent", frame.sequence)
+                self._stop_stream()
+                return POLL_MS
             self.frame_log.write(frame.sequence, queue.committed, raw)
             self.stats.frames_sent += 1
         return POLL_MS
