@@ -32,13 +32,22 @@ def wait_for(condition: Callable[[], T], timeout_s: float = 30.0, what: str = "t
 
 class FakeClock:
     """A clock the test moves by hand (``clock.t += ...``): calling it returns ``t``, integer ns for a device
-    clock or float seconds for a ``Deadline``."""
+    clock or float seconds for a ``Deadline``. ``sleep`` moves it on instead of waiting, so code given
+    ``sleep=clock.sleep`` runs in device time."""
 
     def __init__(self, t: Any = 0) -> None:
         self.t = t
 
     def __call__(self) -> Any:
         return self.t
+
+    def sleep(self, seconds: float) -> None:
+        """Move the clock on by ``seconds``: in ns (at least 1, so a loop that sleeps always moves on) when ``t``
+        is an integer device clock, in seconds when it is a float."""
+        if isinstance(self.t, int):
+            self.t += max(int(seconds * 1e9), 1)
+        else:
+            self.t += seconds
 
 
 def metadata_with(picam2: Any, key: str, frames: int = 20) -> dict:

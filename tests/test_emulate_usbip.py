@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import itertools
 import json
-import signal
 import socket
 import subprocess
 import sys
@@ -13,6 +12,7 @@ import pytest
 
 pytest.importorskip("usb")
 
+from interrupts import interrupt
 from rollcam.firmware.camera import FirmwareCamera
 from rollcam.host.sources import open_camera
 
@@ -52,8 +52,7 @@ def test_rollcam_emulate_usbip_streams_to_the_uvc_source():
             frames = list(src)
         assert len(frames) == 3 and frames[0].data.shape == (480, 640, 3)
         assert all(b.timestamp_ns > a.timestamp_ns for a, b in itertools.pairwise(frames))
-        proc.send_signal(signal.SIGINT)
-        _out, err = proc.communicate(timeout=30)
+        _out, err = interrupt(proc, timeout_s=30)
     finally:
         if proc.poll() is None:
             proc.kill()

@@ -453,7 +453,7 @@ def test_a_host_that_leaves_the_stream_before_its_streamoff_event_stops_it_and_t
     try:
         stream._event(Event(type=uapi.UVC_EVENT_STREAMON))
         assert stream.queue is not None
-        producer.clock.t_ns += 10**9  # frames are due: the renderer makes the newest
+        producer.clock.t += 10**9  # frames are due: the renderer makes the newest
         fake.host_left()
         wait_for(lambda: stream.queue is None or (stream._feed() and stream.queue is None),
                  what="the loop to stop the stream the host left")
@@ -461,7 +461,7 @@ def test_a_host_that_leaves_the_stream_before_its_streamoff_event_stops_it_and_t
         assert not log.read_text()  # a frame the function refused is no frame sent
         stream._event(Event(type=uapi.UVC_EVENT_STREAMOFF))  # the event arrives late: nothing more to stop
         stream._event(Event(type=uapi.UVC_EVENT_STREAMON))
-        producer.clock.t_ns += 10**9
+        producer.clock.t += 10**9
         wait_for(lambda: stream._feed() and fake.queued, what="the next stream's first frame")
         assert fake.queued[0] == 640 * 480 * 2 and stream.stats.streams == 2
     finally:

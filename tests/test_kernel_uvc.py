@@ -13,7 +13,6 @@ import json
 import re
 import sys
 import threading
-import time
 from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
@@ -22,7 +21,7 @@ import cv2
 import guest as guest_module
 import numpy as np
 import pytest
-from rollcam.common.lifecycle import Deadline
+from helpers import wait_for
 from rollcam.emu.usbip.server import ServerLimits, USBIPServer
 from rollcam.emu.uvc import DeviceIdentity, FirmwareProducer, UVCFunction
 from rollcam.emu.uvc.convert import encode
@@ -295,16 +294,6 @@ def test_the_kernel_names_the_camera_in_full_with_ids_that_are_no_other_products
     assert "Generic : pid.codes Test PID (1209:0001)" in out  # usb.ids' name for the ID: a test device
 
 
-def wait_until(condition, seconds: float) -> bool:
-    """Whether ``condition()`` came true within ``seconds`` (looked at every 0.1 s)."""
-    deadline = Deadline(seconds)
-    while not condition():
-        if deadline.expired:
-            return False
-        time.sleep(0.1)
-    return True
-
-
 def test_others_are_served_while_one_is_attached_and_a_vanished_guest_frees_its_camera(tmp_path):
     """A guest holds camera 1-1 and streams; a host importer streams 1-2 meanwhile. Then the guest's QEMU is
     killed: its connection stays open and unread, and the server frees 1-1 within its send limit."""
@@ -324,14 +313,14 @@ def test_others_are_served_while_one_is_attached_and_a_vanished_guest_frees_its_
                 node = g.video_node("rollcam")
                 g.sh(f"setsid v4l2-ctl -d {node} --stream-mmap=4 --stream-count=100000 --stream-to=/dev/null "
                      "</dev/null >/dev/null 2>&1 &")
-                assert wait_until(lambda: functions[0].streaming, 60)
+                wait_for(lambda: functions[0].streaming, 60, "the guest streaming camera 1-1", every_s=0.1)
                 with open_camera(uri + "1-2") as other:  # a second importer, served meanwhile
                     assert len(list(other)) == 3
                 assert server.exports["1-1"].owner is not None  # the guest still holds its camera
                 g.kill()
         finally:
             g.close()
-        assert wait_until(lambda: server.exports["1-1"].owner is None, 60)
+        wait_for(lambda: server.exports["1-1"].owner is None, 60, "camera 1-1 freed", every_s=0.1)
         with open_camera(uri + "1-1") as again:
             assert len(list(again)) == 3
 

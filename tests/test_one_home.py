@@ -68,14 +68,6 @@ ALLOWED: dict[tuple[str, str], str] = {
                                         "finaliser's home moves to common with sim/_rng reading it",
     # cameras
     # tests
-    ("test waiting", "tests/test_kernel_uvc.py"): EDITED.format("the kernel tests"),
-    ("test waiting", "tests/test_preload_hardening.py"): EDITED.format("the preload hardening tests"),
-    ("test waiting", "tests/test_usbip.py"): EDITED.format("the USB/IP tests"),
-    ("test waiting", "tests/test_usbip_limits.py"): EDITED.format("the USB/IP tests"),
-    ("test fake clocks", "tests/test_v4l2_raw.py"): EDITED.format("the V4L2 tests"),
-    ("test fake clocks", "tests/uvc_fakes.py"): EDITED.format("the UVC tests"),
-    ("test SIGINT harness", "tests/test_emulate_usbip.py"): EDITED.format("the USB/IP tests"),
-    ("test SIGINT harness", "tests/test_usbip.py"): EDITED.format("the USB/IP tests"),
     ("test waiting", "tests/test_one_home.py"): "the checker's own made-up copy (COPIES below)",
     ("test SIGINT harness", "tests/test_one_home.py"): "the checker's own made-up copy (COPIES below)",
 }

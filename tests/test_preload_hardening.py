@@ -14,10 +14,10 @@ import socket
 import subprocess
 import sys
 import textwrap
-import time
 from pathlib import Path
 
 import pytest
+from helpers import wait_for
 from programs import compile_c, python_under, run_under
 from rollcam.emu.preload import LIBRARY_NAME, wire
 from rollcam.host.servers.devnodes import FOLDER_PREFIX, program_environment, reclaim_stale_folders, serving
@@ -34,14 +34,6 @@ SOURCE = "emu:imx219?size=320x240&format=YUYV"
 def server():
     with serving([("/dev/video0", SOURCE), ("/dev/video1", "emu:ov9281?size=640x400")]) as s:
         yield s
-
-
-def wait_until(condition, timeout: float = 30.0, what: str = "condition") -> None:
-    """Wait for ``condition()`` to hold, polling; fail naming ``what`` after ``timeout`` seconds."""
-    deadline = time.monotonic() + timeout
-    while not condition():
-        assert time.monotonic() < deadline, f"timed out waiting for {what}"
-        time.sleep(0.02)
 
 
 def open_fds() -> int:
@@ -160,8 +152,8 @@ def test_threads_racing_close_dup_open_and_ioctl_on_one_fd_are_safe(server, tmp_
     p = run_under(server, str(stress), "/dev/video0", "2", timeout=180)
     r = json.loads(p.stdout.strip().splitlines()[-1])
     assert r["unexpected"] == 0 and r["fork_failed"] == 0 and r["calls"] > 100
-    wait_until(lambda: server.open_files() == 0, what="every file released")
-    wait_until(lambda: open_fds() <= before, what="the server's descriptors back to before")
+    wait_for(lambda: server.open_files() == 0, what="every file released")
+    wait_for(lambda: open_fds() <= before, what="the server's descriptors back to before")
 
 
 def test_when_the_server_dies_a_blocked_dqbuf_and_later_calls_fail_with_enodev(tmp_path):
@@ -282,7 +274,7 @@ def test_a_forked_child_shares_the_open_file_as_on_linux(server):
     """)
     assert r == {"child": 0}
     node = server.nodes["/dev/video0"]
-    wait_until(lambda: server.open_files() == 0 and node.owner is None, what="the shared file released")
+    wait_for(lambda: server.open_files() == 0 and node.owner is None, what="the shared file released")
     assert not node.driver.queue.streaming
 
 
@@ -320,7 +312,7 @@ def test_a_second_open_on_one_connection_is_refused_and_leaks_nothing(server):
             for fd in fds + more:
                 os.close(fd)
             assert (err1, err2) == (0, errno.EPROTO)
-    wait_until(lambda: server.open_files() == 0 and not node.files, what="every file released")
+    wait_for(lambda: server.open_files() == 0 and not node.files, what="every file released")
     assert open_fds() <= before + 2
     r = probe(server, """
         fd = os.open("/dev/video0", os.O_RDWR)
@@ -337,8 +329,8 @@ def test_a_killed_run_leaves_its_folder_to_the_next_run(tmp_path):
     env = dict(os.environ, TMPDIR=str(tmp_path))
     victim = subprocess.Popen([sys.executable, "-m", "rollcam.host.cli", "run", "--", "sleep", "60"], env=env)
     try:
-        wait_until(lambda: any((f / "v4l2.sock").exists() for f in tmp_path.glob(f"{FOLDER_PREFIX}*")),
-                   timeout=60, what="the run's socket")
+        wait_for(lambda: any((f / "v4l2.sock").exists() for f in tmp_path.glob(f"{FOLDER_PREFIX}*")),
+                 timeout_s=60, what="the run's socket")
         victim.send_signal(signal.SIGKILL)
         victim.wait(30)
     finally:

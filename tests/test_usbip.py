@@ -7,7 +7,6 @@ import errno
 import re
 import shlex
 import shutil
-import signal
 import socket
 import struct
 import subprocess
@@ -16,11 +15,13 @@ import threading
 import time
 
 import pytest
+from helpers import FakeClock, wait_for
+from interrupts import interrupt
 from rollcam.emu.usbip import ImportedDevice, UrbError, USBIPServer, list_devices
 from rollcam.emu.usbip import protocol as P
 from rollcam.emu.uvc import PayloadParser, Probe, UVCFunction
 from rollcam.emu.uvc import constants as C
-from uvc_fakes import FakeProducer, ManualClock
+from uvc_fakes import FakeProducer
 
 PROBE, COMMIT = C.VS_PROBE_CONTROL << 8, C.VS_COMMIT_CONTROL << 8
 
@@ -38,13 +39,6 @@ def _commit(dev, fmt=1, frame=1):
     probe = Probe.unpack(dev.control(0xA1, C.GET_CUR, PROBE, 1, 34))
     dev.control(0x21, C.SET_CUR, COMMIT, 1, probe.pack(34))
     return probe
-
-
-def _wait_for(cond, timeout=5.0):
-    end = time.monotonic() + timeout
-    while not cond():
-        assert time.monotonic() < end, "condition not reached"
-        time.sleep(0.01)
 
 
 def test_several_clients_list_the_devices_at_once(server):
@@ -109,7 +103,7 @@ def test_one_importer_at_a_time_and_release_on_disconnect(server):
     with pytest.raises(Exception, match=r"refused.*device not found"):
         ImportedDevice(*server.address, "9-9")
     dev.close()
-    _wait_for(lambda: server.exports["1-1"].owner is None)
+    wait_for(lambda: server.exports["1-1"].owner is None, 5.0, "camera 1-1 freed", every_s=0.01)
     assert fn.stats.frames_aborted == 1 and not fn.streaming
     with ImportedDevice(*server.address, "1-1") as again:
         assert again.control(0x80, C.REQ_GET_CONFIGURATION, 0, 0, 1) == b"\x00"  # reset for the next importer
@@ -138,12 +132,13 @@ def test_malformed_peers_lose_their_connection_only(server):
     assert reply[:8] == P.op_header(P.OP_REP_IMPORT) and len(reply) == 8 + 312  # imported, then dropped
     huge = P.Submit(1, 0x10002, P.DIR_OUT, 0, 0, 1 << 30, 0, P.NON_ISO, 0, bytes(8)).pack()
     assert len(_raw(server, P.req_import("1-2") + huge)) == 8 + 312
-    _wait_for(lambda: server.stats.malformed == 4 and server.exports["1-2"].owner is None)
+    wait_for(lambda: server.stats.malformed == 4 and server.exports["1-2"].owner is None, 5.0,
+             "4 malformed requests counted and camera 1-2 freed", every_s=0.01)
     assert len(list_devices(*server.address)) == 2  # still serving
 
 
 def test_unlink_cancels_a_queued_urb():
-    clock, gate = ManualClock(), threading.Event()
+    clock, gate = FakeClock(), threading.Event()
     fn = UVCFunction(FakeProducer(clock=clock), transfer="bulk", realtime=True, sleep=gate.wait,
                      render_ahead=False)
     with USBIPServer([fn], port=0) as srv, ImportedDevice(*srv.address, "1-1") as dev:
@@ -157,7 +152,7 @@ def test_unlink_cancels_a_queued_urb():
         unlink = dev.unlink(second)
         rep = dev.reply()
         assert isinstance(rep, P.RetUnlink) and rep.seqnum == unlink and rep.status == -errno.ECONNRESET
-        clock.t_ns += 10**9
+        clock.t += 10**9
         rep = dev.reply()
         assert isinstance(rep, P.RetSubmit) and rep.seqnum == first and rep.status == 0 and rep.actual_length > 12
         late = dev.unlink(first)
@@ -169,7 +164,7 @@ def test_unlink_cancels_a_queued_urb():
 def test_unlink_of_a_running_urb_answers_with_the_ret_unlink_alone():
     """Linux's stub driver: a URB already running ends early and is answered by its RET_UNLINK; no RET_SUBMIT
     follows (vhci-hcd gave the URB back at the unlink and drops a device that answers it again)."""
-    clock = ManualClock()
+    clock = FakeClock()
 
     def sleep(seconds: float) -> None:  # device time passes at once, real time a little
         clock.sleep(seconds)
@@ -180,11 +175,12 @@ def test_unlink_of_a_running_urb_answers_with_the_ret_unlink_alone():
     with USBIPServer([fn], port=0) as srv, ImportedDevice(*srv.address, "1-1") as dev:
         size = _commit(dev).dwMaxPayloadTransferSize
         running = dev.submit(1, P.DIR_IN, size)  # its worker waits for a frame due in 100 s of device time
-        _wait_for(lambda: fn.streaming)  # a bulk stream starts at its first read: the URB is running
+        # a bulk stream starts at its first read: the URB is running
+        wait_for(lambda: fn.streaming, 5.0, "the bulk stream running", every_s=0.01)
         unlink = dev.unlink(running)
         rep = dev.reply()
         assert isinstance(rep, P.RetUnlink) and rep.seqnum == unlink and rep.status == -errno.ECONNRESET
-        clock.t_ns += 10**12
+        clock.t += 10**12
         after = dev.submit(1, P.DIR_IN, size)
         rep = dev.reply()
         assert isinstance(rep, P.RetSubmit) and rep.seqnum == after and rep.status == 0  # nothing for `running`
@@ -195,7 +191,7 @@ def test_an_unlink_that_comes_before_its_urb_cancels_it_when_it_arrives():
     """vhci-hcd sends its unlink list after its submit list, so a URB submitted and unlinked in between is
     unlinked before it is submitted. Answering that unlink 0 (nothing pending) and running the URB later, as
     Linux's stub does, gives vhci-hcd a reply to a URB it has given back, and it drops the device."""
-    clock = ManualClock()
+    clock = FakeClock()
     fn = UVCFunction(FakeProducer(clock=clock), transfer="bulk", realtime=True, sleep=clock.sleep,
                      render_ahead=False)
     with USBIPServer([fn], port=0) as srv, ImportedDevice(*srv.address, "1-1") as dev:
@@ -204,7 +200,7 @@ def test_an_unlink_that_comes_before_its_urb_cancels_it_when_it_arrives():
         assert unlink == 5 and dev.submit(1, P.DIR_IN, size) == 6
         rep = dev.reply()
         assert isinstance(rep, P.RetUnlink) and rep.seqnum == unlink and rep.status == -errno.ECONNRESET
-        clock.t_ns += 10**9
+        clock.t += 10**9
         after = dev.submit(1, P.DIR_IN, size)
         rep = dev.reply()
         assert isinstance(rep, P.RetSubmit) and rep.seqnum == after and rep.status == 0  # nothing for 6
@@ -290,11 +286,7 @@ def test_linux_usbip_lists_the_emulated_camera_from_the_emulate_hint():
         assert out.returncode == 0, out.stderr
         assert re.search(r"1-1: .*\(1209:0001\)", out.stdout), out.stdout
     finally:
-        proc.send_signal(signal.SIGINT)
-        try:
-            proc.communicate(timeout=30)
-        except subprocess.TimeoutExpired:
-            proc.kill()
+        interrupt(proc, timeout_s=30)
 
 
 @pytest.mark.skipif(USBIP_TOOL is None, reason="Linux usbip tool not installed (apt-get install usbip)")

@@ -17,6 +17,7 @@ import time
 from pathlib import Path
 
 import pytest
+from helpers import FakeClock, wait_for
 from rollcam.common.errors import ConfigError
 from rollcam.emu.usbip import ImportedDevice, UrbError, USBIPServer, list_devices
 from rollcam.emu.usbip import protocol as P
@@ -24,17 +25,10 @@ from rollcam.emu.usbip.server import ServerLimits
 from rollcam.emu.usbip.session import failed
 from rollcam.emu.uvc import Probe, UVCFunction
 from rollcam.emu.uvc import constants as C
-from uvc_fakes import FakeProducer, ManualClock
+from uvc_fakes import FakeProducer
 
 USBIP_TOOL = shutil.which("usbip")
 TESTS = Path(__file__).parent
-
-
-def _wait_for(cond, timeout=5.0):
-    end = time.monotonic() + timeout
-    while not cond():
-        assert time.monotonic() < end, "condition not reached"
-        time.sleep(0.02)
 
 
 def _linux_lists(address) -> None:
@@ -68,11 +62,11 @@ def test_stalled_peers_are_bounded_and_timed_out_while_real_clients_are_served()
                 s.sendall(b"\x01\x11\x80")
                 stalled.append(s)
                 assert srv.connection_count <= 4
-            _wait_for(lambda: _conn_threads() <= 4)
+            wait_for(lambda: _conn_threads() <= 4, 5.0, "at most 4 connection threads")
             assert len(list_devices(*srv.address)) == 1  # served although every slot was held
             _linux_lists(srv.address)
             assert srv.stats.shed >= 8
-            _wait_for(lambda: srv.connection_count == 0)  # the rest time out
+            wait_for(lambda: srv.connection_count == 0, 5.0, "every connection closed")  # the rest time out
             assert srv.stats.timed_out >= 1
         finally:
             for s in stalled:
@@ -88,7 +82,7 @@ def test_an_importer_that_never_sends_loses_the_device():
         with pytest.raises(Exception, match="device busy"):
             ImportedDevice(*srv.address, "1-1")
         _linux_lists(srv.address)
-        _wait_for(lambda: srv.exports["1-1"].owner is None)
+        wait_for(lambda: srv.exports["1-1"].owner is None, 5.0, "camera 1-1 freed")
         assert srv.stats.timed_out == 1
         with ImportedDevice(*srv.address, "1-1") as dev:
             assert dev.control(0x80, C.REQ_GET_CONFIGURATION, 0, 0, 1) == b"\x00"
@@ -137,7 +131,7 @@ def test_a_failed_iso_urb_keeps_the_connection_in_step():
 
 
 def test_an_importer_cannot_queue_more_than_its_byte_budget():
-    clock, gate = ManualClock(), threading.Event()
+    clock, gate = FakeClock(), threading.Event()
     fn = UVCFunction(FakeProducer(clock=clock), transfer="bulk", realtime=True, sleep=gate.wait,
                      render_ahead=False)
     limits = ServerLimits(max_urb_bytes=64 * 1024)
@@ -155,7 +149,7 @@ def test_an_importer_cannot_queue_more_than_its_byte_budget():
             except BlockingIOError:
                 break
         session = srv.exports["1-1"].owner.session
-        _wait_for(lambda: session.reserved_bytes == 64 * 1024)
+        wait_for(lambda: session.reserved_bytes == 64 * 1024, 5.0, "64 KiB reserved")
         time.sleep(0.2)
         assert session.peak_reserved_bytes == 64 * 1024 and sum(map(len, session.queues)) == 3
         assert len(list_devices(*srv.address)) == 1

@@ -9,11 +9,12 @@ import numpy as np
 import pytest
 import usb.core
 import usb.util
+from helpers import FakeClock
 from rollcam.emu.uvc import PayloadParser, Probe, Setup, Stall, UVCFunction
 from rollcam.emu.uvc import constants as C
 from rollcam.emu.uvc.convert import decode
 from rollcam.emu.uvc.pyusb_backend import EmulatedBackend
-from uvc_fakes import FakeProducer, ManualClock
+from uvc_fakes import FakeProducer
 
 VS = 1
 PROBE, COMMIT = C.VS_PROBE_CONTROL << 8, C.VS_COMMIT_CONTROL << 8
@@ -38,7 +39,7 @@ def _commit(dev, fmt=1, frame=1, interval=333333, length=48):
 
 def _realtime_iso_stream():
     """A real-time function on a fake clock (its sleeps move it), committed and streaming isochronously."""
-    clock = ManualClock()
+    clock = FakeClock()
     producer = FakeProducer(clock=clock)
     fn = UVCFunction(producer, realtime=True, sleep=clock.sleep, render_ahead=False)
     dev = usb.core.find(idVendor=0x1209, backend=EmulatedBackend([fn]))
@@ -218,11 +219,11 @@ def test_realtime_slow_host_drops_frames_and_counts_them():
     clock, producer, fn, dev, probe = _realtime_iso_stream()
     parser = PayloadParser(probe.dwClockFrequency, 64 * 48 * 2)
     assert bytes(dev.read(0x81, 3072)) == b""  # nothing read out yet: a zero-length packet
-    clock.t_ns += 40_000_000  # frame 0 is due
+    clock.t += 40_000_000  # frame 0 is due
     got = []
     while not got:
         got += parser.feed(bytes(dev.read(0x81, 3072)))
-    clock.t_ns += 10 * 33_333_333  # the host stalls for ten frame periods
+    clock.t += 10 * 33_333_333  # the host stalls for ten frame periods
     while len(got) < 2:
         got += parser.feed(bytes(dev.read(0x81, 3072)))
     assert fn.stats.frames_dropped == 9
@@ -230,13 +231,13 @@ def test_realtime_slow_host_drops_frames_and_counts_them():
     assert got[1].pts_ns - got[0].pts_ns == 10 * 33_333_333
     fn.mark_errors(1)
     while len(got) < 3:
-        clock.t_ns += 1_000_000
+        clock.t += 1_000_000
         got += parser.feed(bytes(dev.read(0x81, 3072)))
     assert got[2].error
 
 
 def test_bulk_read_times_out_when_no_frame_is_due():
-    clock = ManualClock()
+    clock = FakeClock()
     producer = FakeProducer(clock=clock)
     fn = UVCFunction(producer, transfer="bulk", realtime=True, sleep=lambda s: None,
                      render_ahead=False)
@@ -245,7 +246,7 @@ def test_bulk_read_times_out_when_no_frame_is_due():
     _commit(dev)
     with pytest.raises(usb.core.USBTimeoutError):
         dev.read(0x81, fn.controls.committed.payload_size, timeout=5)
-    clock.t_ns += 10**9
+    clock.t += 10**9
     assert len(dev.read(0x81, 100)) == 100  # smaller than the payload: its first bytes, the rest follows
 
 
@@ -327,15 +328,15 @@ def test_realtime_isochronous_endpoint_keeps_the_bus_pace():
     clock, _producer, fn, dev, probe = _realtime_iso_stream()
     assert fn.bus.interval_ns == 125_000
     parser = PayloadParser(probe.dwClockFrequency, 64 * 48 * 2)
-    t0, packets, frames = clock.t_ns, 0, []
-    while clock.t_ns - t0 < 200_000_000:  # 0.2 s of device time, URBs of 32 packets back to back
+    t0, packets, frames = clock.t, 0, []
+    while clock.t - t0 < 200_000_000:  # 0.2 s of device time, URBs of 32 packets back to back
         data, lengths, _status = fn.read_packets(0x81, 32, 3072)
         packets += len(lengths)
         frames += parser.feed_batch(data, lengths)
     for _ in range(40):  # one packet a read, as pyusb reads an isochronous endpoint
         dev.read(0x81, 3072)
         packets += 1
-    elapsed_s = (clock.t_ns - t0) / 1e9
+    elapsed_s = (clock.t - t0) / 1e9
     assert packets / elapsed_s <= 8000 * 1.001
     assert packets / elapsed_s >= 8000 * 0.99  # a host that keeps asking gets every interval
     assert len(frames) >= 5 and all(f.complete for f in frames)

@@ -3,16 +3,17 @@
 from __future__ import annotations
 
 import pytest
+from helpers import FakeClock
 from rollcam.common.errors import DeviceError
 from rollcam.emu.uvc import FirmwareProducer, FrameProducer
 from rollcam.firmware.camera import FirmwareCamera
 from rollcam.sim.synthetic import resolve_settings
-from uvc_fakes import FakeProducer, ManualClock
+from uvc_fakes import FakeProducer
 
 
 @pytest.fixture
 def producer():
-    clock = ManualClock(5_000)
+    clock = FakeClock(5_000)
     camera = FirmwareCamera("imx219", scene={"scene": "chart"}, size=(640, 480), clock=clock)
     return FirmwareProducer(camera), clock
 
@@ -29,7 +30,7 @@ def test_sizes_intervals_and_configure(producer):
     ivs = p.intervals_ns(640, 480)
     native = resolve_settings(p.camera.sensor, size=(640, 480)).timing.frame_period_ns
     assert ivs[0] == native and ivs[1:] == sorted(ivs[1:]) and len(set(ivs)) == len(ivs)
-    clock.t_ns = 1_000_000
+    clock.t = 1_000_000
     slow = max(ivs)
     p.configure(640, 480, slow)
     f0, f1 = p.frame(0), p.frame(1)

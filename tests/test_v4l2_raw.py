@@ -9,6 +9,7 @@ import urllib.request
 import cv2
 import numpy as np
 import pytest
+from helpers import FakeClock
 from rollcam.common.errors import ConfigError, DeviceError
 from rollcam.emu.http.mjpeg import MjpegServer
 from rollcam.emu.v4l2 import Device, V4L2Error, raw
@@ -188,28 +189,18 @@ def test_streamon_refuses_buffers_too_small_for_a_format_changed_elsewhere():
 
 
 # ------------------------------------------------------------------------------------- compiled before the clock
-class _SlowClock:
-    """A device clock the warm-up render moves on by 20 s, as a cold numba cache would."""
-
-    def __init__(self) -> None:
-        self.t_ns = 0
-
-    def __call__(self) -> int:
-        return self.t_ns
-
-
 def test_stream_on_renders_a_new_kind_of_frame_before_the_clock_starts(monkeypatch):
     from rollcam.firmware import imaging
 
     monkeypatch.setattr(imaging, "_WARM_KINDS", set())  # as in a fresh process
-    clock = _SlowClock()
+    clock = FakeClock()  # the warm-up render moves it on by 20 s, as a cold numba cache would
     cam = FirmwareCamera("imx219", scene={"scene": "flat"}, size=(640, 480), pixel_format="RG10", hflip=True,
                          clock=clock)
     render = cam.imager.render
     warmed = []
 
     def slow_render(spec, seq, start_ns, shutter=None):
-        clock.t_ns += 20 * 10**9
+        clock.t += 20 * 10**9
         warmed.append(seq)
         return render(spec, seq, start_ns, shutter)
 

@@ -3,23 +3,11 @@
 from __future__ import annotations
 
 import numpy as np
+from helpers import FakeClock
 from rollcam.common.errors import DeviceError
 from rollcam.emu.uvc.producer import ControlRange
 from rollcam.sim.frame import Frame
 from rollcam.sim.timing import Readout
-
-
-class ManualClock:
-    """A device clock that only moves when the test says so (``sleep`` advances it)."""
-
-    def __init__(self, t_ns: int = 0) -> None:
-        self.t_ns = t_ns
-
-    def __call__(self) -> int:
-        return self.t_ns
-
-    def sleep(self, seconds: float) -> None:
-        self.t_ns += max(int(seconds * 1e9), 1)
 
 
 class FakeProducer:
@@ -31,7 +19,7 @@ class FakeProducer:
                  start_ns: int = 0) -> None:
         self._sizes = list(sizes)
         self._intervals = list(intervals_ns)
-        self.clock = clock or ManualClock()
+        self.clock = clock or FakeClock()
         self.start_ns = start_ns
         self.size = self._sizes[0]
         self.interval_ns = self._intervals[0]
