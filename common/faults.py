@@ -47,11 +47,14 @@ from __future__ import annotations
 
 import errno
 import zlib
+from collections.abc import Callable
 from dataclasses import dataclass, field, fields
 from typing import Any
 
 from .errors import ConfigError
 from .lifecycle import Stats
+from .mixing import MASK64, splitmix64
+from .values import bounded
 
 COUNTER_FAULTS = ("seqrewrite", "seqfreeze", "seqskip")
 """Frame-counter faults, in the order they take precedence when several hit one frame."""
@@ -81,21 +84,10 @@ PARAMS = {"delay_ms": (DEFAULT_DELAY_MS, 0, MAX_DELAY_MS), "seqrewrite_to": (0, 
           "seqskip_by": (1, 1, U32 - 1), "burst_px": (DEFAULT_BURST_PX, 1, 1 << 24),
           "hot_dn_per_ms": (DEFAULT_HOT_DN_PER_MS, 1, 1 << 20)}
 """Whole-number parameters of the faults: (default, least, most)."""
-_M64 = (1 << 64) - 1
-
-
-def _mix64(x: int) -> int:
-    """splitmix64's finaliser: a bijective scramble of a 64-bit word."""
-    x = (x + 0x9E3779B97F4A7C15) & _M64
-    x = ((x ^ (x >> 30)) * 0xBF58476D1CE4E5B9) & _M64
-    x = ((x ^ (x >> 27)) * 0x94D049BB133111EB) & _M64
-    return x ^ (x >> 31)
-
-
 def draw(seed: int, kind: str, index: int) -> int:
     """The 64-bit draw for event ``index`` of fault ``kind`` under ``seed``: a pure function, no state."""
     salt = zlib.crc32(kind.encode())
-    return _mix64(_mix64((seed & _M64) ^ (salt << 32)) ^ (index & _M64))
+    return splitmix64(splitmix64((seed & MASK64) ^ (salt << 32)) ^ (index & MASK64))
 
 
 @dataclass(frozen=True)
@@ -381,21 +373,21 @@ def _take(key: str, value: str | None, kw: dict[str, Any], rates: dict[str, floa
     if key in RATES:
         rates[key] = _percent(_needs(value))
     elif key == "seed":
-        kw["seed"] = _int(_needs(value), 0, _M64)
+        kw["seed"] = _whole(0, MASK64)(_needs(value))
     elif key in PARAMS:
-        kw[key] = _int(_needs(value), *PARAMS[key][1:])
+        kw[key] = _whole(*PARAMS[key][1:])(_needs(value))
     elif key in DEFECTS:
-        kw[key] = _int(_needs(value), 0, MAX_DEFECTS)
+        kw[key] = _whole(0, MAX_DEFECTS)(_needs(value))
     elif key == "disconnect":
-        kw["disconnect"] = _int(_needs(value), 0, U32)
+        kw["disconnect"] = _whole(0, U32)(_needs(value))
     elif key == "seqwrap":
-        kw["seqwrap"] = DEFAULT_SEQWRAP if value is None else _int(value, 1, U32 - 1)
+        kw["seqwrap"] = DEFAULT_SEQWRAP if value is None else _whole(1, U32 - 1)(value)
     elif key == "tswrap":
-        kw["tswrap_s"] = DEFAULT_TSWRAP_S if value is None else _int(value, 1, 1 << 32)
+        kw["tswrap_s"] = DEFAULT_TSWRAP_S if value is None else _whole(1, 1 << 32)(value)
     elif key == "loaderfail":
-        kw["loaderfail_ms"] = _int(_needs(value), 0, MAX_LOADERFAIL_MS)
+        kw["loaderfail_ms"] = _whole(0, MAX_LOADERFAIL_MS)(_needs(value))
     elif key == "dnn_us":
-        kw["dnn_us"] = _int(_needs(value), 1, MAX_DNN_US)
+        kw["dnn_us"] = _whole(1, MAX_DNN_US)(_needs(value))
     elif key in REQUESTS:
         requests.append(_request(key, value))
     else:
@@ -419,14 +411,9 @@ def _percent(text: str) -> float:
     return value
 
 
-def _int(text: str, lo: int, hi: int) -> int:
-    try:
-        value = int(text, 10)
-    except ValueError:
-        raise ValueError(f"expected a whole number in {lo}..{hi}") from None
-    if not lo <= value <= hi:
-        raise ValueError(f"expected a whole number in {lo}..{hi}")
-    return value
+def _whole(lo: int, hi: int) -> Callable[[str], int]:
+    """The parser of a whole number in ``lo..hi`` (``expected a whole number in lo..hi`` otherwise)."""
+    return bounded(int, lo, hi, "a whole number")
 
 
 def _request(key: str, value: str | None) -> RequestFault:
@@ -440,7 +427,7 @@ def _request(key: str, value: str | None) -> RequestFault:
         err = getattr(errno, name, None)
         if not isinstance(err, int) or not name.startswith("E"):
             raise ValueError(f"{name!r} is not an errno name (EINVAL, ENOMEM, EIO, ...)")
-    return RequestFault(key, err, _int(nth, 1, U32) if nth else 1)
+    return RequestFault(key, err, _whole(1, U32)(nth) if nth else 1)
 
 
 def _num(x: float) -> str:

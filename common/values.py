@@ -88,6 +88,29 @@ def non_negative_int(text: str) -> int:
     return value
 
 
+def _num(value: float) -> str:
+    return str(value) if isinstance(value, int) else f"{value:g}"
+
+
+def bounded(parse: Callable[[str], Any], lo: float, hi: float, what: str = "") -> Callable[[str], Any]:
+    """``parse`` with the result checked to lie in ``lo..hi`` (the error names both bounds). With ``what`` (``"a
+    whole number"``), text ``parse`` refuses and a value out of range both say ``expected <what> in lo..hi``."""
+    span = f"{_num(lo)}..{_num(hi)}"
+
+    def check(text: str) -> Any:
+        try:
+            value = parse(text)
+        except ValueError:
+            if not what:
+                raise
+            raise ValueError(f"expected {what} in {span}") from None
+        if not lo <= value <= hi:
+            raise ValueError(f"expected {what} in {span}" if what else f"must be in {span}")
+        return value
+    check.__doc__ = parse.__doc__
+    return check
+
+
 JPEG_QUALITY = 85
 """The one JPEG quality default (1..100) of every MJPEG encoder: HTTP (``emulate --quality``), UVC (wCompQuality
 8500), V4L2 (``rollcam.sim.codecs`` re-exports it); here, beside its parser, because the CLI reads it numpy-free."""

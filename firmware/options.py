@@ -23,6 +23,7 @@ from rollcam.common.errors import ConfigError, RollcamError
 from rollcam.common.values import (
     JPEG_QUALITY,
     SERIAL,
+    bounded,
     finite_float,
     non_negative_float,
     non_negative_int,
@@ -61,21 +62,6 @@ MAX_IMU_OFFSET_US = 1e6
 """Largest camera-IMU time offset, us (one second either way)."""
 MAX_TEXT = 32
 """Longest serial number or camera name, characters (a USB iSerialNumber string is short ASCII)."""
-
-
-def _num(value: float) -> str:
-    return str(value) if isinstance(value, int) else f"{value:g}"
-
-
-def bounded(parse: Callable[[str], Any], lo: float, hi: float) -> Callable[[str], Any]:
-    """``parse`` with the result checked to lie in ``lo..hi`` (the error names both bounds)."""
-    def check(text: str) -> Any:
-        value = parse(text)
-        if not lo <= value <= hi:
-            raise ValueError(f"must be in {_num(lo)}..{_num(hi)}")
-        return value
-    check.__doc__ = parse.__doc__
-    return check
 
 
 def check_size(size: tuple[int, int]) -> tuple[int, int]:

@@ -17,10 +17,11 @@ import numpy as np
 from llvmlite import ir
 from numba import njit, types
 from numba.core.extending import intrinsic
+from rollcam.common import mixing
 
 from ._jitcache import guard
 
-M1, M2, GOLD = np.uint64(0xBF58476D1CE4E5B9), np.uint64(0x94D049BB133111EB), np.uint64(0x9E3779B97F4A7C15)
+M1, M2, GOLD = np.uint64(mixing.MUL1), np.uint64(mixing.MUL2), np.uint64(mixing.GOLDEN)  # SplitMix64's, as uint64
 _F = np.float32
 _LN2 = 0.6931471805599453
 _SQRT_HALF_2 = 1.4142135623730951  # the mantissa range [sqrt(2)/2, sqrt(2)) keeps |t| <= 0.172 below

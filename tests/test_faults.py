@@ -185,3 +185,15 @@ def test_emulate_refuses_a_bad_plan_and_reports_a_good_one():
                            "--json"], capture_output=True, text=True, timeout=120)
     assert good.returncode == 0, good.stderr
     assert json.loads(good.stdout.splitlines()[0])["faults"] == "drop=2%,seed=7"
+
+
+def test_whole_number_faults_name_their_range_and_draws_keep_their_stream():
+    """The plan's whole numbers go through common.values.bounded and its draws through common.mixing: the same
+    messages and the same 64-bit stream as the plan's own parser and mixer gave (values pinned from those)."""
+    for text, span in [("seqskip_by=0", "1..4294967295"), ("seed=x", "0..18446744073709551615"),
+                       ("delay_ms=1e9", "0..60000"), ("qbuf=EIO@0", "1..4294967296")]:
+        with pytest.raises(ConfigError) as info:
+            FaultPlan.parse(text, "--faults")
+        assert str(info.value) == f"--faults: fault {text!r} in {text!r}: expected a whole number in {span}"
+    assert [draw(0, "error", i) for i in range(3)] == [17983244471914978917, 6854649170381038390,
+                                                       3617272679030404135]

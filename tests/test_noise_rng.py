@@ -5,7 +5,8 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from rollcam.sim._rng import log_f32, normals
+from rollcam.common.mixing import GOLDEN, MASK64, finalise, splitmix64
+from rollcam.sim._rng import log_f32, mix, normals
 from rollcam.sim.hwconfig import load_sensor
 from rollcam.sim.noise import SensorModel
 from scipy import stats
@@ -48,3 +49,12 @@ def test_temporal_noise_of_a_pixel_depends_on_seed_frame_and_pixel_only():
     # and the draws of frame 7 do not depend on frames drawn before it
     m.expose(flat, 10_000_000, 3)
     np.testing.assert_array_equal(m.expose(flat, 10_000_000, 7), a)
+
+
+def test_the_kernels_mixer_is_common_splitmix64():
+    """sim._rng's numba ``mix`` and common.mixing's ``finalise`` are one function; ``splitmix64`` is the
+    reference generator's output (Vigna's splitmix64.c from state 0: e220a8397b1dcdaf, 6e789e6aa1b965f4, ...)."""
+    words = np.random.default_rng(38).integers(0, 2**64, size=4096, dtype=np.uint64)
+    assert [int(mix(w)) for w in words] == [finalise(int(w)) for w in words]
+    assert [splitmix64(k * GOLDEN & MASK64) for k in range(3)] == [0xE220A8397B1DCDAF, 0x6E789E6AA1B965F4,
+                                                                   0x06C45D188009454F]

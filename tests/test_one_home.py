@@ -54,7 +54,6 @@ ALLOWED: dict[tuple[str, str], str] = {
     ("colour conversion", "host/robotics/gcsv.py"): "fold pending: a grey frame drawn on in colour; a codecs row fits",
     # parsers
     ("query parsing", "host/sources/http.py"): "a Content-Type header's ;-parameters, not a URI query",
-    ("integer parsers", "common/faults.py"): EDITED.format("common/faults.py") + " (values.bounded fits)",
     ("integer parsers", "firmware/protocol.py"):
         "the serial protocol's register arguments are decimal or 0x hex and fail as CommandError 102",
     ("boolean words", "benchmarks/flicker.py"): "the lamp states a loop walks through, not a parser",
@@ -63,9 +62,6 @@ ALLOWED: dict[tuple[str, str], str] = {
         "API replica: picamera2's imx500 NMS, pixel-inclusive areas as picamera2 computes them",
     ("IoU / IoA", "host/training/loss.py"):
         "a differentiable GIoU loss on torch tensors; the numpy home has no autograd",
-    # random mixing
-    ("SplitMix64", "common/faults.py"): EDITED.format("common/faults.py") + "; common may not import sim, so the "
-                                        "finaliser's home moves to common with sim/_rng reading it",
     # cameras
     # tests
     ("test waiting", "tests/test_one_home.py"): "the checker's own made-up copy (COPIES below)",

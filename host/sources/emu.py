@@ -28,11 +28,11 @@ from typing import Any
 
 from rollcam.common.errors import ConfigError, SourceError
 from rollcam.common.faults import FaultInjector, FaultPlan
-from rollcam.common.values import convert_option, non_negative_int, positive_int
+from rollcam.common.values import bounded, convert_option, non_negative_int, positive_int
 from rollcam.firmware.camera import FirmwareCamera, FramePlan
 from rollcam.firmware.imaging import encode
 from rollcam.firmware.labfaults import FrameFaults
-from rollcam.firmware.options import MAX_DEVICE_NS, OPTIONS, bounded
+from rollcam.firmware.options import MAX_DEVICE_NS, OPTIONS
 from rollcam.firmware.rig import Rig, RigSpec
 from rollcam.firmware.spec import CameraSpec
 from rollcam.sim.frame import Frame
