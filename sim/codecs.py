@@ -241,6 +241,30 @@ def bgr_to_hsv(bgr: np.ndarray) -> np.ndarray:
     return _cv2().cvtColor(np.ascontiguousarray(bgr, np.uint8), _cv2().COLOR_BGR2HSV)
 
 
+_GREY_CODES = {("bgr", 3): "COLOR_BGR2GRAY", ("bgr", 4): "COLOR_BGRA2GRAY", ("rgb", 3): "COLOR_RGB2GRAY",
+               ("rgb", 4): "COLOR_RGBA2GRAY"}
+"""(channel order, channels) -> OpenCV's conversion to grey (BT.601 luma)."""
+
+
+def grey_u8(image: np.ndarray, order: str = "bgr") -> np.ndarray:
+    """The 8-bit grey of a picture, as optical flow takes it: a 2-D one as it is, a BGR(A) one (or RGB(A), with
+    ``order="rgb"``) by OpenCV's BT.601 luma; values are cast to uint8 first. ConfigError for other shapes."""
+    a = np.ascontiguousarray(image, np.uint8)
+    if a.ndim == 2:
+        return a
+    code = _GREY_CODES.get((order, a.shape[2])) if a.ndim == 3 else None
+    if code is None:
+        raise ConfigError(f"no grey for an {order.upper()} picture of shape {a.shape}")
+    return _cvt(code)(a)
+
+
+def bgr_to_rgb(image: np.ndarray) -> np.ndarray:
+    """OpenCV's channel order to numpy-land's, any depth: BGR -> RGB, BGRA -> RGBA; other shapes as they are."""
+    if image.ndim == 3 and image.shape[2] in (3, 4):
+        return _cvt("COLOR_BGR2RGB" if image.shape[2] == 3 else "COLOR_BGRA2RGBA")(image)
+    return image
+
+
 def _cvt(code: str) -> Callable[[np.ndarray], np.ndarray]:
     """OpenCV's colour conversion ``code`` (imported on first use: cv2 is slow to import)."""
     def run(a: np.ndarray) -> np.ndarray:

@@ -20,6 +20,7 @@ import cv2
 import numpy as np
 from rollcam.common.errors import ConfigError, SourceError
 
+from .codecs import grey_u8
 from .footage import Footage, FpsLike, as_fps
 from .timing import NS_PER_S, LineTiming, Readout, line_sample_times_ns
 
@@ -71,10 +72,7 @@ def _dis_flow(dis: cv2.DISOpticalFlow, ga: np.ndarray, gb: np.ndarray) -> np.nda
 def _gray_u8(a: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """8-bit grayscale of a frame pair for DIS (one common scale, so brightness constancy holds)."""
     if a.dtype == np.uint8 and (a.ndim == 2 or a.shape[2] in (3, 4)):
-        if a.ndim == 2:
-            return a, b
-        code = cv2.COLOR_RGB2GRAY if a.shape[2] == 3 else cv2.COLOR_RGBA2GRAY
-        return cv2.cvtColor(a, code), cv2.cvtColor(b, code)
+        return grey_u8(a, "rgb"), grey_u8(b, "rgb")
     ga = a.astype(np.float32) if a.ndim == 2 else a[..., :3].astype(np.float32).mean(axis=2)
     gb = b.astype(np.float32) if b.ndim == 2 else b[..., :3].astype(np.float32).mean(axis=2)
     lo = min(float(ga.min()), float(gb.min()))

@@ -19,6 +19,7 @@ import numpy as np
 from rollcam.common.errors import ConfigError, SourceError
 from rollcam.common.lifecycle import Closeable
 
+from .codecs import bgr_to_rgb
 from .timing import NS_PER_S
 
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".tif", ".tiff", ".bmp", ".npy")
@@ -50,15 +51,6 @@ def natural_key(path: Path) -> list[object]:
     return [int(part) if part.isdigit() else part.lower() for part in re.split(r"(\d+)", path.name)]
 
 
-def _to_rgb(img: np.ndarray) -> np.ndarray:
-    """OpenCV decodes colour as BGR(A); footage hands out RGB(A) like the rest of numpy-land."""
-    if img.ndim == 3 and img.shape[2] == 3:
-        return cv2.cvtColor(img, cv2.COLOR_BGR2RGB)
-    if img.ndim == 3 and img.shape[2] == 4:
-        return cv2.cvtColor(img, cv2.COLOR_BGRA2RGBA)
-    return img
-
-
 def _read_image(path: Path) -> np.ndarray:
     """Decode one image file (or ``.npy`` array) with its own bit depth, colour as RGB."""
     if not path.is_file():
@@ -74,7 +66,7 @@ def _read_image(path: Path) -> np.ndarray:
     img = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
     if img is None:
         raise SourceError(f"{str(path)!r}: cannot decode image (corrupt or unsupported file)")
-    return _to_rgb(img)
+    return bgr_to_rgb(img)
 
 
 class _FolderReader:
@@ -147,7 +139,7 @@ class _VideoReader:
             self.pos = -(_VIDEO_MAX_SKIP + 2)  # unknown position: the next read seeks
             raise SourceError(f"{self.name!r}: cannot decode frame {k} of {self.count}")
         self.pos = k + 1
-        return _to_rgb(img)
+        return bgr_to_rgb(img)
 
     def close(self) -> None:
         if self.cap is not None:

@@ -13,7 +13,7 @@ from hypothesis import strategies as st
 from rollcam.common.errors import ConfigError, ProtocolError
 from rollcam.host import open_camera
 from rollcam.sim import formats as F
-from rollcam.sim.codecs import CODECS, JPEG_QUALITY, Levels, codec, preview_frame, transcode
+from rollcam.sim.codecs import CODECS, JPEG_QUALITY, Levels, bgr_to_rgb, codec, grey_u8, preview_frame, transcode
 from rollcam.sim.frame import Frame
 from rollcam.sim.hwconfig import load_sensor
 from rollcam.sim.timing import Readout
@@ -212,3 +212,22 @@ def test_encode_image_writes_the_file_format_asked_for():
     assert png[:8] == b"\x89PNG\r\n\x1a\n"
     np.testing.assert_array_equal(cv2.imdecode(np.frombuffer(png, np.uint8), cv2.IMREAD_COLOR), img)
     assert encode_image(img, "jpg", (cv2.IMWRITE_JPEG_QUALITY, 85))[:2] == b"\xff\xd8"
+
+
+def test_grey_and_channel_order_helpers_are_the_luma_and_the_swap():
+    """``grey_u8`` (optical flow's grey) and ``bgr_to_rgb`` (footage's channel order), checked against numpy."""
+    rng = np.random.default_rng(38)
+    bgr = rng.integers(0, 256, (9, 11, 3), dtype=np.uint8)
+    luma = np.rint(bgr[..., 0] * 0.114 + bgr[..., 1] * 0.587 + bgr[..., 2] * 0.299)
+    assert np.abs(grey_u8(bgr).astype(int) - luma).max() <= 1  # BT.601 in OpenCV's fixed point
+    assert np.array_equal(grey_u8(bgr[..., ::-1], "rgb"), grey_u8(bgr))
+    bgra = np.dstack([bgr, np.full((9, 11), 7, np.uint8)])
+    assert np.array_equal(grey_u8(bgra), grey_u8(bgr)) and np.array_equal(grey_u8(bgra[..., [2, 1, 0, 3]], "rgb"),
+                                                                         grey_u8(bgr))
+    assert np.array_equal(grey_u8(bgr[..., 0]), bgr[..., 0])
+    with pytest.raises(ConfigError, match="no grey"):
+        grey_u8(np.zeros((4, 4, 2), np.uint8))
+    assert np.array_equal(bgr_to_rgb(bgr), bgr[..., ::-1])
+    deep = rng.integers(0, 65536, (5, 6, 4), dtype=np.uint16)
+    assert bgr_to_rgb(deep).dtype == np.uint16 and np.array_equal(bgr_to_rgb(deep), deep[..., [2, 1, 0, 3]])
+    assert np.array_equal(bgr_to_rgb(bgr[..., 0]), bgr[..., 0])

@@ -43,15 +43,9 @@ ALLOWED: dict[tuple[str, str], str] = {
         "VideoWriter's with-block aborts the file on an exception and keeps it otherwise; Closeable's exit cannot tell",
     ("context managers", "host/videocapture.py"):
         "API replica: cv2.VideoCapture opens again after release(), which Closeable's one-way close does not allow",
-    # image encoding and colour conversion
+    # image encoding
     ("image encoding", "benchmarks/mjpeg.py"):
         "what it times is OpenCV's JPEG encoder with each sampling option: the call itself is the subject",
-    ("colour conversion", "host/correction/flow.py"): "fold pending: grey for optical flow (as sim/compose.py's): one "
-                                                   "grey-for-flow helper",
-    ("colour conversion", "sim/compose.py"): "fold pending: grey for optical flow (as host/correction/flow.py's)",
-    ("colour conversion", "sim/footage.py"): "fold pending: decoded footage BGR(A) -> RGB(A); a codecs row fits",
-    ("colour conversion", "host/robotics/bags.py"): "fold pending: a mono8 message's grey picture; a codecs row fits",
-    ("colour conversion", "host/robotics/gcsv.py"): "fold pending: a grey frame drawn on in colour; a codecs row fits",
     # parsers
     ("query parsing", "host/sources/http.py"): "a Content-Type header's ;-parameters, not a URI query",
     ("integer parsers", "firmware/protocol.py"):

@@ -25,17 +25,10 @@ import dataclasses
 
 import numpy as np
 from rollcam.common.errors import ConfigError
+from rollcam.sim.codecs import grey_u8
 from rollcam.sim.frame import Frame
 
 FIXED_POINT_STEPS = 4
-
-
-def _grey(image: np.ndarray) -> np.ndarray:
-    import cv2
-
-    if image.ndim == 2:
-        return np.ascontiguousarray(image, np.uint8)
-    return cv2.cvtColor(np.ascontiguousarray(image, np.uint8), cv2.COLOR_BGR2GRAY)
 
 
 def dense_flow(src: np.ndarray, dst: np.ndarray) -> np.ndarray:
@@ -43,7 +36,7 @@ def dense_flow(src: np.ndarray, dst: np.ndarray) -> np.ndarray:
     import cv2
 
     dis = cv2.DISOpticalFlow_create(cv2.DISOPTICAL_FLOW_PRESET_MEDIUM)
-    return dis.calc(_grey(src), _grey(dst), None)
+    return dis.calc(grey_u8(src), grey_u8(dst), None)
 
 
 def _line_time(times: np.ndarray, line: np.ndarray) -> np.ndarray:

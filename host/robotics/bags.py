@@ -157,14 +157,14 @@ def frame_messages(frames: Sequence[Frame]) -> list[Message]:
 def kalibr_messages(frames: Sequence[Frame]) -> list[Message]:
     """The instant in Kalibr's layout: the RS image as mono8 (``kalibr_bagcreater`` reads its images in grey) on
     ``/cam0/image_raw``, the IMU on ``/imu0``."""
-    import cv2
+    from rollcam.sim.codecs import codec  # lazily, as cv2 behind it: importing the bag writer stays light
 
     out: list[Message] = []
     for frame in frames:
         enc = image_encoding(frame)
         if enc is None or enc[0] not in ("bgr8", "mono8"):
             raise ConfigError(f"--format kalibr takes 8-bit picture frames (BGR3, RGB3, GREY), not {frame.format!r}")
-        img = enc[1] if enc[0] == "mono8" else cv2.cvtColor(enc[1], cv2.COLOR_BGR2GRAY)
+        img = enc[1] if enc[0] == "mono8" else codec("GREY").encode(enc[1])
         kind, msg = image_msg(Frame(img, "GREY", frame.sequence, frame.timestamp_ns, frame.line_time_ns,
                                     frame.readout, frame.exposure_ns))
         out.append(("/cam0/image_raw", TYPES[kind], int(frame.timestamp_ns), msg))

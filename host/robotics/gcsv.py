@@ -102,10 +102,10 @@ def video_image(frame: Frame) -> np.ndarray:
     if frame.format not in ("BGR3", "RGB3", "GREY"):
         raise ConfigError(f"--format mp4 takes picture frames (BGR3, RGB3, GREY), not {frame.format.strip()!r}; "
                           "capture raw streams as png or npy")
-    import cv2  # lazily, as the image files do: importing rollcam.host.recording.capture stays light
+    from rollcam.sim.codecs import codec  # lazily, as the image files do: importing the capture stays light
 
     img = image_array(frame, "png")
-    return cv2.cvtColor(img, cv2.COLOR_GRAY2BGR) if img.ndim == 2 else img
+    return codec("GREY").preview(img, img.shape[1], img.shape[0]) if img.ndim == 2 else img
 
 
 def check_frames(frames: Sequence[Frame]) -> None:
