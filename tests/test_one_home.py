@@ -24,8 +24,6 @@ ALLOWED: dict[tuple[str, str], str] = {
     ("threads", "benchmarks/mjpeg.py"): "fold pending: the MJPEG benchmark's client readers; Worker fits",
     ("threads", "benchmarks/soak.py"): "fold pending: the soak's stream reader; Worker fits",
     ("threads", "benchmarks/view.py"): "fold pending: the view benchmark's page driver; Worker fits",
-    ("threads", "emu/usbip/server.py"): EDITED.format("emu/usbip"),
-    ("threads", "emu/usbip/session.py"): EDITED.format("emu/usbip"),
     ("threads", "emu/v4l2/server.py"): EDITED.format("emu/v4l2"),
     ("threads", "host/datasets/executors.py"):
         "fold pending: a pool worker's parent watchdog, started in the pool's initializer with no owner to close it",

@@ -18,7 +18,7 @@ from pathlib import Path
 
 import pytest
 from helpers import FakeClock, wait_for
-from rollcam.common.errors import ConfigError
+from rollcam.common.errors import ConfigError, DeviceError
 from rollcam.emu.usbip import ImportedDevice, UrbError, USBIPServer, list_devices
 from rollcam.emu.usbip import protocol as P
 from rollcam.emu.usbip.server import ServerLimits
@@ -222,3 +222,25 @@ def test_descriptor_exhaustion_is_survived_and_logged_once():
     assert report["alive"] and errors >= 3, report
     assert "Too many open files" in log[0] and "accepting again" in log[-1], log
     assert len(log) == 2, log  # once per episode, not once per retry
+
+
+def test_a_connection_thread_that_breaks_is_joined_and_its_error_raised_on_close():
+    """What a peer does ends its connection quietly; a fault of the server's own (here the device's reset after
+    the importer left) is kept by the connection's worker and raised by ``close()``, not lost on stderr."""
+
+    class BrokenReset(UVCFunction):
+        def reset(self) -> None:
+            super().reset()
+            raise RuntimeError("reset broke")
+
+    srv = USBIPServer([BrokenReset(FakeProducer())], port=0)
+    try:
+        with ImportedDevice(*srv.address, "1-1") as dev:
+            assert dev.control(0x80, C.REQ_GET_DESCRIPTOR, 0x0100, 0, 18)[:2] == bytes([18, 1])
+        wait_for(lambda: srv.connection_count == 0 and srv.exports["1-1"].owner is None, 5.0,
+                 "the connection closed and camera 1-1 given back")
+        with ImportedDevice(*srv.address, "1-1") as dev:  # still served
+            assert dev.control(0x80, C.REQ_GET_DESCRIPTOR, 0x0100, 0, 18)[:2] == bytes([18, 1])
+    finally:
+        with pytest.raises(DeviceError, match=r"usbip-conn failed: RuntimeError\('reset broke'\)"):
+            srv.close()

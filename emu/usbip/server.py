@@ -176,7 +176,7 @@ class USBIPServer(Closeable):
         self._lock = threading.Lock()
         self._released = threading.Condition(self._lock)
         self._conns: dict[socket.socket, _Conn] = {}
-        self._threads: list[threading.Thread] = []
+        self._workers: list[Worker] = []  # one per connection: those alive, and the first that failed
         family = socket.AF_INET6 if ":" in host else socket.AF_INET
         self._sock = socket.create_server((host, port), family=family, backlog=BACKLOG, reuse_port=False)
         self.address: tuple[str, int] = self._sock.getsockname()[:2]
@@ -201,9 +201,10 @@ class USBIPServer(Closeable):
         self._sock.close()
         for c in conns:
             c.abort()
-        for t in list(self._threads):
-            t.join(timeout=2)
-        self._accept.close()  # re-raises what stopped accepting early, if anything did
+        with contextlib.ExitStack() as workers:  # each joined; then what failed, if anything did, is raised
+            workers.callback(self._accept.close)  # what stopped accepting early
+            for w in list(self._workers):
+                workers.callback(w.close)  # what broke a connection's thread (not its peer's doing)
 
     # ------------------------------------------------------------------------------------------ accepting
     def _accept_loop(self) -> None:
@@ -243,9 +244,10 @@ class USBIPServer(Closeable):
                 return
             conn = _Conn(sock, self)
             self._conns[sock] = conn
-            t = threading.Thread(target=self._serve, args=(conn,), name="usbip-conn", daemon=True)
-            self._threads = [x for x in self._threads if x.is_alive()] + [t]
-        t.start()
+            worker = Worker(self._serve, conn, name="usbip-conn", wrap=DeviceError, join_timeout_s=2)
+            failed = [w for w in self._workers if w.error is not None][:1]
+            self._workers = failed + [w for w in self._workers if w.alive] + [worker]
+        worker.start()
 
     def _shed_one(self) -> bool:
         """Drop the oldest connection still sending its first message (lock held); False if there is none."""
@@ -296,15 +298,17 @@ class USBIPServer(Closeable):
             if export is not None and not self.closed:  # an importer gone: say why, for a kernel that lost its device
                 log.info("USB/IP peer %s released %s: %s", conn.peer, export.info.busid, exc or type(exc).__name__)
         finally:
-            if export is not None:
-                export.function.reset()
-            with self._lock:
+            try:
                 if export is not None:
-                    export.owner = None
-                    self._released.notify_all()
-                self._conns.pop(conn.sock, None)
-            with contextlib.suppress(OSError):
-                conn.sock.close()
+                    export.function.reset()
+            finally:  # the camera and the slot are given back even when its reset fails
+                with self._lock:
+                    if export is not None:
+                        export.owner = None
+                        self._released.notify_all()
+                    self._conns.pop(conn.sock, None)
+                with contextlib.suppress(OSError):
+                    conn.sock.close()
 
     def _claim(self, busid: str, conn: _Conn) -> tuple[_Export | None, int]:
         """The export ``busid`` names, now owned by ``conn``; or None and ST_NODEV / ST_DEV_BUSY. An owner idle

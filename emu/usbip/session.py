@@ -23,6 +23,7 @@ vhci-hcd then gives the outstanding URBs back with -ENODEV and the port goes awa
 
 from __future__ import annotations
 
+import contextlib
 import errno
 import logging
 import threading
@@ -31,6 +32,7 @@ from collections import deque
 from collections.abc import Callable
 
 from rollcam.common.errors import DeviceError
+from rollcam.common.lifecycle import Worker
 from rollcam.emu.uvc.device import Setup, UVCFunction
 from rollcam.emu.uvc.faults import Disconnected
 from rollcam.emu.uvc.requests import Stall
@@ -100,31 +102,29 @@ class UrbSession:
     # ------------------------------------------------------------------------------------------ reader
     def run(self) -> None:
         """Read and queue URBs until the connection ends (the exception that ended it propagates)."""
-        workers = [threading.Thread(target=self._work, args=(q,), name="usbip-urbs", daemon=True)
-                   for q in self.queues]
-        for w in workers:
-            w.start()
-        try:
-            while True:
-                cmd = self._recv_command()
-                self.urbs_received += 1
-                if isinstance(cmd, P.Unlink):
-                    self._unlink(cmd)
-                    continue
-                self._newest_submit = cmd.seqnum
-                unlink = self._unlinked_ahead.pop(cmd.seqnum, None)
-                if unlink is not None:  # unlinked before it came: answered, never run
-                    log.debug("URB %d arrived after its unlink %d: answered by the RET_UNLINK", cmd.seqnum, unlink)
-                    self.stats.unlinked += 1
-                    self.send(P.RetUnlink(unlink, -errno.ECONNRESET).pack())
-                    continue
-                self._enqueue(cmd)
-        finally:
-            with self.cond:
-                self.done = True
-                self.cond.notify_all()
-            for w in workers:
-                w.join(timeout=5)
+        with contextlib.ExitStack() as workers:  # on the way out: each worker joined, and its error raised
+            for q in self.queues:
+                workers.enter_context(Worker(self._work, q, name="usbip-urbs", join_timeout_s=5))
+            try:
+                while True:
+                    cmd = self._recv_command()
+                    self.urbs_received += 1
+                    if isinstance(cmd, P.Unlink):
+                        self._unlink(cmd)
+                        continue
+                    self._newest_submit = cmd.seqnum
+                    unlink = self._unlinked_ahead.pop(cmd.seqnum, None)
+                    if unlink is not None:  # unlinked before it came: answered, never run
+                        log.debug("URB %d arrived after its unlink %d: answered by the RET_UNLINK", cmd.seqnum,
+                                  unlink)
+                        self.stats.unlinked += 1
+                        self.send(P.RetUnlink(unlink, -errno.ECONNRESET).pack())
+                        continue
+                    self._enqueue(cmd)
+            finally:
+                with self.cond:
+                    self.done = True
+                    self.cond.notify_all()
 
     def _enqueue(self, cmd: P.Submit) -> None:
         cost = cmd.transfer_buffer_length
