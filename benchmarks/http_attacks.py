@@ -32,6 +32,8 @@ import threading
 import time
 from typing import Any
 
+from rollcam.common.lifecycle import Worker
+
 CLK_TCK = os.sysconf("SC_CLK_TCK")
 
 
@@ -95,17 +97,27 @@ def figures(pid: int) -> dict[str, Any]:
             "cpu_s": round((int(stat[11]) + int(stat[12])) / CLK_TCK, 2)}
 
 
-class Viewer(threading.Thread):
-    """A normal client from 127.0.0.1 streaming for ``seconds``: its status line, first-frame time, latencies."""
+class Viewer:
+    """A normal client from 127.0.0.1 streaming for ``seconds`` (``run`` here, or ``start`` it on a ``Worker`` and
+    ``join`` it): its status line, first-frame time, latencies."""
 
     def __init__(self, port: int, seconds: float) -> None:
-        super().__init__(daemon=True)
         self.port, self.seconds = port, seconds
         self.status = "no answer"
         self.first_s: float | None = None
         self.latency_ms: list[float] = []
+        self._worker = Worker(self.run, name="bench-viewer")
+
+    def start(self) -> None:
+        """Stream on a thread of its own."""
+        self._worker.start()
+
+    def join(self, timeout_s: float) -> None:
+        """Wait for the stream's end (at most ``timeout_s``); what failed, other than the connection, is raised."""
+        self._worker.join(timeout_s)
 
     def run(self) -> None:
+        """Stream for ``seconds``; a failed connection is noted in ``status``."""
         t0 = time.monotonic()
         try:
             with socket.create_connection(("127.0.0.1", self.port), timeout=10) as s:
@@ -232,16 +244,14 @@ def burst(port: int, pid: int, base: float, n: int = 200) -> dict[str, Any]:
         except OSError:
             failed[0] += 1
 
-    threads = [threading.Thread(target=one, args=(i,), daemon=True) for i in range(n)]
-    for t in threads:
-        t.start()
+    clients = [Worker(one, i, name=f"bench-burst-{i}", join_timeout_s=40).start() for i in range(n)]
     viewer = Viewer(port, 8)
     viewer.start()
     time.sleep(0.5)
     go.set()
     peak = figures(pid)
-    for t in threads:
-        t.join(40)
+    for c in clients:
+        c.close()  # joined; what failed, other than a connection, is raised
     viewer.join(15)
     return {**peak, "answered": len(times), "failed": failed[0], "slowest_s": round(max(times, default=0), 2),
             **viewer.result(base)}

@@ -17,19 +17,19 @@ Targets: encode median <= 10 ms at 1920x1080; 0 parts dropped for every client (
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 import socket
 import statistics
 import subprocess
 import sys
-import threading
 import time
 import urllib.request
 from typing import Any
 
 import numpy as np
-from rollcam.common.lifecycle import Deadline
+from rollcam.common.lifecycle import Deadline, Worker
 
 from .http_attacks import read_part, stop
 
@@ -94,16 +94,17 @@ def _jpeg_build(cv2: Any) -> str:
     return "unknown"
 
 
-class Reader(threading.Thread):
-    """A client reading ``/stream.mjpg`` as fast as it can: the sequence numbers of the parts it got."""
+class Reader:
+    """A client reading ``/stream.mjpg`` as fast as it can (``run``, on a ``Worker``): the sequence numbers of the
+    parts it got, or the connection's error."""
 
     def __init__(self, port: int, seconds: float) -> None:
-        super().__init__(daemon=True)
         self.port, self.seconds = port, seconds
         self.seqs: list[int] = []
         self.error: str | None = None
 
     def run(self) -> None:
+        """Read for ``seconds``; a connection that fails is noted in ``error`` (what else fails is raised)."""
         try:
             with socket.create_connection(("127.0.0.1", self.port), timeout=10) as s:
                 s.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 4 << 20)
@@ -133,12 +134,12 @@ def serve_clients(clients: int = 8, seconds: float = 20.0, size: tuple[int, int]
         url = json.loads(proc.stdout.readline())["url"]
         port = int(url.split("//")[1].split("/")[0].rsplit(":", 1)[1])
         readers = [Reader(port, seconds) for _ in range(clients)]
-        for r in readers:
-            r.start()
-        time.sleep(seconds * 0.9)
-        status = json.loads(urllib.request.urlopen(url.replace("/stream.mjpg", "/status.json"), timeout=10).read())
-        for r in readers:
-            r.join(seconds + 30)
+        with contextlib.ExitStack() as reading:  # on the way out: every reader joined, and its error raised
+            for i, r in enumerate(readers):
+                reading.enter_context(Worker(r.run, name=f"mjpeg-reader-{i}", join_timeout_s=seconds + 30))
+            time.sleep(seconds * 0.9)
+            status = json.loads(urllib.request.urlopen(url.replace("/stream.mjpg", "/status.json"),
+                                                       timeout=10).read())
     finally:
         stop(proc)
     per = status["clients"]

@@ -24,7 +24,7 @@ import urllib.request
 from pathlib import Path
 from typing import Any
 
-from rollcam.common.lifecycle import Deadline
+from rollcam.common.lifecycle import Deadline, Worker
 
 FPS_RATIO_TARGET = 0.95  # the device with a page watching keeps >= 95% of its frame rate without one
 TAP_US_TARGET = 500.0  # device-thread cost per frame (1.5% of a 33 ms frame)
@@ -32,20 +32,12 @@ MESSAGE_US_TARGET = 2000.0  # event-loop cost per page message
 PAGE_FPS_TARGET = 0.9  # the page updates at >= 90% of the device's delivered rate
 
 
-class _MjpegReader(threading.Thread):
-    """Reads the MJPEG stream and throws it away (so the server encodes, as for a program watching)."""
-
-    def __init__(self, url: str) -> None:
-        super().__init__(daemon=True)
-        self.url, self.stop, self.bytes = url, threading.Event(), 0
-
-    def run(self) -> None:
-        with urllib.request.urlopen(self.url, timeout=10) as r:
-            while not self.stop.is_set():
-                chunk = r.read(65536)
-                if not chunk:
-                    return
-                self.bytes += len(chunk)
+def _drain_mjpeg(url: str, stop: threading.Event) -> None:
+    """Read the MJPEG stream and throw it away (so the server encodes, as for a program watching) until ``stop``
+    is set or the stream ends."""
+    with urllib.request.urlopen(url, timeout=10) as r:
+        while not stop.is_set() and r.read(65536):
+            pass
 
 
 def _device_phase(cam: Any, pump: Any, seconds: float) -> dict[str, float]:
@@ -127,8 +119,8 @@ def run_view_bench(seconds: float = 10.0, size: tuple[int, int] = (1920, 1080), 
     phases: dict[str, dict[str, Any]] = {}
     with server, view, tempfile.TemporaryDirectory() as profile:
         pump.start()
-        reader = _MjpegReader(server.url)
-        reader.start()
+        stop = threading.Event()
+        reader = Worker(_drain_mjpeg, server.url, stop, name="bench-view-mjpeg", stop_event=stop).start()
         say(f"warming up {size[0]}x{size[1]} at {fps:g} fps")
         time.sleep(min(seconds, 3.0))
         say("MJPEG reader alone")
@@ -140,14 +132,13 @@ def run_view_bench(seconds: float = 10.0, size: tuple[int, int] = (1920, 1080), 
         for name, (fn, *args), settle_s in pages:
             say(f"with a live page: {name}")
             page: dict[str, Any] = {}
-            worker = threading.Thread(target=fn, args=(*args[:1], seconds + settle_s + 2, *args[1:], page),
-                                      daemon=True)
-            worker.start()
+            worker = Worker(fn, *args[:1], seconds + settle_s + 2, *args[1:], page, name=f"bench-view-{name}",
+                            join_timeout_s=120).start()
             time.sleep(settle_s)  # the page connects (a browser takes longer to start)
             phases[name] = {**_device_phase(cam, pump, seconds)}
-            worker.join(120)
+            worker.close()  # joined; what failed in the page is raised
             phases[name].update(page)
-        reader.stop.set()
+        reader.close()
         tap, vs = view.tap.stats, view.stats
     return _document(phases, tap.tap_ns / max(tap.frames, 1) / 1e3, vs.message_ns / max(vs.messages, 1) / 1e3,
                      {"size": list(size), "fps": fps, "seconds": seconds, "browser": use_browser})
