@@ -48,9 +48,11 @@ from typing import Any
 import numpy as np
 from rollcam.common.errors import ConfigError, DeviceError, RollcamError
 from rollcam.common.lifecycle import Deadline, Worker
-from rollcam.emu.v4l2 import Device
+from rollcam.emu.v4l2 import Device, EmuDriver
 from rollcam.emu.v4l2 import functions as fn
+from rollcam.firmware.camera import FirmwareCamera
 from rollcam.firmware.rig import SYNCS
+from rollcam.firmware.spec import CameraSpec
 
 from .http_attacks import figures as process_figures
 from .http_attacks import stop as stop_process
@@ -130,10 +132,12 @@ def soak_targets(figures: dict[str, Any], size: tuple[int, int], *, hog: bool) -
 def open_soak_device(sensor: str = "imx219", *, size: tuple[int, int] = (1920, 1080), fps: float = 30.0,
                      fourcc: str = "YUYV", scene: str = "street", bands: int = 8,
                      rt_priority: int | None = None) -> Device:
-    """The soak's real-time V4L2 device, its format set: the camera options ``open_camera`` builds from
-    ``emu:SENSOR?scene=..&size=WxH&fps=..&format=FOURCC`` (for YUYV the sensor model with the default blur bound)."""
-    dev = Device.open(sensor, scene={"scene": scene}, size=size, fps=fps, realtime=True, bands=bands,
-                      rt_priority=rt_priority)
+    """The soak's real-time V4L2 device on the camera ``open_camera`` builds from
+    ``emu:SENSOR?scene=..&size=WxH&fps=..&format=FOURCC`` (the same ``CameraSpec``, so for YUYV the sensor model
+    with the default blur bound), its format set by VIDIOC_S_FMT as an application does."""
+    options = {"scene": scene, "size": f"{size[0]}x{size[1]}", "fps": f"{fps:g}", "format": fourcc}
+    spec = CameraSpec.from_options(sensor, options, "bench soak")
+    dev = Device(EmuDriver(FirmwareCamera(spec), realtime=True, bands=bands, rt_priority=rt_priority))
     try:
         dev.set_format(*size, fourcc)
     except BaseException:
