@@ -479,7 +479,7 @@ def run_memory_soak(minutes: float = 10.0, *, every_s: float = 10.0, size: tuple
         assert proc.stdout is not None
         endpoints = json.loads(proc.stdout.readline())
         url = endpoints["http"]["url"]
-        reader = threading.Thread(target=_read_stream, args=(url, stop, got), daemon=True)
+        reader = Worker(_read_stream, url, stop, got, name="memory-soak-reader", stop_event=stop)
         t0 = time.monotonic()
         reader.start()
         end = t0 + minutes * 60
