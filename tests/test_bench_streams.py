@@ -4,8 +4,13 @@ documents carry targets in the one shape ``--check`` reads. No speed is asserted
 from __future__ import annotations
 
 import dataclasses
+import subprocess
+import sys
+from pathlib import Path
 
 import pytest
+from helpers import wait_for
+from interrupts import interrupt
 from rollcam.benchmarks.studies import STUDIES
 from rollcam.common.errors import ConfigError
 
@@ -172,3 +177,34 @@ def test_soak_device_runs_the_sensor_model_as_open_camera_does():
         fields = [f.name for f in dataclasses.fields(api) if f.name not in ("frame_length_lines", "settings")]
         assert {k: getattr(soak, k) for k in fields} == {k: getattr(api, k) for k in fields}
         assert abs(soak.settings.timing.frame_period_ns / api.settings.timing.frame_period_ns - 1) < 1e-3
+
+
+def _sockets(pid: int) -> int:
+    fds = Path(f"/proc/{pid}/fd")
+    try:
+        return sum(1 for fd in fds.iterdir() if fd.readlink().as_posix().startswith("socket:"))
+    except (FileNotFoundError, ProcessLookupError):
+        return 0
+
+
+@pytest.mark.parametrize(("terminal", "streaming"), [(False, False), (True, True), (False, True)],
+                         ids=["alone-starting", "group-streaming", "alone-streaming"])
+def test_ctrl_c_in_a_rig_soak_ends_its_emulator(tmp_path, terminal, streaming):
+    """Ctrl-C while the emulator starts or while both streams are read (the soak then holds their two
+    connections), to the soak alone or to its process group as a terminal sends it: exit 130, emulator gone."""
+    exe = Path(sys.executable).with_name("rollcam")
+    proc = subprocess.Popen([str(exe), "bench", "soak", "--cameras", "2", "--size", "160x120", "--scene", "flat",
+                             "--minutes", "5", "--out", str(tmp_path)], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                            start_new_session=terminal)
+    children = Path(f"/proc/{proc.pid}/task/{proc.pid}/children")
+    try:
+        child = int(wait_for(lambda: children.read_text().split(), 60, "the emulator started")[0])
+        if streaming:
+            wait_for(lambda: _sockets(proc.pid) >= 2, 120, "both cameras' streams connected")
+    except AssertionError:
+        proc.kill()
+        raise
+    _, err = interrupt(proc, group=terminal)
+    assert proc.returncode == 130, err
+    assert not _alive(child), "the emulator outlived the soak"
+    assert not list(tmp_path.glob("*.json"))
