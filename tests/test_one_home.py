@@ -22,7 +22,6 @@ ALLOWED: dict[tuple[str, str], str] = {
     # threads
     ("threads", "benchmarks/http_attacks.py"): "fold pending: attacker threads of a benchmark; Worker fits",
     ("threads", "benchmarks/mjpeg.py"): "fold pending: the MJPEG benchmark's client readers; Worker fits",
-    ("threads", "benchmarks/soak.py"): "fold pending: the soak's stream reader; Worker fits",
     ("threads", "benchmarks/view.py"): "fold pending: the view benchmark's page driver; Worker fits",
     ("threads", "emu/usbip/server.py"): EDITED.format("emu/usbip"),
     ("threads", "emu/usbip/session.py"): EDITED.format("emu/usbip"),
