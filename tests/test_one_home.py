@@ -19,8 +19,6 @@ ROOT = Path(__file__).resolve().parents[1]
 PICAMERA2 = "API replica: the picamera2 stand-in keeps picamera2's own {}"
 ALLOWED: dict[tuple[str, str], str] = {
     # threads
-    ("threads", "benchmarks/soak.py"): "fold pending: the soak's stream reader, Worker's job; left while the soak is "
-                                      "reworked",
     ("threads", "emu/v4l2/server.py"):
         "fold pending: the preload server's accept and connection threads, Worker's job; left while emu/v4l2 is "
         "rewritten",

@@ -256,7 +256,7 @@ def test_rollcam_emulate_serves_a_free_running_rig_each_camera_on_its_own_clock(
     # Camera 1's clock is 1 s ahead and 1000 ppm fast. Each stream's timestamps advance by exactly its own
     # nominal frame period on its own clock, and against the host's arrival times (the same monotonic clock the
     # emulator's world runs on) the client sees camera 1 about 1.001 s ahead.
-    _info, got, _err = _serve_rig("stereo,sync=free,offset_ns=0/1000000000,ppm=0/1000", 30)
+    info, got, _err = _serve_rig("stereo,sync=free,offset_ns=0/1000000000,ppm=0/1000", 30)
     timing = CameraSpec.from_options("imx219", FLAT).settings.timing
     lead = []
     for frames_ in got:
@@ -267,6 +267,11 @@ def test_rollcam_emulate_serves_a_free_running_rig_each_camera_on_its_own_clock(
             assert abs(f.timestamp_ns - first.timestamp_ns - timing.frame_start_ns(f.sequence - first.sequence)) <= 1
         lead.append(np.median([f.timestamp_ns - f.meta["arrival_ns"] for f in frames_]))
     assert lead[1] - lead[0] == pytest.approx(1_001_000_000, abs=15_000_000)  # delivery latency is common
+    # --json says where the world clock starts on the host's: camera 0 (the world's clock) then arrives after
+    # its timestamp by exposure, readout and delivery, well under a second.
+    world0 = info["rig"]["world_start_monotonic_ns"]
+    after = [f.meta["arrival_ns"] - (world0 + f.timestamp_ns) for f in got[0]]
+    assert min(after) > 0 and np.median(after) < 1_000_000_000
 
 
 @pytest.mark.parametrize(("rig", "message"), [

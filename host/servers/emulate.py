@@ -246,7 +246,7 @@ def serve(args: argparse.Namespace, camera_options: dict[str, str],
         for pump, started_here in zip(pumps, running, strict=True):
             if any(r.uses_pump for r in started_here):  # UVC paces its own frames; do not render for nobody
                 pump.start()
-        _announce(args, cameras, running, rig_spec)
+        _announce(args, cameras, running, rig_spec, None if rig is None else rig.world0)
         with contextlib.suppress(KeyboardInterrupt):  # Ctrl-C is the normal way to stop a server
             wait_until_stopped(stop, args.duration, _Watch(*pumps, *([] if rig is None else [rig])),
                                servers=tuple(r.server for started in running for r in started))
@@ -266,9 +266,11 @@ def serve(args: argparse.Namespace, camera_options: dict[str, str],
     return 0
 
 
-def _announce(args: argparse.Namespace, cameras: list[Any], running: list[list[Running]], rig: Any) -> None:
-    """The endpoints, on stdout: one JSON line (``--json``; a rig's is ``{"rig": ..., "cameras": [...]}``) or
-    lines for a person."""
+def _announce(args: argparse.Namespace, cameras: list[Any], running: list[list[Running]], rig: Any,
+              world0_ns: int | None = None) -> None:
+    """The endpoints, on stdout: one JSON line (``--json``; a rig's is ``{"rig": ..., "cameras": [...]}``, the
+    rig's with ``world_start_monotonic_ns``: the host's CLOCK_MONOTONIC at the rig's world time 0) or lines for
+    a person."""
     def doc(camera: Any, started: list[Running]) -> dict[str, Any]:
         return {"sensor": camera.sensor.name, "identity": camera.identity(), "faults": args.faults.to_text(),
                 "ledger": camera.insensor.ledger(camera.spec).to_json(), **{r.name: r.info for r in started}}
@@ -277,8 +279,9 @@ def _announce(args: argparse.Namespace, cameras: list[Any], running: list[list[R
         if rig is None:
             print(json.dumps(doc(cameras[0], running[0])), flush=True)
         else:
-            print(json.dumps({"rig": rig.to_json(), "cameras": [doc(c, r) for c, r in zip(cameras, running,
-                                                                                         strict=True)]}), flush=True)
+            docs = [doc(c, r) for c, r in zip(cameras, running, strict=True)]
+            print(json.dumps({"rig": {**rig.to_json(), "world_start_monotonic_ns": world0_ns}, "cameras": docs}),
+                  flush=True)
         return
     if rig is not None:
         print(f"emulating a rig: {rig.to_text()}", flush=True)
