@@ -20,7 +20,7 @@ from pathlib import Path
 from typing import Any
 
 from rollcam.common.errors import ConfigError, RollcamError, require
-from rollcam.common.values import name_list, parse_size, positive_float, positive_int
+from rollcam.common.values import name_list, parse_bool, parse_size, positive_float, positive_int
 from rollcam.host.commands import value_type
 
 Doc = dict[str, Any]
@@ -268,6 +268,9 @@ def _soak_arguments(p: argparse.ArgumentParser) -> None:
                         "target: 0 dropped per camera (default: 1, the in-process V4L2 device)")
     p.add_argument("--sync", default=None, metavar="free|hw",
                    help="with --cameras N: the rig's sync, free-running or one hardware trigger (default: free)")
+    p.add_argument("--physics", type=value_type(parse_bool), default=None, metavar="on|off",
+                   help="with --cameras N: the cameras' sensor model (default: on, the default blur bound; off: the "
+                        "clean picture 'rollcam emulate' serves by default)")
 
 
 def _soak(args: argparse.Namespace, progress: Any) -> tuple[Doc, str]:
@@ -277,8 +280,9 @@ def _soak(args: argparse.Namespace, progress: Any) -> tuple[Doc, str]:
     for flag, given in (("--memory", args.memory), ("--hog", args.hog), ("--rt-priority", args.rt_priority)):
         if rig and given:
             raise ConfigError(f"bench soak: {flag} applies to the one-camera soak, not to --cameras {args.cameras}")
-    if not rig and args.sync is not None:
-        raise ConfigError("bench soak: --sync needs --cameras N (N >= 2)")
+    for flag, given in (("--sync", args.sync), ("--physics", args.physics)):
+        if not rig and given is not None:
+            raise ConfigError(f"bench soak: {flag} needs --cameras N (N >= 2)")
     minutes = args.minutes or (5.0 if rig else 10.0)
     if args.memory:
         doc = run_memory_soak(minutes, size=args.size or (1920, 1080), progress=progress.status)
@@ -286,9 +290,11 @@ def _soak(args: argparse.Namespace, progress: Any) -> tuple[Doc, str]:
         return doc, format_memory_report(doc)
     if rig:
         size = args.size or (1280, 720)
+        physics = args.physics is not False
         doc = run_rig_soak(minutes, cameras=args.cameras, size=size, scene=args.scene, sync=args.sync or "free",
-                           progress=progress.status)
-        write_json(args.out, f"soak_rig{args.cameras}_{args.scene}_{size[0]}x{size[1]}.json", doc)
+                           physics=physics, progress=progress.status)
+        tail = "" if physics else "_clean"
+        write_json(args.out, f"soak_rig{args.cameras}_{args.scene}_{size[0]}x{size[1]}{tail}.json", doc)
         return doc, format_rig_report(doc)
     size = args.size or (1920, 1080)
     doc = run_soak(minutes, size=size, scene=args.scene, rt_priority=args.rt_priority, progress=progress.status,
