@@ -55,6 +55,10 @@ def test_text_and_fourcc_fields_read_as_str():
     assert pix.pixelformat == "MJPG" and bytes(pix)[8:12] == b"MJPG"
     pix.pixelformat = raw.fourcc_code("GREY")  # a number goes in as it is
     assert pix.pixelformat == "GREY"
+    with pytest.raises(TypeError, match="Capability takes a str, got b'x'"):
+        raw.Capability(card=b"x")
+    with pytest.raises(ValueError, match="a fourcc has 4 characters"):
+        raw.PixFormat(pixelformat="YUV")
 
 
 def test_constructor_equality_and_repr():

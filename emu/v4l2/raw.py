@@ -234,6 +234,8 @@ class _Text(View):
         return bytes(stored).split(b"\0", 1)[0].decode("utf-8", "replace")
 
     def encode(self, obj: Any, value: Any) -> None:
+        if not isinstance(value, str):
+            raise TypeError(f"a text field of {type(obj).__name__} takes a str, got {value!r}")
         array = self.field.__get__(obj, type(obj))
         data = cstr(value, len(array))
         C.memmove(array, data, len(data))
@@ -266,6 +268,7 @@ class _StructType(type(C.Structure)):  # type: ignore[misc]
             ns["_fields_"] = [(n, t.ctype, *rest) if isinstance(t, View) else (n, t, *rest)
                               for n, t, *rest in ns["_fields_"]]
         ns["_views_"] = views
+        ns["_names_"] = frozenset(n for n, *_ in ns.get("_fields_", ()))
         return super().__new__(mcs, name, bases, ns)
 
     def __init__(cls, name: str, bases: tuple[type, ...], ns: dict[str, Any]) -> None:
@@ -279,17 +282,14 @@ class Struct(C.Structure, metaclass=_StructType):
     """A kernel structure: its bytes are the kernel's; equal when its bytes are; a readable repr."""
 
     _views_: ClassVar[dict[str, View]] = {}
+    _names_: ClassVar[frozenset[str]] = frozenset()
 
     def __init__(self, *args: Any, **fields: Any) -> None:
-        super().__init__()
-        names = [name for name, *_ in self._fields_]
-        if len(args) > len(names):
-            raise TypeError(f"{type(self).__name__} takes at most {len(names)} fields, got {len(args)}")
-        unknown = sorted(set(fields) - set(names))
-        if unknown:
-            raise TypeError(f"{type(self).__name__} has no field {unknown[0]!r}")
-        for name, value in {**dict(zip(names, args, strict=False)), **fields}.items():
-            setattr(self, name, value)
+        if len(args) > len(self._fields_):
+            raise TypeError(f"{type(self).__name__} takes at most {len(self._fields_)} fields, got {len(args)}")
+        if fields and not fields.keys() <= self._names_:
+            raise TypeError(f"{type(self).__name__} has no field {sorted(fields.keys() - self._names_)[0]!r}")
+        super().__init__(*args, **fields)  # ctypes sets each through its attribute: a View's encodes
 
     def __eq__(self, other: object) -> bool:
         return type(other) is type(self) and bytes(self) == bytes(other)  # type: ignore[call-overload]
