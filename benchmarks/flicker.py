@@ -40,18 +40,14 @@ def _time_frames(cams: dict[str, Any], frames: int) -> dict[str, float]:
 
 def cost(size: tuple[int, int], frames: int, say: Any = print) -> dict[str, Any]:
     """Per-frame ms with the lamps off and on, 8-bit path and sensor path, and the on/off ratios."""
-    from rollcam.sim.hwconfig import load_sensor
-    from rollcam.sim.scenegen import make_street_scene
-    from rollcam.sim.synthetic import SyntheticCamera
+    from .cameras import camera
 
-    sensor = load_sensor("imx219")
     w, h = size
     cams = {}
     for lamps in ("off", "on"):
-        scene = make_street_scene(0, time_of_day="night", lamps=lamps, n_pedestrians=20, n_cameras=1, width=w,
-                                  height=h)
-        cams[f"bgr_{lamps}"] = SyntheticCamera(sensor, scene, size=size, exposure_ns=4_000_000)
-        cams[f"raw_{lamps}"] = SyntheticCamera(sensor, scene, size=size, exposure_ns=4_000_000, pixel_format="RG10")
+        night = {"scene": "street", "time": "night", "lamps": lamps}
+        cams[f"bgr_{lamps}"] = camera("imx219", night, size=size, exposure_ns=4_000_000)
+        cams[f"raw_{lamps}"] = camera("imx219", night, size=size, exposure_ns=4_000_000, pixel_format="RG10")
     say(f"flicker cost: {w}x{h} night street, {frames} frames per case")
     ms = _time_frames(cams, frames)
     n_lights = len(cams["bgr_on"].scene.lights)
@@ -61,16 +57,13 @@ def cost(size: tuple[int, int], frames: int, say: Any = print) -> dict[str, Any]
 
 def accuracy() -> list[dict[str, Any]]:
     """Band period and contrast of the flicker scene against the analytic values, per exposure."""
-    from rollcam.sim.hwconfig import load_sensor
-    from rollcam.sim.scenegen import make_scene
-    from rollcam.sim.synthetic import SyntheticCamera
+    from .cameras import camera
 
-    sensor = load_sensor("imx219")
-    scene = make_scene("flicker", 0, width=640, height=480, lamp="incandescent", lamp_depth=DEPTH)
-    f = scene.lights[0].waveform.freq_hz
-    rows_out = []
+    wall = {"scene": "flicker", "lamp": "incandescent", "lamp_depth": DEPTH}
+    rows_out, f = [], 0.0
     for exp_ms in EXPOSURES_MS:
-        cam = SyntheticCamera(sensor, scene, size=(640, 480), line_length_pck=LINE_PCK, exposure_ns=round(exp_ms * 1e6))
+        cam = camera("imx219", wall, size=(640, 480), line_length_pck=LINE_PCK, exposure_ns=round(exp_ms * 1e6))
+        f = cam.scene.lights[0].waveform.freq_hz
         prof = cam.renderer.render_lines(cam.line_times_ns(0), linear=True).linear[:, :, 1].mean(axis=1)
         prof = prof.astype(np.float64)
         e_ns, lt_ns = cam.settings.exposure_ns, cam.settings.timing.line_time_ns

@@ -19,11 +19,11 @@ import numpy as np
 from rollcam.common.errors import ConfigError
 from rollcam.sim.compose import METHODS, compose_rs, composition_error
 from rollcam.sim.footage import Footage
-from rollcam.sim.hwconfig import load_sensor
 from rollcam.sim.render.renderer import Renderer
 from rollcam.sim.render.result import LineTruth
-from rollcam.sim.scenegen import ego_preset, make_street_scene
 from rollcam.sim.synthetic import SyntheticCamera
+
+from .cameras import camera
 
 SENSOR = "letsroll"
 SCENES: dict[str, tuple[str, str]] = {
@@ -143,9 +143,8 @@ def _gather_truth(truths: Sequence[LineTruth], k_per_line: np.ndarray) -> LineTr
 def _camera(cfg: BenchConfig, scene: str, size: tuple[int, int] | None = None) -> SyntheticCamera:
     speed, ego = SCENES[scene]
     w, h = size or (cfg.width, cfg.height)
-    street = make_street_scene(cfg.seed, speed=speed, n_pedestrians=cfg.n_pedestrians, width=w, height=h,
-                               ego=ego_preset(ego), props=cfg.props)
-    return SyntheticCamera(load_sensor(SENSOR), street, size=(w, h))
+    return camera(SENSOR, {"scene": "street", "seed": cfg.seed, "speed": speed, "pedestrians": cfg.n_pedestrians,
+                           "ego": ego, "props": cfg.props}, size=(w, h))
 
 
 def _footage_fps(cam: SyntheticCamera, spec: int | str) -> Fraction:

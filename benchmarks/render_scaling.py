@@ -14,9 +14,8 @@ from collections.abc import Callable, Sequence
 from typing import Any
 
 import numpy as np
-from rollcam.sim.hwconfig import load_sensor
-from rollcam.sim.scenegen import ego_preset, make_street_scene
-from rollcam.sim.synthetic import SyntheticCamera
+
+from .cameras import camera
 
 SENSOR = "letsroll"
 CAMERAS = {"static": "none", "moving": "vehicle"}
@@ -25,8 +24,7 @@ CAMERAS = {"static": "none", "moving": "vehicle"}
 
 def _time_exact(w: int, h: int, walkers: int, ego: str, frames: int) -> tuple[float, float]:
     """(median wall ms, median process CPU ms) of an exact RS frame."""
-    street = make_street_scene(0, speed="normal", n_pedestrians=walkers, width=w, height=h, ego=ego_preset(ego))
-    cam = SyntheticCamera(load_sensor(SENSOR), street, size=(w, h))
+    cam = camera(SENSOR, {"scene": "street", "speed": "normal", "pedestrians": walkers, "ego": ego}, size=(w, h))
     r, bc = cam.renderer, cam.settings.readout.by_column
     r.render_lines(cam.line_times_ns(0, "rolling"), by_column=bc)  # warm-up: static layer, compile
     wall, cpu = [], []

@@ -38,8 +38,8 @@ from rollcam.sim.isp import preview
 from rollcam.sim.optics import LensOptics
 from rollcam.sim.picture import PictureSteps
 from rollcam.sim.render.renderer import srgb_lut
-from rollcam.sim.scenegen import make_street_scene
-from rollcam.sim.synthetic import SyntheticCamera
+
+from .cameras import camera
 
 _LUT = srgb_lut()
 
@@ -62,9 +62,9 @@ def _srgb(lin: np.ndarray) -> np.ndarray:
 def sensor_overhead(size: tuple[int, int] = (1920, 1080), frames: int = 5, seed: int = 0) -> dict[str, Any]:
     """Noise + mosaic + packing time against the RS frame time (see the module docstring)."""
     sensor = load_sensor("imx219")
-    scene = make_street_scene(seed, speed="fast", width=size[0], height=size[1])
-    clean = SyntheticCamera(sensor, scene, size=size)
-    raw = SyntheticCamera(sensor, scene, size=size, pixel_format="pRAA", blur_px=None)
+    street = {"scene": "street", "seed": seed, "speed": "fast"}
+    clean = camera(sensor, street, size=size)
+    raw = camera(sensor, street, size=size, pixel_format="pRAA", blur_px=0.0)
     pipe = raw.pipeline
     assert pipe is not None
     frame_ms = _median_ms(lambda i: clean.frame(i), frames)
@@ -102,9 +102,9 @@ def raw_streams(size: tuple[int, int] = (1920, 1080), frames: int = 3, seed: int
     sensor = load_sensor("imx219")
     out: dict[str, Any] = {"sensor": "imx219", "size": f"{size[0]}x{size[1]}", "format": "pRAA"}
     for speed in ("normal", "fast"):
-        scene = make_street_scene(seed, speed=speed, width=size[0], height=size[1])
-        for key, blur in (("blur", DEFAULT_BOUND_PX), ("noblur", None)):
-            cam = SyntheticCamera(sensor, scene, size=size, pixel_format="pRAA", blur_px=blur)
+        street = {"scene": "street", "seed": seed, "speed": speed}
+        for key, blur in (("blur", DEFAULT_BOUND_PX), ("noblur", 0.0)):
+            cam = camera(sensor, street, size=size, pixel_format="pRAA", blur_px=blur)
             out[f"{speed}_{key}_ms"] = round(_median_ms(lambda i, c=cam: c.frame(i + 2), frames), 3)
     return out
 
@@ -113,8 +113,7 @@ def adaptive_blur(size: tuple[int, int] = (1920, 1080), frame: int = 3, seed: in
                   bound_px: float = DEFAULT_BOUND_PX, dense_step_px: float = 0.05) -> dict[str, Any]:
     """Adaptive against dense exposure sampling on the fast pedestrians (see the module docstring)."""
     sensor = load_sensor("letsroll")
-    scene = make_street_scene(seed, speed="fast", width=size[0], height=size[1])
-    cam = SyntheticCamera(sensor, scene, size=size, exposure_ns=10_000_000)
+    cam = camera(sensor, {"scene": "street", "seed": seed, "speed": "fast"}, size=size, exposure_ns=10_000_000)
     r, s = cam.renderer, cam.settings
     mid = cam.line_times_ns(frame)
     starts = mid - s.exposure_ns // 2
@@ -155,8 +154,8 @@ def optics_costs(size: tuple[int, int] = (1920, 1080), frames: int = 5, seed: in
     """Milliseconds per frame of each lens effect and ISP picture step, and of whole clean frames with them
     (see the module docstring)."""
     sensor = load_sensor("imx219")
-    scene = make_street_scene(seed, speed="normal", width=size[0], height=size[1])
-    plain = SyntheticCamera(sensor, scene, size=size)
+    street = {"scene": "street", "seed": seed, "speed": "normal"}
+    plain = camera(sensor, street, size=size)
     lin = plain.renderer.render_lines(plain.line_times_ns(0), linear=True).linear
     assert lin is not None
     picture = plain.frame(0).data
@@ -171,12 +170,12 @@ def optics_costs(size: tuple[int, int] = (1920, 1080), frames: int = 5, seed: in
         out[f"{name}_ms"] = round(_median_ms(lambda i, o=optics: o.apply(lin, buf), frames), 3)
     for name, step in steps.items():
         out[f"{name}_ms"] = round(_median_ms(lambda i, st=step: st.apply(picture), frames), 3)
-    lensed = SyntheticCamera(sensor, scene, size=size, optics=PHONE_LENS)
+    lensed = camera(sensor, street, size=size, lens=PHONE_LENS)
     out["frame_off_ms"] = round(_median_ms(lambda i: plain.frame(i), frames), 3)
     out["frame_lens_ms"] = round(_median_ms(lambda i: lensed.frame(i), frames), 3)
     out["frame_lens_isp_ms"] = round(_median_ms(lambda i: PHONE_ISP.apply(lensed.frame(i).data), frames), 3)
-    raw, raw_lens = (SyntheticCamera(sensor, scene, size=size, pixel_format="pRAA", optics=o)
-                     for o in (None, PHONE_LENS))
+    raw, raw_lens = (camera(sensor, street, size=size, pixel_format="pRAA", lens=o)
+                     for o in (LensOptics(), PHONE_LENS))
     out["raw_frame_off_ms"] = round(_median_ms(lambda i: raw.frame(i), frames), 3)
     out["raw_frame_lens_ms"] = round(_median_ms(lambda i: raw_lens.frame(i), frames), 3)
     return out

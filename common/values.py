@@ -92,6 +92,11 @@ JPEG_QUALITY = 85
 """The one JPEG quality default (1..100) of every MJPEG encoder: HTTP (``emulate --quality``), UVC (wCompQuality
 8500), V4L2 (``rollcam.sim.codecs`` re-exports it); here, beside its parser, because the CLI reads it numpy-free."""
 
+SERIAL = "0001"
+"""The one default serial number of an emulated sensor: it seeds the fixed-pattern noise (DSNU/PRNU) and names
+the USB device (iSerialNumber), so a camera built any way (``emu:``, ``rollcam emulate``, a ``SyntheticCamera``
+or ``SensorModel`` made directly) is the same sensor unless told otherwise."""
+
 
 def jpeg_quality(value: str | int) -> int:
     """A JPEG quality, an integer in 1..100, from text (an option) or an integer (numpy's too); ConfigError

@@ -22,6 +22,7 @@ from typing import Any
 from rollcam.common.errors import ConfigError, RollcamError
 from rollcam.common.values import (
     JPEG_QUALITY,
+    SERIAL,
     finite_float,
     non_negative_float,
     non_negative_int,
@@ -294,7 +295,7 @@ OPTIONS: dict[str, Option] = {o.name: o for o in (
     Option("jpeg_quality", bounded(non_negative_int, 0, 100), 0,
            "ISP: JPEG compression left in the picture at quality 1..100, processed formats (0: off); with "
            f"format=MJPG the encoder's quality (0: {JPEG_QUALITY})"),
-    Option("serial", _text, "0001", "device serial number (fixes the DSNU/PRNU patterns)"),
+    Option("serial", _text, SERIAL, "device serial number (fixes the DSNU/PRNU patterns)"),
     Option("noise_seed", _seed, 0, "temporal noise seed"),
     Option("mount_m", _vector3, (0.0, 0.0, 0.0), "the camera moved from the scene camera, as one camera of a "
                                                    "rig: right,forward,up in m (docs/rigs.md)"),

@@ -24,6 +24,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from rollcam.common.errors import ConfigError, RollcamError
+from rollcam.common.values import SERIAL
 from rollcam.sim import formats as sf
 from rollcam.sim.defects import SensorDefects
 from rollcam.sim.hwconfig import SensorConfig, load_sensor
@@ -63,7 +64,7 @@ class CameraSpec:
     noise: frozenset[str] | None = None
     lens: LensOptics = field(default_factory=LensOptics)
     picture: PictureSteps = field(default_factory=PictureSteps)
-    serial: str = "0001"
+    serial: str = SERIAL
     noise_seed: int = 0
     hflip: bool = False
     vflip: bool = False

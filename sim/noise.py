@@ -41,6 +41,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 from rollcam.common.errors import ConfigError
+from rollcam.common.values import SERIAL
 
 from . import _sensor_kernels as kern
 from ._jitcache import guard
@@ -70,7 +71,7 @@ class SensorModel:
     noise: NoiseParams
     bit_depth: int
     cfa: str
-    serial: str = "0"
+    serial: str = SERIAL
     seed: int = 0
     stages: frozenset[str] = field(default_factory=lambda: frozenset(STAGES))
     flux_photons_per_s: float | None = None

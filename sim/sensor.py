@@ -13,6 +13,7 @@ from typing import Any
 
 import numpy as np
 from rollcam.common.errors import ConfigError
+from rollcam.common.values import SERIAL
 
 from .codecs import codec
 from .formats import FORMATS, PixelFormat, pixel_format
@@ -38,7 +39,7 @@ class SensorPipeline:
     vflip: bool = False
 
     @classmethod
-    def for_sensor(cls, sensor: SensorConfig, fourcc: str = "BGR3", *, gain: float = 1.0, serial: str = "0",
+    def for_sensor(cls, sensor: SensorConfig, fourcc: str = "BGR3", *, gain: float = 1.0, serial: str = SERIAL,
                    seed: int = 0, stages: frozenset[str] | None = None, origin: tuple[int, int] = (0, 0),
                    wb_gains: tuple[float, float, float] | None = (1.0, 1.0, 1.0), hflip: bool = False,
                    vflip: bool = False, size: tuple[int, int] = (2, 2)) -> SensorPipeline:

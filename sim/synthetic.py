@@ -27,6 +27,7 @@ from dataclasses import dataclass
 
 import numpy as np
 from rollcam.common.errors import ConfigError
+from rollcam.common.values import SERIAL
 
 from .defects import SensorDefects
 from .exposure import DEFAULT_BOUND_PX, integrate, plan_samples
@@ -184,7 +185,7 @@ class SyntheticCamera:
 
     def __init__(self, sensor: SensorConfig, scene: Scene, camera: int | str = 0, *, start_ns: int = 0,
                  pixel_format: str = "BGR3", physics: bool | None = None, blur_px: float | None = DEFAULT_BOUND_PX,
-                 noise: frozenset[str] | None = None, serial: str = "0", noise_seed: int = 0, hflip: bool = False,
+                 noise: frozenset[str] | None = None, serial: str = SERIAL, noise_seed: int = 0, hflip: bool = False,
                  vflip: bool = False, optics: LensOptics | None = None, settings: StreamSettings | None = None,
                  defects: SensorDefects | None = None, mount: tuple[float, float, float, float] | None = None,
                  ego_path: bool = False,

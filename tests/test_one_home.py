@@ -18,9 +18,6 @@ ROOT = Path(__file__).resolve().parents[1]
 
 EDITED = "fold pending: {} is being changed by another change of this session; fold it there"
 PICAMERA2 = "API replica: the picamera2 stand-in keeps picamera2's own {}"
-CAMERA_SPEC = ("fold pending: built through CameraSpec these cameras get the emulator's sensor serial (0001, not 0), "
-               "so other fixed-pattern noise, and the benchmark's published numbers change: fold with a re-run")
-
 ALLOWED: dict[tuple[str, str], str] = {
     # threads
     ("threads", "benchmarks/http_attacks.py"): "fold pending: attacker threads of a benchmark; Worker fits",
@@ -70,10 +67,6 @@ ALLOWED: dict[tuple[str, str], str] = {
     ("SplitMix64", "common/faults.py"): EDITED.format("common/faults.py") + "; common may not import sim, so the "
                                         "finaliser's home moves to common with sim/_rng reading it",
     # cameras
-    ("cameras from a CameraSpec", "benchmarks/flicker.py"): CAMERA_SPEC,
-    ("cameras from a CameraSpec", "benchmarks/render_cases.py"): CAMERA_SPEC,
-    ("cameras from a CameraSpec", "benchmarks/render_scaling.py"): CAMERA_SPEC,
-    ("cameras from a CameraSpec", "benchmarks/sensor_bench.py"): CAMERA_SPEC,
     # tests
     ("test waiting", "tests/test_kernel_uvc.py"): EDITED.format("the kernel tests"),
     ("test waiting", "tests/test_preload_hardening.py"): EDITED.format("the preload hardening tests"),

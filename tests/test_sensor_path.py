@@ -373,3 +373,18 @@ def test_path_blur_checks_its_inputs():
         r.path_blur(starts, 1000, ones, ones, out, hits, margin=-1)
     with pytest.raises(ConfigError, match="static one"):
         _renderer(1, "fast", "none").path_blur(starts, 1000, ones, ones, out, hits)
+
+
+def test_a_camera_built_by_hand_is_the_sensor_emu_builds():
+    """One default serial: a SyntheticCamera made directly has the fixed-pattern noise of the same camera built
+    from a CameraSpec (as emu: builds it); it had serial 0 against the spec's 0001, so other DSNU/PRNU."""
+    from rollcam.firmware.imaging import synthetic_camera
+    from rollcam.firmware.spec import CameraSpec
+
+    by_hand = SyntheticCamera(load_sensor("imx219"), make_street_scene(0, width=160, height=120), size=(160, 120),
+                              pixel_format="RG10")
+    spec = synthetic_camera(CameraSpec.create("imx219", scene="street", size=(160, 120), pixel_format="RG10"))
+    assert np.array_equal(by_hand.frame(2).data, spec.frame(2).data)
+    other = SyntheticCamera(load_sensor("imx219"), make_street_scene(0, width=160, height=120), size=(160, 120),
+                            pixel_format="RG10", serial="0")
+    assert not np.array_equal(other.frame(2).data, spec.frame(2).data)  # the serial does choose the pattern

@@ -15,6 +15,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 from rollcam.common.errors import ProtocolError
+from rollcam.common.values import SERIAL
 
 from . import constants as C
 
@@ -71,7 +72,7 @@ class DeviceIdentity:
     bcd_device: int = 0x0100
     manufacturer: str = "rollcam"
     product: str = "rollcam emulated UVC camera"
-    serial: str = "0001"
+    serial: str = SERIAL
 
 
 @dataclass(frozen=True)
