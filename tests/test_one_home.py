@@ -54,6 +54,7 @@ ALLOWED: dict[tuple[str, str], str] = {
         "a differentiable GIoU loss on torch tensors; the numpy home has no autograd",
     # cameras
     # tests
+    ("V4L2 structures", "firmware/controls.py"): "the firmware's control-table row, named Control; no V4L2 structure",
     ("test waiting", "tests/test_one_home.py"): "the checker's own made-up copy (COPIES below)",
     ("test SIGINT harness", "tests/test_one_home.py"): "the checker's own made-up copy (COPIES below)",
 }
@@ -114,6 +115,7 @@ COPIES = {
     "atomic files": "import os\nos.replace(tmp, path)\n",
     "YOLO label lines": "vals = [float(v) for v in line.split()]\n",
     "cameras from a CameraSpec": "cam = SyntheticCamera(sensor, scene, size=(64, 48))\n",
+    "V4L2 structures": "import ctypes\nclass PixFormat(ctypes.Structure):\n    _fields_ = []\n",
     "test waiting": "def wait_for(predicate, timeout_s=5):\n    pass\n",
     "test fake clocks": "class FakeClock:\n    t = 0\n",
     "test SIGINT harness": "import signal\nproc.send_signal(signal.SIGINT)\n",

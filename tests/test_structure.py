@@ -35,7 +35,6 @@ ALLOWED_PRIVATE_ATTRIBUTES: dict[tuple[str, str], str] = {
     ("host/commands/run.py", "argparse._SubParsersAction"): FOLLOW_UP + " (`rollcam run`): use Subparsers",
     ("emu/v4l2/driver.py", "d._stop_pump"): FOLLOW_UP + " (emu/v4l2)",
     ("emu/v4l2/driver.py", "d._filling"): FOLLOW_UP + " (emu/v4l2)",
-    ("emu/v4l2/ioctls.py", "a._stepwise"): FOLLOW_UP + " (emu/v4l2)",
     ("host/shims/picamera2/_cnn.py", "cam._cam"): FOLLOW_UP + " (the picamera2 stand-in)",
     ("host/shims/picamera2/request.py", "self._request._array"): FOLLOW_UP + " (the picamera2 stand-in)",
     ("host/shims/libcamera/__init__.py", "other._key"): "ColorSpace.__eq__ compares with another ColorSpace",

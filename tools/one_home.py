@@ -75,6 +75,11 @@ CONCEPTS: tuple[Concept, ...] = (
             home_api="rollcam.sim.label_formats.yolo_lines"),
     Concept("cameras from a CameraSpec", ("firmware/imaging.py", "sim/synthetic.py"), r"\bSyntheticCamera\(",
             home_api="rollcam.firmware.spec.CameraSpec -> firmware.imaging (what emu: builds)"),
+    Concept("V4L2 structures", ("emu/v4l2/raw.py",),
+            r"^\s*class (V4[lL]2(?!Error\b)\w*|v4l2_\w+|Capability|FmtDesc|PixFormat|MetaFormat|Format|RequestBuffers|"
+            r"Buffer|ExportBuffer|TimeCode|Fract|CaptureParm|StreamParm|FrmSize(Enum)?|FrmIval(Enum)?|Input|QueryCtrl|"
+            r"QueryExtCtrl|QueryMenu|ExtControls?|Control|EventSubscription|EventCtrl|Event|Selection)\b",
+            home_api="rollcam.emu.v4l2.raw (one ctypes declaration per structure, str/fourcc views)"),
     Concept("test waiting", ("tests/helpers.py",), r"\bdef _?wait_(for|until)\(", scope="tests",
             home_api="tests/helpers.py wait_for"),
     Concept("test fake clocks", ("tests/helpers.py",), r"^class \w*Clock\b", scope="tests",

@@ -37,8 +37,8 @@ from rollcam.emu.uvc.convert import encode, wire_layout
 from rollcam.emu.uvc.producer import FrameProducer
 from rollcam.emu.uvc.requests import Committed, VideoControls
 from rollcam.emu.uvc.stream import StreamStats
-from rollcam.emu.v4l2.abi import REQUESTS, Buffer, Event, Format, RequestBuffers
-from rollcam.emu.v4l2.raw import fourcc_code
+from rollcam.emu.v4l2.abi import REQUESTS
+from rollcam.emu.v4l2.raw import Buffer, Event, Format, RequestBuffers, fourcc_code
 
 from . import uapi
 from .requests import SetupHandler
@@ -145,7 +145,7 @@ class OutputQueue:
             raise DeviceError(f"a {len(data)}-byte frame does not fit the gadget's {len(m)}-byte buffer")
         m[:len(data)] = data
         b = Buffer(index=index, type=uapi.BUF_TYPE_VIDEO_OUTPUT, memory=MEMORY_MMAP, bytesused=len(data))
-        b.timestamp.tv_sec, b.timestamp.tv_usec = divmod(timestamp_ns // 1000, 1_000_000)
+        b.timestamp_ns = timestamp_ns
         self.ioctl(self.fd, "QBUF", b)
 
     def reclaim(self) -> None:

@@ -5,14 +5,14 @@ each event's 64 data bytes are a ``struct uvc_event``: the bus speed (CONNECT), 
 ``struct usb_ctrlrequest`` (SETUP) or a ``struct uvc_request_data`` (DATA: what the host sent in the data stage
 of a SET_CUR). User space answers a SETUP with ``UVCIOC_SEND_RESPONSE`` and a ``struct uvc_request_data``:
 the reply bytes of an IN request, the length to receive of an OUT one, or a negative length for a STALL. The
-V4L2 structures and request numbers are ``rollcam.emu.v4l2.abi``'s.
+V4L2 structures are ``rollcam.emu.v4l2.raw``'s, request numbers ``rollcam.emu.v4l2.abi``'s.
 """
 
 from __future__ import annotations
 
 import ctypes as C
 
-from rollcam.emu.v4l2.abi import Event, EventSubscription
+from rollcam.emu.v4l2.raw import Event, EventSubscription
 
 V4L2_EVENT_PRIVATE_START = 0x08000000
 UVC_EVENT_CONNECT = V4L2_EVENT_PRIVATE_START + 0

@@ -9,6 +9,7 @@ rollcam's: the rolling-shutter line time (ns) and the readout direction.
 
 from __future__ import annotations
 
+import ctypes as C
 import errno
 from dataclasses import dataclass
 from typing import Any
@@ -172,9 +173,21 @@ def _s_ctrl(d: Any, arg: raw.Control) -> raw.Control:
     return raw.Control(c.id, _store(d, c, _validate(c, int(arg.value))))
 
 
+def _value(c: Ctrl | None, item: raw.ExtControl) -> int:
+    """An item's value: ``value64``, or for a 32-bit control its low half, signed."""
+    return item.value64 if c is not None and c.type == _T.INTEGER64 else C.c_int32(item.value64 & 0xFFFFFFFF).value
+
+
+def _put(c: Ctrl, item: raw.ExtControl, value: int) -> None:
+    """Write ``value`` back as the framework does: a 32-bit control's into the low half only."""
+    item.value64 = value if c.type == _T.INTEGER64 else (item.value64 & ~0xFFFFFFFF) | (value & 0xFFFFFFFF)
+
+
 def _ext(d: Any, arg: raw.ExtControls, mode: str) -> raw.ExtControls:
-    """G/TRY/S_EXT_CTRLS. ``error_idx``: the failing index for TRY, ``count`` for G and S (nothing was set)."""
-    count = len(arg.controls)
+    """G/TRY/S_EXT_CTRLS on ``arg``'s array, in place (values written back on success). ``error_idx``: the
+    failing index for TRY, ``count`` for G and S (nothing was set)."""
+    items = raw.ext_controls(arg)
+    count = arg.count
     which = arg.which
     fail_idx = lambda i: i if mode == "try" else count  # noqa: E731
 
@@ -187,7 +200,8 @@ def _ext(d: Any, arg: raw.ExtControls, mode: str) -> raw.ExtControls:
         raise error(errno.EINVAL, 0 if mode == "try" else count, f"which {which:#x} is not valid here")
     table = controls(d)
     found: list[Ctrl] = []
-    for i, (cid, _value) in enumerate(arg.controls):
+    for i, item in enumerate(items):
+        cid = item.id
         c = table.get(cid)
         if c is None:
             raise error(errno.EINVAL, i, f"no control with id {cid:#x}")
@@ -197,20 +211,22 @@ def _ext(d: Any, arg: raw.ExtControls, mode: str) -> raw.ExtControls:
             raise error(errno.EINVAL, i, f"control {cid:#x} is not in class {which:#x}")
         found.append(c)
     if mode == "get":
-        arg.controls = [[c.id, c.default if which == raw.CtrlWhich.DEF_VAL else c.value] for c in found]
+        for c, item in zip(found, items, strict=True):
+            _put(c, item, c.default if which == raw.CtrlWhich.DEF_VAL else c.value)
         arg.error_idx = 0
         return arg
     values = []
-    for i, (c, (_cid, value)) in enumerate(zip(found, arg.controls, strict=True)):
+    for i, (c, item) in enumerate(zip(found, items, strict=True)):
         try:
-            values.append(_validate(c, int(value)))
+            values.append(_validate(c, _value(c, item)))
         except V4L2Error as exc:
             raise error(exc.errno, i, str(exc)) from None
         if mode == "set" and c.flags & _F.GRABBED:
             raise error(errno.EBUSY, i, f"control {c.name!r} is grabbed while streaming")
     if mode == "set":
         values = [_store(d, c, v) for c, v in zip(found, values, strict=True)]
-    arg.controls = [[c.id, v] for c, v in zip(found, values, strict=True)]
+    for c, item, v in zip(found, items, values, strict=True):
+        _put(c, item, v)
     arg.error_idx = 0 if mode == "try" else count
     return arg
 
@@ -218,7 +234,7 @@ def _ext(d: Any, arg: raw.ExtControls, mode: str) -> raw.ExtControls:
 def _enuminput(_d: Any, arg: raw.Input) -> raw.Input:
     if arg.index != 0:
         raise V4L2Error(errno.EINVAL, f"input {arg.index} does not exist (one input: 0)")
-    return raw.Input(0, "Camera")
+    return raw.Input(0, "Camera", raw.INPUT_TYPE_CAMERA)
 
 
 def _s_input(_d: Any, arg: int) -> int:

@@ -35,7 +35,7 @@ from rollcam.sim.frame import Frame
 
 from . import ctrls, raw
 from .ctrls import CID_TO_CONTROL
-from .queue import BufferQueue, Slot, V4L2Error
+from .queue import BufferQueue, BufferState, Slot, V4L2Error
 
 CTRL_NAMES = {"exposure": "Exposure", "analogue_gain": "Analogue Gain", "digital_gain": "Digital Gain",
               "vblank": "Vertical Blanking", "hblank": "Horizontal Blanking", "pixel_rate": "Pixel Rate",
@@ -246,8 +246,9 @@ def _pix_format(width: int, height: int, fourcc: str) -> raw.PixFormat:
         quant = raw.Quantization.FULL_RANGE
     elif pf.layout is not None and pf.layout.packing in YUV_PACKINGS:
         enc, quant = raw.YcbcrEnc.BT601, raw.Quantization.LIM_RANGE
-    return raw.PixFormat(width, height, fourcc, raw.Field.NONE, pf.bytesperline(width), pf.sizeimage(width, height),
-                         space, enc, quant)
+    return raw.PixFormat(width=width, height=height, pixelformat=fourcc, field=raw.Field.NONE,
+                         bytesperline=pf.bytesperline(width), sizeimage=pf.sizeimage(width, height), colorspace=space,
+                         ycbcr_enc=enc, quantization=quant)
 
 
 # ------------------------------------------------------------------------------------------------ handlers
@@ -308,14 +309,15 @@ def _enum_frameintervals(d: EmuDriver, arg: raw.FrmIval) -> raw.FrmIval:
 def _g_parm(d: EmuDriver, _arg: Any) -> raw.StreamParm:
     t = d.camera.spec.settings.timing
     ival = Fraction(t.frame_period_pck, t.pixel_rate_hz)
-    return raw.StreamParm(numerator=ival.numerator, denominator=ival.denominator)
+    return raw.stream_parm(ival.numerator, ival.denominator)
 
 
 def _s_parm(d: EmuDriver, arg: raw.StreamParm) -> raw.StreamParm:
     """S_PARM: the frame interval becomes the nearest frame length (vertical blanking) the mode allows."""
-    if arg.numerator <= 0 or arg.denominator <= 0:
+    t = arg.parm.capture.timeperframe
+    if t.numerator <= 0 or t.denominator <= 0:
         return _g_parm(d, None)  # the kernel treats a zero fraction as "keep the current interval"
-    d.camera.set_frame_interval_ns(round(Fraction(arg.numerator, arg.denominator) * 1_000_000_000))
+    d.camera.set_frame_interval_ns(round(Fraction(t.numerator, t.denominator) * 1_000_000_000))
     return _g_parm(d, None)
 
 
@@ -362,11 +364,11 @@ def _reqbufs(d: EmuDriver, arg: raw.RequestBuffers) -> raw.RequestBuffers:
     return raw.RequestBuffers(count, arg.type, arg.memory)
 
 
-def _querybuf(d: EmuDriver, arg: raw.Buffer) -> raw.Buffer:
+def _querybuf(d: EmuDriver, arg: raw.Buffer) -> BufferState:
     return d.queue.query(arg.index)
 
 
-def _qbuf(d: EmuDriver, arg: raw.Buffer) -> raw.Buffer:
+def _qbuf(d: EmuDriver, arg: raw.Buffer) -> BufferState:
     d.queue.queue(arg.index)
     return d.queue.query(arg.index)
 

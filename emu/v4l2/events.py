@@ -23,8 +23,8 @@ WRITE_ONLY = 0x0040
 
 
 @dataclass
-class Event:
-    """One pending ``struct v4l2_event`` of type CTRL."""
+class PendingEvent:
+    """One pending control event (the kernel's ``v4l2_kevent``): DQEVENT makes ``raw.Event`` of it."""
 
     id: int
     changes: int
@@ -53,7 +53,7 @@ class Events:
 
     def __init__(self, limit: int = 64) -> None:
         self.subs: dict[int, int] = {}  # control id -> subscription flags
-        self.pending: collections.OrderedDict[int, Event] = collections.OrderedDict()
+        self.pending: collections.OrderedDict[int, PendingEvent] = collections.OrderedDict()
         self.limit = limit
         self.sequence = 0
 
@@ -83,7 +83,7 @@ class Events:
         elif len(self.pending) >= self.limit:
             self.pending.popitem(last=False)  # the oldest is lost, as when the kernel's ring is full
         self.sequence += 1
-        self.pending[ctrl.id] = Event(ctrl.id, changes, ctrl, self.sequence - 1, time.monotonic_ns())
+        self.pending[ctrl.id] = PendingEvent(ctrl.id, changes, ctrl, self.sequence - 1, time.monotonic_ns())
 
     def notify(self, changed: dict[int, int], table: dict[int, Ctrl], by_me: bool) -> None:
         """Queue the changes of subscribed controls; a value this file set itself only with ALLOW_FEEDBACK."""
@@ -95,7 +95,7 @@ class Events:
             if ch:
                 self.queue(table[cid], ch)
 
-    def dequeue(self) -> tuple[Event, int]:
+    def dequeue(self) -> tuple[PendingEvent, int]:
         """VIDIOC_DQEVENT: the oldest event and how many remain; ENOENT when none is pending."""
         if not self.pending:
             raise V4L2Error(errno.ENOENT, "no event pending")

@@ -7,12 +7,13 @@ driver's ``V4L2Error`` (an OSError with the kernel's errno, and a rollcam Device
 from __future__ import annotations
 
 from collections.abc import Iterator
+from dataclasses import replace
 from typing import Any, Protocol
 
 import numpy as np
 
 from . import raw
-from .queue import V4L2Error
+from .queue import BufferState, V4L2Error
 
 
 class Handle(Protocol):
@@ -71,14 +72,14 @@ def set_format(h: Handle, width: int, height: int, fourcc: str) -> raw.PixFormat
 
 def get_frame_interval(h: Handle) -> tuple[int, int]:
     """VIDIOC_G_PARM: time per frame as (numerator, denominator) seconds."""
-    p = h.ioctl(raw.Ioctl.G_PARM)
-    return p.numerator, p.denominator
+    t = h.ioctl(raw.Ioctl.G_PARM).parm.capture.timeperframe
+    return t.numerator, t.denominator
 
 
 def set_frame_interval(h: Handle, numerator: int, denominator: int) -> tuple[int, int]:
     """VIDIOC_S_PARM; returns the interval actually set."""
-    p = h.ioctl(raw.Ioctl.S_PARM, raw.StreamParm(numerator=numerator, denominator=denominator))
-    return p.numerator, p.denominator
+    t = h.ioctl(raw.Ioctl.S_PARM, raw.stream_parm(numerator, denominator)).parm.capture.timeperframe
+    return t.numerator, t.denominator
 
 
 def query_control(h: Handle, cid: int) -> raw.QueryCtrl:
@@ -103,27 +104,26 @@ def set_control(h: Handle, cid: int, value: int) -> int:
 
 def request_buffers(h: Handle, count: int, memory: int = raw.Memory.MMAP) -> int:
     """VIDIOC_REQBUFS; returns the number allocated (0 frees them)."""
-    return h.ioctl(raw.Ioctl.REQBUFS, raw.RequestBuffers(count, memory=memory)).count
+    return h.ioctl(raw.Ioctl.REQBUFS, raw.RequestBuffers(count, raw.BufType.VIDEO_CAPTURE, memory)).count
 
 
-def query_buffer(h: Handle, index: int) -> raw.Buffer:
-    """VIDIOC_QUERYBUF."""
+def query_buffer(h: Handle, index: int) -> BufferState:
+    """VIDIOC_QUERYBUF: the buffer's state (timestamp in integer ns)."""
     return h.ioctl(raw.Ioctl.QUERYBUF, raw.Buffer(index))
 
 
-def queue_buffer(h: Handle, index: int) -> raw.Buffer:
+def queue_buffer(h: Handle, index: int) -> BufferState:
     """VIDIOC_QBUF."""
     return h.ioctl(raw.Ioctl.QBUF, raw.Buffer(index))
 
 
 def dequeue_buffer(h: Handle, *, block: bool = True, timeout_s: float | None = None
-                   ) -> tuple[raw.Buffer, np.ndarray]:
-    """VIDIOC_DQBUF: the buffer's state and a view of its first ``bytesused`` bytes (valid until re-queued)."""
+                   ) -> tuple[BufferState, np.ndarray]:
+    """VIDIOC_DQBUF: the buffer's state (a copy) and a view of its first ``bytesused`` bytes (valid until
+    re-queued)."""
     slot = h.ioctl(raw.Ioctl.DQBUF, {"block": block, "timeout_s": timeout_s})
-    info = slot.info
-    buf = raw.Buffer(info.index, info.type, info.bytesused, int(info.flags), info.field, info.timestamp_ns,
-                     info.sequence, info.memory, info.length)
-    return buf, slot.memory[: info.bytesused]
+    info = replace(slot.info, flags=int(slot.info.flags))
+    return info, slot.memory[: info.bytesused]
 
 
 def stream_on(h: Handle) -> None:

@@ -2,8 +2,8 @@
 
 ``handle(node, file, request, data)`` does what Linux's v4l2-ioctl.c and the vb2 ioctl helpers do before and
 after a driver: unknown requests get ENOTTY, the buffer type and memory are checked, priority and queue
-ownership give EBUSY, and the structure is translated to the driver's ``raw`` values and back with
-``abi``'s layouts. Control changes are announced as events to the files that subscribed, those an injected
+ownership give EBUSY, and the driver reads and answers the program's structure itself (``raw``'s, one
+declaration of each). Control changes are announced as events to the files that subscribed, those an injected
 register reset made (``rollcam.firmware.labfaults``) at the next request any file makes.
 """
 
@@ -62,6 +62,8 @@ def handle(node: DeviceNode, f: OpenFile, request: int, data: bytes) -> Answer:
             node.sync()
     if isinstance(out, Answer):
         return out
+    if isinstance(out, raw.Struct):  # the driver's answer, whole: the kernel's structure, reserved fields zero
+        return Answer(0, bytes(out))
     return Answer(int(out or 0), None if struct is None else bytes(arg))
 
 
@@ -79,120 +81,87 @@ def _is_meta(node: DeviceNode) -> bool:
 
 
 # ------------------------------------------------------------------------------------------- device and formats
-def _querycap(node: DeviceNode, _f: OpenFile, a: abi.Capability) -> None:
+def _querycap(node: DeviceNode, _f: OpenFile, _a: raw.Capability) -> raw.Capability:
     c = node.driver.ioctl(raw.Ioctl.QUERYCAP)
-    abi.set_str(a.driver, c.driver)
-    abi.set_str(a.card, c.card)
-    abi.set_str(a.bus_info, f"{c.bus_info}-{node.bus_minor}")
-    a.version = c.version
+    c.bus_info = f"{c.bus_info}-{node.bus_minor}"
     rw = 0 if _is_meta(node) else raw.Cap.READWRITE  # vb2's read() emulation: on the image node only
-    a.device_caps = c.device_caps | rw
-    a.capabilities = c.capabilities | raw.Cap.READWRITE
-    a.reserved[:] = [0, 0, 0]
+    c.device_caps |= rw
+    c.capabilities |= raw.Cap.READWRITE
+    return c
 
 
-def _enum_fmt(node: DeviceNode, _f: OpenFile, a: abi.FmtDesc) -> None:
+def _enum_fmt(node: DeviceNode, _f: OpenFile, a: raw.FmtDesc) -> raw.FmtDesc:
     _type(node, a.type)
-    d = node.driver.ioctl(raw.Ioctl.ENUM_FMT, raw.FmtDesc(a.index))
-    a.flags = d.flags
-    abi.set_str(a.description, d.description)
-    a.pixelformat = raw.fourcc_code(d.pixelformat)
-    a.mbus_code = 0
-    a.reserved[:] = [0, 0, 0]
+    return node.driver.ioctl(raw.Ioctl.ENUM_FMT, a)
 
 
-def _put_pix(a: abi.Format, p: raw.PixFormat) -> None:
-    pix = a.fmt.pix
+def _put_pix(a: raw.Format, p: raw.PixFormat) -> None:
     C.memset(C.addressof(a.fmt), 0, C.sizeof(a.fmt))
-    pix.width, pix.height, pix.pixelformat = p.width, p.height, raw.fourcc_code(p.pixelformat)
-    pix.field, pix.bytesperline, pix.sizeimage, pix.colorspace = p.field, p.bytesperline, p.sizeimage, p.colorspace
-    pix.ycbcr_enc, pix.quantization = p.ycbcr_enc, p.quantization
-    pix.priv = PRIV_MAGIC
+    a.fmt.pix = p
+    a.fmt.pix.priv = PRIV_MAGIC
 
 
-def _get_pix(a: abi.Format) -> raw.PixFormat:
-    pix = a.fmt.pix
-    return raw.PixFormat(pix.width, pix.height, raw.fourcc_text(pix.pixelformat))
-
-
-def _put_meta(a: abi.Format) -> None:
+def _put_meta(a: raw.Format) -> None:
     """The metadata node's one format, whatever was asked (as uvcvideo's meta node answers TRY/S_FMT)."""
     from .meta import BUFFER_SIZE, META_FOURCC
 
     C.memset(C.addressof(a.fmt), 0, C.sizeof(a.fmt))
-    a.fmt.meta.dataformat, a.fmt.meta.buffersize = raw.fourcc_code(META_FOURCC), BUFFER_SIZE
+    a.fmt.meta = raw.MetaFormat(META_FOURCC, BUFFER_SIZE)
 
 
-def _g_fmt(node: DeviceNode, _f: OpenFile, a: abi.Format) -> None:
+def _g_fmt(node: DeviceNode, _f: OpenFile, a: raw.Format) -> None:
     _type(node, a.type)
     if _is_meta(node):
         return _put_meta(a)
     _put_pix(a, node.driver.fmt)
 
 
-def _try_fmt(node: DeviceNode, _f: OpenFile, a: abi.Format) -> None:
+def _try_fmt(node: DeviceNode, _f: OpenFile, a: raw.Format) -> None:
     _type(node, a.type)
     if _is_meta(node):
         return _put_meta(a)
-    _put_pix(a, node.driver.ioctl(raw.Ioctl.TRY_FMT, _get_pix(a)))
+    _put_pix(a, node.driver.ioctl(raw.Ioctl.TRY_FMT, a.fmt.pix))
 
 
-def _s_fmt(node: DeviceNode, f: OpenFile, a: abi.Format) -> None:
+def _s_fmt(node: DeviceNode, f: OpenFile, a: raw.Format) -> None:
     _type(node, a.type)
     if _is_meta(node):
         if node.driver.queue.slots and node.owner is not f:
             raise V4L2Error(errno.EBUSY, "S_FMT while another file owns the buffers")
         return _put_meta(a)
-    want = _get_pix(a)
+    want = a.fmt.pix
     if node.driver.queue.slots and (node.owner is not f or node.driver.ioctl(raw.Ioctl.TRY_FMT, want) !=
                                     node.driver.fmt):
         raise V4L2Error(errno.EBUSY, "S_FMT while buffers are allocated")
     _put_pix(a, node.driver.fmt if node.driver.queue.slots else node.driver.ioctl(raw.Ioctl.S_FMT, want))
 
 
-def _enum_framesizes(node: DeviceNode, _f: OpenFile, a: abi.FrmSizeEnum) -> None:
-    s = node.driver.ioctl(raw.Ioctl.ENUM_FRAMESIZES, raw.FrmSize(a.index, raw.fourcc_text(a.pixel_format)))
-    a.type, a.width, a.height = s.type, s.width, s.height
-    a._stepwise[2:] = [0, 0]
-    a.reserved[:] = [0, 0]
+def _enum_framesizes(node: DeviceNode, _f: OpenFile, a: raw.FrmSizeEnum) -> raw.FrmSizeEnum:
+    return node.driver.ioctl(raw.Ioctl.ENUM_FRAMESIZES, a)
 
 
-def _enum_frameintervals(node: DeviceNode, _f: OpenFile, a: abi.FrmIvalEnum) -> None:
+def _enum_frameintervals(node: DeviceNode, _f: OpenFile, a: raw.FrmIvalEnum) -> raw.FrmIvalEnum:
     """The mode's frame interval, DISCRETE (S_PARM still takes any interval: it sets the frame length)."""
-    ival = node.driver.ioctl(raw.Ioctl.ENUM_FRAMEINTERVALS,
-                             raw.FrmIval(a.index, raw.fourcc_text(a.pixel_format), a.width, a.height))
-    a.type, a.numerator, a.denominator = ival.type, ival.numerator, ival.denominator
-    a._stepwise[:] = [0, 0, 0, 0]
-    a.reserved[:] = [0, 0]
+    return node.driver.ioctl(raw.Ioctl.ENUM_FRAMEINTERVALS, a)
 
 
-def _parm(node: DeviceNode, a: abi.StreamParm, ival: tuple[int, int]) -> None:
-    C.memset(C.addressof(a.parm), 0, C.sizeof(a.parm))
-    cap = a.parm.capture
-    cap.capability = raw.Cap.TIMEPERFRAME
-    cap.timeperframe.numerator, cap.timeperframe.denominator = ival
-    cap.readbuffers = READ_BUFFERS
+def _parm(a: raw.StreamParm, p: raw.StreamParm) -> None:
+    a.parm = p.parm
+    a.parm.capture.readbuffers = READ_BUFFERS
 
 
-def _g_parm(node: DeviceNode, _f: OpenFile, a: abi.StreamParm) -> None:
+def _g_parm(node: DeviceNode, _f: OpenFile, a: raw.StreamParm) -> None:
     _type(node, a.type)
-    p = node.driver.ioctl(raw.Ioctl.G_PARM)
-    _parm(node, a, (p.numerator, p.denominator))
+    _parm(a, node.driver.ioctl(raw.Ioctl.G_PARM))
 
 
-def _s_parm(node: DeviceNode, _f: OpenFile, a: abi.StreamParm) -> None:
+def _s_parm(node: DeviceNode, _f: OpenFile, a: raw.StreamParm) -> None:
     _type(node, a.type)
-    t = a.parm.capture.timeperframe
-    p = node.driver.ioctl(raw.Ioctl.S_PARM, raw.StreamParm(numerator=t.numerator, denominator=t.denominator))
-    _parm(node, a, (p.numerator, p.denominator))
+    _parm(a, node.driver.ioctl(raw.Ioctl.S_PARM, a))
 
 
-def _enuminput(node: DeviceNode, _f: OpenFile, a: abi.Input) -> None:
-    i = node.driver.ioctl(raw.Ioctl.ENUMINPUT, raw.Input(a.index))
-    idx = a.index
-    C.memset(C.addressof(a), 0, C.sizeof(a))
-    a.index, a.type = idx, i.type
-    abi.set_str(a.name, i.name)
+def _enuminput(node: DeviceNode, _f: OpenFile, a: raw.Input) -> raw.Input:
+    return node.driver.ioctl(raw.Ioctl.ENUMINPUT, a)
 
 
 def _g_input(node: DeviceNode, _f: OpenFile, a: C.c_int) -> None:
@@ -218,62 +187,51 @@ def _log_status(node: DeviceNode, _f: OpenFile, _a: None) -> None:
 
 
 # ------------------------------------------------------------------------------------------------- controls
-def _queryctrl(node: DeviceNode, _f: OpenFile, a: abi.QueryCtrl) -> None:
+def _queryctrl(node: DeviceNode, _f: OpenFile, a: raw.QueryCtrl) -> raw.QueryCtrl:
     c = ctrls.find(node.driver, a.id)
-    C.memset(C.addressof(a), 0, C.sizeof(a))
-    a.id, a.type, a.flags = c.id, c.type, c.flags
-    abi.set_str(a.name, c.name)
+    q = raw.QueryCtrl(c.id, c.type, c.name, flags=c.flags)
     if c.type in (raw.CtrlType.INTEGER, raw.CtrlType.BOOLEAN, raw.CtrlType.MENU):
-        a.minimum, a.maximum, a.step, a.default_value = c.minimum, c.maximum, c.step, c.default
+        q.minimum, q.maximum, q.step, q.default_value = c.minimum, c.maximum, c.step, c.default
+    return q
 
 
-def _query_ext_ctrl(node: DeviceNode, _f: OpenFile, a: abi.QueryExtCtrl) -> None:
-    q = node.driver.ioctl(raw.Ioctl.QUERY_EXT_CTRL, raw.QueryExtCtrl(a.id))
-    C.memset(C.addressof(a), 0, C.sizeof(a))
-    a.id, a.type, a.name = q.id, q.type, q.name.encode()[:31]
-    a.minimum, a.maximum, a.step, a.default_value, a.flags = q.minimum, q.maximum, q.step, q.default_value, q.flags
-    a.elem_size, a.elems = q.elem_size, q.elems
+def _query_ext_ctrl(node: DeviceNode, _f: OpenFile, a: raw.QueryExtCtrl) -> raw.QueryExtCtrl:
+    return node.driver.ioctl(raw.Ioctl.QUERY_EXT_CTRL, a)
 
 
-def _querymenu(node: DeviceNode, _f: OpenFile, a: abi.QueryMenu) -> None:
-    m = node.driver.ioctl(raw.Ioctl.QUERYMENU, raw.QueryMenu(a.id, a.index))
-    abi.set_str(a.name, m.name)
+def _querymenu(node: DeviceNode, _f: OpenFile, a: raw.QueryMenu) -> None:
+    a.name = node.driver.ioctl(raw.Ioctl.QUERYMENU, a).name
     a.reserved = 0
 
 
-def _g_ctrl(node: DeviceNode, _f: OpenFile, a: abi.Control) -> None:
+def _g_ctrl(node: DeviceNode, _f: OpenFile, a: raw.Control) -> None:
     node.driver.admit(raw.Ioctl.G_CTRL)  # unplugged, or an injected error: as the driver's own ioctl
-    a.value = ctrls.KERNEL_CTRL[raw.Ioctl.G_CTRL](node.driver, raw.Control(a.id)).value
+    a.value = ctrls.KERNEL_CTRL[raw.Ioctl.G_CTRL](node.driver, a).value
 
 
-def _s_ctrl(node: DeviceNode, _f: OpenFile, a: abi.Control) -> None:
+def _s_ctrl(node: DeviceNode, _f: OpenFile, a: raw.Control) -> None:
     node.driver.admit(raw.Ioctl.S_CTRL)
-    a.value = ctrls.KERNEL_CTRL[raw.Ioctl.S_CTRL](node.driver, raw.Control(a.id, a.value)).value
+    a.value = ctrls.KERNEL_CTRL[raw.Ioctl.S_CTRL](node.driver, a).value
 
 
 def _ext_ctrls(request: raw.Ioctl) -> Callable[..., Answer]:
-    def run(node: DeviceNode, _f: OpenFile, a: abi.ExtControls, extra: bytes) -> Answer:
+    def run(node: DeviceNode, _f: OpenFile, a: raw.ExtControls, extra: bytes) -> Answer:
         n = a.count
         if n > 1024:
             raise V4L2Error(errno.EINVAL, f"{n} controls in one call (at most 1024)")
-        if n and len(extra) < n * C.sizeof(abi.ExtControl):
+        if n and len(extra) < n * C.sizeof(raw.ExtControl):
             raise V4L2Error(errno.EFAULT, "the controls array is not readable")
-        items = (abi.ExtControl * n).from_buffer_copy(extra[: n * C.sizeof(abi.ExtControl)]) if n else []
-        table = ctrls.controls(node.driver)
-        values = [[c.id, c.value64 if table.get(c.id) is not None and table[c.id].type == raw.CtrlType.INTEGER64
-                   else C.c_int32(c.value64 & 0xFFFFFFFF).value] for c in items]
-        arg = raw.ExtControls(a.which, values)
+        items = (raw.ExtControl * n).from_buffer_copy(extra[: n * C.sizeof(raw.ExtControl)])
+        program_array, a.controls, a.error_idx = a.controls, C.addressof(items), 0  # the driver works on our copy
         try:
-            node.driver.ioctl(request, arg)
+            node.driver.ioctl(request, a)
             err = None
         except V4L2Error as exc:
             err = exc
-        a.error_idx = arg.error_idx
-        for c, (_cid, v) in zip(items, arg.controls, strict=True):
-            is64 = table.get(c.id) is not None and table[c.id].type == raw.CtrlType.INTEGER64
-            c.value64 = v if is64 else (c.value64 & ~0xFFFFFFFF) | (v & 0xFFFFFFFF)
+        a.controls = program_array
+        for c in items:
             c.size = 0
-        data = bytes(a) + (bytes(items) if n else b"")
+        data = bytes(a) + bytes(items)
         if err is not None:
             raise _WithData(err, data)
         return Answer(0, data)
@@ -289,16 +247,16 @@ class _WithData(V4L2Error):
         self.data = data
 
 
-def _subscribe(node: DeviceNode, f: OpenFile, a: abi.EventSubscription) -> None:
+def _subscribe(node: DeviceNode, f: OpenFile, a: raw.EventSubscription) -> None:
     ctrl = ctrls.controls(node.driver).get(a.id) if a.type == EVENT_CTRL else None
     f.events.subscribe(a.type, a.id, a.flags, ctrl)
 
 
-def _unsubscribe(_node: DeviceNode, f: OpenFile, a: abi.EventSubscription) -> None:
+def _unsubscribe(_node: DeviceNode, f: OpenFile, a: raw.EventSubscription) -> None:
     f.events.unsubscribe(a.type, a.id)
 
 
-def _dqevent(node: DeviceNode, f: OpenFile, a: abi.Event) -> None:
+def _dqevent(node: DeviceNode, f: OpenFile, a: raw.Event) -> None:
     if node.driver.queue.disconnected:
         raise V4L2Error(errno.ENODEV, "device disconnected")
     ev, left = f.events.dequeue()

@@ -8,9 +8,9 @@ import errno
 import os
 from typing import Any
 
-from . import abi, raw
+from . import raw
 from .node import Answer, DeviceNode, OpenFile
-from .queue import V4L2Error
+from .queue import BufferState, V4L2Error
 
 BUF_CAP_SUPPORTS_MMAP = 1
 BUF_CAP_SUPPORTS_ORPHANED_BUFS = 1 << 4  # REQBUFS 0 while mapped: the program's mappings stay valid (memfds)
@@ -26,55 +26,54 @@ def _check(node: DeviceNode, t: int, memory: int | None = None) -> None:
         raise V4L2Error(errno.EINVAL, f"memory {memory} is not MMAP (the only memory this device has)")
 
 
-def fill(node: DeviceNode, a: abi.Buffer, info: raw.Buffer) -> None:
-    """``struct v4l2_buffer`` of a buffer's state."""
-    C.memset(C.addressof(a), 0, C.sizeof(a))
-    a.index, a.type, a.bytesused, a.field = info.index, node.driver.buf_type, info.bytesused, raw.Field.NONE
+def fill(node: DeviceNode, info: BufferState) -> raw.Buffer:
+    """``struct v4l2_buffer`` of a buffer's state (as vb2's ``__fill_v4l2_buffer``)."""
     flags = (info.flags & _STATE_FLAGS) | _TIMESTAMP_FLAGS
     if info.index in node.mapped:
         flags |= raw.BufFlag.MAPPED
-    a.flags = int(flags)
-    a.timestamp.tv_sec, usec = divmod(info.timestamp_ns // 1000, 1_000_000)
-    a.timestamp.tv_usec = usec
-    a.sequence, a.memory, a.length = info.sequence, raw.Memory.MMAP, info.length
+    a = raw.Buffer(info.index, node.driver.buf_type, info.bytesused, int(flags), raw.Field.NONE,
+                   sequence=info.sequence, memory=raw.Memory.MMAP, length=info.length)
+    a.timestamp_ns = info.timestamp_ns
     a.m.offset = node.offset(info.index)
+    return a
 
 
-def _reqbufs(node: DeviceNode, f: OpenFile, a: abi.RequestBuffers) -> None:
+def _reqbufs(node: DeviceNode, f: OpenFile, a: raw.RequestBuffers) -> raw.RequestBuffers:
     _check(node, a.type)
     if a.memory != raw.Memory.MMAP:
         raise V4L2Error(errno.EINVAL, f"memory {a.memory} is not supported (MMAP only)")
     d = node.driver
     if d.queue.streaming:
         raise V4L2Error(errno.EBUSY, "REQBUFS while streaming")
-    count = d.ioctl(raw.Ioctl.REQBUFS, raw.RequestBuffers(a.count)).count
+    r = d.ioctl(raw.Ioctl.REQBUFS, a)
     node.reallocated()
-    node.owner = f if count else None
+    node.owner = f if r.count else None
     node.waiting_for_buffers = True
-    a.count, a.capabilities, a.flags = count, BUF_CAP_SUPPORTS_MMAP | BUF_CAP_SUPPORTS_ORPHANED_BUFS, 0
-    a.reserved[:] = [0, 0, 0]
+    r.capabilities = BUF_CAP_SUPPORTS_MMAP | BUF_CAP_SUPPORTS_ORPHANED_BUFS
+    return r
 
 
-def _querybuf(node: DeviceNode, _f: OpenFile, a: abi.Buffer) -> None:
+def _querybuf(node: DeviceNode, _f: OpenFile, a: raw.Buffer) -> raw.Buffer:
     _check(node, a.type)
-    fill(node, a, node.driver.ioctl(raw.Ioctl.QUERYBUF, raw.Buffer(a.index)))
+    return fill(node, node.driver.ioctl(raw.Ioctl.QUERYBUF, a))
 
 
-def _qbuf(node: DeviceNode, _f: OpenFile, a: abi.Buffer) -> None:
+def _qbuf(node: DeviceNode, _f: OpenFile, a: raw.Buffer) -> raw.Buffer:
     _check(node, a.type, a.memory)
     if a.flags & FLAG_REQUEST_FD:
         raise V4L2Error(errno.EBADR, "this device has no requests (media request API)")
-    fill(node, a, node.driver.ioctl(raw.Ioctl.QBUF, raw.Buffer(a.index)))
+    out = fill(node, node.driver.ioctl(raw.Ioctl.QBUF, a))
     node.waiting_for_buffers = False
+    return out
 
 
-def _dqbuf(node: DeviceNode, _f: OpenFile, a: abi.Buffer) -> None:
+def _dqbuf(node: DeviceNode, _f: OpenFile, a: raw.Buffer) -> raw.Buffer:
     _check(node, a.type, a.memory)
     slot = node.driver.ioctl(raw.Ioctl.DQBUF, {"block": False})
-    fill(node, a, slot.info)
+    return fill(node, slot.info)
 
 
-def _expbuf(node: DeviceNode, _f: OpenFile, a: abi.ExportBuffer) -> Any:
+def _expbuf(node: DeviceNode, _f: OpenFile, a: raw.ExportBuffer) -> Any:
     _check(node, a.type)
     if a.plane != 0 or a.flags & ~(os.O_CLOEXEC | os.O_ACCMODE):
         raise V4L2Error(errno.EINVAL, f"plane {a.plane} / flags {a.flags:#x} are not valid")

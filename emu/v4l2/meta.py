@@ -33,7 +33,7 @@ import numpy as np
 from rollcam.common.lifecycle import Stats
 
 from . import raw
-from .queue import BufferQueue, V4L2Error
+from .queue import BufferQueue, BufferState, V4L2Error
 
 META_FOURCC = "RCIS"
 """rollcam in-sensor results (``v4l2_fourcc('R', 'C', 'I', 'S')``)."""
@@ -165,7 +165,7 @@ def _reqbufs(d: MetaDriver, arg: raw.RequestBuffers) -> raw.RequestBuffers:
     return raw.RequestBuffers(d.queue.request(arg.count, arg.memory, BUFFER_SIZE), arg.type, arg.memory)
 
 
-def _qbuf(d: MetaDriver, arg: raw.Buffer) -> raw.Buffer:
+def _qbuf(d: MetaDriver, arg: raw.Buffer) -> BufferState:
     d.queue.queue(arg.index)
     return d.queue.query(arg.index)
 

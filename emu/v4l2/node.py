@@ -132,7 +132,7 @@ class DeviceNode:
             before = ctrls.controls(self.driver) if has_controls else {}
             try:
                 self.driver.ioctl(raw.Ioctl.STREAMOFF)
-                self.driver.ioctl(raw.Ioctl.REQBUFS, raw.RequestBuffers(0))
+                self.driver.ioctl(raw.Ioctl.REQBUFS, raw.RequestBuffers(0, memory=raw.Memory.MMAP))
             except V4L2Error:
                 pass  # a disconnected device: nothing left to stop
             self._free_shm()
@@ -283,7 +283,7 @@ class DeviceNode:
 def _start_fileio(node: DeviceNode, f: OpenFile) -> None:
     """vb2's read() emulation starts: buffers allocated, queued and streaming, owned by ``f``."""
     d = node.driver
-    d.ioctl(raw.Ioctl.REQBUFS, raw.RequestBuffers(READ_BUFFERS))
+    d.ioctl(raw.Ioctl.REQBUFS, raw.RequestBuffers(READ_BUFFERS, memory=raw.Memory.MMAP))
     node.reallocated()
     for i in range(len(d.queue.slots)):
         d.ioctl(raw.Ioctl.QBUF, raw.Buffer(i))

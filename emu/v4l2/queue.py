@@ -7,13 +7,13 @@ import errno
 import threading
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 from rollcam.common.errors import DeviceError
 from rollcam.common.lifecycle import Deadline
 
-from .raw import VIDEO_MAX_FRAME, Buffer, BufFlag, Memory
+from .raw import VIDEO_MAX_FRAME, BufFlag, BufType, Field, Memory
 
 MIN_BUFFERS = 2
 
@@ -29,10 +29,26 @@ class V4L2Error(DeviceError, OSError):
 
 
 @dataclass
-class Slot:
-    """One buffer: its memory and its current ``struct v4l2_buffer``."""
+class BufferState:
+    """A buffer's state in the queue (what the kernel keeps in ``vb2_buffer``; ``timestamp_ns`` is
+    CLOCK_MONOTONIC in integer ns): ``struct v4l2_buffer`` (``raw.Buffer``) is made from it at the device node."""
 
-    info: Buffer
+    index: int
+    type: int = BufType.VIDEO_CAPTURE
+    bytesused: int = 0
+    flags: int = 0
+    field: int = Field.NONE
+    timestamp_ns: int = 0
+    sequence: int = 0
+    memory: int = Memory.MMAP
+    length: int = 0
+
+
+@dataclass
+class Slot:
+    """One buffer: its memory and its current state."""
+
+    info: BufferState
     memory: np.ndarray = field(repr=False)
 
 
@@ -71,7 +87,7 @@ class BufferQueue:
             if count == 0:
                 return 0
             count = min(max(count, MIN_BUFFERS), VIDEO_MAX_FRAME)
-            self.slots = [Slot(Buffer(i, flags=BufFlag.MAPPED | BufFlag.TIMESTAMP_MONOTONIC, length=sizeimage),
+            self.slots = [Slot(BufferState(i, flags=BufFlag.MAPPED | BufFlag.TIMESTAMP_MONOTONIC, length=sizeimage),
                                self.alloc(i, sizeimage)) for i in range(count)]
             return count
 
@@ -81,10 +97,11 @@ class BufferQueue:
                             if self.slots else "no buffers allocated (REQBUFS first)")
         return self.slots[index]
 
-    def query(self, index: int) -> Buffer:
+    def query(self, index: int) -> BufferState:
         """QUERYBUF: a copy of the buffer's current state."""
         with self.cond:
-            return _copy(self._slot(index).info)
+            info = self._slot(index).info
+            return replace(info, flags=int(info.flags))
 
     def queue(self, index: int) -> None:
         """QBUF: hand an empty buffer to the driver; EINVAL if it is already queued or not dequeued."""
@@ -170,6 +187,3 @@ class BufferQueue:
             self.disconnected = True
             self.cond.notify_all()
 
-
-def _copy(b: Buffer) -> Buffer:
-    return Buffer(b.index, b.type, b.bytesused, int(b.flags), b.field, b.timestamp_ns, b.sequence, b.memory, b.length)
