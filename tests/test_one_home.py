@@ -19,9 +19,6 @@ ROOT = Path(__file__).resolve().parents[1]
 PICAMERA2 = "API replica: the picamera2 stand-in keeps picamera2's own {}"
 ALLOWED: dict[tuple[str, str], str] = {
     # threads
-    ("threads", "emu/v4l2/server.py"):
-        "fold pending: the preload server's accept and connection threads, Worker's job; left while emu/v4l2 is "
-        "rewritten",
     ("threads", "host/datasets/executors.py"):
         "a pool worker's parent watchdog: started by the pool's initializer, it lives as long as the worker process "
         "and ends it by os._exit, with no owner to close it or take an error",

@@ -343,3 +343,34 @@ def test_a_killed_run_leaves_its_folder_to_the_next_run(tmp_path):
     assert p.returncode == 0
     assert not left.exists() and mine.is_dir()
     assert reclaim_stale_folders(tmp_path) == [] and mine.is_dir()
+
+
+class _BrokenNode:
+    """A device node whose open() has a bug (raises what no request should): the server's own fault."""
+
+    def __init__(self) -> None:
+        self.closed = False
+
+    def open(self, flags: int):
+        raise RuntimeError("a bug in open")
+
+    def close(self) -> None:
+        self.closed = True
+
+
+def test_a_connection_thread_that_breaks_is_joined_and_its_error_raised_on_close(tmp_path):
+    """A fault of the server's own in one connection ends that connection, the server keeps serving the others,
+    and close() joins every thread and raises the fault (it was a traceback on stderr, lost to the caller)."""
+    from rollcam.common.errors import DeviceError
+    from rollcam.emu.v4l2.server import PreloadServer
+
+    node = _BrokenNode()
+    server = PreloadServer({"/dev/video0": node}, str(tmp_path / "s"))
+    with _connect(server.socket_path) as s:
+        s.sendall(wire.REQ.pack(wire.Op.OPEN, len(b"/dev/video0"), os.O_RDWR, 0, 0) + b"/dev/video0")
+        assert s.recv(wire.RSP.size) == b""  # the connection ends
+    with _connect(server.socket_path):  # the next one is served
+        pass
+    with pytest.raises(DeviceError, match="rollcam-preload-conn failed: RuntimeError"):
+        server.close()
+    assert node.closed and not (tmp_path / "s").exists()

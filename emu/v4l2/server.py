@@ -22,7 +22,8 @@ import threading
 from collections.abc import Mapping
 from dataclasses import dataclass
 
-from rollcam.common.lifecycle import Closeable
+from rollcam.common.errors import DeviceError
+from rollcam.common.lifecycle import Closeable, Worker
 from rollcam.emu.preload.wire import HELLO, MAGIC, MAX_PAYLOAD, REQ, RSP, VERSION, Op
 
 from . import ioctls
@@ -56,24 +57,35 @@ class PreloadServer(Closeable):
         self._conns: set[socket.socket] = set()
         self._files: dict[int, SharedFile] = {}
         self._lock = threading.Lock()
-        self._stop = threading.Event()
-        self._thread = threading.Thread(target=self._accept, name="rollcam-preload-accept", daemon=True)
-        self._thread.start()
+        self._workers: list[Worker] = []  # one per connection: those alive, and the first that failed
+        self._accepting = Worker(self._accept, name="rollcam-preload-accept", wrap=DeviceError, join_timeout_s=5)
+        self._accepting.start()
 
     def _close(self) -> None:
-        """Stop accepting, drop every connection (their files are released), stop the devices."""
-        self._stop.set()
+        """Stop accepting, drop every connection (their files are released), stop the devices; then raise what
+        broke the accepting thread or a connection's, if anything did (a peer's doing only ends its connection)."""
+        self._accepting.stop()
         with contextlib.suppress(OSError):
             self.sock.shutdown(socket.SHUT_RDWR)
         self.sock.close()
-        self._thread.join(5)
+        with contextlib.ExitStack() as steps:  # last registered runs first; each runs whatever the others raise
+            steps.callback(self._remove_socket_file)
+            for node in self.nodes.values():
+                steps.callback(node.close)
+            steps.callback(self._drop_connections)
+            steps.callback(self._accepting.close)  # first: no connection is accepted after the drop
+
+    def _drop_connections(self) -> None:
         with self._lock:
-            conns = list(self._conns)
+            conns, workers = list(self._conns), list(self._workers)
         for c in conns:
             with contextlib.suppress(OSError):
                 c.shutdown(socket.SHUT_RDWR)
-        for node in self.nodes.values():
-            node.close()
+        with contextlib.ExitStack() as joined:
+            for w in workers:
+                joined.callback(w.close)
+
+    def _remove_socket_file(self) -> None:
         with contextlib.suppress(FileNotFoundError):
             os.unlink(self.socket_path)
 
@@ -83,7 +95,7 @@ class PreloadServer(Closeable):
             return len(self._files)
 
     def _accept(self) -> None:
-        while not self._stop.is_set():
+        while not self._accepting.stopping:
             try:
                 conn, _ = self.sock.accept()
             except OSError:
@@ -93,7 +105,10 @@ class PreloadServer(Closeable):
                     conn.close()  # the program's open() gets ENODEV; the others keep their files
                     continue
                 self._conns.add(conn)
-            threading.Thread(target=self._serve, args=(conn,), name="rollcam-preload-conn", daemon=True).start()
+                worker = Worker(self._serve, conn, name="rollcam-preload-conn", wrap=DeviceError, join_timeout_s=5)
+                failed = [w for w in self._workers if w.error is not None][:1]
+                self._workers = failed + [w for w in self._workers if w.alive] + [worker]
+            worker.start()
 
     def _serve(self, conn: socket.socket) -> None:
         shared: SharedFile | None = None
