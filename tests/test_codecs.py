@@ -98,7 +98,7 @@ def test_rgb_and_xr24_and_the_yuv_layouts_are_the_kernels():
 
 @pytest.mark.parametrize(("fourcc", "code"), [("YUYV", cv2.COLOR_BGR2YUV_YUYV), ("UYVY", cv2.COLOR_BGR2YUV_UYVY)])
 def test_the_422_packings_are_opencvs_bytes(fourcc, code):
-    """rollcam's own 4:2:2 kernel (half OpenCV's CPU time) sends exactly what OpenCV's conversion would: random
+    """rollcam's own 4:2:2 kernels (less CPU than OpenCV's) sends exactly what OpenCV's conversion would: random
     pictures of several sizes, every pair of extreme pixels, and a non-contiguous view."""
     import itertools
 

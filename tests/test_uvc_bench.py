@@ -16,6 +16,9 @@ def test_uvc_bench_document():
     assert all(r["frames_ok"] >= 1 for r in doc["path"].values())
     assert doc["target"]["limit_mb_s"] == 1244.2 and isinstance(doc["target"]["pass"], bool)
     assert "iso_3072" in format_uvc(doc)
+    y = doc["yuyv_conversion"]
+    assert y["equal"] and y["rollcam_cpu_ms"] > 0 and y["opencv_cpu_ms"] > 0
+    assert "1080p BGR->YUYV" in format_uvc(doc)
 
 
 def test_bench_uvc_writes_json(tmp_path, capsys, monkeypatch):
