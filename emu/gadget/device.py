@@ -98,14 +98,14 @@ class FrameLog:
             self.file = None
 
 
-Ioctl = Callable[[int, str, Any], Any]
+IoctlCall = Callable[[int, str, Any], Any]
 """How the gadget talks to its node: ``ioctl`` above, or a test's stand-in for the kernel's UVC function."""
 
 
 class OutputQueue:
     """The node's MMAP output buffers while a stream runs: format set, buffers mapped, started, stopped."""
 
-    def __init__(self, fd: int, committed: Committed, ioctl: Ioctl = ioctl) -> None:
+    def __init__(self, fd: int, committed: Committed, ioctl: IoctlCall = ioctl) -> None:
         self.fd, self.committed, self.ioctl = fd, committed, ioctl
         layout = wire_layout(committed.fourcc)
         fmt = Format(type=uapi.BUF_TYPE_VIDEO_OUTPUT)
@@ -170,7 +170,7 @@ class OutputQueue:
             _ioctl_logged(self.ioctl, self.fd, name, arg)
 
 
-def _ioctl_logged(io: Ioctl, fd: int, name: str, arg: Any) -> None:
+def _ioctl_logged(io: IoctlCall, fd: int, name: str, arg: Any) -> None:
     """An ioctl whose failure is only logged (stopping a stream the host already left must still work)."""
     try:
         io(fd, name, arg)
@@ -188,7 +188,7 @@ class GadgetStream:
 
     def __init__(self, node: str, producer: FrameProducer, controls: VideoControls,
                  interfaces: tuple[int, int] = (0, 1), frame_log: Path | None = None,
-                 ioctl: Ioctl = ioctl) -> None:
+                 ioctl: IoctlCall = ioctl) -> None:
         self.node, self.producer, self.controls, self.ioctl = node, producer, controls, ioctl
         self.handler = SetupHandler(controls, interfaces)
         self.stats = GadgetStats()
