@@ -39,6 +39,8 @@ ALLOWED: dict[tuple[str, str], str] = {
     # image encoding
     ("image encoding", "benchmarks/mjpeg.py"):
         "what it times is OpenCV's JPEG encoder with each sampling option: the call itself is the subject",
+    ("colour conversion", "benchmarks/uvc.py"):
+        "what it times the codec table's 4:2:2 kernel against is OpenCV's cvtColor: the call itself is the subject",
     # parsers
     ("query parsing", "host/sources/http.py"): "a Content-Type header's ;-parameters, not a URI query",
     ("integer parsers", "firmware/protocol.py"):
