@@ -80,7 +80,13 @@ def test_plan_has_the_label_arm_for_its_speeds_and_only_selects_it_with_its_base
     assert {(j.speed, j.train[0][-2:], j.labels) for j in only} == {
         (sp, sh, arm) for sp in ("fast", "20") for sh, arm in (("gs", "exact"), ("rs", "exact"), ("rs", "gs"),
                                                              ("rs", "hand"))}
-    assert [j.seed for j in only[:4]] == [0, 0, 0, 0] and only[0].speed == "fast"
+    for jobs in (only, plan_jobs(MEDIUM), plan_jobs(REDUCED)):  # seed-major: a study cut short has whole comparisons
+        seeds = [j.seed for j in jobs]
+        assert seeds == sorted(seeds)
+    first = [j for j in plan_jobs(MEDIUM) if j.seed == MEDIUM.seeds[0]]
+    assert {(j.speed, j.train[0][-2:], j.labels) for j in first} == {
+        (sp, sh, arm) for sp in ("normal", "fast") for sh, arm in (("gs", "exact"), ("rs", "exact"), ("rs", "gs"),
+                                                                 ("rs", "hand"))}
     with pytest.raises(ConfigError, match="--only 'nope'"):
         plan_jobs(REDUCED, ("nope",))
 

@@ -57,20 +57,19 @@ class Job:
 
 
 def plan_jobs(s: StudySettings, only: tuple[str, ...] = ()) -> list[Job]:
-    """Every training run of the study, each once (an experiment that needs a run another has made shares it);
-    ``only``: the runs of those experiments (the label arm brings the GS and exact-label RS runs of its speeds)."""
+    """Every training run of the study, each once (an experiment that needs a run another has made shares it),
+    seed by seed; ``only``: the runs of those experiments (the label arm brings the GS and exact-label RS runs of its
+    speeds)."""
     jobs = _all_jobs(s)
-    if not only:
-        return jobs
-    bad = [g for g in only if g not in EXPERIMENTS]
-    if bad:
-        raise ConfigError(f"--only {bad[0]!r} is not one of {list(EXPERIMENTS)}")
-    chosen = [j for j in jobs if j.group in only or ("labels" in only and j.group in ("t1", "speed")
-                                                      and j.speed in s.label_speeds)]
-    if "labels" in only:  # every arm of a speed and seed before the next: a run cut short leaves whole comparisons
-        rank = {sp: i for i, sp in enumerate(s.label_speeds)}
-        chosen.sort(key=lambda j: (rank.get(j.speed, len(rank)), j.seed))
-    return chosen
+    if only:
+        bad = [g for g in only if g not in EXPERIMENTS]
+        if bad:
+            raise ConfigError(f"--only {bad[0]!r} is not one of {list(EXPERIMENTS)}")
+        jobs = [j for j in jobs if j.group in only or ("labels" in only and j.group in ("t1", "speed")
+                                                        and j.speed in s.label_speeds)]
+    # seed-major: every run of seed 0 before any of seed 1, so a study cut short (or read half-way with
+    # --report) holds every comparison at fewer seeds rather than some comparisons at all seeds
+    return sorted(jobs, key=lambda j: j.seed)
 
 
 def _all_jobs(s: StudySettings) -> list[Job]:
