@@ -15,14 +15,27 @@ with contextlib.suppress(Exception):
 
 
 @pytest.fixture(scope="session")
-def kernel_guest(tmp_path_factory):
-    """One booted guest kernel (``guest.Guest``) for every kernel test of the session; skips, naming what is
-    missing, on a machine without QEMU, busybox-static, the USB/IP and V4L2 tools or the kernel cache."""
+def kernel_guests(tmp_path_factory):
+    """The session's guest kernel (``guest.GuestSlot``), booted on first use and again after a test broke it;
+    skips, naming what is missing, on a machine without QEMU, busybox-static, the USB/IP and V4L2 tools or the
+    kernel cache."""
     import guest
 
     why = guest.missing()
     if why:
         pytest.skip(f"the kernel tests need: {why}")
-    g = guest.Guest(tmp_path_factory.mktemp("guest"))
+    slot = guest.GuestSlot(lambda: tmp_path_factory.mktemp("guest"))
+    yield slot
+    slot.close()
+
+
+@pytest.fixture
+def kernel_guest(kernel_guests):
+    """A booted guest kernel (``guest.Guest``), shared by the kernel tests while it stays sound; a test during
+    which its kernel oopses fails with the oops, and the next test gets a fresh guest."""
+    g = kernel_guests.get()
     yield g
-    g.close()
+    crash = g.oops()
+    if crash is not None:
+        pytest.fail(f"the guest kernel broke during this test (the next test boots a fresh guest):\n{crash}",
+                    pytrace=False)

@@ -35,7 +35,7 @@ import sys
 import tempfile
 import threading
 import time
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from pathlib import Path
 
 KERNEL_META_PACKAGE = "linux-image-amd64"
@@ -46,6 +46,10 @@ EXTRA_MODULES = ("vivid", "usbip-vudc", "libcomposite", "usb_f_uvc")
 """Modules a test loads when it needs them (``Guest.load_module``)."""
 LAYOUT = "2"  # of a cache folder; a folder of another layout is built again
 BOOT_TIMEOUT_S = 240.0
+OOPS_MARKERS = ("Oops:", "kernel BUG at", "BUG: ", "general protection fault", "Kernel panic",
+                "refcount_t: underflow", "list_del corruption", "list_add corruption")
+"""Console lines that say the guest kernel broke (an oops, a BUG, a corrupted list or refcount): a guest that
+printed one can no longer be trusted to run the next test (``Guest.oops``)."""
 USBIP_PORTS = 24  # virtio-serial ports for USB/IP connections, each used once (a port opens once at a time)
 PROGRAMS = {"qemu-system-x86_64": "qemu-system-x86", "busybox": "busybox-static", "socat": "socat",
             "usbip": "usbip", "v4l2-ctl": "v4l-utils", "v4l2-compliance": "v4l-utils", "dpkg-deb": "dpkg"}
@@ -300,6 +304,14 @@ class Guest:
         """Everything the guest's serial console printed (the kernel's log at loglevel 6 and the init's)."""
         return self._tail(self.console_path, 1 << 22)
 
+    def oops(self) -> str | None:
+        """The guest kernel's first oops, BUG or corruption report on the console (``find_oops``), or None."""
+        return find_oops(self.console())
+
+    def sound(self) -> bool:
+        """Whether the guest runs and its kernel has reported no oops (``oops``)."""
+        return not self._closed and self.proc.poll() is None and self.oops() is None
+
     def _wait_console(self, text: str, timeout_s: float) -> None:
         deadline = time.monotonic() + timeout_s
         while text not in self.console():
@@ -443,6 +455,44 @@ class Guest:
             if s is not None:
                 s.close()
         self._qemu_log.close()
+
+
+def find_oops(console: str) -> str | None:
+    """The first oops, BUG or corruption report (``OOPS_MARKERS``) in a guest's console text, with the lines
+    around it (its call trace), or None when the kernel reported none."""
+    lines = console.splitlines()
+    for i, line in enumerate(lines):
+        if any(m in line for m in OOPS_MARKERS):
+            return "\n".join(lines[max(0, i - 5):i + 40])
+    return None
+
+
+class GuestSlot:
+    """The kernel tests' shared guest: ``get()`` hands out the running guest, or boots a fresh one where the last
+    one broke (its kernel oopsed, or QEMU is gone), so one kernel bug costs the test that met it and not every
+    test after it. ``workdir()`` gives each guest a folder of its own; ``boot`` boots one there."""
+
+    def __init__(self, workdir: Callable[[], Path], boot: Callable[[Path], Guest] = Guest) -> None:
+        self._workdir = workdir
+        self._boot = boot
+        self._guest: Guest | None = None
+        self.boots = 0
+
+    def get(self) -> Guest:
+        """A sound guest: the current one, or a fresh one in place of a broken one."""
+        if self._guest is not None and not self._guest.sound():
+            self._guest.close()
+            self._guest = None
+        if self._guest is None:
+            self._guest = self._boot(self._workdir())
+            self.boots += 1
+        return self._guest
+
+    def close(self) -> None:
+        """Power the current guest off."""
+        if self._guest is not None:
+            self._guest.close()
+            self._guest = None
 
 
 class UsbipBridge:

@@ -13,6 +13,7 @@ import json
 import re
 import sys
 import threading
+import warnings
 from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
@@ -217,15 +218,41 @@ def test_stream_off_keeps_the_device_through_50_cycles(kernel_guest, transfer):
         assert_device_kept(kernel_guest, att)
 
 
-def test_detach_while_streaming_frees_the_device_for_the_next_attach(kernel_guest):
-    with attached_camera(kernel_guest, "iso") as att:
-        kernel_guest.sh(f"setsid v4l2-ctl -d {att.node} --stream-mmap=4 --stream-count=100000 "
-                        "--stream-to=/dev/null </dev/null >/tmp/long.log 2>&1 &\n"
-                        "sleep 3; usbip detach -p 0")
-        with kernel_guest.usbip_port(att.server.address) as port:
-            kernel_guest.sh(f"usbip --tcp-port {port} attach -r 127.0.0.1 -b 1-1")
-            node = kernel_guest.video_node("rollcam")
-            assert_emulators_frames(att, capture(kernel_guest, node, "YUYV", 640, 480, 4))
+def test_detach_while_streaming_frees_the_device_for_the_next_attach(kernel_guests):
+    """Debian 6.1's uvcvideo can itself break when its device goes while it streams: CI met a refcount underflow
+    and a list corruption in ``uvc_video_copy_data_work`` / ``uvc_buffer_queue`` once, a race inside the guest's
+    driver between its URB copy work and the disconnect. A crash inside uvcvideo therefore runs the test once more
+    in a fresh guest (with a warning quoting it); it fails if the kernel breaks again, breaks elsewhere, or the
+    camera does not come back."""
+    for attempt in (1, 2):
+        g = kernel_guests.get()
+        try:
+            _detach_while_streaming_and_attach_again(g)
+        except Exception:
+            crash = g.oops()
+            if attempt == 2 or crash is None or "uvc" not in crash:
+                raise
+            warnings.warn(f"the guest's uvcvideo broke at the detach; once more in a fresh guest:\n{crash}",
+                          stacklevel=1)
+            continue
+        crash = g.oops()
+        if crash is None:
+            return
+        if attempt == 2 or "uvc" not in crash:
+            pytest.fail(f"the guest kernel broke at the detach:\n{crash}", pytrace=False)
+        warnings.warn(f"the guest's uvcvideo broke at the detach; once more in a fresh guest:\n{crash}",
+                      stacklevel=1)
+
+
+def _detach_while_streaming_and_attach_again(g) -> None:
+    with attached_camera(g, "iso") as att:
+        g.sh(f"setsid v4l2-ctl -d {att.node} --stream-mmap=4 --stream-count=100000 "
+             "--stream-to=/dev/null </dev/null >/tmp/long.log 2>&1 &\n"
+             "sleep 3; usbip detach -p 0")
+        with g.usbip_port(att.server.address) as port:
+            g.sh(f"usbip --tcp-port {port} attach -r 127.0.0.1 -b 1-1")
+            node = g.video_node("rollcam")
+            assert_emulators_frames(att, capture(g, node, "YUYV", 640, 480, 4))
 
 
 def test_the_metadata_node_carries_each_frames_pts_and_scr(kernel_guest):
