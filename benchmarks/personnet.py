@@ -18,6 +18,9 @@ Figures (the document's keys), each measured in this one run:
 - ``empty``: false positives per frame at the detector's threshold on street frames with no pedestrians at all
   (``emu:letsroll?pedestrians=0``, 1920x1080, rolling shutter: without walkers or ego-motion both shutters
   give the same picture), over scene seeds x 5 cameras x 3 times of day.
+- ``flat``: the same on featureless 1920x1080 frames (``FLAT_LEVELS``, black to white, each clean and with a
+  flat field's noise): what a camera's black start-up frames, a covered lens or a blown-out frame show; with
+  ``max_score``, the highest score any of them reached (how far below the threshold the model stays).
 """
 
 from __future__ import annotations
@@ -36,6 +39,8 @@ EMPTY_URI = "emu:letsroll?scene=street&seed={seed}&camera={camera}&time={time}&p
 EMPTY_TIMES = ("dawn", "noon", "dusk")
 IOU_GRID = (0.45, 0.5, 0.55, 0.6, 0.65, 0.7, 0.75, 0.8, 0.85, 0.9)
 """NMS IoU thresholds tried on the validation split (0.45 is ``onnx:``'s default)."""
+FLAT_LEVELS = (*range(0, 256, 16), 255)
+"""Grey levels of the featureless frames (each once clean and once with noise of 2 DN)."""
 EMPTY_SEED0 = 1000
 """First scene seed of the empty frames (scenes of their own, not those of any dataset)."""
 
@@ -141,6 +146,29 @@ def empty_frames(spec: str, scenes: int) -> dict[str, Any]:
             "frames_with_fp": int((c > 0).sum()), "max_fp": int(c.max())}
 
 
+def flat_frames(model: Path, conf: float, iou: float) -> dict[str, Any]:
+    """Detections at ``conf`` on featureless frames (``FLAT_LEVELS``), and the highest score of any (found at
+    conf 0.01)."""
+    from rollcam.host.detectors import load_detector
+
+    det = load_detector(f"onnx:{model}?conf=0.01&iou={iou}")
+    rng = np.random.default_rng(0)
+    counts, top = [], 0.0
+    try:
+        for level in FLAT_LEVELS:
+            clean = np.full((1080, 1920, 3), level, np.uint8)
+            noisy = np.clip(clean + rng.normal(0, 2, clean.shape), 0, 255).astype(np.uint8)
+            for frame in (clean, noisy):
+                scores = det.detect(frame).scores
+                counts.append(int((scores >= conf).sum()))
+                top = max(top, float(scores.max(initial=0.0)))
+    finally:
+        det.close()
+    c = np.array(counts)
+    return {"frames": len(c), "conf": conf, "fp_per_frame": round(float(c.mean()), 4),
+            "frames_with_fp": int((c > 0).sum()), "max_fp": int(c.max()), "max_score": round(top, 3)}
+
+
 def personnet_bench(model: Path | None = None, dataset: Path | None = None, empty_scenes: int = 10,
                     say: Callable[[str], None] = lambda _msg: None) -> dict[str, Any]:
     """The figures and targets of ``model`` (default: the packaged ``personnet``) as one JSON document."""
@@ -160,6 +188,8 @@ def personnet_bench(model: Path | None = None, dataset: Path | None = None, empt
     iou = doc.get("iou") or (personnet.default_iou() if packaged else 0.45)
     say(f"empty street frames at conf {conf}, NMS IoU {iou}")
     doc["empty"] = empty_frames(f"onnx:{path}?conf={conf}&iou={iou}", empty_scenes)
+    say(f"featureless frames at conf {conf}, NMS IoU {iou}")
+    doc["flat"] = flat_frames(path, conf, iou)
     doc["targets"] = targets(doc)
     return doc
 
@@ -178,7 +208,8 @@ def targets(doc: dict[str, Any]) -> dict[str, dict[str, Any]]:
 
 
 def format_report(doc: dict[str, Any]) -> str:
-    """The figures as text: size, speed, the per-speed/shutter table, empty-frame false positives, targets."""
+    """The figures as text: size, speed, the per-speed/shutter table, empty- and flat-frame false positives,
+    targets."""
     lines = [f"{doc['model']}: {doc['file_mb']} MB; per 640x360 frame on one core, median (min): model "
              f"{doc['ms_model']} ({doc['ms_model_min']}) ms, detect() {doc['ms_detect']} ({doc['ms_detect_min']}) ms"]
     if "test" in doc:
@@ -190,6 +221,10 @@ def format_report(doc: dict[str, Any]) -> str:
     e = doc["empty"]
     lines.append(f"empty street frames: {e['fp_per_frame']} false positives per frame at conf {e['conf']} "
                  f"({e['frames_with_fp']} of {e['frames']} frames with any, at most {e['max_fp']})")
+    if "flat" in doc:  # documents from before the figure lack it
+        f = doc["flat"]
+        lines.append(f"featureless frames: {f['fp_per_frame']} false positives per frame at conf {f['conf']} "
+                     f"({f['frames_with_fp']} of {f['frames']} frames with any; highest score {f['max_score']})")
     for name, t in doc["targets"].items():
         verdict = "n/a" if t["pass"] is None else "PASS" if t["pass"] else "FAIL"
         lines.append(f"target {name}: {t['value']} {t['op']} {t['limit']}: {verdict}")

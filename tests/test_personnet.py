@@ -72,6 +72,23 @@ def test_bench_targets_apply_only_to_what_was_measured():
     doc["targets"] = t
     text = format_report(doc)
     assert "target ms_detect: 20.0 <= 15.0: FAIL" in text and "target mAP50: 0.95 >= 0.9: PASS" in text
+    assert "featureless" not in text  # a document from before the figure
+    doc["flat"] = {"frames": 34, "conf": 0.3, "fp_per_frame": 0.5, "frames_with_fp": 4, "max_fp": 12,
+                   "max_score": 0.44}
+    assert "featureless frames: 0.5 false positives per frame at conf 0.3 (4 of 34 frames with any; highest " \
+           "score 0.44)" in format_report(doc)
+
+
+def test_bench_counts_what_a_detector_reports_on_featureless_frames():
+    from rollcam.benchmarks.personnet import FLAT_LEVELS, flat_frames
+    from rollcam.host.detectors import personnet
+
+    doc = flat_frames(personnet.model_path(), 0.0, personnet.default_iou())
+    assert doc["frames"] == 2 * len(FLAT_LEVELS) and FLAT_LEVELS[0] == 0 and FLAT_LEVELS[-1] == 255
+    # at conf 0 every detection counts, so the count and the top score agree on whether there was one
+    assert (doc["frames_with_fp"] > 0) == (doc["max_score"] > 0)
+    strict = flat_frames(personnet.model_path(), 1.01, personnet.default_iou())
+    assert strict["frames_with_fp"] == 0 and strict["max_score"] == doc["max_score"]
 
 
 def test_personnet_nms_iou_defaults_to_the_cards_and_an_option_overrides_it():

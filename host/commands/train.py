@@ -66,6 +66,10 @@ def add_parser(sub: Subparsers) -> argparse.ArgumentParser:
                    help="boxes of the RS images: exact (rollcam's RS box), gs (the box at the reference instant, "
                         "from the GS image of the pair) or hand (a modelled annotator's; docs/training.md) "
                         "(default: %(default)s)")
+    p.add_argument("--background", type=value_type(fraction, "a number in [0, 1]"), default=0.0, metavar="F",
+                   help="add F background images (no person: flat frames, crops of person-free regions, empty "
+                        "streets) per training image, e.g. 0.1, so the model learns what no person looks like "
+                        "(default: 0, none)")
     p.add_argument("--val-every", type=_COUNT, default=1, metavar="N", help="validate every N epochs (default: 1)")
     p.add_argument("--out", required=True, metavar="DIR", help="run folder (rerun to resume)")
     p.add_argument("--json", action="store_true", help="print the run card as JSON on stdout")
@@ -82,7 +86,7 @@ def config_from_args(args: argparse.Namespace):
                        seed=args.seed, input=args.input, init=args.init,
                        threads=args.threads or min(8, os.cpu_count() or 1), steps=args.steps,
                        val_every=args.val_every, scenes=args.scenes, cameras=args.cameras, ema=args.ema,
-                       labels=args.labels)
+                       labels=args.labels, background=args.background)
 
 
 def run(args: argparse.Namespace) -> int:

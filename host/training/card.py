@@ -54,6 +54,10 @@ def rebuild_command(cfg: TrainConfig, out: Path) -> str:
         args += ["--val-every", str(cfg.val_every)]
     if cfg.ema:
         args += ["--ema", f"{cfg.ema:g}"]
+    if cfg.labels != "exact":
+        args += ["--labels", cfg.labels]
+    if cfg.background:
+        args += ["--background", f"{cfg.background:g}"]
     if cfg.init:
         args += ["--init", cfg.init]
     args += ["--out", str(out)]
@@ -109,7 +113,9 @@ def card_markdown(card: dict[str, Any]) -> str:
         f"- trained on {', '.join(card['subsets'])}; validated on {', '.join(card['val_subsets'])}",
         f"- {c['epochs']} epochs, batch {c['batch']}, lr {c['lr']:g} (AdamW, cosine), seed {c['seed']}, "
         f"{c['threads']} thread(s) on {card['device']}" + (f", initialised from `{c['init']}`" if c["init"] else "")
-        + (f"; exported the weights' moving average (decay {c['ema']:g})" if c.get("ema") else ""),
+        + (f"; exported the weights' moving average (decay {c['ema']:g})" if c.get("ema") else "")
+        + (f"; RS images with {c['labels']} labels" if c.get("labels", "exact") != "exact" else "")
+        + (f"; {c['background']:g} background image(s) per training image" if c.get("background") else ""),
         f"- code: rollcam {card['rollcam_version']}, commit {git['commit'] or 'unknown'}"
         + (" (with local changes)" if git["dirty"] else "") + f", torch {card['torch']}", "",
         "## Result (validation split, scored through `onnx:`)", "",

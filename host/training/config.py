@@ -25,6 +25,8 @@ class TrainConfig:
     for training and validation alike.
     ``ema`` > 0 keeps an exponential moving average of the weights with that decay, which validation and the
     export use instead of the raw weights (0: off).
+    ``background`` > 0 adds that many background images (no person: flat frames, crops of person-free regions,
+    empty streets; ``rollcam.host.training.background``) per training image (0: none).
     """
 
     dataset: str
@@ -46,6 +48,7 @@ class TrainConfig:
     cameras: int | None = None
     ema: float = 0.0
     labels: str = "exact"
+    background: float = 0.0
 
     def __post_init__(self) -> None:
         model_size(self.model)
@@ -66,12 +69,17 @@ class TrainConfig:
         if not (0 <= self.ema < 1):
             raise ConfigError(f"--ema must be in [0, 1), got {self.ema!r}")
         check_arm(self.labels)
+        if not (0 <= self.background <= 1):
+            raise ConfigError(f"--background must be in [0, 1] (background images per training image), "
+                              f"got {self.background!r}")
+        if self.background and self.input == "raw":
+            raise ConfigError("--background makes RGB pictures; a raw-mosaic model (--input raw) cannot take them")
 
     @staticmethod
     def added_keys() -> dict[str, Any]:
         """Options added after the first release, with the value that reproduces runs made before them: a
         checkpoint whose config lacks one was trained with that value."""
-        return {"ema": 0.0, "labels": "exact"}
+        return {"ema": 0.0, "labels": "exact", "background": 0.0}
 
     def to_json(self) -> dict[str, Any]:
         """Plain-JSON form, stored in checkpoints and the run card."""

@@ -18,7 +18,7 @@ import json
 import re
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from rollcam.common.errors import ConfigError
@@ -28,6 +28,9 @@ from ..evaluation.loaders import EvalSet, load_rollcam
 from .labels import relabel
 from .loss import build_targets
 from .model import STRIDE
+
+if TYPE_CHECKING:
+    from .background import Backgrounds
 
 
 @dataclass(frozen=True)
@@ -105,18 +108,38 @@ _NAME = re.compile(r"s(\d+)_[a-z]+_c(\d+)\.[a-z]+$")
 
 
 class FittedImages:
-    """The images of some sets fitted to the network input, with their boxes in input pixels, fitted lazily."""
+    """The images of some sets fitted to the network input, with their boxes in input pixels, fitted lazily;
+    after them, the background images of ``with_backgrounds`` (no boxes), if any."""
 
     def __init__(self, sets: list[EvalSet], width: int, height: int, input: str) -> None:
         self.entries = [e for s in sets for e in s.images]
         self.width, self.height, self.input = width, height, input
         self._cache: dict[int, tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
+        self._content: dict[int, tuple[float, float, float, float]] = {}
+        self.backgrounds: Backgrounds | None = None
+
+    def with_backgrounds(self, fraction: float, seed: int, card: dict[str, Any]) -> FittedImages:
+        """Add ``round(fraction x images)`` background images (``rollcam.host.training.background``) after the
+        dataset's own; returns self."""
+        from .background import Backgrounds
+
+        count = round(fraction * len(self.entries))
+        self.backgrounds = Backgrounds(count, seed, self, card) if count else None
+        return self
 
     def __len__(self) -> int:
-        return len(self.entries)
+        return len(self.entries) + (len(self.backgrounds) if self.backgrounds is not None else 0)
+
+    def content(self, i: int) -> tuple[float, float, float, float]:
+        """(x0, y0, x1, y1): where dataset image ``i`` lies in the input, letterbox bars excluded."""
+        self.get(i)
+        return self._content[i]
 
     def get(self, i: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(fitted image H x W x C, boxes (N, 4) in input pixels, ignore flags (N,)) of image ``i``."""
+        if i >= len(self.entries) and self.backgrounds is not None:
+            return (self.backgrounds.get(i - len(self.entries)), np.zeros((0, 4), np.float32),
+                    np.zeros(0, bool))
         if i not in self._cache:
             import cv2
 
@@ -132,6 +155,9 @@ class FittedImages:
             b[:, [0, 2]] = b[:, [0, 2]] * place.scale_x + place.pad_x
             b[:, [1, 3]] = b[:, [1, 3]] * place.scale_y + place.pad_y
             self._cache[i] = (np.ascontiguousarray(fitted), b, e.truth.ignore.copy())
+            h, w = img.shape[:2]
+            self._content[i] = (place.pad_x, place.pad_y, place.pad_x + w * place.scale_x,
+                                place.pad_y + h * place.scale_y)
         return self._cache[i]
 
 

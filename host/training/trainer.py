@@ -310,8 +310,8 @@ def _train(cfg: TrainConfig, out: Path, info: DatasetInfo, subsets: tuple[str, .
     net = PersonNet(model_size(cfg.model), in_channels=1 if cfg.input == "raw" else 3)
     images = FittedImages(load_split(info, subsets, "train", scenes=cfg.scenes, cameras=cfg.cameras,
                                      labels=cfg.labels), *cfg.imgsz,
-                          cfg.detector_input)
-    if not len(images):
+                          cfg.detector_input).with_backgrounds(cfg.background, cfg.seed, info.card)
+    if not images.entries:
         raise ConfigError(f"the train split of {list(subsets)} in {cfg.dataset!r} holds no images")
     if cfg.init and state is None:
         _init_weights(net, cfg.init, images, cfg, info.raw_bits)

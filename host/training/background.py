@@ -1,0 +1,152 @@
+"""Background images for ``rollcam train --background F``: pictures with no person in them, trained on as images
+with no boxes, so that a detector learns that a featureless or person-free picture holds nobody.
+
+A detector trained only on street scenes full of walkers has never been told what *no* person looks like at the
+scale of a whole frame: personnet's tried third stage reported frame-high people at scores 0.49-0.57 in flat black,
+grey and white frames (docs/training.md). A camera's black start-up frames, a covered lens or a blown-out frame
+would fill a detector's log with them. The remedy object detectors use is background images (images without
+labels, a few to ten per cent of the training set); here they are of three kinds, in turn:
+
+- ``flat``: a uniform frame at a level drawn over the whole range (black to white), tinted a little per channel,
+  with a gentle linear ramp on half of them and the sensor-like noise of a flat field (0-3 DN);
+- ``crop``: a crop of a training image's person-free region (above the highest box, or left or right of every
+  box; ignored boxes count as people), scaled up to the whole input: sky, roofs and facades at the scale a
+  person would fill, the textures most like a walker's outline;
+- ``street``: an empty street rendered as the dataset's own were (its sensor, size, times of day and emu
+  options, ``pedestrians=0``), from scene seeds of its own (``STREET_SEED0`` on, none of the dataset's).
+
+Each background is drawn from the run's seed and its index alone, so a resumed run sees the same ones. Streets
+are rendered once and kept (as the fitted dataset images are); flat frames and crops are remade on each use.
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+from rollcam.common.errors import ConfigError
+
+if TYPE_CHECKING:
+    from .data import FittedImages
+
+KINDS = ("flat", "crop", "street")
+STREET_SEED0 = 5000
+"""First scene seed of the empty streets (the datasets' seeds are drawn from 0..2^31; ``rollcam bench personnet``
+tests on 1000..1009)."""
+STREETS_PER_SCENE = 5
+"""Camera views of one empty street scene before the next seed."""
+MARGIN_PX = 2
+"""Input pixels kept between a crop and the nearest box."""
+MIN_CROP_PX = 24
+"""The smallest side (input pixels) of a person-free region worth a crop; smaller ones give a flat frame."""
+
+
+class Backgrounds:
+    """``count`` background images for a training set: ``get(i)`` is image ``i`` (H x W x 3 uint8, RGB, the
+    network input's size), of kind ``KINDS[i % 3]``. ``source``: the fitted training images the crops come from;
+    ``card``: the dataset's card (how its streets were rendered)."""
+
+    def __init__(self, count: int, seed: int, source: FittedImages, card: dict[str, Any]) -> None:
+        if source.input == "raw":
+            raise ConfigError("--background makes RGB pictures; a raw-mosaic model (--input raw) cannot take them")
+        self.count, self.seed, self.source = count, seed, source
+        self.width, self.height = source.width, source.height
+        self._card = card.get("config", {})
+        taken = {int(v) for v in card.get("scene_seeds", {}).values()}
+        self._seeds = (s for s in range(STREET_SEED0, STREET_SEED0 + 10**6) if s not in taken)
+        self._streets: dict[int, np.ndarray] = {}
+        self._street_seed: dict[int, int] = {}
+
+    def __len__(self) -> int:
+        return self.count
+
+    def kind(self, i: int) -> str:
+        """The kind of background ``i``."""
+        return KINDS[i % len(KINDS)]
+
+    def get(self, i: int) -> np.ndarray:
+        """Background ``i``, the same on every call."""
+        if not 0 <= i < self.count:
+            raise IndexError(i)
+        rng = np.random.default_rng([self.seed, i, 0x6267])
+        kind = self.kind(i)
+        if kind == "street":
+            if i not in self._streets:
+                self._streets[i] = self._street(i // len(KINDS))
+            return self._streets[i]
+        if kind == "crop":
+            crop = self._crop(rng)
+            if crop is not None:
+                return crop
+        return flat_frame(rng, self.width, self.height)
+
+    def _crop(self, rng: np.random.Generator) -> np.ndarray | None:
+        import cv2
+
+        j = int(rng.integers(len(self.source.entries)))
+        img, boxes, _ignore = self.source.get(j)
+        x0, y0, x1, y1 = self.source.content(j)
+        region = free_region(boxes, (x0, y0, x1, y1), rng)
+        if region is None:
+            return None
+        rx0, ry0, rx1, ry1 = region
+        aspect = self.width / self.height
+        ch = min(ry1 - ry0, (rx1 - rx0) / aspect) * rng.uniform(0.6, 1.0)
+        cw = ch * aspect
+        cx = rx0 + rng.uniform(0, rx1 - rx0 - cw)
+        cy = ry0 + rng.uniform(0, ry1 - ry0 - ch)
+        patch = img[int(cy):int(cy + ch), int(cx):int(cx + cw)]
+        return cv2.resize(patch, (self.width, self.height), interpolation=cv2.INTER_LINEAR)
+
+    def _street(self, k: int) -> np.ndarray:
+        from ..datasets.plan import DatasetConfig, Sample, sample_uri
+        from ..detectors.onnx import fit_image
+        from ..sources import open_camera
+
+        scene = k // STREETS_PER_SCENE
+        while scene not in self._street_seed:
+            self._street_seed[len(self._street_seed)] = next(self._seeds)
+        c = self._card
+        size = c.get("size")
+        times = tuple(c.get("times") or ("noon",))
+        cfg = DatasetConfig(sensor=c.get("sensor", "letsroll"),
+                            size=tuple(int(v) for v in size.split("x")) if isinstance(size, str) else None,
+                            times=times, pedestrians=0, emu_options=c.get("emu_options", ""))
+        sample = Sample("normal", scene, self._street_seed[scene], times[(k // STREETS_PER_SCENE) % len(times)],
+                        k % STREETS_PER_SCENE, "train", 0)
+        with open_camera(sample_uri(cfg, sample) + "&shutter=rolling&frames=1") as cam:
+            picture = cam.read().data
+        fitted, _ = fit_image(picture, self.width, self.height)
+        return np.ascontiguousarray(fitted)
+
+
+def flat_frame(rng: np.random.Generator, width: int, height: int) -> np.ndarray:
+    """A featureless frame: one level (black to white), a slight tint, on half of them a gentle linear ramp, and
+    a flat field's noise; H x W x 3 uint8."""
+    level = rng.uniform(0, 255)
+    base = np.full((height, width, 3), level, np.float32) + rng.normal(0, 4, 3).astype(np.float32)
+    if rng.random() < 0.5:
+        angle = rng.uniform(0, 2 * np.pi)
+        yy, xx = np.mgrid[0:height, 0:width].astype(np.float32)
+        ramp = (np.cos(angle) * (xx / width - 0.5) + np.sin(angle) * (yy / height - 0.5)) * rng.uniform(0, 40)
+        base += ramp[..., None]
+    base += rng.normal(0, rng.uniform(0, 3), base.shape).astype(np.float32)
+    return np.clip(np.rint(base), 0, 255).astype(np.uint8)
+
+
+def free_region(boxes: np.ndarray, content: tuple[float, float, float, float],
+                rng: np.random.Generator) -> tuple[float, float, float, float] | None:
+    """A rectangle of ``content`` (x0, y0, x1, y1) that no box comes within ``MARGIN_PX`` of: the band above every
+    box, or left or right of every box, one drawn among those at least ``MIN_CROP_PX`` on each side (all of
+    ``content`` when there is no box); None when none is."""
+    x0, y0, x1, y1 = content
+    if len(boxes) == 0:
+        return content
+    top = float(boxes[:, 1].min()) - MARGIN_PX
+    left = float(boxes[:, 0].min()) - MARGIN_PX
+    right = float(boxes[:, 2].max()) + MARGIN_PX
+    bands = [(x0, y0, x1, min(y1, top)), (x0, y0, min(x1, left), y1), (max(x0, right), y0, x1, y1)]
+    ok = [b for b in bands if b[2] - b[0] >= MIN_CROP_PX and b[3] - b[1] >= MIN_CROP_PX]
+    if not ok:
+        return None
+    return ok[int(rng.integers(len(ok)))]
