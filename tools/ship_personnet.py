@@ -76,8 +76,10 @@ def _schedule_line(card: dict[str, Any]) -> str:
     steps = f" of at most {cfg['steps']} steps" if cfg.get("steps") else ""
     start = f"from `{cfg['init']}`" if cfg.get("init") else "from scratch"
     ema = f", exporting the weights' moving average (decay {cfg['ema']:g})" if cfg.get("ema") else ""
+    bg = (f", with {cfg['background']:g} background image(s) (no person) per training image"
+          if cfg.get("background") else "")
     return (f"{cfg['epochs']} epochs{steps}, batch {cfg['batch']}, AdamW lr {cfg['lr']:g} (warm-up, cosine), "
-            f"seed {cfg['seed']}, {cfg['threads']} thread(s) on {card['device']}, {start}{ema}: "
+            f"seed {cfg['seed']}, {cfg['threads']} thread(s) on {card['device']}, {start}{ema}{bg}: "
             f"{card['timings']['train_s']:.0f} s")
 
 
@@ -115,7 +117,14 @@ def readme(fig: dict[str, Any], train: dict[str, Any]) -> str:
         f"`detect()` with letterbox and NMS {fig['ms_detect']} ms.",
         f"- Empty street frames (no pedestrians; {fig['empty']['frames']} frames, 1920x1080): "
         f"{fig['empty']['fp_per_frame']} false positives per frame at conf {fig['empty']['conf']} "
-        f"({fig['empty']['frames_with_fp']} frames with any).", "",
+        f"({fig['empty']['frames_with_fp']} frames with any)."]
+    if "flat" in fig:
+        lines.append(f"- Featureless frames (flat black to white, clean and noisy; {fig['flat']['frames']} frames, "
+                     f"1920x1080): {fig['flat']['fp_per_frame']} false positives per frame at conf "
+                     f"{fig['flat']['conf']} ({fig['flat']['frames_with_fp']} frames with any; highest score "
+                     f"{fig['flat']['max_score']}).")
+    lines += [
+        "",
         f"Test split of `{fig.get('dataset', train['dataset']['path'])}`, 1920x1080 frames scored at the model's "
         "input (P and R at best F1; mAP at `conf=0.01`; "
         f"NMS `iou={fig.get('iou', 0.45)}`):", "",
