@@ -21,13 +21,11 @@ are rendered once and kept (as the fitted dataset images are); flat frames and c
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING, Any
+from typing import Any, Protocol
 
 import numpy as np
 from rollcam.common.errors import ConfigError
-
-if TYPE_CHECKING:
-    from .data import FittedImages
+from rollcam.common.values import parse_size
 
 KINDS = ("flat", "crop", "street")
 STREET_SEED0 = 5000
@@ -41,12 +39,25 @@ MIN_CROP_PX = 24
 """The smallest side (input pixels) of a person-free region worth a crop; smaller ones give a flat frame."""
 
 
+class TrainingImages(Protocol):
+    """What the crops are cut from: the fitted training images (``rollcam.host.training.data.FittedImages``)."""
+
+    entries: list[Any]
+    width: int
+    height: int
+    input: str
+
+    def get(self, i: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]: ...
+
+    def content(self, i: int) -> tuple[float, float, float, float]: ...
+
+
 class Backgrounds:
     """``count`` background images for a training set: ``get(i)`` is image ``i`` (H x W x 3 uint8, RGB, the
     network input's size), of kind ``KINDS[i % 3]``. ``source``: the fitted training images the crops come from;
     ``card``: the dataset's card (how its streets were rendered)."""
 
-    def __init__(self, count: int, seed: int, source: FittedImages, card: dict[str, Any]) -> None:
+    def __init__(self, count: int, seed: int, source: TrainingImages, card: dict[str, Any]) -> None:
         if source.input == "raw":
             raise ConfigError("--background makes RGB pictures; a raw-mosaic model (--input raw) cannot take them")
         self.count, self.seed, self.source = count, seed, source
@@ -110,7 +121,7 @@ class Backgrounds:
         size = c.get("size")
         times = tuple(c.get("times") or ("noon",))
         cfg = DatasetConfig(sensor=c.get("sensor", "letsroll"),
-                            size=tuple(int(v) for v in size.split("x")) if isinstance(size, str) else None,
+                            size=parse_size(size) if isinstance(size, str) else None,
                             times=times, pedestrians=0, emu_options=c.get("emu_options", ""))
         sample = Sample("normal", scene, self._street_seed[scene], times[(k // STREETS_PER_SCENE) % len(times)],
                         k % STREETS_PER_SCENE, "train", 0)
