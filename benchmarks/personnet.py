@@ -141,6 +141,12 @@ def empty_frames(spec: str, scenes: int) -> dict[str, Any]:
         conf = det.conf
     finally:
         det.close()
+    return false_positives(counts, conf)
+
+
+def false_positives(counts: list[int], conf: float) -> dict[str, Any]:
+    """The figures of detections per frame on frames that hold nobody: frames, fp_per_frame, frames_with_fp,
+    max_fp (at ``conf``)."""
     c = np.array(counts)
     return {"frames": len(c), "conf": conf, "fp_per_frame": round(float(c.mean()), 4),
             "frames_with_fp": int((c > 0).sum()), "max_fp": int(c.max())}
@@ -164,9 +170,7 @@ def flat_frames(model: Path, conf: float, iou: float) -> dict[str, Any]:
                 top = max(top, float(scores.max(initial=0.0)))
     finally:
         det.close()
-    c = np.array(counts)
-    return {"frames": len(c), "conf": conf, "fp_per_frame": round(float(c.mean()), 4),
-            "frames_with_fp": int((c > 0).sum()), "max_fp": int(c.max()), "max_score": round(top, 3)}
+    return false_positives(counts, conf) | {"max_score": round(top, 3)}
 
 
 def personnet_bench(model: Path | None = None, dataset: Path | None = None, empty_scenes: int = 10,

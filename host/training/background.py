@@ -24,7 +24,6 @@ from __future__ import annotations
 from typing import Any, Protocol
 
 import numpy as np
-from rollcam.common.errors import ConfigError
 from rollcam.common.values import parse_size
 
 KINDS = ("flat", "crop", "street")
@@ -54,12 +53,11 @@ class TrainingImages(Protocol):
 
 class Backgrounds:
     """``count`` background images for a training set: ``get(i)`` is image ``i`` (H x W x 3 uint8, RGB, the
-    network input's size), of kind ``KINDS[i % 3]``. ``source``: the fitted training images the crops come from;
-    ``card``: the dataset's card (how its streets were rendered)."""
+    network input's size), of kind ``KINDS[i % 3]``. ``source``: the fitted training images the crops come from
+    (RGB ones: ``TrainConfig`` refuses ``--background`` for a raw-mosaic model); ``card``: the dataset's card (how
+    its streets were rendered)."""
 
     def __init__(self, count: int, seed: int, source: TrainingImages, card: dict[str, Any]) -> None:
-        if source.input == "raw":
-            raise ConfigError("--background makes RGB pictures; a raw-mosaic model (--input raw) cannot take them")
         self.count, self.seed, self.source = count, seed, source
         self.width, self.height = source.width, source.height
         self._card = card.get("config", {})

@@ -18,19 +18,17 @@ import json
 import re
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 from rollcam.common.errors import ConfigError
 
 from ..detectors.onnx import fit_image, input_scale
 from ..evaluation.loaders import EvalSet, load_rollcam
+from .background import Backgrounds
 from .labels import relabel
 from .loss import build_targets
 from .model import STRIDE
-
-if TYPE_CHECKING:
-    from .background import Backgrounds
 
 
 @dataclass(frozen=True)
@@ -121,8 +119,6 @@ class FittedImages:
     def with_backgrounds(self, fraction: float, seed: int, card: dict[str, Any]) -> FittedImages:
         """Add ``round(fraction x images)`` background images (``rollcam.host.training.background``) after the
         dataset's own; returns self."""
-        from .background import Backgrounds
-
         count = round(fraction * len(self.entries))
         self.backgrounds = Backgrounds(count, seed, self, card) if count else None
         return self
