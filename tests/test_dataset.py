@@ -10,7 +10,9 @@ from rollcam.common.errors import ConfigError
 from rollcam.host.cli import main
 from rollcam.host.datasets import DatasetConfig, build_dataset, make_plan
 from rollcam.host.datasets.build import DRIVER_LOCK
+from rollcam.host.datasets.layout import content_digest
 from rollcam.host.datasets.plan import LabelPolicy
+from rollcam.host.datasets.sample import read_records
 from rollcam.host.sources import open_camera
 
 SMALL = DatasetConfig(size=(192, 108), scenes=3, frames=6, pedestrians=12, seed=7)
@@ -96,6 +98,12 @@ def test_same_labels_whatever_the_worker_count(tmp_path):
     ta, tb = _tree(a), _tree(b)
     assert ta.keys() == tb.keys() and len(ta) > 20
     assert ta == tb
+    # the card's one digest of every file: what a study's report records and `rollcam study --adopt` checks
+    card = json.loads((a / "dataset.json").read_text())
+    assert card["content_sha256"] == content_digest(read_records(b))
+    rec = next(iter(read_records(b).values()))
+    rec["files"][next(iter(rec["files"]))]["sha256"] = "0" * 64
+    assert content_digest({("x", "y"): rec}) != content_digest({("x", "y"): next(iter(read_records(b).values()))})
 
 
 def test_interrupted_build_resumes_to_the_same_dataset(tmp_path):

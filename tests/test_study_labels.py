@@ -157,13 +157,15 @@ def test_study_device_cuda_without_a_gpu_is_one_line_exit_2(tmp_path, capsys):
 
 
 @pytest.mark.slow
-def test_quick_label_arm_with_a_base_end_to_end(tmp_path):
+def test_quick_label_arm_with_a_base_end_to_end(tmp_path, monkeypatch):
     """The label arm and Table 2 on the quick setting, every run fine-tuned from a base trained on GS images of
     other scenes; then --report rebuilds the same tables from the finished runs."""
     pytest.importorskip("torch")
     import dataclasses
     import json
+    import shutil
 
+    from rollcam.host.training import study, trainer
     from rollcam.host.training.study import run_study
 
     s = dataclasses.replace(QUICK, base_frames=8, base_scenes=6, base_epochs=2, base_lr=4e-3)
@@ -186,3 +188,15 @@ def test_quick_label_arm_with_a_base_end_to_end(tmp_path):
     assert "## The label arm" in text and "## Table 2 analogue" in text and "hand-like labels" in text
     again = run_study(s, out, only=("labels", "coco"), report_only=True)
     assert again["label_arm"] == doc["label_arm"] and again["timing"]["finished"] == len(doc["runs"])
+
+    # carried on elsewhere from the report folder alone: the datasets are rendered again and match, every run and
+    # Table 2 are taken over, nothing is trained
+    carried = tmp_path / "committed"
+    carried.mkdir()
+    for name in ("report.json", "base.pt"):
+        shutil.copy(out / name, carried / name)
+    monkeypatch.setattr(trainer, "train", lambda *a, **k: pytest.fail("an adopted run was trained again"))
+    monkeypatch.setattr(study, "test_model", lambda *a, **k: pytest.fail("a model was tested again"))
+    other = run_study(s, tmp_path / "elsewhere", only=("labels", "coco"), progress=False, adopt_from=(carried,))
+    assert other["label_arm"] == doc["label_arm"] and other["datasets"] == doc["datasets"]
+    assert [r["test"] for r in other["runs"]] == [r["test"] for r in doc["runs"]]

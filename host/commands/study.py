@@ -29,7 +29,8 @@ examples:
   rollcam study --setting reduced --workers 2 --out rollcam_out/study_reduced
   rollcam study --setting reduced --only labels,coco --workers 2 --out rollcam_out/study_reduced
   nice -n 19 rollcam study --setting medium --workers 2 --out rollcam_out/study_medium   # hours; resumable
-  rollcam study --setting full --out /data/study_full                      # on a GPU machine"""
+  rollcam study --setting full --out /data/study_full                      # on a GPU machine
+  rollcam study --setting medium --workers 2 --out study_medium --adopt docs/study_medium   # go on from a report"""
 
 
 def add_parser(sub: Subparsers) -> argparse.ArgumentParser:
@@ -51,6 +52,10 @@ def add_parser(sub: Subparsers) -> argparse.ArgumentParser:
     p.add_argument("--report", action="store_true",
                    help="train nothing: write the report of the runs already finished in --out (where a long "
                         "study stands)")
+    p.add_argument("--adopt", action="append", default=[], metavar="DIR",
+                   help="take over the finished runs of another copy of this study (its folder, or its report.json "
+                        "with base.pt beside it, copied from another machine) instead of training them again; "
+                        "checked to be of the same setting, datasets and base model (repeatable)")
     p.add_argument("--executor", default=None, metavar="SPEC", help="'local' or 'dask://HOST:PORT' for the runs")
     p.add_argument("--json", action="store_true", help="print the report's JSON document on stdout")
     p.add_argument("--progress", action="store_true", help="show progress even when stderr is not a terminal")
@@ -77,7 +82,7 @@ def run(args: argparse.Namespace) -> int:
     command = shlex.join(["rollcam", *argv]) if argv else None
     doc = run_study(settings, args.out, workers=args.workers, executor=args.executor,
                     progress=True if args.progress else None, command=command, only=args.only,
-                    device=args.device, report_only=args.report)
+                    device=args.device, report_only=args.report, adopt_from=tuple(args.adopt))
     if doc["timing"]["device"] == "cuda":
         print("study: training on the CUDA GPU torch sees (runs one at a time)")
     if args.json:

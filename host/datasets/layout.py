@@ -7,6 +7,7 @@ never on how many workers rendered the samples or in which order they finished.
 
 from __future__ import annotations
 
+import hashlib
 import json
 from collections import defaultdict
 from pathlib import Path
@@ -97,7 +98,7 @@ def finalize(root: Path, cfg: DatasetConfig, records: dict[tuple[str, str], dict
     for rec in records.values():
         scenes[rec["split"]].add(rec["scene"])
     card = {"format": CARD_FORMAT, "kind": "rollcam-dataset", "rollcam_version": version, "config": cfg.to_json(),
-            "classes": list(CLASS_NAMES), "pairs": len(records),
+            "classes": list(CLASS_NAMES), "pairs": len(records), "content_sha256": content_digest(records),
             "scenes_per_split": {sp: sorted(scenes[sp]) for sp in SPLITS},
             "scene_seeds": {str(r["scene"]): r["scene_seed"]
                             for r in sorted(records.values(), key=lambda r: r["scene"])},
@@ -105,6 +106,17 @@ def finalize(root: Path, cfg: DatasetConfig, records: dict[tuple[str, str], dict
     write_atomic(root / CARD_JSON, (json.dumps(card, indent=1) + "\n").encode())
     write_atomic(root / CARD_MD, card_markdown(card).encode())
     return card
+
+
+def content_digest(records: dict[tuple[str, str], dict[str, Any]]) -> str:
+    """One SHA-256 over every file of the samples (each file's name, size and SHA-256, in sample order): two
+    builds with the same digest hold the same images and labels byte for byte, so what was measured on one
+    (a model's test scores) stands for the other."""
+    h = hashlib.sha256()
+    for key in sorted(records):
+        for rel, d in sorted(records[key].get("files", {}).items()):
+            h.update(f"{rel} {d['bytes']} {d['sha256']}\n".encode())
+    return h.hexdigest()
 
 
 def card_markdown(card: dict[str, Any]) -> str:

@@ -20,12 +20,18 @@ A setting with a base (``base_frames``) first trains one model on GS images of s
 Every run is an ordinary ``rollcam train`` folder under ``OUT/runs/`` with its test results beside it
 (``test.json``): a rerun of the study resumes an interrupted run and skips finished ones. Runs go to the
 dataset builder's executors (``--workers N`` processes, one torch thread each, or a Dask cluster).
+
+A study longer than one machine's stay goes on elsewhere from its report alone (``adopt``): ``report.json``
+holds every finished run's results and the digests of the datasets they were tested on, and ``base.pt`` beside
+it the base model's weights, so another machine re-renders the same datasets (checked byte for byte), takes the
+finished runs over and trains only the rest.
 """
 
 from __future__ import annotations
 
 import dataclasses
 import functools
+import io
 import json
 import time
 from dataclasses import asdict, dataclass, replace
@@ -213,17 +219,123 @@ def bootstrap_se(truths: list[Any], dets: list[Any], n: int, rng: np.random.Gene
     return float(np.std(vals, ddof=1))
 
 
+BASE_WEIGHTS = "base.pt"
+"""Beside the report of a setting with a base: the base model's weights (a bare state dict, exactly what every
+run was fine-tuned from), so that the report folder alone carries the study on (``adopt``)."""
+
+
+def dataset_digests(s: StudySettings, root: Path) -> dict[str, str]:
+    """``content_digest`` of each of the study's datasets built under ``root/data`` (what its runs were tested
+    on; the report records it, ``adopt`` checks it)."""
+    from ..datasets.layout import content_digest
+    from ..datasets.sample import read_records
+
+    return {name: content_digest(read_records(root / "data" / name)) for name in dataset_configs(s)
+            if (root / "data" / name / "dataset.json").is_file()}
+
+
+def export_base(s: StudySettings, root: Path) -> Path | None:
+    """Write ``root/base.pt``, the finished base model's weights, beside the report; None without a finished
+    base. The weights are those of ``runs/base/last.pt``, which every run's ``--init`` loads."""
+    run = root / "runs" / "base"
+    if not s.base_frames or not (run / "test.json").is_file() or not (run / "last.pt").is_file():
+        return None
+    out = root / BASE_WEIGHTS
+    if out.is_file() and out.stat().st_mtime_ns >= (run / "last.pt").stat().st_mtime_ns:
+        return out
+    from .trainer import import_torch, load_state
+
+    torch = import_torch()
+    state = load_state(run / "last.pt")
+    buf = io.BytesIO()
+    torch.save(state.get("model", state), buf)
+    write_atomic(out, buf.getvalue())
+    return out
+
+
+def adopt(s: StudySettings, root: Path, src: str | Path) -> list[str]:
+    """Take the finished runs of another copy of this study into ``root``, so they are not trained again: ``src``
+    is a study folder or its report copied elsewhere (``report.json``, and ``base.pt`` for a setting with a base).
+    It must be of the same setting, its runs tested on datasets byte-identical to those built under ``root``
+    (``dataset_digests``), and, where ``root`` has a finished base of its own, fine-tuned from the same base.
+    Runs ``root`` has finished are kept. Returns the keys of the runs taken over."""
+    src = Path(src)
+    path = src / "report.json" if src.is_dir() else src
+    try:
+        doc = json.loads(path.read_text())
+    except (OSError, ValueError) as exc:
+        raise ConfigError(f"--adopt {str(src)!r}: no readable study report there ({exc})") from None
+    if not isinstance(doc, dict) or doc.get("kind") != "rollcam-study":
+        raise ConfigError(f"--adopt {str(path)!r} is not a rollcam study report")
+    theirs, ours = doc.get("settings", {}), json.loads(json.dumps(s.to_json()))  # tuples as JSON has them
+    if theirs != ours:
+        diff = sorted(k for k in set(theirs) | set(ours) if theirs.get(k) != ours.get(k))
+        raise ConfigError(f"--adopt {str(path)!r} is a study of other settings (differing: {diff})")
+    made, here = doc.get("datasets") or {}, dataset_digests(s, root)
+    if not made:
+        raise ConfigError(f"--adopt {str(path)!r} records no dataset digests, so its runs cannot be checked "
+                          "against these datasets (rewrite it with this version: rollcam study ... --report)")
+    for name, digest in made.items():
+        if name in here and here[name] != digest:
+            raise ConfigError(f"--adopt {str(path)!r}: its runs were tested on another {name!r} dataset than the "
+                              f"one built here (content digest {digest[:12]} there, {here[name][:12]} here); "
+                              "a study's runs must share their test images")
+    runs = {r["job"]["key"]: r for r in doc.get("runs", [])}
+    base = base_job(s)
+    weights = path.parent / BASE_WEIGHTS
+    if base is not None and any(k != base.key for k in runs):
+        if base.key not in runs or not weights.is_file():
+            raise ConfigError(f"--adopt {str(path)!r}: its runs were fine-tuned from a base model whose weights "
+                              f"are not beside it ({BASE_WEIGHTS})")
+        _same_base(root, weights, path)
+    taken = []
+    for key, run in sorted(runs.items()):
+        dest = root / "runs" / key / "test.json"
+        if dest.is_file():
+            continue
+        dest.parent.mkdir(parents=True, exist_ok=True)
+        if base is not None and key == base.key:  # the weights every fine-tune's --init loads
+            write_atomic(dest.parent / "last.pt", weights.read_bytes())
+        write_atomic(dest, (json.dumps(run, indent=1) + "\n").encode())
+        taken.append(key)
+    for name, table in (doc.get("coco") or {}).items():
+        dest = root / "coco" / f"{name}.json"
+        if not dest.is_file():
+            dest.parent.mkdir(parents=True, exist_ok=True)
+            table = {k: v for k, v in table.items() if k != "spec"}
+            write_atomic(dest, (json.dumps(table, indent=1) + "\n").encode())
+    return taken
+
+
+def _same_base(root: Path, weights: Path, path: Path) -> None:
+    """Refuse to mix runs fine-tuned from two different base models."""
+    mine = root / "runs" / "base"
+    if not (mine / "test.json").is_file():
+        return
+    from .trainer import load_state
+
+    a, b = load_state(weights), load_state(mine / "last.pt")
+    b = b.get("model", b)
+    if a.keys() != b.keys() or any(not bool((a[k] == b[k]).all()) for k in a):
+        raise ConfigError(f"--adopt {str(path)!r}: its runs were fine-tuned from another base model than the one "
+                          f"finished under {str(root)!r}; a study's runs must share their base")
+
+
 def report_finished(s: StudySettings, out: str | Path, command: str | None = None,
-                    only: tuple[str, ...] = ()) -> dict[str, Any]:
-    """The report of the runs of ``OUT`` that have finished (``runs/KEY/test.json``), with how many are."""
+                    only: tuple[str, ...] = (), adopt_from: tuple[str | Path, ...] = ()) -> dict[str, Any]:
+    """The report of the runs of ``OUT`` that have finished (``runs/KEY/test.json``; with those of
+    ``adopt_from`` taken over first), with how many are."""
     root = Path(out).resolve()
     if not (root / "data" / "rgb" / "dataset.json").is_file():
         raise ConfigError(f"--report: {str(out)!r} holds no study of this setting yet (no data/rgb)")
+    for src in adopt_from:
+        adopt(s, root, src)
     jobs = plan_jobs(s, only)
     base = base_job(s)
     results = [json.loads(p.read_text()) for j in ([base] if base else []) + jobs
                if (p := root / "runs" / j.key / "test.json").is_file()]
-    extra: dict[str, Any] = {}
+    extra: dict[str, Any] = {"datasets": dataset_digests(s, root)}
+    export_base(s, root)
     coco = {d.split("?", 1)[0]: d for d in s.coco_detectors}
     done = {name: json.loads(p.read_text()) | {"spec": spec} for name, spec in coco.items()
             if (p := root / "coco" / f"{name}.json").is_file()}
@@ -295,13 +407,16 @@ def label_tables(s: StudySettings, root: Path) -> dict[str, Any]:
 
 def run_study(s: StudySettings, out: str | Path, *, workers: int = 1, executor: str | None = None,
               progress: bool | None = None, command: str | None = None, only: tuple[str, ...] = (),
-              device: str = "auto", report_only: bool = False) -> dict[str, Any]:
+              device: str = "auto", report_only: bool = False,
+              adopt_from: tuple[str | Path, ...] = ()) -> dict[str, Any]:
     """Build the datasets, run every job (of the experiments ``only`` names, when given), write
-    ``OUT/report.md``, ``report.json`` and the charts. ``device`` ``auto`` trains on a CUDA GPU when torch sees
-    one (runs then go one at a time), else on the CPU. ``report_only``: train nothing, write the report of the
-    runs already finished (where a long study stands)."""
+    ``OUT/report.md``, ``report.json`` and the charts (and ``base.pt``, the base model's weights, for a setting
+    with a base). ``device`` ``auto`` trains on a CUDA GPU when torch sees one (runs then go one at a time),
+    else on the CPU. ``report_only``: train nothing, write the report of the runs already finished (where a long
+    study stands). ``adopt_from``: study folders or copied reports whose finished runs are taken over rather
+    than trained again (``adopt``)."""
     if report_only:
-        return report_finished(s, out, command, only)
+        return report_finished(s, out, command, only, adopt_from)
     from ..datasets.build import build_dataset
     from ..datasets.executors import open_executor
     from ..progress import Progress
@@ -316,7 +431,9 @@ def run_study(s: StudySettings, out: str | Path, *, workers: int = 1, executor: 
             continue
         build_dataset(cfg, root / "data" / name, workers=workers, progress=progress)
     t_data = time.monotonic() - t0
-    extra: dict[str, Any] = {"device": device}
+    for src in adopt_from:
+        adopt(s, root, src)
+    extra: dict[str, Any] = {"device": device, "datasets": dataset_digests(s, root)}
     if not only or "coco" in only:
         extra["coco"] = coco_table(s, root)
     if not only or "labels" in only:
@@ -339,6 +456,7 @@ def run_study(s: StudySettings, out: str | Path, *, workers: int = 1, executor: 
         ex.close()
     if len(results) != len(jobs) + (base is not None):
         raise ConfigError(f"study: {len(jobs) + (base is not None) - len(results)} run(s) gave no result")
+    export_base(s, root)
     timing = {"datasets_s": round(t_data, 1), "total_s": round(time.monotonic() - t0, 1), "workers": workers,
               "train_s_sum": round(sum(r["train_s"] for r in results), 1), "device": device,
               "finished": len(results), "planned": len(results)}

@@ -87,7 +87,9 @@ def _check_dataset(cfg: TrainConfig) -> tuple[DatasetInfo, tuple[str, ...], tupl
     return info, subsets, check_subsets(info, cfg.val_subsets or subsets, "--val")
 
 
-def _load_state(path: Path) -> dict[str, Any]:
+def load_state(path: Path) -> dict[str, Any]:
+    """A checkpoint (``last.pt``) or a bare state dict saved by torch, on the CPU; a file that is neither is a
+    ``ConfigError`` naming it."""
     torch = import_torch()
     try:
         return torch.load(str(path), map_location="cpu", weights_only=True)
@@ -102,7 +104,7 @@ def _checkpoint(out: Path, cfg: TrainConfig) -> dict[str, Any] | None:
     path = out / CHECKPOINT
     if not path.is_file():
         return None
-    state = _load_state(path)
+    state = load_state(path)
     have, want = TrainConfig.added_keys() | state.get("config", {}), cfg.to_json()
     if have != want:
         diff = sorted(k for k in set(have) | set(want) if have.get(k) != want.get(k))
@@ -130,7 +132,7 @@ def _init_weights(net: Any, path: str, images: FittedImages, cfg: TrainConfig, b
                    for i in range(0, n, cfg.batch))
         load_onnx_weights(net, p, batches)
         return
-    state = _load_state(p)
+    state = load_state(p)
     weights = state.get("model", state) if isinstance(state, dict) else state
     try:
         net.load_state_dict(weights)
