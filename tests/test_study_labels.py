@@ -131,7 +131,15 @@ def test_label_statements_say_which_arm_shows_the_study_s_pattern():
     exact = next(t for t in text if "exact RS labels" in t)
     hand = next(t for t in text if "hand-like labels" in t)
     assert "does not show the study's pattern" in exact
-    assert "-25.0% (beyond the spread): shows the study's pattern" in hand
+    assert "-25.0% (beyond the spread; with the test images' sampling, 95 % interval" in hand
+    assert hand.endswith("shows the study's pattern.")
+    # the interval adds each group's test-image standard error (0.01) to the seed term
+    d = agg["label_arm"]["fast"]["hand"]["gs_to_rs"]["mAP50_95"]
+    gs = agg["label_arm"]["fast"]["gs_model"]["mAP50_95"]["mean"]
+    assert d["se_images"] == pytest.approx(np.sqrt(d["se"] ** 2 + 2 * 0.01 ** 2), abs=1e-6)
+    assert d["interval"] == pytest.approx([(d["delta"] - 2 * d["se_images"]) / gs,
+                                           (d["delta"] + 2 * d["se_images"]) / gs], abs=1e-5)
+    assert d["beyond_images"] is True and "interval" not in agg["label_arm"]["fast"]["hand"]["gs_to_rs"]["mAP50"]
     assert agg["label_arm"]["fast"]["hand"]["on_exact"]["mAP50"]["mean"] == pytest.approx(0.79)
     assert agg["label_arm"]["fast"]["hand"]["se_test"]["mean"] == pytest.approx(0.01)
 
