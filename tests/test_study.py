@@ -2,13 +2,14 @@
 
 from __future__ import annotations
 
+import dataclasses
 import json
 
 import pytest
 from rollcam.host.cli import main
 from rollcam.host.training.study import plan_jobs
-from rollcam.host.training.study_report import aggregate, difference, statements
-from rollcam.host.training.study_settings import QUICK, REDUCED
+from rollcam.host.training.study_report import aggregate, difference, report_markdown, statements
+from rollcam.host.training.study_settings import MEDIUM, QUICK, REDUCED
 
 
 def _result(key, group, speed, train, seed, test, **kw):
@@ -59,6 +60,22 @@ def test_aggregate_tables_and_plain_answers():
     text = statements(agg)
     assert any("1x (normal)" in t and "-1.2%: within 2 %" in t for t in text)
     assert any("10x (fast)" in t and "NOT within 2 %" in t and "beyond" in t for t in text)
+
+    # the report people read: what a setting with a base says about its start, and no empty sections
+    timing = {"train_s_sum": 3600.0, "workers": 0, "finished": 7, "planned": 41}
+    md = report_markdown(s, agg, timing, "rollcam study --quick --out q")
+    assert "trained from scratch for 2 epochs" in md and "## Table 1 analogue" in md
+    assert "## Fig. 4 analogue" not in md and "## RS penalty" in md  # quick has no Fig. 4 runs here, and raw
+    base = _result("base", "base", "normal", ("normal_gs",), 0, _test(0.6, 0.6))
+    for cell in base["test"].values():
+        cell["mAP50_95_se"] = 0.004
+    medium = dataclasses.replace(MEDIUM, seeds=(0, 1, 2))
+    md = report_markdown(medium, aggregate(medium, [*results, base]), timing, "rollcam study --setting medium")
+    assert "fine-tuned for 12 epochs per run from one base model (24 epochs on the GS images of 800 pairs" in md
+    assert "The base model every run starts from" in md and "GS mAP@0.5 0.600, mAP@0.5:0.95 0.300" in md
+    assert "(7 of 41; 1.00 h of training" in md
+    assert "## Table 3 analogue" in md  # the GS models tested on RS images and the RS models on GS ones
+    assert "## RS penalty" not in md and "## Fig. 4" not in md  # no speeds beyond Table 1's, no Fig. 4 runs
 
 
 @pytest.mark.parametrize("command", ["study", "dataset"])

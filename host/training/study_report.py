@@ -136,8 +136,9 @@ def aggregate(s: StudySettings, results: list[dict[str, Any]]) -> dict[str, Any]
             fig4["cameras"].append({"n": r["job"]["cameras"] or s.cameras, **point})
     for k in fig4:
         fig4[k].sort(key=lambda p: p["n"])
+    base = next((r["test"] for r in results if r["job"]["group"] == "base"), None)
     return {"table1": table1, "table3": table3, "speed": speed, "raw": raw, "fig4": fig4,
-            "label_arm": label_arm(s, results)}
+            "label_arm": label_arm(s, results), "base": base}
 
 
 def n_train_scenes(s: StudySettings) -> int:
@@ -307,52 +308,63 @@ def report_markdown(s: StudySettings, agg: dict[str, Any], timing: dict[str, Any
                     extra: dict[str, Any] | None = None) -> str:
     """The report people read."""
     n = len(s.seeds)
+    start = (f"fine-tuned for {s.epochs} epochs per run from one base model ({s.base_epochs} epochs on the GS "
+             f"images of {s.base_frames} pairs of {s.base_scenes} other scenes, dataset seed {s.base_seed})"
+             if s.base_frames else f"trained from scratch for {s.epochs} epochs per run")
     lines = [f"# rollcam study, `{s.name}` setting", "",
              f"Paired GS/RS datasets with exact labels ({s.size[0]}x{s.size[1]}, {s.frames_per_speed} pairs per "
              f"speed, {s.scenes} scenes x {s.cameras} cameras x {len(s.times)} times of day), rollcam's "
-             f"`{s.model}` detector trained from scratch for {s.epochs} epochs per run, {n} seeds per cell "
+             f"`{s.model}` detector {start}, {n} seeds per cell "
              f"(mean ± sample std). `*`: the GS->RS difference exceeds twice its standard error over seeds "
              f"(with {n} seeds a rough test). " + _time_line(timing), "",
              "Made by:", "", "```sh norun", command, "```", "", "## Answers", ""]
     lines += [f"- {t}" for t in statements(agg) + label_statements(agg)]
+    base = agg.get("base")
+    if base:
+        lines += ["", "The base model every run starts from, on the study's normal-speed test splits: " + ", ".join(
+            f"{sh.upper()} mAP@0.5 {base[sh]['mAP50']:.3f}, mAP@0.5:0.95 {base[sh]['mAP50_95']:.3f} "
+            f"(test SE {base[sh]['mAP50_95_se']:.3f})" for sh in SHUTTERS if sh in base) + "."]
     lines += ["", *_label_sections(s, agg, extra or {})]
-    lines += ["## Table 1 analogue: train and test on the same subset", "",
-              f"Study: {STUDY_REFERENCE['table1']}.", "",
-              "| Validation | P | R | mAP@0.5 | mAP@0.5:0.95 |", "|---|---:|---:|---:|---:|"]
+    t1 = []
     for sp, row in agg["table1"].items():
         name = {"normal": "Normal", "fast": "Faster"}[sp]
         if not (row["gs"]["mAP50"]["n"] and row["rs"]["mAP50"]["n"]):
-            continue  # not run (rollcam study --only)
-        for sh in SHUTTERS:
-            lines.append(f"| {name}_{sh.upper()} | " + " | ".join(_ms(row[sh][m]) for m in METRICS) + " |")
-        lines.append("| GS->RS | " + " | ".join(_diff(row["gs_to_rs"][m]) for m in METRICS) + " |")
-    lines += ["", "## Table 3 analogue: cross training (mAP@0.5 / mAP@0.5:0.95)", "",
-              "Study (mAP@0.5): " + ", ".join(f"{k} {v}" for k, v in STUDY_REFERENCE["table3_mAP50"].items()) + ".",
-              ""]
+            continue  # not run (rollcam study --only), or not yet
+        t1 += [f"| {name}_{sh.upper()} | " + " | ".join(_ms(row[sh][m]) for m in METRICS) + " |" for sh in SHUTTERS]
+        t1.append("| GS->RS | " + " | ".join(_diff(row["gs_to_rs"][m]) for m in METRICS) + " |")
+    if t1:
+        lines += ["## Table 1 analogue: train and test on the same subset", "",
+                  f"Study: {STUDY_REFERENCE['table1']}.", "",
+                  "| Validation | P | R | mAP@0.5 | mAP@0.5:0.95 |", "|---|---:|---:|---:|---:|", *t1]
+    t3 = []
     for sp, rows in agg["table3"].items():
         if not any(cells["gs"]["mAP50"]["n"] or cells["rs"]["mAP50"]["n"] for cells in rows.values()):
             continue
-        lines += [f"Walkers {_speed_label(sp)}:", "", "| train \\ test | GS | RS | GS+RS |", "|---|---:|---:|---:|"]
+        t3 += [f"Walkers {_speed_label(sp)}:", "", "| train \\ test | GS | RS | GS+RS |", "|---|---:|---:|---:|"]
         for label, cells in rows.items():
             if not cells["gs"]["mAP50"]["n"] and not cells["rs"]["mAP50"]["n"]:
                 continue
-            lines.append(f"| {label} | " + " | ".join(f"{_ms(cells[t]['mAP50'])} / {_ms(cells[t]['mAP50_95'])}"
-                                                       for t in ("gs", "rs", "gsrs")) + " |")
-        lines.append("")
-    lines += ["## RS penalty against walking speed", "",
-              "| input | speed | GS mAP@0.5 | RS mAP@0.5 | GS->RS | GS mAP@0.5:0.95 | RS mAP@0.5:0.95 | GS->RS |",
-              "|---|---|---:|---:|---:|---:|---:|---:|"]
-    for name, table in (("RGB", agg["speed"]), ("raw", agg["raw"])):
-        for sp, row in table.items():
-            if not (row["gs"]["mAP50"]["n"] and row["rs"]["mAP50"]["n"]):
-                continue
-            lines.append(f"| {name} | {_speed_label(sp)} | " + " | ".join(
-                f"{_ms(row['gs'][m])} | {_ms(row['rs'][m])} | {_diff(row['gs_to_rs'][m])}"
-                for m in ("mAP50", "mAP50_95")) + " |")
-    lines += ["", f"## Fig. 4 analogue: training-set diversity ({s.fig4_subset}, seed {s.seeds[0]})", "",
-              "| varied | n | mAP@0.5 | mAP@0.5:0.95 |", "|---|---:|---:|---:|"]
-    for k, pts in agg["fig4"].items():
-        lines += [f"| {k} | {p['n']} | {p['mAP50']:.3f} | {p['mAP50_95']:.3f} |" for p in pts]
+            t3.append(f"| {label} | " + " | ".join(f"{_ms(cells[t]['mAP50'])} / {_ms(cells[t]['mAP50_95'])}"
+                                                    for t in ("gs", "rs", "gsrs")) + " |")
+        t3.append("")
+    if t3:  # a section only where the setting has its runs and some have finished
+        lines += ["", "## Table 3 analogue: cross training (mAP@0.5 / mAP@0.5:0.95)", "",
+                  "Study (mAP@0.5): " + ", ".join(f"{k} {v}" for k, v in STUDY_REFERENCE["table3_mAP50"].items())
+                  + ".", "", *t3]
+    penalty = [f"| {name} | {_speed_label(sp)} | " + " | ".join(
+               f"{_ms(row['gs'][m])} | {_ms(row['rs'][m])} | {_diff(row['gs_to_rs'][m])}"
+               for m in ("mAP50", "mAP50_95")) + " |"
+               for name, table in (("RGB", agg["speed"]), ("raw", agg["raw"])) for sp, row in table.items()
+               if row["gs"]["mAP50"]["n"] and row["rs"]["mAP50"]["n"]]
+    if penalty and (len(agg["speed"]) > len(agg["table1"]) or agg["raw"]):  # more than Table 1 says
+        lines += ["", "## RS penalty against walking speed", "",
+                  "| input | speed | GS mAP@0.5 | RS mAP@0.5 | GS->RS | GS mAP@0.5:0.95 | RS mAP@0.5:0.95 | GS->RS |",
+                  "|---|---|---:|---:|---:|---:|---:|---:|", *penalty]
+    if any(len(pts) > 1 for pts in agg["fig4"].values()):
+        lines += ["", f"## Fig. 4 analogue: training-set diversity ({s.fig4_subset}, seed {s.seeds[0]})", "",
+                  "| varied | n | mAP@0.5 | mAP@0.5:0.95 |", "|---|---:|---:|---:|"]
+        for k, pts in agg["fig4"].items():
+            lines += [f"| {k} | {p['n']} | {p['mAP50']:.3f} | {p['mAP50_95']:.3f} |" for p in pts]
     lines += ["", "Charts: `report.png`. Numbers: `report.json`. Each run: `runs/<name>/` (a `rollcam train` "
               "folder with its card and curves, and `test.json`).", ""]
     return "\n".join(lines)
@@ -377,7 +389,7 @@ def _plot_label_arm(ax: Any, arms: dict[str, Any]) -> None:
     ax.set_xticks(ticks, names, fontsize=7)
     ax.set_ylabel("RS - GS (% of GS)")
     ax.set_title("Label arm: RS labels exact / gs / hand")
-    ax.legend(fontsize=7)
+    _legend(ax, 7)
 
 
 def plot_report(s: StudySettings, agg: dict[str, Any], path: Path) -> None:
@@ -400,7 +412,7 @@ def plot_report(s: StudySettings, agg: dict[str, Any], path: Path) -> None:
     a.set_xticks([i + 0.2 for i in range(len(labels))], labels, fontsize=8)
     a.set_ylim(0, 1)
     a.set_title("Table 1: train = test subset")
-    a.legend(fontsize=8)
+    _legend(a, 8)
     for name, table, style in (("RGB", agg["speed"], "o-"), ("raw", agg["raw"], "s--")):
         table = {sp: row for sp, row in table.items() if row["gs"]["mAP50"]["n"] and row["rs"]["mAP50"]["n"]}
         if not table:
@@ -416,7 +428,7 @@ def plot_report(s: StudySettings, agg: dict[str, Any], path: Path) -> None:
     b.set_xlabel("walker speed (x normal)")
     b.set_ylabel("RS - GS (% of GS)")
     b.set_title("RS penalty against speed")
-    b.legend(fontsize=7)
+    _legend(b, 7)
     arms = {sp: row for sp, row in agg.get("label_arm", {}).items() if row["gs_model"]["mAP50"]["n"]}
     if arms and all(len(pts) <= 1 for pts in agg["fig4"].values()):
         _plot_label_arm(c, arms)  # a study without Fig. 4's reduced runs shows the label arm there instead
@@ -428,11 +440,17 @@ def plot_report(s: StudySettings, agg: dict[str, Any], path: Path) -> None:
         c.set_xlabel("training scenes / camera views")
         c.set_ylim(0, 1)
         c.set_title(f"Fig. 4: diversity ({s.fig4_subset})")
-        c.legend(fontsize=7)
+        _legend(c, 7)
     for ax in (a, b, c):
         ax.grid(alpha=0.3)
     fig.tight_layout()
     write_figure(path, fig, dpi=100)
+
+
+def _legend(ax: Any, fontsize: int) -> None:
+    """The chart's legend, when it has something labelled (a partial study's chart may not yet)."""
+    if ax.get_legend_handles_labels()[0]:
+        ax.legend(fontsize=fontsize)
 
 
 def write_report(root: Path, s: StudySettings, results: list[dict[str, Any]], timing: dict[str, Any],
