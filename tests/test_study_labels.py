@@ -131,7 +131,7 @@ def test_label_statements_say_which_arm_shows_the_study_s_pattern():
     exact = next(t for t in text if "exact RS labels" in t)
     hand = next(t for t in text if "hand-like labels" in t)
     assert "does not show the study's pattern" in exact
-    assert "-25.0% (beyond the spread; with the test images' sampling, 95 % interval" in hand
+    assert "-25.0% (beyond the spread; with the test images' sampling, about 95 % interval" in hand
     assert hand.endswith("shows the study's pattern.")
     # the interval adds each group's test-image standard error (0.01) to the seed term
     d = agg["label_arm"]["fast"]["hand"]["gs_to_rs"]["mAP50_95"]

@@ -31,6 +31,7 @@ from __future__ import annotations
 
 import dataclasses
 import functools
+import hashlib
 import io
 import json
 import time
@@ -234,33 +235,49 @@ def dataset_digests(s: StudySettings, root: Path) -> dict[str, str]:
             if (root / "data" / name / "dataset.json").is_file()}
 
 
-def export_base(s: StudySettings, root: Path) -> Path | None:
-    """Write ``root/base.pt``, the finished base model's weights, beside the report; None without a finished
-    base. The weights are those of ``runs/base/last.pt``, which every run's ``--init`` loads."""
+def weights_digest(state: dict[str, Any]) -> str:
+    """One SHA-256 over a state dict's tensors (names, shapes, dtypes, bytes): which base model a run started from."""
+    h = hashlib.sha256()
+    for name in sorted(state):
+        v = state[name]
+        h.update(f"{name} {tuple(v.shape)} {v.dtype}\n".encode())
+        h.update(v.detach().cpu().contiguous().numpy().tobytes())
+    return h.hexdigest()
+
+
+def _base_state(run: Path) -> dict[str, Any]:
+    """The weights a fine-tune's ``--init`` loads from ``run/last.pt`` (a checkpoint's model, or a bare state
+    dict)."""
+    from .trainer import load_state
+
+    state = load_state(run / "last.pt")
+    return state.get("model", state)
+
+
+def export_base(s: StudySettings, root: Path) -> str | None:
+    """Write ``root/base.pt``, the finished base model's weights (those of ``runs/base/last.pt``, which every
+    run's ``--init`` loads), beside the report; return their ``weights_digest``, or None without a finished
+    base. Written afresh every time: a copied folder's file times prove nothing."""
     run = root / "runs" / "base"
     if not s.base_frames or not (run / "test.json").is_file() or not (run / "last.pt").is_file():
         return None
-    out = root / BASE_WEIGHTS
-    if out.is_file() and out.stat().st_mtime_ns >= (run / "last.pt").stat().st_mtime_ns:
-        return out
-    from .trainer import import_torch, load_state
+    from .trainer import import_torch
 
     torch = import_torch()
-    state = load_state(run / "last.pt")
+    state = _base_state(run)
     buf = io.BytesIO()
-    torch.save(state.get("model", state), buf)
-    write_atomic(out, buf.getvalue())
-    return out
+    torch.save(state, buf)
+    write_atomic(root / BASE_WEIGHTS, buf.getvalue())
+    return weights_digest(state)
 
 
-def adopt(s: StudySettings, root: Path, src: str | Path) -> list[str]:
-    """Take the finished runs of another copy of this study into ``root``, so they are not trained again: ``src``
-    is a study folder or its report copied elsewhere (``report.json``, and ``base.pt`` for a setting with a base).
-    It must be of the same setting, its runs tested on datasets byte-identical to those built under ``root``
-    (``dataset_digests``), and, where ``root`` has a finished base of its own, fine-tuned from the same base.
-    Runs ``root`` has finished are kept. Returns the keys of the runs taken over."""
+def read_report(s: StudySettings, src: str | Path, root: Path) -> tuple[Path, dict[str, Any]]:
+    """The study report ``--adopt`` names (a folder holding ``report.json``, or the file), checked to be a report
+    of this setting and not ``root``'s own: the checks that need nothing rendered."""
     src = Path(src)
-    path = src / "report.json" if src.is_dir() else src
+    path = (src / "report.json" if src.is_dir() else src).resolve()
+    if path.parent == root.resolve():
+        raise ConfigError(f"--adopt {str(src)!r} is --out itself; name the report of another copy of the study")
     try:
         doc = json.loads(path.read_text())
     except (OSError, ValueError) as exc:
@@ -269,8 +286,21 @@ def adopt(s: StudySettings, root: Path, src: str | Path) -> list[str]:
         raise ConfigError(f"--adopt {str(path)!r} is not a rollcam study report")
     theirs, ours = doc.get("settings", {}), json.loads(json.dumps(s.to_json()))  # tuples as JSON has them
     if theirs != ours:
-        diff = sorted(k for k in set(theirs) | set(ours) if theirs.get(k) != ours.get(k))
-        raise ConfigError(f"--adopt {str(path)!r} is a study of other settings (differing: {diff})")
+        diff = [f"{k}: {theirs.get(k)!r} there, {ours.get(k)!r} here" for k in sorted(set(theirs) | set(ours))
+                if theirs.get(k) != ours.get(k)]
+        raise ConfigError(f"--adopt {str(path)!r} is a study of other settings ({'; '.join(diff[:4])}"
+                          f"{'; ...' if len(diff) > 4 else ''})")
+    return path, doc
+
+
+def adopt(s: StudySettings, root: Path, src: str | Path) -> list[str]:
+    """Take the finished runs of another copy of this study into ``root``, so they are not trained again: ``src``
+    is a study folder or its report copied elsewhere (``report.json``, and ``base.pt`` for a setting with a base).
+    It must be of the same setting (``read_report``); a run is taken only when the dataset it was tested on is
+    built under ``root`` and byte-identical (``dataset_digests``; a run of a dataset not built here waits for a
+    later adopt); a setting with a base needs the report's base weights, matching the digest it records and any
+    base ``root`` finished itself. Runs ``root`` has finished are kept. Returns the keys of the runs taken."""
+    path, doc = read_report(s, src, root)
     made, here = doc.get("datasets") or {}, dataset_digests(s, root)
     if not made:
         raise ConfigError(f"--adopt {str(path)!r} records no dataset digests, so its runs cannot be checked "
@@ -280,45 +310,63 @@ def adopt(s: StudySettings, root: Path, src: str | Path) -> list[str]:
             raise ConfigError(f"--adopt {str(path)!r}: its runs were tested on another {name!r} dataset than the "
                               f"one built here (content digest {digest[:12]} there, {here[name][:12]} here); "
                               "a study's runs must share their test images")
-    runs = {r["job"]["key"]: r for r in doc.get("runs", [])}
     base = base_job(s)
+    known = {j.key for j in _all_jobs(s)} | ({base.key} if base else set())
+    runs: dict[str, dict[str, Any]] = {}
+    for run in doc.get("runs", []):
+        key = run.get("job", {}).get("key") if isinstance(run, dict) else None
+        if key not in known:
+            raise ConfigError(f"--adopt {str(path)!r}: {key!r} is not a run of the {s.name!r} setting")
+        runs[key] = run
+
+    def dataset(key: str) -> str:  # what the run was tested on (the base too is tested on the rgb test split)
+        return "raw" if runs[key]["job"].get("raw") else "rgb"
+
+    todo = [k for k in sorted(runs) if not (root / "runs" / k / "test.json").is_file()
+            and made.get(dataset(k)) is not None and made[dataset(k)] == here.get(dataset(k))]
     weights = path.parent / BASE_WEIGHTS
-    if base is not None and any(k != base.key for k in runs):
-        if base.key not in runs or not weights.is_file():
-            raise ConfigError(f"--adopt {str(path)!r}: its runs were fine-tuned from a base model whose weights "
-                              f"are not beside it ({BASE_WEIGHTS})")
-        _same_base(root, weights, path)
-    taken = []
-    for key, run in sorted(runs.items()):
+    if base is not None and todo:
+        _check_base(root, weights, doc.get("base_sha256"), path)
+    for key in todo:
         dest = root / "runs" / key / "test.json"
-        if dest.is_file():
-            continue
         dest.parent.mkdir(parents=True, exist_ok=True)
         if base is not None and key == base.key:  # the weights every fine-tune's --init loads
             write_atomic(dest.parent / "last.pt", weights.read_bytes())
-        write_atomic(dest, (json.dumps(run, indent=1) + "\n").encode())
-        taken.append(key)
-    for name, table in (doc.get("coco") or {}).items():
-        dest = root / "coco" / f"{name}.json"
-        if not dest.is_file():
-            dest.parent.mkdir(parents=True, exist_ok=True)
-            table = {k: v for k, v in table.items() if k != "spec"}
-            write_atomic(dest, (json.dumps(table, indent=1) + "\n").encode())
-    return taken
+        write_atomic(dest, (json.dumps(runs[key], indent=1) + "\n").encode())
+    if made.get("rgb") == here.get("rgb"):
+        for name, table in (doc.get("coco") or {}).items():
+            dest = root / "coco" / f"{name}.json"
+            if not dest.is_file() and name in {d.split("?", 1)[0] for d in s.coco_detectors}:
+                dest.parent.mkdir(parents=True, exist_ok=True)
+                table = {k: v for k, v in table.items() if k != "spec"}
+                write_atomic(dest, (json.dumps(table, indent=1) + "\n").encode())
+    return todo
 
 
-def _same_base(root: Path, weights: Path, path: Path) -> None:
-    """Refuse to mix runs fine-tuned from two different base models."""
-    mine = root / "runs" / "base"
-    if not (mine / "test.json").is_file():
-        return
+def _check_base(root: Path, weights: Path, digest: str | None, path: Path) -> None:
+    """Refuse runs fine-tuned from a base other than the report's (its ``base.pt`` must be the one its runs
+    started from) or than the one ``root`` finished itself: runs from two bases are not one study."""
+    if not digest or not weights.is_file():
+        raise ConfigError(f"--adopt {str(path)!r}: its runs were fine-tuned from a base model, and the report does "
+                          f"not carry it ({BASE_WEIGHTS} beside it, and its digest base_sha256 in it)")
     from .trainer import load_state
 
-    a, b = load_state(weights), load_state(mine / "last.pt")
-    b = b.get("model", b)
-    if a.keys() != b.keys() or any(not bool((a[k] == b[k]).all()) for k in a):
+    state = load_state(weights)
+    if weights_digest(state.get("model", state)) != digest:
+        raise ConfigError(f"--adopt {str(path)!r}: the {BASE_WEIGHTS} beside it is not the base its runs were "
+                          "fine-tuned from (its weights do not match the report's base_sha256)")
+    mine = root / "runs" / "base"
+    if (mine / "test.json").is_file() and weights_digest(_base_state(mine)) != digest:
         raise ConfigError(f"--adopt {str(path)!r}: its runs were fine-tuned from another base model than the one "
                           f"finished under {str(root)!r}; a study's runs must share their base")
+
+
+def finished_runs(s: StudySettings, root: Path) -> list[dict[str, Any]]:
+    """Every run of the setting's whole plan finished under ``root`` (what ``report.json`` carries, whatever
+    ``--only`` the report was made with, so that adopting it loses nothing)."""
+    base = base_job(s)
+    return [json.loads(p.read_text()) for j in ([base] if base else []) + _all_jobs(s)
+            if (p := root / "runs" / j.key / "test.json").is_file()]
 
 
 def report_finished(s: StudySettings, out: str | Path, command: str | None = None,
@@ -327,26 +375,27 @@ def report_finished(s: StudySettings, out: str | Path, command: str | None = Non
     ``adopt_from`` taken over first), with how many are."""
     root = Path(out).resolve()
     if not (root / "data" / "rgb" / "dataset.json").is_file():
-        raise ConfigError(f"--report: {str(out)!r} holds no study of this setting yet (no data/rgb)")
+        adopting = (" (--adopt checks the runs it takes against datasets rendered here: run the study command "
+                    "with --adopt, without --report, to render them)") if adopt_from else ""
+        raise ConfigError(f"--report: {str(out)!r} holds no study of this setting yet (no data/rgb){adopting}")
     for src in adopt_from:
         adopt(s, root, src)
     jobs = plan_jobs(s, only)
     base = base_job(s)
     results = [json.loads(p.read_text()) for j in ([base] if base else []) + jobs
                if (p := root / "runs" / j.key / "test.json").is_file()]
-    extra: dict[str, Any] = {"datasets": dataset_digests(s, root)}
-    export_base(s, root)
+    extra: dict[str, Any] = {"datasets": dataset_digests(s, root), "base_sha256": export_base(s, root)}
     coco = {d.split("?", 1)[0]: d for d in s.coco_detectors}
     done = {name: json.loads(p.read_text()) | {"spec": spec} for name, spec in coco.items()
             if (p := root / "coco" / f"{name}.json").is_file()}
-    if (not only or "coco" in only) and done:
+    if done:  # Table 2 whenever it was made, so that the report carries it on (adopt)
         extra["coco"] = done
     if not only or "labels" in only:
         extra["labels"] = label_tables(s, root)
     timing = {"datasets_s": 0.0, "total_s": 0.0, "workers": 0, "device": "cpu",
               "train_s_sum": round(sum(r["train_s"] for r in results), 1),
               "finished": len(results), "planned": len(jobs) + (base is not None)}
-    return write_report(root, s, results, timing, command, extra)
+    return write_report(root, s, results, timing, command, extra, finished_runs(s, root))
 
 
 def coco_table(s: StudySettings, root: Path) -> dict[str, Any]:
@@ -423,6 +472,8 @@ def run_study(s: StudySettings, out: str | Path, *, workers: int = 1, executor: 
     from .trainer import resolve_device
 
     root = output_dir(Path(out).resolve())  # a file there: one line, exit 2
+    for src in adopt_from:  # what needs nothing rendered is checked before the hours of rendering
+        read_report(s, src, root)
     jobs = plan_jobs(s, only)
     device = resolve_device(device)
     t0 = time.monotonic()
@@ -456,8 +507,8 @@ def run_study(s: StudySettings, out: str | Path, *, workers: int = 1, executor: 
         ex.close()
     if len(results) != len(jobs) + (base is not None):
         raise ConfigError(f"study: {len(jobs) + (base is not None) - len(results)} run(s) gave no result")
-    export_base(s, root)
+    extra["base_sha256"] = export_base(s, root)
     timing = {"datasets_s": round(t_data, 1), "total_s": round(time.monotonic() - t0, 1), "workers": workers,
               "train_s_sum": round(sum(r["train_s"] for r in results), 1), "device": device,
               "finished": len(results), "planned": len(results)}
-    return write_report(root, s, results, timing, command, extra)
+    return write_report(root, s, results, timing, command, extra, finished_runs(s, root))

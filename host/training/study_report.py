@@ -7,7 +7,8 @@ normal seeds; with 3 seeds a rough one, said in the report). Every seed is teste
 seed spread leaves out what the choice of test images adds; for mAP@0.5:0.95, whose per-run bootstrap standard
 error ``b`` each run measures, a difference also carries ``se_images = sqrt(se^2 + b_gs^2 + b_rs^2)`` (the GS and
 RS images taken as independent, which overstates it for paired instants) and its 95 % interval
-``delta +- 2 se_images``: what the difference would be on all the streets the generator makes. Files:
+``delta +- 2 se_images`` (about 95 %; with 3-5 seeds the seed term's few degrees of freedom make it rough):
+what the difference would be on all the streets the generator makes. Files:
 ``report.json``, ``report.md``, ``report.png``.
 """
 
@@ -166,7 +167,7 @@ def _interval(d: dict[str, Any]) -> str:
     if "interval" not in d:
         return ""
     lo, hi = d["interval"]
-    return f"; with the test images' sampling, 95 % interval {lo:+.1%} to {hi:+.1%}"
+    return f"; with the test images' sampling, about 95 % interval {lo:+.1%} to {hi:+.1%}"
 
 
 def statements(agg: dict[str, Any]) -> list[str]:
@@ -351,12 +352,12 @@ def report_markdown(s: StudySettings, agg: dict[str, Any], timing: dict[str, Any
         lines += ["", "## Table 3 analogue: cross training (mAP@0.5 / mAP@0.5:0.95)", "",
                   "Study (mAP@0.5): " + ", ".join(f"{k} {v}" for k, v in STUDY_REFERENCE["table3_mAP50"].items())
                   + ".", "", *t3]
+    rows = [(name, sp, row) for name, table in (("RGB", agg["speed"]), ("raw", agg["raw"]))
+            for sp, row in table.items() if row["gs"]["mAP50"]["n"] and row["rs"]["mAP50"]["n"]]
     penalty = [f"| {name} | {_speed_label(sp)} | " + " | ".join(
                f"{_ms(row['gs'][m])} | {_ms(row['rs'][m])} | {_diff(row['gs_to_rs'][m])}"
-               for m in ("mAP50", "mAP50_95")) + " |"
-               for name, table in (("RGB", agg["speed"]), ("raw", agg["raw"])) for sp, row in table.items()
-               if row["gs"]["mAP50"]["n"] and row["rs"]["mAP50"]["n"]]
-    if penalty and (len(agg["speed"]) > len(agg["table1"]) or agg["raw"]):  # more than Table 1 says
+               for m in ("mAP50", "mAP50_95")) + " |" for name, sp, row in rows]
+    if any(name == "raw" or sp not in agg["table1"] for name, sp, _ in rows):  # more than Table 1 says
         lines += ["", "## RS penalty against walking speed", "",
                   "| input | speed | GS mAP@0.5 | RS mAP@0.5 | GS->RS | GS mAP@0.5:0.95 | RS mAP@0.5:0.95 | GS->RS |",
                   "|---|---|---:|---:|---:|---:|---:|---:|", *penalty]
@@ -454,15 +455,18 @@ def _legend(ax: Any, fontsize: int) -> None:
 
 
 def write_report(root: Path, s: StudySettings, results: list[dict[str, Any]], timing: dict[str, Any],
-                 command: str | None = None, extra: dict[str, Any] | None = None) -> dict[str, Any]:
+                 command: str | None = None, extra: dict[str, Any] | None = None,
+                 runs: list[dict[str, Any]] | None = None) -> dict[str, Any]:
     """Write ``report.json``, ``report.md`` and ``report.png`` under ``root``; return the JSON document.
-    ``extra``: the tables made without training (``coco``: Table 2; ``labels``: box sizes and label ceilings)."""
+    ``extra``: the tables made without training (``coco``: Table 2; ``labels``: box sizes and label ceilings) and
+    what carries the study on (``datasets``, ``base_sha256``). ``runs``: what ``report.json`` lists (every
+    finished run), when more than the ``results`` the tables are made of."""
     agg = aggregate(s, results)
     extra = extra or {}
     command = command or f"rollcam study --setting {s.name} --out {root.name}"
     doc = {"kind": "rollcam-study", "settings": s.to_json(), "timing": timing, "command": command,
            "study_reference": STUDY_REFERENCE, "answers": statements(agg) + label_statements(agg), **agg, **extra,
-           "runs": sorted(results, key=lambda r: r["job"]["key"])}
+           "runs": sorted(results if runs is None else runs, key=lambda r: r["job"]["key"])}
     write_atomic(root / "report.json", (json.dumps(doc, indent=1) + "\n").encode())
     write_atomic(root / "report.md", report_markdown(s, agg, timing, command, extra).encode())
     plot_report(s, agg, root / "report.png")
