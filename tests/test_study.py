@@ -60,6 +60,8 @@ def test_aggregate_tables_and_plain_answers():
     text = statements(agg)
     assert any("1x (normal)" in t and "-1.2%: within 2 %" in t for t in text)
     assert any("10x (fast)" in t and "NOT within 2 %" in t and "beyond" in t for t in text)
+    one = statements(aggregate(s, [r for r in results if r["job"]["seed"] == 0]))
+    assert all("one seed so far: no spread to judge by" in t and "within the" not in t for t in one)
 
     # the report people read: what a setting with a base says about its start, and no empty sections
     timing = {"train_s_sum": 3600.0, "workers": 0, "finished": 7, "planned": 41}

@@ -59,7 +59,7 @@ def difference(gs: dict[str, Any], rs: dict[str, Any], b_gs: dict[str, Any] | No
     else:
         beyond = bool(abs(delta) > 2 * se) if se > 0 else bool(delta != 0)
     out = {"delta": round(delta, 6), "relative": round(rel, 6) if math.isfinite(rel) else None,
-           "se": round(se, 6), "beyond_spread": beyond}
+           "se": round(se, 6), "beyond_spread": beyond, "seeds": min(gs["n"], rs["n"])}
     if b_gs and b_rs and b_gs["n"] and b_rs["n"] and min(gs["n"], rs["n"]) >= 2:
         full = math.sqrt(se ** 2 + b_gs["mean"] ** 2 + b_rs["mean"] ** 2)
         out |= {"se_images": round(full, 6), "beyond_images": bool(abs(delta) > 2 * full)}
@@ -162,6 +162,13 @@ def _speed_label(sp: str) -> str:
     return f"{SPEED_X.get(sp) or float(sp):g}x ({sp})"
 
 
+def _spread(d: dict[str, Any], what: str = "the spread") -> str:
+    """Whether a difference is beyond or within the seed spread, or that one seed has none yet."""
+    if d.get("seeds", 2) < 2:
+        return "one seed so far: no spread to judge by"
+    return f"{'beyond' if d['beyond_spread'] else 'within'} {what}"
+
+
 def _interval(d: dict[str, Any]) -> str:
     """``; 95 % interval ...`` of a difference that carries the test images' sampling, else nothing."""
     if "interval" not in d:
@@ -186,7 +193,7 @@ def statements(agg: dict[str, Any]) -> list[str]:
             out.append(f"{name}, walkers at {_speed_label(sp)}: mAP@0.5 {row['gs']['mAP50']['mean']:.3f} (GS) vs "
                        f"{row['rs']['mAP50']['mean']:.3f} (RS), {d50['relative']:+.1%}: "
                        f"{'within' if within else 'NOT within'} 2 %; mAP@0.5:0.95 {d95['relative']:+.1%} "
-                       f"({'beyond' if d95['beyond_spread'] else 'within'} the seed-to-seed spread{_interval(d95)}).")
+                       f"({_spread(d95, 'the seed-to-seed spread')}{_interval(d95)}).")
     return out
 
 
@@ -208,9 +215,10 @@ def label_statements(agg: dict[str, Any]) -> list[str]:
             same50 = abs(d50["relative"]) <= 0.02 or not d50["beyond_spread"]
             drop95 = d95["delta"] < 0 and d95["beyond_spread"]
             verdict = "shows the study's pattern" if same50 and drop95 else "does not show the study's pattern"
+            if d95.get("seeds", 2) < 2:
+                verdict = "one seed cannot say"
             out.append(f"walkers at {_speed_label(sp)}, {ARM_NAMES[arm]}: mAP@0.5 {d50['relative']:+.1%} "
-                       f"({'within' if not d50['beyond_spread'] else 'beyond'} the spread), mAP@0.5:0.95 "
-                       f"{d95['relative']:+.1%} ({'beyond' if d95['beyond_spread'] else 'within'} the spread"
+                       f"({_spread(d50)}), mAP@0.5:0.95 {d95['relative']:+.1%} ({_spread(d95)}"
                        f"{_interval(d95)}): {verdict}.")
     return out
 
