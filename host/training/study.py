@@ -162,9 +162,9 @@ def test_model(model: Path | str, dataset: Path, speed: str, labels: str = "exac
                also: tuple[str, ...] = ()) -> dict[str, Any]:
     """The model (a ``model.onnx``, or a detector spec) on the test splits of ``speed``: GS, RS, and GS and RS
     pooled (``gsrs``), the RS images labelled by the arm ``labels``; with another arm than ``exact``, also the RS
-    images against exact labels (``rs_exact``), and against each arm of ``also`` (``rs_ARMlabels``). Each GS and
-    RS cell carries ``mAP50_95_se``, the standard error of its mAP@0.5:0.95 over the test images
-    (``bootstrap_se``)."""
+    images against exact labels (``rs_exact``), and against each arm of ``also`` (``rs_ARMlabels``). The GS and
+    RS cells carry ``mAP50_95_se``, the standard error of their mAP@0.5:0.95 over the test images
+    (``bootstrap_se``; the other arms' cells, which no difference is taken of, do not)."""
     from ..detectors import load_detector
     from ..evaluation.loaders import load_rollcam, run_detector
 
@@ -186,7 +186,7 @@ def test_model(model: Path | str, dataset: Path, speed: str, labels: str = "exac
         other["exact"] = "rs_exact"
     for arm, key in other.items():
         rs = {s.name: s for s in relabel(exact, arm)}[subset(speed, "rs")]
-        out[key] = scores([e.truth for e in rs.images], dets["rs"])
+        out[key] = scores([e.truth for e in rs.images], dets["rs"], se=False)
     return out
 
 
@@ -208,7 +208,7 @@ def scores(truths: list[Any], dets: list[Any], se: bool = True) -> dict[str, Any
 def bootstrap_se(truths: list[Any], dets: list[Any], n: int, rng: np.random.Generator) -> float:
     """The standard error of mAP@0.5:0.95 from sampling the test images: its spread over ``n`` resamples of the
     images with replacement (one model, one set of detections)."""
-    from ..evaluation.metrics import evaluate
+    from ..evaluation.metrics import coco_map
 
     k = len(truths)
     if k < 2:
@@ -216,7 +216,7 @@ def bootstrap_se(truths: list[Any], dets: list[Any], n: int, rng: np.random.Gene
     vals = []
     for _ in range(n):
         idx = rng.integers(0, k, k)
-        vals.append(float(evaluate([truths[i] for i in idx], [dets[i] for i in idx])["mAP50_95"]))
+        vals.append(coco_map([truths[i] for i in idx], [dets[i] for i in idx])["mAP50_95"])
     return float(np.std(vals, ddof=1))
 
 
