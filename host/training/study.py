@@ -32,7 +32,6 @@ from __future__ import annotations
 import dataclasses
 import functools
 import hashlib
-import io
 import json
 import time
 from dataclasses import asdict, dataclass, replace
@@ -261,13 +260,10 @@ def export_base(s: StudySettings, root: Path) -> str | None:
     run = root / "runs" / "base"
     if not s.base_frames or not (run / "test.json").is_file() or not (run / "last.pt").is_file():
         return None
-    from .trainer import import_torch
+    from .trainer import save_state
 
-    torch = import_torch()
     state = _base_state(run)
-    buf = io.BytesIO()
-    torch.save(state, buf)
-    write_atomic(root / BASE_WEIGHTS, buf.getvalue())
+    save_state(root / BASE_WEIGHTS, state)
     return weights_digest(state)
 
 
@@ -319,11 +315,10 @@ def adopt(s: StudySettings, root: Path, src: str | Path) -> list[str]:
             raise ConfigError(f"--adopt {str(path)!r}: {key!r} is not a run of the {s.name!r} setting")
         runs[key] = run
 
-    def dataset(key: str) -> str:  # what the run was tested on (the base too is tested on the rgb test split)
-        return "raw" if runs[key]["job"].get("raw") else "rgb"
-
+    verified = {name for name, digest in made.items() if here.get(name) == digest}
+    # a run is taken where the dataset it was tested on is verified (the base too is tested on rgb's test split)
     todo = [k for k in sorted(runs) if not (root / "runs" / k / "test.json").is_file()
-            and made.get(dataset(k)) is not None and made[dataset(k)] == here.get(dataset(k))]
+            and ("raw" if runs[k]["job"].get("raw") else "rgb") in verified]
     weights = path.parent / BASE_WEIGHTS
     if base is not None and todo:
         _check_base(root, weights, doc.get("base_sha256"), path)
@@ -333,7 +328,7 @@ def adopt(s: StudySettings, root: Path, src: str | Path) -> list[str]:
         if base is not None and key == base.key:  # the weights every fine-tune's --init loads
             write_atomic(dest.parent / "last.pt", weights.read_bytes())
         write_atomic(dest, (json.dumps(runs[key], indent=1) + "\n").encode())
-    if made.get("rgb") == here.get("rgb"):
+    if "rgb" in verified:
         for name, table in (doc.get("coco") or {}).items():
             dest = root / "coco" / f"{name}.json"
             if not dest.is_file() and name in {d.split("?", 1)[0] for d in s.coco_detectors}:
@@ -385,10 +380,7 @@ def report_finished(s: StudySettings, out: str | Path, command: str | None = Non
     results = [json.loads(p.read_text()) for j in ([base] if base else []) + jobs
                if (p := root / "runs" / j.key / "test.json").is_file()]
     extra: dict[str, Any] = {"datasets": dataset_digests(s, root), "base_sha256": export_base(s, root)}
-    coco = {d.split("?", 1)[0]: d for d in s.coco_detectors}
-    done = {name: json.loads(p.read_text()) | {"spec": spec} for name, spec in coco.items()
-            if (p := root / "coco" / f"{name}.json").is_file()}
-    if done:  # Table 2 whenever it was made, so that the report carries it on (adopt)
+    if done := coco_table(s, root, make=False):  # Table 2 whenever it was made, so the report carries it on
         extra["coco"] = done
     if not only or "labels" in only:
         extra["labels"] = label_tables(s, root)
@@ -398,9 +390,10 @@ def report_finished(s: StudySettings, out: str | Path, command: str | None = Non
     return write_report(root, s, results, timing, command, extra, finished_runs(s, root))
 
 
-def coco_table(s: StudySettings, root: Path) -> dict[str, Any]:
+def coco_table(s: StudySettings, root: Path, make: bool = True) -> dict[str, Any]:
     """The study's Table 2 analogue: each of ``s.coco_detectors`` (COCO-trained, not fine-tuned) on the GS and RS
-    test splits of normal and fast walkers, RS scored against every label arm; kept in ``coco/DETECTOR.json``."""
+    test splits of normal and fast walkers, RS scored against every label arm; kept in ``coco/DETECTOR.json``.
+    ``make=False``: only the detectors already done."""
     data = root / "data" / "rgb"
     out = {}
     for spec in s.coco_detectors:
@@ -408,6 +401,8 @@ def coco_table(s: StudySettings, root: Path) -> dict[str, Any]:
         path = root / "coco" / f"{name}.json"
         if path.is_file():
             out[name] = json.loads(path.read_text()) | {"spec": spec}
+            continue
+        if not make:
             continue
         doc: dict[str, Any] = {}
         for speed in ("normal", "fast"):
@@ -485,8 +480,8 @@ def run_study(s: StudySettings, out: str | Path, *, workers: int = 1, executor: 
     for src in adopt_from:
         adopt(s, root, src)
     extra: dict[str, Any] = {"device": device, "datasets": dataset_digests(s, root)}
-    if not only or "coco" in only:
-        extra["coco"] = coco_table(s, root)
+    if done := coco_table(s, root, make=not only or "coco" in only):  # done before: carried on in the report
+        extra["coco"] = done
     if not only or "labels" in only:
         extra["labels"] = label_tables(s, root)
     results = []

@@ -68,6 +68,12 @@ def difference(gs: dict[str, Any], rs: dict[str, Any], b_gs: dict[str, Any] | No
     return out
 
 
+def differences(gs: dict[str, Any], rs: dict[str, Any]) -> dict[str, Any]:
+    """``difference`` of every metric of two cells; mAP@0.5:0.95 with their test-image errors (``mAP50_95_se``)."""
+    return {m: difference(gs[m], rs[m], *((gs["mAP50_95_se"], rs["mAP50_95_se"]) if m == "mAP50_95" else ()))
+            for m in METRICS}
+
+
 def _cell(results: list[dict[str, Any]], group: str, train: tuple[str, ...], test: str,
           metric: str, **match: Any) -> dict[str, Any]:
     vals = [r["test"][test][metric] for r in results if r["job"]["group"] in group.split("|")
@@ -91,9 +97,7 @@ def label_arm(s: StudySettings, results: list[dict[str, Any]]) -> dict[str, Any]
             cell["se_test"] = _cell(results, group, rs, "rs", "mAP50_95_se", **match)
             if arm != "exact":
                 cell["on_exact"] = {m: _cell(results, group, rs, "rs_exact", m, **match) for m in METRICS}
-            cell["gs_to_rs"] = {m: difference(row["gs_model"][m], cell[m]) for m in METRICS}
-            cell["gs_to_rs"]["mAP50_95"] = difference(row["gs_model"]["mAP50_95"], cell["mAP50_95"],
-                                                      row["gs_model"]["mAP50_95_se"], cell["se_test"])
+            cell["gs_to_rs"] = differences(row["gs_model"], cell | {"mAP50_95_se": cell["se_test"]})
             row[arm] = cell
         out[sp] = row
     return out
@@ -106,9 +110,7 @@ def aggregate(s: StudySettings, results: list[dict[str, Any]]) -> dict[str, Any]
         for sh in SHUTTERS:
             row[sh] = {m: _cell(results, group, (subset(speed, sh),), sh, m, **match)
                        for m in (*METRICS, "mAP50_95_se")}
-        row["gs_to_rs"] = {m: difference(row["gs"][m], row["rs"][m]) for m in METRICS}
-        row["gs_to_rs"]["mAP50_95"] = difference(row["gs"]["mAP50_95"], row["rs"]["mAP50_95"],
-                                                 row["gs"]["mAP50_95_se"], row["rs"]["mAP50_95_se"])
+        row["gs_to_rs"] = differences(row["gs"], row["rs"])
         return row
 
     table1 = {sp: shutter_pair("t1", sp, scenes=None, cameras=None) for sp in s.speeds if sp in SPEED_X}

@@ -140,7 +140,8 @@ def _init_weights(net: Any, path: str, images: FittedImages, cfg: TrainConfig, b
         raise ConfigError(f"--init {path!r} does not fit this model ({str(exc).splitlines()[0]})") from None
 
 
-def _save(path: Path, state: dict[str, Any]) -> None:
+def save_state(path: Path, state: dict[str, Any]) -> None:
+    """Write what torch saves of ``state`` to ``path`` atomically (whole or absent), ``load_state``'s twin."""
     torch = import_torch()
     buf = io.BytesIO()
     torch.save(state, buf)
@@ -339,7 +340,7 @@ def _train(cfg: TrainConfig, out: Path, info: DatasetInfo, subsets: tuple[str, .
     try:
         for epoch in range(done, cfg.epochs):
             history.append(_epoch(run, epoch, bar, clock))
-            _save(out / CHECKPOINT, {"config": cfg.to_json(), "epoch": epoch + 1, "model": net.state_dict(),
+            save_state(out / CHECKPOINT, {"config": cfg.to_json(), "epoch": epoch + 1, "model": net.state_dict(),
                                      "optimizer": opt.state_dict(), "history": history}
                   | ({"ema": average.state()} if average is not None else {}))
             if on_epoch is not None:
