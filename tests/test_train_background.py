@@ -14,7 +14,15 @@ pytest.importorskip("torch", reason="rollcam train needs the 'train' extra (torc
 pytest.importorskip("faster_coco_eval")
 
 from rollcam.host.datasets import DatasetConfig, build_dataset
-from rollcam.host.training.background import KINDS, MARGIN_PX, flat_frame, free_region
+from rollcam.host.training.background import (
+    DEFAULT_KINDS,
+    KINDS,
+    MARGIN_PX,
+    Backgrounds,
+    edge_region,
+    flat_frame,
+    free_region,
+)
 from rollcam.host.training.config import TrainConfig
 from rollcam.host.training.data import FittedImages, load_split, make_batch, open_dataset
 
@@ -38,7 +46,7 @@ def test_backgrounds_follow_the_images_hold_no_box_and_are_the_same_for_a_seed(t
     n = len(a.entries)
     assert len(a) == 2 * n and len(a.backgrounds) == n
     kinds = [a.backgrounds.kind(i) for i in range(len(a.backgrounds))]
-    assert kinds[:3] == list(KINDS)
+    assert kinds[:3] == list(DEFAULT_KINDS) == ["flat", "crop", "street"]
     for i in range(n, len(a)):
         img, boxes, ignore = a.get(i)
         assert img.shape == (56, 96, 3) and img.dtype == np.uint8
@@ -73,6 +81,66 @@ def test_crops_keep_clear_of_every_box_and_a_crowded_picture_gives_none():
     assert free_region(crowded, content, rng) is None
 
 
+def test_edge_bands_touch_a_frame_edge_and_keep_clear_of_every_box():
+    rng = np.random.default_rng(0)
+    content = (0.0, 10.0, 640.0, 350.0)  # letterboxed: 10 px bars above and below
+    boxes = np.array([[200, 150, 240, 260], [400, 120, 430, 200]], np.float32)
+    sides = set()
+    for _ in range(50):
+        (x0, y0, x1, y1), side = edge_region(boxes, content, rng)
+        sides.add(side)
+        assert (y0, y1) == (10.0, 350.0)
+        if side == "left":
+            assert x0 == 0.0 and x1 <= boxes[:, 0].min() - MARGIN_PX
+        else:
+            assert x1 == 640.0 and x0 >= boxes[:, 2].max() + MARGIN_PX
+    assert sides == {"left", "right"}
+    assert edge_region(np.zeros((0, 4), np.float32), content, rng)[0] == content
+    assert edge_region(np.array([[5, 0, 635, 20]], np.float32), content, rng) is None
+
+
+class _Ramp:
+    """A training set of one picture whose red channel is its column (0 at the left edge, 255 at the right), with
+    one person in the middle: where an edge crop was cut from shows in its pixels."""
+
+    width, height, input = 256, 144, "bgr"
+
+    def __init__(self) -> None:
+        self.entries = [0]
+
+    def get(self, i):
+        img = np.zeros((self.height, self.width, 3), np.uint8)
+        img[..., 0] = np.arange(self.width, dtype=np.uint8)[None, :]
+        img[..., 1] = 100
+        return img, np.array([[120, 40, 136, 120]], np.float32), np.zeros(0, bool)
+
+    def content(self, i):
+        return 0.0, 0.0, float(self.width), float(self.height)
+
+
+def test_edge_crops_are_flush_with_a_frame_edge_and_a_kind_named_twice_comes_twice():
+    bg = Backgrounds(40, 7, _Ramp(), {}, kinds=("edge", "flat", "edge"))
+    assert [bg.kind(i) for i in range(6)] == ["edge", "flat", "edge"] * 2
+    assert [bg._ordinal(i) for i in range(6)] == [0, 0, 1, 2, 1, 3]
+    edges = {"left": 0, "right": 0}
+    for i in range(40):
+        if bg.kind(i) != "edge":
+            continue
+        img = bg.get(i)
+        assert img.shape == (144, 256, 3) and np.all(img[..., 1] == 100)  # a crop of the picture, not a flat frame
+        red = img[..., 0].astype(int)
+        if red[:, 0].max() <= 1:  # cut flush with the picture's left edge ...
+            edges["left"] += 1
+            assert red[:, -1].max() < 120 - MARGIN_PX  # ... and clear of the person
+        else:
+            assert red[:, -1].min() >= 254, red[:, -1]  # ... or flush with its right edge
+            assert red[:, 0].min() > 136 + MARGIN_PX - 2
+            edges["right"] += 1
+    assert edges["left"] and edges["right"]
+    default = Backgrounds(9, 7, _Ramp(), {})
+    assert default.kinds == DEFAULT_KINDS and [default._ordinal(i) for i in (2, 5, 8)] == [0, 1, 2]
+
+
 def test_flat_frames_span_black_to_white():
     levels = [flat_frame(np.random.default_rng(k), 64, 36).mean() for k in range(200)]
     assert min(levels) < 20 and max(levels) > 235
@@ -89,6 +157,16 @@ def test_training_with_backgrounds_end_to_end_and_its_card_rebuilds_it(tiny, tmp
     assert card["config"]["background"] == 0.5
     assert "--background 0.5" in card["command"]
     assert "0.5 background image(s) per training image" in (out / "README.md").read_text()
+    assert "--background-kinds" not in card["command"]  # the default cycle, as every earlier run had it
+
+    edge = tmp_path / "edge"
+    assert main(["train", str(tiny), "--model", "pico", "--epochs", "1", "--imgsz", "96x56", "--batch", "4",
+                 "--threads", "1", "--background", "0.5", "--background-kinds", "street,edge,street",
+                 "--out", str(edge), "--json"]) == 0
+    card = json.loads(capsys.readouterr().out)
+    assert card["config"]["background_kinds"] == ["street", "edge", "street"]
+    assert "--background-kinds street,edge,street" in card["command"]
+    assert "(street, edge, street in turn)" in (edge / "README.md").read_text()
 
 
 def test_bad_background_options_are_refused(tiny, tmp_path, capsys):
@@ -98,3 +176,10 @@ def test_bad_background_options_are_refused(tiny, tmp_path, capsys):
     with pytest.raises(ConfigError, match="raw-mosaic model"):
         TrainConfig(dataset="d", input="raw", background=0.1)
     assert TrainConfig.added_keys()["background"] == 0.0 == TrainConfig(dataset="d").background
+    assert tuple(TrainConfig.added_keys()["background_kinds"]) == DEFAULT_KINDS  # older checkpoints resume
+    assert main(["train", str(tiny), "--background-kinds", "flat,sky", "--out", str(tmp_path / "r")]) == 2
+    err = capsys.readouterr().err
+    assert "--background-kinds" in err and "'sky' is not a background kind (flat, crop, street, edge)" in err
+    assert err.count("--background-kinds") == 1 and KINDS == ("flat", "crop", "street", "edge")
+    with pytest.raises(ConfigError, match="at least one"):
+        TrainConfig(dataset="d", background_kinds=())

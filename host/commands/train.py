@@ -28,6 +28,13 @@ examples:
 _COUNT = value_type(positive_int, "an integer >= 1")
 
 
+def _kinds(text: str) -> tuple[str, ...]:
+    """``--background-kinds``: a comma-separated cycle of background kinds."""
+    from ..training.background import check_kinds
+
+    return check_kinds(tuple(k.strip() for k in text.split(",") if k.strip()), option="")
+
+
 def add_parser(sub: Subparsers) -> argparse.ArgumentParser:
     """Add ``rollcam train``."""
     p = sub.add_parser("train", help="train a person detector on a rollcam dataset and export ONNX",
@@ -70,6 +77,10 @@ def add_parser(sub: Subparsers) -> argparse.ArgumentParser:
                    help="add F background images (no person: flat frames, crops of person-free regions, empty "
                         "streets) per training image, e.g. 0.1, so the model learns what no person looks like "
                         "(default: 0, none)")
+    p.add_argument("--background-kinds", type=value_type(_kinds), default=None, metavar="KIND[,KIND]",
+                   help="the cycle of background kinds: flat, crop (person-free regions), street (empty streets), "
+                        "edge (person-free bands cropped flush with a frame edge); a kind named twice comes twice "
+                        "as often (default: flat,crop,street)")
     p.add_argument("--val-every", type=_COUNT, default=1, metavar="N", help="validate every N epochs (default: 1)")
     p.add_argument("--out", required=True, metavar="DIR", help="run folder (rerun to resume)")
     p.add_argument("--json", action="store_true", help="print the run card as JSON on stdout")
@@ -79,6 +90,7 @@ def add_parser(sub: Subparsers) -> argparse.ArgumentParser:
 
 def config_from_args(args: argparse.Namespace):
     """The TrainConfig the options describe."""
+    from ..training.background import DEFAULT_KINDS
     from ..training.config import TrainConfig
 
     return TrainConfig(dataset=args.dataset, subsets=tuple(args.subset), val_subsets=tuple(args.val),
@@ -86,7 +98,8 @@ def config_from_args(args: argparse.Namespace):
                        seed=args.seed, input=args.input, init=args.init,
                        threads=args.threads or min(8, os.cpu_count() or 1), steps=args.steps,
                        val_every=args.val_every, scenes=args.scenes, cameras=args.cameras, ema=args.ema,
-                       labels=args.labels, background=args.background)
+                       labels=args.labels, background=args.background,
+                       background_kinds=args.background_kinds or DEFAULT_KINDS)
 
 
 def run(args: argparse.Namespace) -> int:

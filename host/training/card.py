@@ -16,6 +16,7 @@ from typing import Any
 
 from rollcam.common.files import write_atomic, write_figure
 
+from .background import DEFAULT_KINDS
 from .config import TrainConfig
 from .data import DatasetInfo
 from .model import STRIDE, count_parameters
@@ -58,6 +59,8 @@ def rebuild_command(cfg: TrainConfig, out: Path) -> str:
         args += ["--labels", cfg.labels]
     if cfg.background:
         args += ["--background", f"{cfg.background:g}"]
+    if cfg.background_kinds != DEFAULT_KINDS:
+        args += ["--background-kinds", ",".join(cfg.background_kinds)]
     if cfg.init:
         args += ["--init", cfg.init]
     args += ["--out", str(out)]
@@ -115,7 +118,10 @@ def card_markdown(card: dict[str, Any]) -> str:
         f"{c['threads']} thread(s) on {card['device']}" + (f", initialised from `{c['init']}`" if c["init"] else "")
         + (f"; exported the weights' moving average (decay {c['ema']:g})" if c.get("ema") else "")
         + (f"; RS images with {c['labels']} labels" if c.get("labels", "exact") != "exact" else "")
-        + (f"; {c['background']:g} background image(s) per training image" if c.get("background") else ""),
+        + (f"; {c['background']:g} background image(s) per training image"
+           + (f" ({', '.join(c['background_kinds'])} in turn)"
+              if tuple(c.get("background_kinds", DEFAULT_KINDS)) != DEFAULT_KINDS else "")
+           if c.get("background") else ""),
         f"- code: rollcam {card['rollcam_version']}, commit {git['commit'] or 'unknown'}"
         + (" (with local changes)" if git["dirty"] else "") + f", torch {card['torch']}", "",
         "## Result (validation split, scored through `onnx:`)", "",

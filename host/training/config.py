@@ -7,6 +7,7 @@ from typing import Any
 
 from rollcam.common.errors import ConfigError
 
+from .background import DEFAULT_KINDS, check_kinds
 from .labels import check_arm
 from .model import model_size
 
@@ -26,7 +27,8 @@ class TrainConfig:
     ``ema`` > 0 keeps an exponential moving average of the weights with that decay, which validation and the
     export use instead of the raw weights (0: off).
     ``background`` > 0 adds that many background images (no person: flat frames, crops of person-free regions,
-    empty streets; ``rollcam.host.training.background``) per training image (0: none).
+    empty streets; ``rollcam.host.training.background``) per training image (0: none), of the kinds
+    ``background_kinds`` in turn.
     """
 
     dataset: str
@@ -49,6 +51,7 @@ class TrainConfig:
     ema: float = 0.0
     labels: str = "exact"
     background: float = 0.0
+    background_kinds: tuple[str, ...] = DEFAULT_KINDS
 
     def __post_init__(self) -> None:
         model_size(self.model)
@@ -72,6 +75,7 @@ class TrainConfig:
         if not (0 <= self.background <= 1):
             raise ConfigError(f"--background must be in [0, 1] (background images per training image), "
                               f"got {self.background!r}")
+        check_kinds(self.background_kinds)
         if self.background and self.input == "raw":
             raise ConfigError("--background makes RGB pictures; a raw-mosaic model (--input raw) cannot take them")
 
@@ -79,13 +83,14 @@ class TrainConfig:
     def added_keys() -> dict[str, Any]:
         """Options added after the first release, with the value that reproduces runs made before them: a
         checkpoint whose config lacks one was trained with that value."""
-        return {"ema": 0.0, "labels": "exact", "background": 0.0}
+        return {"ema": 0.0, "labels": "exact", "background": 0.0, "background_kinds": list(DEFAULT_KINDS)}
 
     def to_json(self) -> dict[str, Any]:
         """Plain-JSON form, stored in checkpoints and the run card."""
         d = asdict(self)
         d["imgsz"] = f"{self.imgsz[0]}x{self.imgsz[1]}"
         d["subsets"], d["val_subsets"] = list(self.subsets), list(self.val_subsets)
+        d["background_kinds"] = list(self.background_kinds)
         return d
 
     @property

@@ -25,7 +25,7 @@ from rollcam.common.errors import ConfigError
 
 from ..detectors.onnx import fit_image, input_scale
 from ..evaluation.loaders import EvalSet, load_rollcam
-from .background import Backgrounds
+from .background import DEFAULT_KINDS, Backgrounds
 from .labels import relabel
 from .loss import build_targets
 from .model import STRIDE
@@ -116,11 +116,12 @@ class FittedImages:
         self._content: dict[int, tuple[float, float, float, float]] = {}
         self.backgrounds: Backgrounds | None = None
 
-    def with_backgrounds(self, fraction: float, seed: int, card: dict[str, Any]) -> FittedImages:
-        """Add ``round(fraction x images)`` background images (``rollcam.host.training.background``) after the
-        dataset's own; returns self."""
+    def with_backgrounds(self, fraction: float, seed: int, card: dict[str, Any],
+                         kinds: tuple[str, ...] = DEFAULT_KINDS) -> FittedImages:
+        """Add ``round(fraction x images)`` background images (``rollcam.host.training.background``) of ``kinds``
+        in turn after the dataset's own; returns self."""
         count = round(fraction * len(self.entries))
-        self.backgrounds = Backgrounds(count, seed, self, card) if count else None
+        self.backgrounds = Backgrounds(count, seed, self, card, kinds) if count else None
         return self
 
     def __len__(self) -> int:

@@ -313,7 +313,8 @@ def _train(cfg: TrainConfig, out: Path, info: DatasetInfo, subsets: tuple[str, .
     net = PersonNet(model_size(cfg.model), in_channels=1 if cfg.input == "raw" else 3)
     images = FittedImages(load_split(info, subsets, "train", scenes=cfg.scenes, cameras=cfg.cameras,
                                      labels=cfg.labels), *cfg.imgsz,
-                          cfg.detector_input).with_backgrounds(cfg.background, cfg.seed, info.card)
+                          cfg.detector_input).with_backgrounds(cfg.background, cfg.seed, info.card,
+                                                               cfg.background_kinds)
     if not images.entries:
         raise ConfigError(f"the train split of {list(subsets)} in {cfg.dataset!r} holds no images")
     if cfg.init and state is None:
