@@ -152,6 +152,39 @@ def test_label_statements_say_which_arm_shows_the_study_s_pattern():
     assert agg["label_arm"]["fast"]["hand"]["se_test"]["mean"] == pytest.approx(0.01)
 
 
+def test_label_arm_chart_error_bars_carry_the_test_images_for_map50_95_and_the_seeds_for_map50():
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    from matplotlib.container import ErrorbarContainer
+    from rollcam.host.training.study_report import _plot_label_arm
+
+    results = []
+    for seed, jitter in enumerate((0.0, 0.004, -0.004)):
+        for key, group, train, test, kw in (
+                ("fast_gs", "t1", "fast_gs", {"gs": _cell(0.80 + jitter)}, {}),
+                ("fast_rs", "t1", "fast_rs", {"rs": _cell(0.80 - jitter)}, {}),
+                ("fast_rs_handlabels", "labels", "fast_rs",
+                 {"rs": _cell(0.80 + jitter) | {"mAP50_95": 0.30 + jitter}, "rs_exact": _cell(0.79)},
+                 {"labels": "hand"})):
+            results.append({"job": {"key": f"{key}_s{seed}", "group": group, "speed": "fast", "train": [train],
+                                    "seed": seed, "raw": False, "scenes": None, "cameras": None} | kw,
+                            "test": test})
+    arms = {sp: row for sp, row in aggregate(QUICK, results)["label_arm"].items() if row["gs_model"]["mAP50"]["n"]}
+    fig, ax = plt.subplots()
+    _plot_label_arm(ax, arms)
+    bars = [c for c in ax.containers if isinstance(c, ErrorbarContainer)]
+    half = [float(np.ptp(c.lines[2][0].get_segments()[0][:, 1])) / 2 for c in bars]
+    plt.close(fig)
+    hand = arms["fast"]["hand"]["gs_to_rs"]
+    gs = arms["fast"]["gs_model"]
+    assert len(bars) == 6  # exact, gs, hand x mAP@0.5, mAP@0.5:0.95 (the gs arm has no runs: zero-height bars)
+    assert half[4] == pytest.approx(100 * hand["mAP50"]["se"] / gs["mAP50"]["mean"], rel=1e-4)
+    assert half[5] == pytest.approx(100 * hand["mAP50_95"]["se_images"] / gs["mAP50_95"]["mean"], rel=1e-4)
+    assert hand["mAP50_95"]["se_images"] > 2 * hand["mAP50_95"]["se"]  # the test images' term is what shows
+
+
 def test_bootstrap_se_is_zero_for_a_perfect_detector_and_grows_with_fewer_images():
     rng = np.random.default_rng(1)
     truths = [Truth.of(_boxes(5, rng), [0] * 5, None, 640, 360) for _ in range(60)]

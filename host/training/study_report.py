@@ -377,8 +377,10 @@ def report_markdown(s: StudySettings, agg: dict[str, Any], timing: dict[str, Any
                   "| varied | n | mAP@0.5 | mAP@0.5:0.95 |", "|---|---:|---:|---:|"]
         for k, pts in agg["fig4"].items():
             lines += [f"| {k} | {p['n']} | {p['mAP50']:.3f} | {p['mAP50_95']:.3f} |" for p in pts]
-    lines += ["", "Charts: `report.png`. Numbers: `report.json`. Each run: `runs/<name>/` (a `rollcam train` "
-              "folder with its card and curves, and `test.json`).", ""]
+    lines += ["", "Charts: `report.png` (error bars: Table 1's the seed spread, the differences' one standard error, "
+              "for mAP@0.5:0.95 with the test images' sampling added, for mAP@0.5 over the seeds alone). "
+              "Numbers: `report.json`. Each run: `runs/<name>/` (a `rollcam train` folder with its card and curves, "
+              "and `test.json`).", ""]
     return "\n".join(lines)
 
 
@@ -391,7 +393,7 @@ def _plot_label_arm(ax: Any, arms: dict[str, Any]) -> None:
             for j, m in enumerate(("mAP50", "mAP50_95")):
                 d = row[arm]["gs_to_rs"][m]
                 base = max(row["gs_model"][m]["mean"], 1e-9)
-                ax.bar(x + 0.4 * j, 100 * (d["relative"] or 0.0), 0.4, yerr=100 * d["se"] / base, capsize=3,
+                ax.bar(x + 0.4 * j, 100 * (d["relative"] or 0.0), 0.4, yerr=_error_bar(d, base), capsize=3,
                        color=("C0", "C1")[j], label=("mAP@0.5", "mAP@0.5:0.95")[j] if x == 0 else None)
             ticks.append(x + 0.2)
             names.append(f"{sp}\n{arm}")
@@ -457,6 +459,12 @@ def plot_report(s: StudySettings, agg: dict[str, Any], path: Path) -> None:
         ax.grid(alpha=0.3)
     fig.tight_layout()
     write_figure(path, fig, dpi=100)
+
+
+def _error_bar(d: dict[str, Any], gs_mean: float) -> float:
+    """A difference's error bar in % of GS: one standard error, with the test images' sampling where the
+    difference has it (``se_images``, mAP@0.5:0.95), else over the seeds alone."""
+    return 100 * d.get("se_images", d["se"]) / max(gs_mean, 1e-9)
 
 
 def _legend(ax: Any, fontsize: int) -> None:
