@@ -47,6 +47,18 @@ def test_personnet_finds_walkers_in_a_rendered_street_frame():
     assert found >= 0.6, f"found {found:.0%} of {len(truth)} walkers"
 
 
+def test_personnet_reports_nobody_in_featureless_frames():
+    # A camera's black start-up frames, a covered lens, a blown-out frame: flat levels from black to white, clean
+    # and with 2 DN of noise (the bench's figure). The stage shipped before background images boxed up to 12
+    # frame-high people in a clean dark grey.
+    from rollcam.benchmarks.personnet import flat_frames
+    from rollcam.host.detectors import personnet
+
+    got = flat_frames(personnet.model_path(), personnet.default_conf(), personnet.default_iou())
+    assert got["frames"] == 34 and got["frames_with_fp"] == 0, got
+    assert got["max_score"] < personnet.default_conf() - 0.1  # not a near miss
+
+
 def test_personnet_options_are_those_of_a_packaged_model():
     with pytest.raises(ConfigError, match="fixed by the personnet model"):
         load_detector("personnet?letterbox=0")

@@ -143,7 +143,7 @@ def test_init_from_an_exported_onnx_reproduces_it_and_fine_tunes(tiny_dataset, t
 
 
 def test_weight_average_is_exported_resumes_exactly_and_old_checkpoints_still_resume(tiny_dataset, tmp_path):
-    from rollcam.host.training.model import Exported, PersonNet, model_size
+    from rollcam.host.training.model import Exported, PersonNet, count_parameters, model_size
     from rollcam.host.training.trainer import WeightAverage
 
     # the average itself: the ramp, then the decay
@@ -162,6 +162,7 @@ def test_weight_average_is_exported_resumes_exactly_and_old_checkpoints_still_re
     a = train(_cfg(tiny_dataset, ema=0.9), tmp_path / "a")
     state = torch.load(str(tmp_path / "a" / "last.pt"), map_location="cpu", weights_only=True)
     assert state["ema"]["updates"] == 4 and a.card["config"]["ema"] == 0.9 and "--ema 0.9" in a.card["command"]
+    assert a.card["model"]["parameters"] == count_parameters(PersonNet(model_size("pico"))) > 0  # the size, averaged
     raw, averaged = state["model"], state["ema"]["weights"]
     assert any(not torch.equal(raw[k], averaged[k]) for k in raw if raw[k].dtype.is_floating_point)
     # model.onnx is the average: onnxruntime's output is the averaged network's, not the raw weights'

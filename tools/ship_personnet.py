@@ -76,8 +76,9 @@ def _schedule_line(card: dict[str, Any]) -> str:
     steps = f" of at most {cfg['steps']} steps" if cfg.get("steps") else ""
     start = f"from `{cfg['init']}`" if cfg.get("init") else "from scratch"
     ema = f", exporting the weights' moving average (decay {cfg['ema']:g})" if cfg.get("ema") else ""
+    kinds = cfg.get("background_kinds")
     bg = (f", with {cfg['background']:g} background image(s) (no person) per training image"
-          if cfg.get("background") else "")
+          + (f" ({', '.join(kinds)} in turn)" if kinds else "") if cfg.get("background") else "")
     return (f"{cfg['epochs']} epochs{steps}, batch {cfg['batch']}, AdamW lr {cfg['lr']:g} (warm-up, cosine), "
             f"seed {cfg['seed']}, {cfg['threads']} thread(s) on {card['device']}, {start}{ema}{bg}: "
             f"{card['timings']['train_s']:.0f} s")
@@ -151,7 +152,9 @@ def readme(fig: dict[str, Any], train: dict[str, Any]) -> str:
     if data not in {card["dataset"]["path"] for card in chain}:  # a dataset of its own for the figures
         doc = json.loads((Path(data) / "dataset.json").read_text())
         lines.append(_dataset_command({"dataset": {"path": data, "pairs": doc["pairs"], "config": doc["config"]}}))
-    lines += [f"rollcam bench personnet --model {run}/model.onnx --dataset {data} "
+    scenes = fig["empty"]["frames"] // 15  # 5 cameras x 3 times of day a scene
+    empty = f"--empty-scenes {scenes} " if scenes != 10 else ""
+    lines += [f"rollcam bench personnet --model {run}/model.onnx --dataset {data} {empty}"
               "--out rollcam_out/personnet/bench",
               f"python tools/ship_personnet.py {run} rollcam_out/personnet/bench/personnet.json",
               "```", "", f"Trained from rollcam commit `{train['git']['commit']}`.", ""]

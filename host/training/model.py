@@ -141,5 +141,6 @@ class Exported(nn.Module):
 
 
 def count_parameters(net: nn.Module) -> int:
-    """Trainable parameters of ``net``."""
-    return sum(p.numel() for p in net.parameters() if p.requires_grad)
+    """Parameters of ``net``, the model's size (frozen ones too: the exported moving average of ``--ema`` holds
+    its weights without gradients)."""
+    return sum(p.numel() for p in net.parameters())
