@@ -152,13 +152,13 @@ def test_label_statements_say_which_arm_shows_the_study_s_pattern():
     assert agg["label_arm"]["fast"]["hand"]["se_test"]["mean"] == pytest.approx(0.01)
 
 
-def test_label_arm_chart_error_bars_carry_the_test_images_for_map50_95_and_the_seeds_for_map50():
+def test_difference_charts_error_bars_carry_the_test_images_for_map50_95_and_the_seeds_for_map50():
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
     from matplotlib.container import ErrorbarContainer
-    from rollcam.host.training.study_report import _plot_label_arm
+    from rollcam.host.training.study_report import _plot_label_arm, _plot_penalty
 
     results = []
     for seed, jitter in enumerate((0.0, 0.004, -0.004)):
@@ -171,12 +171,20 @@ def test_label_arm_chart_error_bars_carry_the_test_images_for_map50_95_and_the_s
             results.append({"job": {"key": f"{key}_s{seed}", "group": group, "speed": "fast", "train": [train],
                                     "seed": seed, "raw": False, "scenes": None, "cameras": None} | kw,
                             "test": test})
-    arms = {sp: row for sp, row in aggregate(QUICK, results)["label_arm"].items() if row["gs_model"]["mAP50"]["n"]}
-    fig, ax = plt.subplots()
+    agg = aggregate(QUICK, results)
+    arms = {sp: row for sp, row in agg["label_arm"].items() if row["gs_model"]["mAP50"]["n"]}
+    fig, (ax, pen) = plt.subplots(1, 2)
     _plot_label_arm(ax, arms)
+    _plot_penalty(pen, agg)
     bars = [c for c in ax.containers if isinstance(c, ErrorbarContainer)]
     half = [float(np.ptp(c.lines[2][0].get_segments()[0][:, 1])) / 2 for c in bars]
+    lines = {c.get_label(): float(np.ptp(c.lines[2][0].get_segments()[0][:, 1])) / 2
+             for c in pen.containers if isinstance(c, ErrorbarContainer)}
     plt.close(fig)
+    exact, gs_cell = agg["speed"]["fast"]["gs_to_rs"], agg["speed"]["fast"]["gs"]
+    assert lines["RGB mAP50"] == pytest.approx(100 * exact["mAP50"]["se"] / gs_cell["mAP50"]["mean"], rel=1e-4)
+    assert lines["RGB mAP50_95"] == pytest.approx(100 * exact["mAP50_95"]["se_images"] / gs_cell["mAP50_95"]["mean"],
+                                                  rel=1e-4)
     hand = arms["fast"]["hand"]["gs_to_rs"]
     gs = arms["fast"]["gs_model"]
     assert len(bars) == 6  # exact, gs, hand x mAP@0.5, mAP@0.5:0.95 (the gs arm has no runs: zero-height bars)

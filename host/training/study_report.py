@@ -406,6 +406,27 @@ def _plot_label_arm(ax: Any, arms: dict[str, Any]) -> None:
     _legend(ax, 7)
 
 
+def _plot_penalty(ax: Any, agg: dict[str, Any]) -> None:
+    """The RS penalty against walking speed: each speed's GS->RS change of mAP@0.5 and mAP@0.5:0.95, RGB and raw,
+    with its standard error."""
+    for name, table, style in (("RGB", agg["speed"], "o-"), ("raw", agg["raw"], "s--")):
+        table = {sp: row for sp, row in table.items() if row["gs"]["mAP50"]["n"] and row["rs"]["mAP50"]["n"]}
+        if not table:
+            continue
+        xs = [SPEED_X.get(sp) or float(sp) for sp in table]
+        for m in ("mAP50", "mAP50_95"):
+            ys = [100 * (row["gs_to_rs"][m]["relative"] or 0.0) for row in table.values()]
+            err = [_error_bar(row["gs_to_rs"][m], row["gs"][m]["mean"]) for row in table.values()]
+            ax.errorbar(xs, ys, yerr=err, fmt=style, capsize=3, label=f"{name} {m}")
+    ax.axhline(0, color="grey", lw=0.8)
+    ax.axhspan(-2, 2, color="grey", alpha=0.15)
+    ax.set_xscale("log")
+    ax.set_xlabel("walker speed (x normal)")
+    ax.set_ylabel("RS - GS (% of GS)")
+    ax.set_title("RS penalty against speed")
+    _legend(ax, 7)
+
+
 def plot_report(s: StudySettings, agg: dict[str, Any], path: Path) -> None:
     """Three panels: Table 1 bars, the RS penalty against speed (RGB and raw), Fig. 4; written atomically."""
     import matplotlib
@@ -427,22 +448,7 @@ def plot_report(s: StudySettings, agg: dict[str, Any], path: Path) -> None:
     a.set_ylim(0, 1)
     a.set_title("Table 1: train = test subset")
     _legend(a, 8)
-    for name, table, style in (("RGB", agg["speed"], "o-"), ("raw", agg["raw"], "s--")):
-        table = {sp: row for sp, row in table.items() if row["gs"]["mAP50"]["n"] and row["rs"]["mAP50"]["n"]}
-        if not table:
-            continue
-        xs = [SPEED_X.get(sp) or float(sp) for sp in table]
-        for m in ("mAP50", "mAP50_95"):
-            ys = [100 * (row["gs_to_rs"][m]["relative"] or 0.0) for row in table.values()]
-            err = [100 * row["gs_to_rs"][m]["se"] / max(row["gs"][m]["mean"], 1e-9) for row in table.values()]
-            b.errorbar(xs, ys, yerr=err, fmt=style, capsize=3, label=f"{name} {m}")
-    b.axhline(0, color="grey", lw=0.8)
-    b.axhspan(-2, 2, color="grey", alpha=0.15)
-    b.set_xscale("log")
-    b.set_xlabel("walker speed (x normal)")
-    b.set_ylabel("RS - GS (% of GS)")
-    b.set_title("RS penalty against speed")
-    _legend(b, 7)
+    _plot_penalty(b, agg)
     arms = {sp: row for sp, row in agg.get("label_arm", {}).items() if row["gs_model"]["mAP50"]["n"]}
     if arms and all(len(pts) <= 1 for pts in agg["fig4"].values()):
         _plot_label_arm(c, arms)  # a study without Fig. 4's reduced runs shows the label arm there instead
