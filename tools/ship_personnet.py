@@ -78,7 +78,8 @@ def _schedule_line(card: dict[str, Any]) -> str:
     ema = f", exporting the weights' moving average (decay {cfg['ema']:g})" if cfg.get("ema") else ""
     kinds = cfg.get("background_kinds")
     bg = (f", with {cfg['background']:g} background image(s) (no person) per training image"
-          + (f" ({', '.join(kinds)} in turn)" if kinds else "") if cfg.get("background") else "")
+          + (f" ({', '.join(kinds)} in turn)" if kinds and kinds != ["flat", "crop", "street"] else "")
+          if cfg.get("background") else "")
     return (f"{cfg['epochs']} epochs{steps}, batch {cfg['batch']}, AdamW lr {cfg['lr']:g} (warm-up, cosine), "
             f"seed {cfg['seed']}, {cfg['threads']} thread(s) on {card['device']}, {start}{ema}{bg}: "
             f"{card['timings']['train_s']:.0f} s")

@@ -75,7 +75,10 @@ class TrainConfig:
         if not (0 <= self.background <= 1):
             raise ConfigError(f"--background must be in [0, 1] (background images per training image), "
                               f"got {self.background!r}")
-        check_kinds(self.background_kinds)
+        object.__setattr__(self, "background_kinds", check_kinds(tuple(self.background_kinds)))
+        if not self.background and self.background_kinds != DEFAULT_KINDS:
+            raise ConfigError("--background-kinds sets the kinds of the background images of --background F; "
+                              "give --background F > 0 with it")
         if self.background and self.input == "raw":
             raise ConfigError("--background makes RGB pictures; a raw-mosaic model (--input raw) cannot take them")
 
