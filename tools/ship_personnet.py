@@ -20,6 +20,8 @@ import sys
 from pathlib import Path
 from typing import Any
 
+from rollcam.host.training.background import DEFAULT_KINDS
+
 LICENSE = """\
 MIT License
 
@@ -78,7 +80,7 @@ def _schedule_line(card: dict[str, Any]) -> str:
     ema = f", exporting the weights' moving average (decay {cfg['ema']:g})" if cfg.get("ema") else ""
     kinds = cfg.get("background_kinds")
     bg = (f", with {cfg['background']:g} background image(s) (no person) per training image"
-          + (f" ({', '.join(kinds)} in turn)" if kinds and kinds != ["flat", "crop", "street"] else "")
+          + (f" ({', '.join(kinds)} in turn)" if kinds and tuple(kinds) != DEFAULT_KINDS else "")
           if cfg.get("background") else "")
     return (f"{cfg['epochs']} epochs{steps}, batch {cfg['batch']}, AdamW lr {cfg['lr']:g} (warm-up, cosine), "
             f"seed {cfg['seed']}, {cfg['threads']} thread(s) on {card['device']}, {start}{ema}{bg}: "

@@ -124,14 +124,11 @@ class Backgrounds:
         img, boxes, _ignore = self.source.get(j)
         content = self.source.content(j)
         if edge:
-            found = edge_region(boxes, content, rng)
-            if found is None:
-                return None
-            region, side = found
+            region, side = edge_region(boxes, content, rng) or (None, None)
         else:
             region, side = free_region(boxes, content, rng), None
-            if region is None:
-                return None
+        if region is None:
+            return None
         rx0, ry0, rx1, ry1 = region
         aspect = self.width / self.height
         ch = min(ry1 - ry0, (rx1 - rx0) / aspect) * rng.uniform(0.6, 1.0)
@@ -185,14 +182,9 @@ def free_region(boxes: np.ndarray, content: tuple[float, float, float, float],
     """A rectangle of ``content`` (x0, y0, x1, y1) that no box comes within ``MARGIN_PX`` of: the band above every
     box, or left or right of every box, one drawn among those at least ``MIN_CROP_PX`` on each side (all of
     ``content`` when there is no box); None when none is."""
-    x0, y0, x1, y1 = content
     if len(boxes) == 0:
         return content
-    top = float(boxes[:, 1].min()) - MARGIN_PX
-    left = float(boxes[:, 0].min()) - MARGIN_PX
-    right = float(boxes[:, 2].max()) + MARGIN_PX
-    bands = [(x0, y0, x1, min(y1, top)), (x0, y0, min(x1, left), y1), (max(x0, right), y0, x1, y1)]
-    ok = [b for b in bands if _big_enough(b)]
+    ok = [b for b in _bands(boxes, content).values() if _big_enough(b)]
     if not ok:
         return None
     return ok[int(rng.integers(len(ok)))]
@@ -203,17 +195,24 @@ def edge_region(boxes: np.ndarray, content: tuple[float, float, float, float],
     """A band of ``content`` beside its left or right edge that no box comes within ``MARGIN_PX`` of, and that
     edge (``"left"`` or ``"right"``): one drawn among the bands at least ``MIN_CROP_PX`` on each side (all of
     ``content`` and either edge when there is no box); None when neither is."""
-    x0, y0, x1, y1 = content
     if len(boxes) == 0:
         return content, ("left", "right")[int(rng.integers(2))]
-    left = float(boxes[:, 0].min()) - MARGIN_PX
-    right = float(boxes[:, 2].max()) + MARGIN_PX
-    bands = [((x0, y0, min(x1, left), y1), "left"), ((max(x0, right), y0, x1, y1), "right")]
-    ok = [b for b in bands if _big_enough(b[0])]
+    ok = [(b, side) for side, b in _bands(boxes, content).items() if side != "top" and _big_enough(b)]
     if not ok:
         return None
     return ok[int(rng.integers(len(ok)))]
 
 
-def _big_enough(band: tuple[float, float, float, float]) -> bool:
+def _bands(boxes: np.ndarray, content: tuple[float, float, float, float]) -> dict[str, tuple[float, ...]]:
+    """The bands of ``content`` clear of every box by ``MARGIN_PX``: above all of them, left of them, right of
+    them (a band may be empty or inside out; ``_big_enough`` says which are worth a crop)."""
+    x0, y0, x1, y1 = content
+    top = float(boxes[:, 1].min()) - MARGIN_PX
+    left = float(boxes[:, 0].min()) - MARGIN_PX
+    right = float(boxes[:, 2].max()) + MARGIN_PX
+    return {"top": (x0, y0, x1, min(y1, top)), "left": (x0, y0, min(x1, left), y1),
+            "right": (max(x0, right), y0, x1, y1)}
+
+
+def _big_enough(band: tuple[float, ...]) -> bool:
     return band[2] - band[0] >= MIN_CROP_PX and band[3] - band[1] >= MIN_CROP_PX
